@@ -1,0 +1,62 @@
+"""`ridgeloc` command line: a thin dispatcher over `pipeline.commands.<name>` modules.
+
+Each command module defines `HELP: str`, `add_arguments(parser)` and `main(args) -> int`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from pipeline import __version__
+from pipeline.errors import RidgelocError
+
+# The stage order of the product, written once.
+COMMANDS = ("run", "solve", "simulate", "synth", "inspect")
+
+
+def _load_commands() -> dict:
+    modules = {}
+    for name in COMMANDS:
+        module_name = f"pipeline.commands.{name}"
+        try:
+            modules[name] = importlib.import_module(module_name)
+        except ModuleNotFoundError as exc:
+            if exc.name != module_name:
+                raise
+    return modules
+
+
+def build_parser() -> tuple[argparse.ArgumentParser, dict]:
+    parser = argparse.ArgumentParser(
+        prog="ridgeloc",
+        description="Locate ground targets from recorded UAV flights (video, telemetry, laser ranges).",
+    )
+    parser.add_argument("--version", action="version", version=f"ridgeloc {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    modules = _load_commands()
+    for name, module in modules.items():
+        p = sub.add_parser(name, help=module.HELP, description=module.HELP)
+        module.add_arguments(p)
+    return parser, modules
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser, modules = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 2
+    try:
+        return int(modules[args.command].main(args) or 0)
+    except RidgelocError as exc:
+        print(f"ridgeloc: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("ridgeloc: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

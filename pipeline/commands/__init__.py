@@ -1,0 +1,1 @@
+"""Command-line layer: one module per `ridgeloc` subcommand, each thin over library functions."""

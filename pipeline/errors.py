@@ -1,0 +1,41 @@
+"""One error hierarchy. Every message is one line that names the file (when there is one) and the problem.
+
+The CLI turns any `RidgelocError` into `ridgeloc: error: <message>` and a non-zero exit; anything else
+escaping is a bug in ridgeloc, not a user mistake.
+"""
+
+from __future__ import annotations
+
+from os import PathLike
+
+
+class RidgelocError(Exception):
+    """Base class for errors caused by input, configuration or geometry (not by a bug)."""
+
+    def __init__(self, message: str, path: str | PathLike | None = None):
+        self.path = None if path is None else str(path)
+        super().__init__(f"{self.path}: {message}" if self.path else message)
+
+
+class InputError(RidgelocError):
+    """A file or value the user supplied is malformed, inconsistent or unusable."""
+
+
+class ConfigError(InputError):
+    """A configuration file has unknown keys, wrong types or units, or points at missing files."""
+
+
+class LogReadError(InputError):
+    """A flight log, bag or video cannot be read (truncated, garbage, missing definitions, no data)."""
+
+
+class ObservationError(InputError):
+    """Observations cannot be used by an estimator (too few, non-finite, mismatched, degenerate)."""
+
+
+class GeometryError(ObservationError):
+    """The observation geometry does not determine the target (collinear, coincident, behind camera)."""
+
+
+class SolverError(RidgelocError):
+    """An estimator failed in a way the caller should hear about (for example divergence)."""

@@ -1,0 +1,1 @@
+"""Camera models, frames and rotations: from GPS/IMU/gimbal to projection matrices."""

@@ -1,0 +1,1 @@
+"""Readers of flight logs, bags and video into one columnar time-series model (`pipeline.ingest.model`)."""

@@ -1,0 +1,155 @@
+"""The one time-series model every reader produces.
+
+Columnar numpy arrays, int64 nanosecond timestamps (`t_ns`, sorted ascending, on the time base named by
+`clock`), SI units, frames in the names:
+- positions are WGS84 latitude/longitude in degrees with the altitude datum stated (`alt_datum`);
+- vehicle attitude is a unit quaternion (w, x, y, z) rotating body FRD vectors into the LOCAL LEVEL NED frame
+  at the vehicle's own position (what autopilots log; see FIELD_NOTES.md);
+- gimbal attitude is a unit quaternion (w, x, y, z) rotating the gimbal (camera-mount) FRD frame into local
+  NED, where roll and pitch are earth-referenced and yaw is earth-referenced or relative to the vehicle's
+  heading as `yaw_in_vehicle_frame` says, per sample;
+- ranges are metres with a `valid` flag (out-of-range and invalid samples are kept but flagged, never used).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pipeline.errors import InputError
+
+ALT_DATUMS = ("amsl", "ellipsoid", "relative")
+CLOCKS = ("unix", "boot", "video", "unknown")
+
+
+def _check_series(name: str, t_ns: np.ndarray, **columns: np.ndarray) -> None:
+    if t_ns.dtype != np.int64 or t_ns.ndim != 1:
+        raise InputError(f"{name}: t_ns must be a 1-D int64 array")
+    for col, arr in columns.items():
+        if arr.shape[0] != t_ns.shape[0]:
+            raise InputError(f"{name}: column '{col}' has {arr.shape[0]} rows, t_ns has {t_ns.shape[0]}")
+    if t_ns.size > 1 and (np.diff(t_ns) < 0).any():
+        raise InputError(f"{name}: t_ns is not sorted")
+
+
+@dataclass(frozen=True)
+class PositionSeries:
+    """Platform position: t_ns (n,), lat_deg (n,), lon_deg (n,), alt_m (n,) on `alt_datum`."""
+
+    t_ns: np.ndarray
+    lat_deg: np.ndarray
+    lon_deg: np.ndarray
+    alt_m: np.ndarray
+    alt_datum: str
+    source: str = ""
+    clock: str = "unknown"
+
+    def __post_init__(self):
+        if self.alt_datum not in ALT_DATUMS:
+            raise InputError(f"position series {self.source!r}: unknown altitude datum {self.alt_datum!r}")
+        _check_series(f"position series {self.source!r}", self.t_ns, lat=self.lat_deg, lon=self.lon_deg,
+                      alt=self.alt_m)
+
+
+@dataclass(frozen=True)
+class AttitudeSeries:
+    """Vehicle attitude: t_ns (n,), quat_wxyz (n, 4) rotating body FRD -> local level NED."""
+
+    t_ns: np.ndarray
+    quat_wxyz: np.ndarray
+    source: str = ""
+    clock: str = "unknown"
+
+    def __post_init__(self):
+        _check_series(f"attitude series {self.source!r}", self.t_ns, quat=self.quat_wxyz)
+
+
+@dataclass(frozen=True)
+class GimbalSeries:
+    """Gimbal attitude: t_ns (n,), quat_wxyz (n, 4) rotating gimbal FRD -> local level NED (yaw possibly
+    relative to the vehicle heading: yaw_in_vehicle_frame (n,) bool)."""
+
+    t_ns: np.ndarray
+    quat_wxyz: np.ndarray
+    yaw_in_vehicle_frame: np.ndarray
+    source: str = ""
+    clock: str = "unknown"
+
+    def __post_init__(self):
+        _check_series(f"gimbal series {self.source!r}", self.t_ns, quat=self.quat_wxyz,
+                      yaw_flag=self.yaw_in_vehicle_frame)
+
+
+@dataclass(frozen=True)
+class RangeSeries:
+    """Laser range: t_ns (n,), range_m (n,), valid (n,) bool (False: out of range / invalid, do not use)."""
+
+    t_ns: np.ndarray
+    range_m: np.ndarray
+    valid: np.ndarray
+    source: str = ""
+    clock: str = "unknown"
+
+    def __post_init__(self):
+        _check_series(f"range series {self.source!r}", self.t_ns, range=self.range_m, valid=self.valid)
+
+
+@dataclass(frozen=True)
+class FrameSeries:
+    """Video frames available for decoding: t_ns (n,) presentation times, index (n,) frame number within
+    `source` (a video path, or a bag topic). Pixels are decoded on demand by the reader that made it."""
+
+    t_ns: np.ndarray
+    index: np.ndarray
+    source: str = ""
+    clock: str = "video"
+    width_px: int = 0
+    height_px: int = 0
+
+    def __post_init__(self):
+        _check_series(f"frame series {self.source!r}", self.t_ns, index=self.index)
+
+
+@dataclass(frozen=True)
+class ClockLink:
+    """Pairs of simultaneous readings of two clocks (e.g. SYSTEM_TIME: boot ms and UNIX us), to map one
+    time base onto the other: a_ns (n,) on clock `a`, b_ns (n,) on clock `b`."""
+
+    a: str
+    b: str
+    a_ns: np.ndarray
+    b_ns: np.ndarray
+
+
+@dataclass(frozen=True)
+class StreamInfo:
+    """One stream of a log as `ridgeloc inspect` shows it."""
+
+    name: str  # topic or message type
+    msg_type: str
+    count: int
+    t_first_ns: int | None
+    t_last_ns: int | None
+    supplies: tuple[str, ...] = ()  # model quantities it can supply: position, attitude, gimbal, range, frames
+
+
+@dataclass
+class FlightLog:
+    """Everything read from one or more files of a flight. Missing quantities are None."""
+
+    path: str
+    position: PositionSeries | None = None
+    attitude: AttitudeSeries | None = None
+    gimbal: GimbalSeries | None = None
+    range: RangeSeries | None = None
+    frames: FrameSeries | None = None
+    clock_links: list[ClockLink] = field(default_factory=list)
+    streams: list[StreamInfo] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    def missing_for_localization(self) -> list[str]:
+        """Quantities localization needs that this log does not supply."""
+        needed = {"position": self.position, "attitude": self.attitude, "gimbal": self.gimbal,
+                  "range": self.range, "frames": self.frames}
+        return [k for k, v in needed.items() if v is None]

@@ -1,0 +1,55 @@
+"""What one processed flight group yields: the contract between `ridgeloc run` and the report/export stage."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pipeline.solve.estimate import Estimate
+from pipeline.solve.observations import Observations
+
+
+@dataclass
+class GroupResult:
+    """One flight group, processed.
+
+    Attributes:
+        name: group name (folder-safe), e.g. "group1".
+        origin_lla: (lat_deg, lon_deg, alt_m) of the local ENU frame's origin, WGS84, altitude above the
+            ellipsoid. Every *_m position below is ENU metres relative to it.
+        observations: the synchronized observations that were solved (world frame = that ENU frame).
+        estimates: method name -> Estimate, methods named as in `ridgeloc solve`.
+        truth_m: (3,) true target position in ENU metres when known, else None.
+        intersection_angle_deg: angle between the first and last lines of sight (paper's gamma).
+        timings_s: stage name -> wall seconds (ingest, track, sync, solve, ...).
+        settings: the flight's resolved configuration, JSON-serialisable, for the report.
+        tracking: optional per-frame tracking quality (name -> (n,) list), JSON-serialisable.
+    """
+
+    name: str
+    origin_lla: tuple[float, float, float]
+    observations: Observations
+    estimates: dict[str, Estimate]
+    truth_m: np.ndarray | None = None
+    intersection_angle_deg: float = float("nan")
+    timings_s: dict[str, float] = field(default_factory=dict)
+    settings: dict = field(default_factory=dict)
+    tracking: dict = field(default_factory=dict)
+
+    @property
+    def n_observations(self) -> int:
+        return self.observations.n
+
+    def errors_m(self) -> dict[str, float | None]:
+        return {m: e.error_m(self.truth_m) for m, e in self.estimates.items()}
+
+
+@dataclass
+class GroupFailure:
+    """A flight group that could not be processed: its name, the source (config or folder) and the one-line
+    error message."""
+
+    name: str
+    source: str
+    message: str

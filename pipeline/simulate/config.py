@@ -1,0 +1,255 @@
+"""The simulation experiment's configuration: typed defaults, loaded from YAML, unknown keys rejected.
+
+Every choice the paper leaves open (section 3.1) is a key here; docs/simulation.md says what each default is
+and why. Defaults reproduce the paper's setup: 2 km height, 5 km slant distance, 10 observations, intersection
+angles 10..80 deg, noise 5 m / 2.5 m / 0.2 deg / 0.1 px, 1000 trials.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import types
+import typing
+from dataclasses import dataclass, field
+from os import PathLike
+from pathlib import Path
+from typing import Literal
+
+import yaml
+
+from pipeline.errors import ConfigError
+
+ALL_METHODS = ("dlt", "vision", "range", "los", "fusion-raw", "fusion", "ridge", "mle")
+
+
+@dataclass(frozen=True)
+class GeometryConfig:
+    """Flight path and viewing geometry. The target is at the world origin (ENU metres, z up).
+
+    path: "arc" = the platform circles the target at constant height and slant distance (every frame at the
+        nominal observation angle); "straight" = a straight level line whose midpoint is at the nominal slant
+        distance, perpendicular to the horizontal line of sight there (end frames are farther away).
+    n_observations: frames per trial, evenly spaced along the path between the first and last line of sight.
+    """
+
+    path: Literal["arc", "straight"] = "arc"
+    n_observations: int = 10
+    height_m: float = 2000.0
+    slant_distance_m: float = 5000.0
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    """Pinhole camera without distortion, principal point at the image centre.
+
+    pointing_jitter_deg: std (per axis) of how far the true optical axis misses the target, so the true
+        pixel is not always the principal point (0 = the target locked at the centre, as in the paper).
+    """
+
+    image_width_px: int = 600
+    image_height_px: int = 400
+    focal_length_px: float = 1000.0
+    pointing_jitter_deg: float = 0.0
+
+
+@dataclass(frozen=True)
+class NoiseConfig:
+    """Zero-mean normal noise, standard deviations.
+
+    platform_position_m: per axis, on the platform (camera centre = laser origin) position the estimators see.
+    range_m: on the laser range, which is measured from the true platform position.
+    attitude_deg: per axis, a small rotation composed with the true camera attitude the estimators see.
+    attitude_model: "independent" = a fresh error per frame; "accumulating" = a random walk, frame i's error is
+        the sum of i independent steps of attitude_deg each; "constant" = one error shared by all frames (bias).
+    pixel_px: per axis, on the target pixel, which is projected through the true camera.
+    """
+
+    platform_position_m: float = 5.0
+    range_m: float = 2.5
+    attitude_deg: float = 0.2
+    attitude_model: Literal["independent", "accumulating", "constant"] = "independent"
+    pixel_px: float = 0.1
+
+
+@dataclass(frozen=True)
+class SolverConfig:
+    """Options passed to every estimator (pipeline.solve.solve_batch).
+
+    tol_m: the paper's iteration threshold ||dX|| (0.0001 in section 3.1).
+    max_iterations: iteration limit; a trial that reaches it counts as non-converged.
+    ridge_hkb: Hoerl-Kennard-Baldwin variant for the ridge estimator, "paper" (Eqs. 44-45 as printed) or
+        "textbook".
+    mle_sigma: "given" = the MLE is told the true noise standard deviations of this config; "estimated" = it
+        is told nothing and must estimate them (variance components) from the data.
+    """
+
+    tol_m: float = 1e-4
+    max_iterations: int = 100
+    ridge_hkb: Literal["paper", "textbook"] = "paper"
+    mle_sigma: Literal["given", "estimated"] = "given"
+
+
+@dataclass(frozen=True)
+class SimulationConfig:
+    """The whole experiment; `name` labels the outputs (defaults to the config file's stem)."""
+
+    name: str = "table2"
+    description: str = ""
+    seed: int = 20240601
+    trials: int = 1000
+    angles_deg: tuple[float, ...] = (10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0)
+    methods: tuple[str, ...] = ALL_METHODS
+    geometry: GeometryConfig = field(default_factory=GeometryConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
+    solver: SolverConfig = field(default_factory=SolverConfig)
+
+    def __post_init__(self):
+        _check_config(self)
+
+    @classmethod
+    def from_dict(cls, doc: dict | None, path: str | PathLike | None = None) -> SimulationConfig:
+        doc = {} if doc is None else doc
+        if isinstance(doc, dict) and "name" not in doc and path is not None:
+            doc = {**doc, "name": Path(path).stem.removeprefix("simulation_")}
+        try:
+            return _build(cls, doc, "")
+        except ConfigError as exc:
+            raise ConfigError(str(exc), path) from None
+
+    @classmethod
+    def load(cls, path: str | PathLike) -> SimulationConfig:
+        path = Path(path)
+        try:
+            doc = yaml.safe_load(path.read_text())
+        except FileNotFoundError:
+            raise ConfigError("config file not found", path) from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"cannot read: {exc}", path) from None
+        except yaml.YAMLError as exc:
+            mark = getattr(exc, "problem_mark", None)
+            where = f" at line {mark.line + 1} column {mark.column + 1}" if mark is not None else ""
+            raise ConfigError(f"not valid YAML: {getattr(exc, 'problem', None) or exc}{where}", path) from None
+        return cls.from_dict(doc, path)
+
+    def replace(self, **changes) -> SimulationConfig:
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict:
+        return _to_plain(dataclasses.asdict(self))
+
+
+def _to_plain(value):
+    if isinstance(value, dict):
+        return {k: _to_plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_to_plain(v) for v in value]
+    return value
+
+
+def _check_config(cfg: SimulationConfig) -> None:
+    g, c, nz, s = cfg.geometry, cfg.camera, cfg.noise, cfg.solver
+    if cfg.trials < 1:
+        raise ConfigError(f"'trials' must be >= 1, got {cfg.trials}")
+    if not cfg.angles_deg:
+        raise ConfigError("'angles_deg' must list at least one intersection angle")
+    if len(set(cfg.angles_deg)) != len(cfg.angles_deg):
+        raise ConfigError(f"'angles_deg' has duplicates: {list(cfg.angles_deg)}")
+    if not cfg.methods:
+        raise ConfigError("'methods' must list at least one estimator")
+    unknown = [m for m in cfg.methods if m not in ALL_METHODS]
+    if unknown:
+        raise ConfigError(f"unknown method(s) in 'methods': {', '.join(unknown)} (known: {', '.join(ALL_METHODS)})")
+    if len(set(cfg.methods)) != len(cfg.methods):
+        raise ConfigError(f"'methods' has duplicates: {list(cfg.methods)}")
+    if g.n_observations < 2:
+        raise ConfigError(f"'geometry.n_observations' must be >= 2, got {g.n_observations}")
+    if not 0 < g.height_m < g.slant_distance_m:
+        raise ConfigError(f"'geometry.height_m' ({g.height_m}) must be > 0 and below 'geometry.slant_distance_m' "
+                          f"({g.slant_distance_m})")
+    max_angle = max_intersection_angle_deg(g)
+    too_wide = [a for a in cfg.angles_deg if not 0 < a < max_angle]
+    if too_wide:
+        raise ConfigError(f"'angles_deg' {too_wide} not reachable: the {g.path} path at this height and slant distance "
+                          f"allows intersection angles in (0, {max_angle:.1f}) deg")
+    for name in ("image_width_px", "image_height_px", "focal_length_px"):
+        if getattr(c, name) <= 0:
+            raise ConfigError(f"'camera.{name}' must be > 0, got {getattr(c, name)}")
+    if c.pointing_jitter_deg < 0:
+        raise ConfigError(f"'camera.pointing_jitter_deg' must be >= 0, got {c.pointing_jitter_deg}")
+    for f in ("platform_position_m", "range_m", "attitude_deg", "pixel_px"):
+        if getattr(nz, f) < 0:
+            raise ConfigError(f"'noise.{f}' must be >= 0, got {getattr(nz, f)}")
+    if s.tol_m <= 0:
+        raise ConfigError(f"'solver.tol_m' must be > 0, got {s.tol_m}")
+    if s.max_iterations < 1:
+        raise ConfigError(f"'solver.max_iterations' must be >= 1, got {s.max_iterations}")
+
+
+def max_intersection_angle_deg(g: GeometryConfig) -> float:
+    """Largest intersection angle the path can produce (arc: half a circle; straight: approaching 180 deg)."""
+    if g.path == "straight":
+        return 180.0
+    r2 = g.slant_distance_m ** 2 - g.height_m ** 2
+    return math.degrees(math.acos((g.height_m ** 2 - r2) / g.slant_distance_m ** 2))
+
+
+# ---- a small typed loader over the dataclasses above --------------------------------------------------------
+
+def _type_name(tp) -> str:
+    origin = typing.get_origin(tp)
+    if origin is Literal:
+        return " | ".join(repr(a) for a in typing.get_args(tp))
+    if origin is tuple:
+        return f"list of {_type_name(typing.get_args(tp)[0])}"
+    return getattr(tp, "__name__", str(tp))
+
+
+def _convert(tp, value, where: str):
+    origin = typing.get_origin(tp)
+    if dataclasses.is_dataclass(tp):
+        if not isinstance(value, dict):
+            raise ConfigError(f"'{where}' must be a mapping of keys, got {type(value).__name__}")
+        return _build(tp, value, where + ".")
+    if origin is Literal:
+        if value not in typing.get_args(tp):
+            raise ConfigError(f"'{where}' must be one of {_type_name(tp)}, got {value!r}")
+        return value
+    if origin is tuple:
+        if not isinstance(value, list):
+            raise ConfigError(f"'{where}' must be a {_type_name(tp)}, got {type(value).__name__} {value!r}")
+        item = typing.get_args(tp)[0]
+        return tuple(_convert(item, v, f"{where}[{i}]") for i, v in enumerate(value))
+    if origin in (typing.Union, types.UnionType):
+        raise TypeError(f"unsupported config type {tp}")  # not used by the dataclasses above
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"'{where}' must be true or false, got {value!r}")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"'{where}' must be an integer, got {type(value).__name__} {value!r}")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ConfigError(f"'{where}' must be a finite number, got {type(value).__name__} {value!r}")
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"'{where}' must be a string, got {type(value).__name__} {value!r}")
+        return value
+    raise TypeError(f"unsupported config type {tp}")
+
+
+def _build(cls, doc: dict, prefix: str):
+    if not isinstance(doc, dict):
+        raise ConfigError(f"the top level must be a mapping of keys, got {type(doc).__name__}")
+    hints = typing.get_type_hints(cls)
+    names = [f.name for f in dataclasses.fields(cls)]
+    unknown = sorted(set(doc) - set(names))
+    if unknown:
+        raise ConfigError(f"unknown key(s) {', '.join(prefix + k for k in unknown)} "
+                          f"(known in {prefix.rstrip('.') or 'the top level'}: {', '.join(names)})")
+    values = {k: _convert(hints[k], v, prefix + k) for k, v in doc.items()}
+    return cls(**values)

@@ -1,1 +1,294 @@
-"""Estimators of the target position from synchronized observations (paper sections 2.1-2.4, plus MLE)."""
+"""Estimators of the target position from synchronized observations (paper sections 2.1-2.4, plus MLE).
+
+    solve(method, obs, **options) -> Estimate              one problem; raises a clear error when it cannot
+    solve_batch(method, batch, **options) -> BatchEstimate  B problems at once; failures are statuses
+
+Methods (docs/solvers.md): dlt, vision, range, los, fusion-raw, fusion, ridge, mle. Both entry points run
+the same batched kernels (a single problem is a batch of one), so they give the same numbers.
+
+Options: tol_m (1e-4, the paper's threshold on ||dX||), max_iterations (50), initial_m ((3,) or (B,3));
+ridge: hkb ("paper" | "textbook"), k (a fixed ridge parameter; k=0 is `fusion`); mle: robust ("huber" |
+"cauchy" | None), sigma (a `Sigma` or dict overriding the observations' sigmas), estimate_variance_components
+(default: on when the pixel or range sigma is unknown).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.errors import GeometryError, ObservationError, SolverError
+from pipeline.solve import least_squares, linear
+from pipeline.solve import mle as _mle
+from pipeline.solve.estimate import BatchEstimate, Estimate, Status
+from pipeline.solve.observations import ObservationBatch, Observations, Sigma
+from pipeline.solve.stacked import Stacked, pixel_model, range_model
+
+METHODS = ("dlt", "vision", "range", "los", "fusion-raw", "fusion", "ridge", "mle")
+
+_COMMON = {"tol_m", "max_iterations", "initial_m"}
+_OPTIONS = {
+    "dlt": set(), "los": set(),
+    "vision": _COMMON, "range": _COMMON, "fusion-raw": _COMMON, "fusion": _COMMON,
+    "ridge": _COMMON | {"hkb", "k"},
+    "mle": _COMMON | {"robust", "sigma", "estimate_variance_components"},
+}
+_USES_PIXELS = {"dlt", "vision", "fusion-raw", "fusion", "ridge", "mle"}
+
+__all__ = ["METHODS", "BatchEstimate", "Estimate", "Status", "solve", "solve_batch"]
+
+
+def _check_options(method: str, options: dict) -> dict:
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    unknown = sorted(set(options) - _OPTIONS[method])
+    if unknown:
+        raise ValueError(f"method {method!r} takes no option(s) {', '.join(unknown)}; it takes "
+                         f"{', '.join(sorted(_OPTIONS[method])) or 'none'}")
+    o = dict(options)
+    tol = float(o.get("tol_m", 1e-4))
+    if not tol > 0:
+        raise ValueError(f"tol_m must be > 0, got {tol}")
+    o["tol_m"] = tol
+    it = o.get("max_iterations", 50)
+    if isinstance(it, bool) or not isinstance(it, (int, np.integer)) or it < 1:
+        raise ValueError(f"max_iterations must be an integer >= 1, got {it!r}")
+    o["max_iterations"] = int(it)
+    if o.get("hkb", "paper") not in least_squares.HKB_VARIANTS:
+        raise ValueError(f"hkb must be one of {least_squares.HKB_VARIANTS}, got {o['hkb']!r}")
+    if o.get("k") is not None and not (np.isfinite(o["k"]) and o["k"] >= 0):
+        raise ValueError(f"k must be a finite number >= 0, got {o['k']!r}")
+    if o.get("robust", "huber") not in _mle.ROBUST_LOSSES:
+        raise ValueError(f"robust must be one of {_mle.ROBUST_LOSSES}, got {o['robust']!r}")
+    s = o.get("sigma")
+    if isinstance(s, dict):
+        o["sigma"] = Sigma.from_dict(s, "sigma option")
+    elif s is not None and not isinstance(s, Sigma):
+        raise ValueError(f"sigma must be a Sigma or a dict, got {type(s).__name__}")
+    return o
+
+
+def _initial(options: dict, B: int):
+    x0 = options.get("initial_m")
+    if x0 is None:
+        return None
+    x0 = np.asarray(x0, dtype=np.float64)
+    if x0.shape == (3,):
+        x0 = np.broadcast_to(x0, (B, 3)).copy()
+    if x0.shape != (B, 3) or not np.isfinite(x0).all():
+        raise ValueError(f"initial_m must be 3 finite numbers or ({B}, 3) of them, got shape {x0.shape}")
+    return x0
+
+
+def _vision_init(st: Stacked, o: dict):
+    x0 = _initial(o, st.size)
+    if x0 is not None:
+        return x0, None
+    X, status, _ = linear.dlt(st)
+    X, _, status, _ = least_squares.vision(st, X, o["tol_m"], o["max_iterations"], status)
+    # a vision result that hit the iteration limit is still a usable initial value
+    return X, status
+
+
+def _solve_stacked(method: str, st: Stacked, o: dict) -> BatchEstimate:
+    B = st.size
+    tol, itmax = o["tol_m"], o["max_iterations"]
+    extras: dict = {}
+    cov = None
+    if method == "dlt":
+        X, status, cond = linear.dlt(st)
+        it = np.zeros(B, dtype=np.int64)
+    elif method == "los":
+        X, status, pts, oracle = linear.los(st)
+        it = np.zeros(B, dtype=np.int64)
+        cond = np.full(B, np.nan)
+        extras = {"points_m": pts, "oracle_error_m": oracle}
+    elif method == "vision":
+        x0 = _initial(o, B)
+        init_status = None
+        if x0 is None:
+            x0, init_status, _ = linear.dlt(st)
+        X, it, status, cond = least_squares.vision(st, x0, tol, itmax, init_status)
+    elif method in ("range", "fusion-raw"):
+        x0, init_status = _vision_init(st, o)
+        fn = least_squares.range_only if method == "range" else least_squares.fusion_raw
+        X, it, status, cond = fn(st, x0, tol, itmax, init_status)
+    elif method in ("fusion", "ridge"):
+        x0, init_status = _vision_init(st, o)
+        if method == "fusion":
+            k, hkb = None, None
+        else:
+            k = o.get("k")
+            hkb = None if k is not None else o.get("hkb", "paper")
+        X, it, status, cond, ex = least_squares.normalized_fusion(st, x0, tol, itmax, init_status, k=k, hkb=hkb)
+        extras = {"augmented_component": ex["augmented"]}
+        if method == "ridge":
+            extras["k"] = ex["k"]
+    elif method == "mle":
+        x0 = _initial(o, B)
+        init_status = None
+        if x0 is None:
+            x0, init_status, _ = linear.dlt(st)
+            need = ~np.isfinite(x0).all(axis=1)
+            if need.any():  # fewer than two pixels: start from the line-of-sight points
+                Xl, sl, _, _ = linear.los(st.take(np.flatnonzero(need)))
+                x0[need], init_status[need] = Xl, sl
+        sigma = o.get("sigma") or st.sigma
+        vce = o.get("estimate_variance_components")
+        if vce is None:
+            vce = sigma.pixel_px is None or sigma.range_m is None
+        X, it, status, cond, cov, ex = _mle.mle(st, x0, sigma, o.get("robust", "huber"), bool(vce), tol, itmax,
+                                                init_status)
+        axes, vecs = _mle.ellipsoid(cov)
+        extras = {"cep50_m": _mle.cep_m(cov[:, :2, :2], 0.5), "cep90_m": _mle.cep_m(cov[:, :2, :2], 0.9),
+                  "ellipsoid_semi_axes_1sigma_m": axes, "ellipsoid_axes": vecs, **ex}
+    else:  # pragma: no cover - _check_options rejects it
+        raise ValueError(method)
+    if method in _USES_PIXELS:
+        behind = _behind_camera(st, X)
+        if behind.any():
+            status[behind] = Status.DEGENERATE
+            X[behind] = np.nan
+        extras["behind_camera"] = behind
+    return BatchEstimate(method=method, position_m=X, iterations=it, status=status.astype(np.int8),
+                         condition_number=cond, covariance_m2=cov, extras=extras)
+
+
+def _behind_camera(st: Stacked, X: np.ndarray) -> np.ndarray:
+    ok = np.isfinite(X).all(axis=1)
+    depth = st.depths(np.where(ok[:, None], X, 0.0))
+    return ok & ((depth <= 0) & st.has_pix).any(axis=1)
+
+
+def solve_batch(method: str, batch: ObservationBatch, **options) -> BatchEstimate:
+    """Solve B problems with one estimator. Problems it cannot solve get status DEGENERATE (geometry does not
+    determine the target, too few observations, target behind a camera) or DIVERGED, and NaN positions."""
+    o = _check_options(method, options)
+    if not isinstance(batch, ObservationBatch):
+        raise TypeError(f"solve_batch wants an ObservationBatch, got {type(batch).__name__}")
+    return _solve_stacked(method, Stacked.from_batch(batch), o)
+
+
+# ---- single problem: clear errors for unusable input --------------------------------------------------------
+
+def _spread_m(points: np.ndarray) -> float:
+    return float(np.linalg.norm(points - points.mean(axis=0), axis=1).max()) if len(points) else 0.0
+
+
+def _check_inputs(method: str, obs: Observations, o: dict) -> None:
+    npix = int(obs.has_pixel.sum())
+    nrng = int(obs.has_range.sum())
+    nboth = int((obs.has_pixel & obs.has_range).sum())
+    has_init = o.get("initial_m") is not None
+    det = np.linalg.det(obs.P[:, :, :3])
+    scale = np.abs(obs.P[:, :, :3]).max(axis=(1, 2)) ** 3
+    bad = np.flatnonzero(~(np.abs(det) > 1e-12 * scale))
+    if bad.size and method != "range":
+        raise ObservationError(f"frame(s) {bad.tolist()}: the left 3x3 block of P is singular, not a finite "
+                               "camera")
+    if method == "los":
+        if nboth == 0:
+            raise ObservationError("los needs at least one frame with both a target pixel and a range")
+        return
+    if method == "mle":
+        if not has_init and npix < 2 and nboth == 0:
+            raise ObservationError(f"mle starts from the linear intersection (two or more pixels) or a line of "
+                                   f"sight (a pixel and a range in one frame); there are {npix} pixel(s) and "
+                                   f"no frame with both")
+        if 2 * npix + nrng < 3:
+            raise ObservationError(f"mle needs at least three observations (2 per pixel, 1 per range), got "
+                                   f"{2 * npix + nrng}")
+        return
+    needs_pixels = method in ("dlt", "vision") or not has_init
+    if needs_pixels and npix < 2:
+        what = method if method in ("dlt", "vision") else f"{method} (initialised from vision)"
+        raise ObservationError(f"{what} needs at least two frames with a target pixel, got {npix}"
+                               + ("" if method in ("dlt", "vision") else "; or pass initial_m"))
+    if needs_pixels:
+        centres = np.linalg.solve(obs.P[obs.has_pixel, :, :3], -obs.P[obs.has_pixel, :, 3:])[..., 0]
+        if _spread_m(centres) <= 1e-6 * (1.0 + np.abs(centres).max()):
+            raise GeometryError("all frames with a target pixel share one camera position: no baseline to "
+                                "intersect the lines of sight")
+    if method == "range":
+        if nrng < 3:
+            raise ObservationError(f"range needs at least three laser ranges, got {nrng}")
+        s = obs.platform_m[obs.has_range]
+        sv = np.linalg.svd(s - s.mean(axis=0), compute_uv=False)
+        if sv[0] <= 1e-6 * (1.0 + np.abs(s).max()):
+            raise GeometryError("all ranged frames share one platform position: ranges from one point do not "
+                                "locate the target")
+        if sv[1] <= 1e-9 * sv[0]:
+            raise GeometryError("the platform positions of the ranged frames are collinear: ranges cannot fix "
+                                "the rotation of the target about that line")
+    if method in ("fusion", "ridge") and nrng == 0:
+        raise ObservationError(f"{method} fuses pixels with ranges but there are no ranges; use vision")
+
+
+def solve(method: str, obs: Observations, **options) -> Estimate:
+    """Solve one problem with one estimator (see the module docstring for methods and options).
+
+    Raises ObservationError for unusable input (too few pixels or ranges, a singular P), GeometryError when
+    the geometry does not determine the target (coincident or collinear positions, rank-deficient design,
+    target behind a camera), SolverError when the iteration diverged. An estimate that reached max_iterations
+    is returned with status MAX_ITERATIONS (converged False).
+    """
+    o = _check_options(method, options)
+    if not isinstance(obs, Observations):
+        raise TypeError(f"solve wants an Observations, got {type(obs).__name__}")
+    _check_inputs(method, obs, o)
+    st = Stacked.from_observations(obs)
+    be = _solve_stacked(method, st, o)
+    status = Status(int(be.status[0]))
+    cond = float(be.condition_number[0])
+    if status == Status.DEGENERATE:
+        if method in _USES_PIXELS and bool(be.extras["behind_camera"][0]):
+            raise GeometryError(f"{method}: the estimate lies behind the camera of a frame with a target "
+                                "pixel (check the pixels and the sign convention of P)")
+        raise GeometryError(f"{method}: the geometry does not determine the target (design matrix rank "
+                            f"deficient, condition number {cond:.3g}); more baseline or other observations "
+                            "are needed")
+    if status == Status.DIVERGED:
+        raise SolverError(f"{method}: the iteration diverged after {int(be.iterations[0])} iterations "
+                          "(the estimate ran away or became non-finite)")
+    X = be.position_m[0]
+    extras = {}
+    if method == "los":
+        pts = be.extras["points_m"][0]
+        extras["points_m"] = [None if not np.isfinite(p).all() else p.tolist() for p in pts]
+        oracle = float(be.extras["oracle_error_m"][0])
+        if np.isfinite(oracle):
+            extras["oracle_error_m"] = oracle
+    if "augmented_component" in be.extras:
+        extras["augmented_component"] = float(be.extras["augmented_component"][0])
+    if "k" in be.extras:
+        extras["k"] = float(be.extras["k"][0])
+    cov = None
+    if method == "mle":
+        cov = be.covariance_m2[0]
+        ax = be.extras["ellipsoid_semi_axes_1sigma_m"][0]
+        extras.update({
+            "cep50_m": float(be.extras["cep50_m"][0]), "cep90_m": float(be.extras["cep90_m"][0]),
+            "ellipsoid": {"semi_axes_1sigma_m": ax.tolist(),
+                          "semi_axes_95pct_m": (ax * np.sqrt(_mle.CHI2_3_95)).tolist(),
+                          "axes": be.extras["ellipsoid_axes"][0].T.tolist()},
+            "variance_factors": {"pixel": float(be.extras["variance_factor_pixel"][0]),
+                                 "range": float(be.extras["variance_factor_range"][0])},
+            "sigma0_sq": float(be.extras["sigma0_sq"][0]),
+            "vce_rounds": int(be.extras["vce_rounds"][0]),
+            "robust": o.get("robust", "huber"),
+        })
+    return Estimate(method=method, position_m=X, iterations=int(be.iterations[0]), status=status,
+                    residuals=_residuals(method, st, X), condition_number=cond, covariance_m2=cov, extras=extras)
+
+
+def _residuals(method: str, st: Stacked, X: np.ndarray) -> np.ndarray:
+    """Observed minus predicted of the observations the method used: pixels (px, u v interleaved), then
+    ranges (m)."""
+    X = X[None]
+    parts = []
+    if method in _USES_PIXELS or method == "los":
+        _, r, ok = pixel_model(st, X)
+        parts.append(r[ok])
+    if method not in ("dlt", "vision"):
+        _, r, ok = range_model(st, X)
+        parts.append(r[ok])
+    return np.concatenate(parts) if parts else np.zeros(0)

@@ -1,0 +1,85 @@
+"""The batched iteration driver shared by the Gauss-Newton style estimators.
+
+Every problem iterates X <- X + dX until ||dX|| <= tol_m (CONVERGED), max_iterations (MAX_ITERATIONS), a
+singular normal matrix (DEGENERATE) or a non-finite / exploding estimate (DIVERGED). Converged problems are
+frozen: each iteration only computes the still active ones.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from pipeline.solve.estimate import Status
+from pipeline.solve.stacked import Stacked, condition_numbers
+
+#: an estimate further than this many times the problem's size from the platforms has diverged
+DIVERGENCE_FACTOR = 1e3
+#: cond(design) beyond this: the geometry does not determine the target
+DEGENERATE_CONDITION = 1e10
+
+StepFn = Callable[[Stacked, np.ndarray], tuple[np.ndarray, np.ndarray, dict]]
+
+
+def problem_scale_m(st: Stacked, X0: np.ndarray) -> np.ndarray:
+    """(B,) a length scale: the largest platform-to-initial-estimate distance (>= 1 m)."""
+    d = np.linalg.norm(X0[:, None, :] - st.platform_m, axis=-1).max(axis=1)
+    return np.where(np.isfinite(d), np.maximum(d, 1.0), 1.0)
+
+
+def iterate(st: Stacked, X0: np.ndarray, step: StepFn, tol_m: float, max_iterations: int,
+            init_status: np.ndarray | None = None, extra_names: tuple[str, ...] = ()):
+    """Run `step(sub, X_sub) -> (dX (b,3), singular (b,) bool, extras {name: (b,)})` to convergence.
+
+    Returns X (B,3) (NaN where DIVERGED or DEGENERATE), iterations (B,), status (B,) int8 and the extras of
+    each problem's last iteration (B,) arrays.
+    """
+    B = st.size
+    X = np.array(X0, dtype=np.float64, copy=True)
+    iterations = np.zeros(B, dtype=np.int64)
+    status = np.full(B, Status.MAX_ITERATIONS, dtype=np.int8)
+    finite0 = np.isfinite(X).all(axis=1)
+    if init_status is not None:
+        bad_init = np.isin(init_status, (Status.DIVERGED, Status.DEGENERATE)) | ~finite0
+        status[bad_init] = np.where(init_status[bad_init] == Status.DIVERGED, Status.DIVERGED, Status.DEGENERATE)
+    else:
+        bad_init = ~finite0
+        status[bad_init] = Status.DEGENERATE
+    active = ~bad_init
+    centre = st.platform_m.mean(axis=1)
+    bound = DIVERGENCE_FACTOR * problem_scale_m(st, np.where(finite0[:, None], X, centre))
+    extras = {name: np.full(B, np.nan) for name in extra_names}
+    for _ in range(max_iterations):
+        idx = np.flatnonzero(active)
+        if idx.size == 0:
+            break
+        sub = st if idx.size == B else st.take(idx)
+        dX, singular, ex = step(sub, X[idx])
+        for name, v in ex.items():
+            extras[name][idx] = v
+        iterations[idx] += 1
+        Xn = X[idx] + dX
+        step_norm = np.linalg.norm(dX, axis=1)
+        finite = np.isfinite(Xn).all(axis=1)
+        exploded = ~finite | (np.linalg.norm(Xn - centre[idx], axis=1) > bound[idx])
+        X[idx] = np.where(finite[:, None], Xn, X[idx])
+        done_conv = ~singular & ~exploded & (step_norm <= tol_m)
+        st_idx = status[idx]
+        st_idx[singular] = Status.DEGENERATE
+        st_idx[~singular & exploded] = Status.DIVERGED
+        st_idx[done_conv] = Status.CONVERGED
+        status[idx] = st_idx
+        active[idx] = ~(singular | exploded | done_conv)
+    failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
+    X[failed] = np.nan
+    return X, iterations, status, extras
+
+
+def flag_degenerate(X: np.ndarray, status: np.ndarray, design: np.ndarray) -> None:
+    """In place: problems whose final design matrix (B,m,k) is numerically rank deficient (condition number
+    of the column-equilibrated matrix above DEGENERATE_CONDITION) become DEGENERATE."""
+    cond = condition_numbers(design, equilibrate=True)
+    bad = (cond > DEGENERATE_CONDITION) & np.isfinite(X).all(axis=1)
+    status[bad] = Status.DEGENERATE
+    X[bad] = np.nan

@@ -1,0 +1,154 @@
+"""The paper's Gauss-Newton estimators: vision (eqs. 9-15), range (16-27), fusion without normalization
+([H; h] stacked), the min-max normalized fusion (36-41) and its ridge variant (43-47).
+
+All are batched: they take a `Stacked` of B problems and (B,3) initial values.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.solve.iterate import flag_degenerate, iterate
+from pipeline.solve.stacked import Stacked, condition_numbers, normal_equations, pixel_model, range_model, solve_spd
+
+HKB_VARIANTS = ("paper", "textbook")
+
+
+def _gn_step(model):
+    def step(sub: Stacked, X: np.ndarray):
+        J, r, ok = model(sub, X)
+        N, g = normal_equations(J, r, ok.astype(np.float64))
+        dX, singular = solve_spd(N, g)
+        return dX, singular, {}
+    return step
+
+
+def _fused_model(st: Stacked, X: np.ndarray):
+    Jp, rp, okp = pixel_model(st, X)
+    Jr, rr, okr = range_model(st, X)
+    return (np.concatenate([Jp, Jr], axis=1), np.concatenate([rp, rr], axis=1),
+            np.concatenate([okp, okr], axis=1))
+
+
+def _run(st, X0, model, tol_m, max_iterations, init_status):
+    X, it, status, _ = iterate(st, X0, _gn_step(model), tol_m, max_iterations, init_status)
+    J, _, _ = model(st, np.where(np.isfinite(X), X, 0.0))
+    cond = condition_numbers(J)
+    cond[~np.isfinite(X).all(axis=1)] = np.nan
+    flag_degenerate(X, status, J)
+    return X, it, status, cond
+
+
+def vision(st: Stacked, X0, tol_m, max_iterations, init_status=None):
+    """Gauss-Newton on reprojection residuals (eqs. 9-15 with the corrected Jacobian of `pixel_model`);
+    cond is that of H (2n x 3)."""
+    return _run(st, X0, pixel_model, tol_m, max_iterations, init_status)
+
+
+def range_only(st: Stacked, X0, tol_m, max_iterations, init_status=None):
+    """Gauss-Newton on laser ranges (eqs. 16-27); cond is that of h (n x 3)."""
+    return _run(st, X0, range_model, tol_m, max_iterations, init_status)
+
+
+def fusion_raw(st: Stacked, X0, tol_m, max_iterations, init_status=None):
+    """Gauss-Newton on [pixels; ranges] with the stacked design [H; h] and no normalization or weighting:
+    pixels count in px and ranges in m."""
+    return _run(st, X0, _fused_model, tol_m, max_iterations, init_status)
+
+
+def _minmax(r: np.ndarray, ok: np.ndarray):
+    """Per problem Min and the divisor Max - Min over the rows in use; a divisor of 0 (all residuals equal,
+    or a single row) or no rows at all becomes 1 so the block is only shifted, not scaled."""
+    hi = np.max(np.where(ok, r, -np.inf), axis=1)
+    lo = np.min(np.where(ok, r, np.inf), axis=1)
+    span = hi - lo
+    good = np.isfinite(span) & (span > 0)
+    lo = np.where(np.isfinite(lo), lo, 0.0)
+    return lo, np.where(good, span, 1.0)
+
+
+def normalized_system(st: Stacked, X: np.ndarray):
+    """The paper's eqs. (36)-(38) at X: T (B, 2n+n, 4) and dPhi (B, 3n), with unused rows zero.
+
+    Pixel rows: [H/(Max-Min), -Min/(Max-Min)], (dpsi - Min)/(Max-Min); range rows likewise with max, min of
+    dphi. Max, Min over the pixel residuals dpsi = psi - F(X) of all frames (u and v together), max, min over
+    the range residuals dphi = phi - f(X).
+    """
+    Jp, rp, okp = pixel_model(st, X)
+    Jr, rr, okr = range_model(st, X)
+    Lo, Sp = _minmax(rp, okp)
+    lo, sp = _minmax(rr, okr)
+    Tp = np.concatenate([Jp, np.broadcast_to((-Lo)[:, None, None], (*rp.shape, 1))], axis=2) / Sp[:, None, None]
+    Tr = np.concatenate([Jr, np.broadcast_to((-lo)[:, None, None], (*rr.shape, 1))], axis=2) / sp[:, None, None]
+    T = np.concatenate([Tp * okp[..., None], Tr * okr[..., None]], axis=1)
+    dPhi = np.concatenate([(rp - Lo[:, None]) / Sp[:, None] * okp, (rr - lo[:, None]) / sp[:, None] * okr], axis=1)
+    rows = okp.sum(axis=1) + okr.sum(axis=1)
+    return T, dPhi, rows
+
+
+def hkb_k(N, g, dPhi, rows, variant: str = "paper"):
+    """Hoerl-Kennard-Baldwin ridge parameter (B,) for the system T beta = dPhi with N = T^T T, g = T^T dPhi.
+
+    paper (eqs. 44-45 as implemented): beta_hat = N^-1 g, the least-squares solution [dX; 1]-vector of the
+    current iteration; t = 4 = rank(T); delta0^2 = dPhi^T (I - T N^-1 T^T) dPhi / (m - t) with Phi read as the
+    normalized shift vector dPhi (the vector the hat matrix of T acts on) and n read as m, the number of rows
+    of T in use (2 per pixel + 1 per range); k = t delta0^2 / (beta_hat^T N beta_hat).
+    textbook: the same on the column-standardized system (columns of T scaled to unit length), k = p s^2 /
+    (gamma_hat^T gamma_hat); the returned k then applies to the standardized normal matrix.
+    """
+    p = N.shape[-1]
+    if variant == "textbook":
+        d = np.sqrt(np.einsum("bii->bi", N))
+        d = np.where(d > 0, d, 1.0)
+        N = N / (d[:, :, None] * d[:, None, :])
+        g = g / d
+    beta, singular = solve_spd(N, g)
+    rss = np.maximum(np.einsum("bi,bi->b", dPhi, dPhi) - np.einsum("bi,bi->b", g, beta), 0.0)
+    dof = rows - p
+    s2 = np.where(dof > 0, rss / np.where(dof > 0, dof, 1), 0.0)
+    if variant == "textbook":
+        denom = np.einsum("bi,bi->b", beta, beta)
+    else:
+        denom = np.einsum("bi,bij,bj->b", beta, N, beta)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k = p * s2 / denom
+    return np.where(np.isfinite(k) & ~singular, k, 0.0)
+
+
+def _normalized_step(k_fixed: float | None, hkb: str | None):
+    def step(sub: Stacked, X: np.ndarray):
+        T, dPhi, rows = normalized_system(sub, X)
+        N, g = normal_equations(T, dPhi, np.ones(dPhi.shape))
+        B = N.shape[0]
+        if hkb is None:
+            k = np.zeros(B) if k_fixed is None else np.full(B, float(k_fixed))
+            beta, singular = solve_spd(N + k[:, None, None] * np.eye(4), g)
+        else:
+            k = hkb_k(N, g, dPhi, rows, hkb)
+            if hkb == "textbook":
+                d = np.sqrt(np.einsum("bii->bi", N))
+                d = np.where(d > 0, d, 1.0)
+                Ns = N / (d[:, :, None] * d[:, None, :]) + k[:, None, None] * np.eye(4)
+                gamma, singular = solve_spd(Ns, g / d)
+                beta = gamma / d
+            else:
+                beta, singular = solve_spd(N + k[:, None, None] * np.eye(4), g)
+        return beta[:, :3], singular, {"k": k, "augmented": beta[:, 3]}
+    return step
+
+
+def normalized_fusion(st: Stacked, X0, tol_m, max_iterations, init_status=None, k: float | None = None,
+                      hkb: str | None = None):
+    """The paper's normalized fusion (eqs. 36-41; k = None, hkb = None) or ridge fusion (eqs. 43-47; hkb =
+    'paper' or 'textbook', or a fixed k). Solves T [dX; a] = dPhi (a is the 4th unknown the paper writes as
+    1) and updates X by dX only.
+
+    Returns X, iterations, status, cond (of T at the final iterate), extras {k, augmented} of the last iteration.
+    """
+    X, it, status, extras = iterate(st, X0, _normalized_step(k, hkb), tol_m, max_iterations, init_status,
+                                    extra_names=("k", "augmented"))
+    T, _, _ = normalized_system(st, np.where(np.isfinite(X), X, 0.0))
+    cond = condition_numbers(T)
+    cond[~np.isfinite(X).all(axis=1)] = np.nan
+    flag_degenerate(X, status, T)
+    return X, it, status, cond, extras

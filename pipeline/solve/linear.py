@@ -1,0 +1,93 @@
+"""Closed-form estimators: `dlt` (linear forward intersection) and `los` (single-frame line of sight x range)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.solve.estimate import Status
+from pipeline.solve.stacked import Stacked
+
+
+def dlt(st: Stacked):
+    """Homogeneous linear triangulation from every frame with a pixel.
+
+    Each pixel gives two rows u p3 - p1, v p3 - p2 (p_k rows of P) of A [X; 1] = 0. The world is first shifted
+    to the platforms' centroid and scaled by their spread, and each row is scaled to unit length, so the
+    algebraic error is well conditioned; the solution is the eigenvector of A^T A with the smallest eigenvalue.
+
+    Returns X (B,3) (NaN when fewer than two pixels or the rays are parallel: status DEGENERATE),
+    status (B,) int8, and cond (B,) = sigma_1 / sigma_3 of the normalised A (its 4th singular value is the
+    algebraic residual, ~0).
+    """
+    c = st.platform_m.mean(axis=1)  # (B,3)
+    spread = np.sqrt(((st.platform_m - c[:, None, :]) ** 2).sum(-1).mean(-1))
+    sc = np.where(spread > 1.0, spread, 1.0)
+    # P' = P [[sc I, c], [0, 1]]
+    Mp = st.M * sc[:, None, None, None]
+    p4p = np.einsum("bnij,bj->bni", st.M, c) + st.p4
+    Pp = np.concatenate([Mp, p4p[..., None]], axis=-1)  # (B,n,3,4)
+    rows = st.pix[..., :, None] * Pp[..., 2:3, :] - Pp[..., :2, :]  # (B,n,2,4)
+    norm = np.linalg.norm(rows, axis=-1, keepdims=True)
+    ok = st.has_pix[..., None, None] & (norm > 0)
+    A = np.where(ok, rows / np.where(ok, norm, 1.0), 0.0).reshape(st.size, -1, 4)
+    N = np.swapaxes(A, 1, 2) @ A
+    evals, evecs = np.linalg.eigh(N)
+    x = evecs[..., 0]  # (B,4)
+    enough = st.has_pix.sum(axis=1) >= 2
+    w = x[:, 3]
+    at_infinity = np.abs(w) <= 1e-12 * np.linalg.norm(x[:, :3], axis=1)
+    good = enough & ~at_infinity
+    with np.errstate(divide="ignore", invalid="ignore"):
+        X = c + sc[:, None] * x[:, :3] / w[:, None]
+        cond = np.sqrt(np.maximum(evals[:, 3], 0) / np.maximum(evals[:, 1], 0))
+    X[~good] = np.nan
+    cond = np.where(np.isfinite(cond), cond, np.inf)
+    status = np.where(good, Status.CLOSED_FORM, Status.DEGENERATE).astype(np.int8)
+    return X, status, cond
+
+
+def los_points(st: Stacked):
+    """Per-frame line-of-sight points (B,n,3), NaN where a frame lacks the pixel or the range.
+
+    The ray leaves the camera centre C = -M^-1 p4 along sign(det M) M^-1 [u, v, 1] (the sign puts the
+    point in front of the camera). The laser range d is measured from the platform position s (the laser),
+    which may differ from C by a lever arm, so the point is C + t a with |C + t a - s| = d (the far root
+    of the quadratic); with C = s this is simply C + d a.
+    """
+    Minv = np.linalg.inv(st.M)
+    C = -np.einsum("bnij,bnj->bni", Minv, st.p4)
+    xh = np.concatenate([st.pix, np.ones((*st.pix.shape[:-1], 1))], axis=-1)
+    a = np.einsum("bnij,bnj->bni", Minv, xh) * st.depth_sign()[..., None]
+    a /= np.linalg.norm(a, axis=-1, keepdims=True)
+    cs = C - st.platform_m
+    b = np.einsum("bni,bni->bn", a, cs)
+    disc = b * b - (np.einsum("bni,bni->bn", cs, cs) - st.range_m ** 2)
+    t = -b + np.sqrt(np.maximum(disc, 0.0))
+    pts = C + t[..., None] * a
+    valid = st.has_pix & st.has_range
+    pts[~valid] = np.nan
+    return pts, valid
+
+
+def los(st: Stacked):
+    """Line-of-sight estimate: per-frame points, their component-wise median, and the oracle error.
+
+    Returns X (B,3) median point, status (B,) (CLOSED_FORM, or DEGENERATE with no usable frame), points
+    (B,n,3), and oracle (B,) = the smallest per-frame error against the truth (NaN without truth): the best
+    single frame's error, which only an oracle knowing the truth could pick (the figure of the paper's
+    Table 4).
+    """
+    pts, valid = los_points(st)
+    any_valid = valid.any(axis=1)
+    X = np.full((st.size, 3), np.nan)
+    if any_valid.any():
+        X[any_valid] = np.nanmedian(pts[any_valid], axis=1)
+    status = np.where(any_valid, Status.CLOSED_FORM, Status.DEGENERATE).astype(np.int8)
+    if st.truth_m is not None:
+        err = np.linalg.norm(pts - st.truth_m[:, None, :], axis=-1)
+        oracle = np.full(st.size, np.nan)
+        if any_valid.any():
+            oracle[any_valid] = np.nanmin(err[any_valid], axis=1)
+    else:
+        oracle = np.full(st.size, np.nan)
+    return X, status, pts, oracle

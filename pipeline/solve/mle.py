@@ -1,0 +1,282 @@
+"""Weighted maximum-likelihood estimator (beyond the paper): Gauss-Newton / Levenberg-Marquardt on pixel and
+range residuals weighted by each sensor's standard deviation, robust loss by IRLS, optional variance component
+estimation, posterior covariance, CEP and error ellipsoid. Batched over B problems.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.solve.estimate import Status
+from pipeline.solve.iterate import DEGENERATE_CONDITION, DIVERGENCE_FACTOR, problem_scale_m
+from pipeline.solve.observations import Sigma
+from pipeline.solve.stacked import Stacked, condition_numbers, normal_equations, pixel_model, range_model, solve_spd
+
+ROBUST_LOSSES = (None, "huber", "cauchy")
+#: tuning constants in units of the standardized residual (95 % efficiency under Gaussian noise)
+HUBER_C = 1.345
+CAUCHY_C = 2.3849
+#: 95 % quantile of chi-square with 3 degrees of freedom, for the 95 % ellipsoid
+CHI2_3_95 = 7.814727903251178
+VCE_MAX_ROUNDS = 10
+VCE_TOL = 0.01
+
+
+def _rho_and_weight(e: np.ndarray, robust: str | None):
+    """Loss rho(e) and IRLS weight rho'(e)/e of standardized residuals e."""
+    if robust is None:
+        return 0.5 * e * e, np.ones_like(e)
+    a = np.abs(e)
+    if robust == "huber":
+        inside = a <= HUBER_C
+        rho = np.where(inside, 0.5 * e * e, HUBER_C * a - 0.5 * HUBER_C ** 2)
+        w = np.where(inside, 1.0, HUBER_C / np.where(inside, 1.0, a))
+        return rho, w
+    z = (e / CAUCHY_C) ** 2
+    return 0.5 * CAUCHY_C ** 2 * np.log1p(z), 1.0 / (1.0 + z)
+
+
+def base_variances(st: Stacked, X0: np.ndarray, sigma: Sigma):
+    """A priori variances (B, 2n+n) of the residual rows [u_1, v_1, ..., d_1, ...], from the sensor sigmas.
+
+    pixel: sigma_px^2 + (f sigma_att)^2 + (f sigma_pos / D)^2, f the focal length of that axis (`focal_px`),
+    D the camera-to-target distance at the initial estimate: an attitude error turns the line of sight by
+    sigma_att (f sigma_att px), a platform position error moves it sideways by sigma_pos/D radians.
+    range: sigma_range^2 + sigma_pos^2, the position error's component along the line of sight.
+    Unknown sigmas: pixel 1 px, range 1 m, position and attitude 0 (variance component estimation then
+    scales the pixel and range groups).
+    """
+    s_px = 1.0 if sigma.pixel_px is None else sigma.pixel_px
+    s_r = 1.0 if sigma.range_m is None else sigma.range_m
+    s_pos = 0.0 if sigma.position_m is None else sigma.position_m
+    s_att = 0.0 if sigma.attitude_deg is None else np.deg2rad(sigma.attitude_deg)
+    fx, fy = st.focal_px()
+    B, n = fx.shape
+    if s_pos > 0:
+        C = st.camera_centres_m()
+        D = np.linalg.norm(X0[:, None, :] - C, axis=-1)
+        D = np.where(np.isfinite(D) & (D > 0), D, np.inf)
+        pos_rad2 = (s_pos / D) ** 2
+    else:
+        pos_rad2 = 0.0
+    var_u = s_px ** 2 + fx ** 2 * (s_att ** 2 + pos_rad2)
+    var_v = s_px ** 2 + fy ** 2 * (s_att ** 2 + pos_rad2)
+    var_pix = np.stack([var_u, var_v], axis=-1).reshape(B, 2 * n)
+    var_rng = np.full((B, n), s_r ** 2 + s_pos ** 2)
+    var = np.concatenate([var_pix, var_rng], axis=1)
+    var = np.where(var > 0, var, 1.0)  # all sigmas zero: unit weights
+    return var
+
+
+def _model(st: Stacked, X: np.ndarray):
+    Jp, rp, okp = pixel_model(st, X)
+    Jr, rr, okr = range_model(st, X)
+    return (np.concatenate([Jp, Jr], axis=1), np.concatenate([rp, rr], axis=1),
+            np.concatenate([okp, okr], axis=1))
+
+
+def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
+        max_iterations: int, init_status: np.ndarray | None = None):
+    """Returns X (B,3), iterations (B,), status (B,) int8, cond (B,) of the weighted design W^1/2 J,
+    covariance (B,3,3) m^2, and extras {variance_factor_pixel, variance_factor_range, sigma0_sq, vce_rounds}.
+    """
+    B = st.size
+    npix = 2 * st.n
+    X = np.array(X0, dtype=np.float64, copy=True)
+    finite0 = np.isfinite(X).all(axis=1)
+    status = np.full(B, Status.MAX_ITERATIONS, dtype=np.int8)
+    if init_status is not None:
+        bad = np.isin(init_status, (Status.DIVERGED, Status.DEGENERATE)) | ~finite0
+        status[bad] = np.where(init_status[bad] == Status.DIVERGED, Status.DIVERGED, Status.DEGENERATE)
+    else:
+        bad = ~finite0
+        status[bad] = Status.DEGENERATE
+    X[bad] = 0.0
+    var0 = base_variances(st, X, sigma)
+    group = np.zeros(var0.shape[1], dtype=np.int64)
+    group[npix:] = 1
+    vf = np.ones((B, 2))  # variance factors of the pixel and range groups
+    J, r, ok = _model(st, X)
+    okf = ok.astype(np.float64)
+
+    iterations = np.zeros(B, dtype=np.int64)
+    lam = np.zeros(B)
+    vce_rounds = np.zeros(B, dtype=np.int64)
+    centre = st.platform_m.mean(axis=1)
+    bound = DIVERGENCE_FACTOR * problem_scale_m(st, np.where(finite0[:, None], X0, centre))
+
+    def costs(var, vfac, rr, okk):
+        e = rr / np.sqrt(var * vfac[:, group])
+        rho, w = _rho_and_weight(e, robust)
+        return (rho * okk).sum(axis=1), w
+
+    cost, _ = costs(var0, vf, r, okf)
+    active = ~bad
+    for _ in range(max_iterations):
+        idx = np.flatnonzero(active)
+        if idx.size == 0:
+            break
+        sub = st if idx.size == B else st.take(idx)
+        var_i = var0[idx] * vf[idx][:, group]
+        e = r[idx] / np.sqrt(var_i)
+        _, wr = _rho_and_weight(e, robust)
+        w = okf[idx] * wr / var_i
+        N, g = normal_equations(J[idx], r[idx], w)
+        lam_i = lam[idx]
+        Nd = N + lam_i[:, None, None] * (np.einsum("bii->bi", N)[:, :, None] * np.eye(3))
+        dX, singular = solve_spd(Nd, g)
+        iterations[idx] += 1
+        Xn = X[idx] + np.where(singular[:, None], 0.0, dX)
+        finite = np.isfinite(Xn).all(axis=1)
+        exploded = ~finite | (np.linalg.norm(Xn - centre[idx], axis=1) > bound[idx])
+        Xn = np.where(exploded[:, None], X[idx], Xn)
+        Jn, rn, okn = _model(sub, Xn)
+        okn = okn.astype(np.float64)
+        cost_n, _ = costs(var0[idx], vf[idx], rn, okn)
+        old = cost[idx]
+        accept = ~singular & ~exploded & (cost_n <= old * (1 + 1e-12) + 1e-300)
+        step_norm = np.where(singular, np.inf, np.linalg.norm(dX, axis=1))
+        # accept: move and relax damping; reject: stay and damp harder
+        a_idx = idx[accept]
+        X[a_idx] = Xn[accept]
+        J[a_idx], r[a_idx], okf[a_idx] = Jn[accept], rn[accept], okn[accept]
+        cost[a_idx] = cost_n[accept]
+        lam[a_idx] = np.where(lam[a_idx] / 10 < 1e-9, 0.0, lam[a_idx] / 10)
+        rej = idx[~accept]
+        lam[rej] = np.where(lam[rej] == 0, 1e-4, lam[rej] * 10)
+        small = step_norm <= tol_m
+        inner_done = small & ~singular & ~exploded
+        st_idx = status[idx]
+        st_idx[singular & ~small] = Status.DEGENERATE
+        st_idx[exploded & ~singular] = Status.DIVERGED
+        still = ~(singular & ~small) & ~(exploded & ~singular) & ~inner_done
+        # damping that cannot help any more: the minimum along every direction is reached
+        stuck = ~accept & (lam[idx] > 1e12)
+        inner_done |= stuck & still
+        still &= ~stuck
+        if vce and inner_done.any():
+            d_idx = idx[inner_done]
+            factors, usable = _vce_factors(st.take(d_idx), J[d_idx], r[d_idx], okf[d_idx], var0[d_idx] *
+                                           vf[d_idx][:, group], group, robust)
+            more = (np.abs(factors - 1) > VCE_TOL) & usable
+            again = more.any(axis=1) & (vce_rounds[d_idx] < VCE_MAX_ROUNDS)
+            vf[d_idx] = np.where(usable & again[:, None], vf[d_idx] * factors, vf[d_idx])
+            vce_rounds[d_idx] += again
+            rd = d_idx[again]
+            if rd.size:
+                cost[rd], _ = costs(var0[rd], vf[rd], r[rd], okf[rd])
+                lam[rd] = 0.0
+            keep = np.zeros(idx.size, dtype=bool)
+            keep[np.flatnonzero(inner_done)[again]] = True
+            inner_done &= ~keep
+            still |= keep
+        st_idx[inner_done] = Status.CONVERGED
+        status[idx] = st_idx
+        active[idx] = still
+    failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
+    # covariance and condition number at the final iterate with the final weights
+    var_f = var0 * vf[:, group]
+    e = r / np.sqrt(var_f)
+    _, wr = _rho_and_weight(e, robust)
+    w = okf * wr / var_f
+    N, _ = normal_equations(J, r, w)
+    cov, singular = _inverse_spd(N)
+    Jw = J * np.sqrt(w)[..., None]
+    cond = condition_numbers(Jw)
+    bad_cond = (condition_numbers(Jw, equilibrate=True) > DEGENERATE_CONDITION) | singular
+    status[bad_cond & ~failed] = Status.DEGENERATE
+    failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
+    X[failed] = np.nan
+    cov[failed] = np.nan
+    cond[failed & ~bad_cond] = np.nan
+    m = okf.sum(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sigma0_sq = np.where(m > 3, (w * r * r).sum(axis=1) / (m - 3), np.nan)
+    extras = {"variance_factor_pixel": vf[:, 0], "variance_factor_range": vf[:, 1], "sigma0_sq": sigma0_sq,
+              "vce_rounds": vce_rounds}
+    return X, iterations, status, cond, cov, extras
+
+
+def _inverse_spd(N: np.ndarray):
+    k = N.shape[-1]
+    eye = np.broadcast_to(np.eye(k), N.shape)
+    cols = [solve_spd(N, eye[..., j]) for j in range(k)]
+    inv = np.stack([c[0] for c in cols], axis=-1)
+    return 0.5 * (inv + np.swapaxes(inv, 1, 2)), cols[0][1]
+
+
+def _vce_factors(st: Stacked, J, r, okf, var, group, robust):
+    """Helmert/Foerstner variance component factors (b, 2) = (sum_g w r^2) / r_g with the redundancy numbers
+    r_g = sum_g (1 - w_i J_i N^-1 J_i^T), and a (b, 2) flag 'usable' (redundancy of the group >= 0.5)."""
+    e = r / np.sqrt(var)
+    _, wr = _rho_and_weight(e, robust)
+    w = okf * wr / var
+    N, _ = normal_equations(J, r, w)
+    Ninv, _ = _inverse_spd(N)
+    lev = w * np.einsum("bmi,bij,bmj->bm", J, Ninv, J)
+    out = np.ones((J.shape[0], 2))
+    usable = np.zeros((J.shape[0], 2), dtype=bool)
+    for g in (0, 1):
+        sel = (group == g)[None, :] & (okf > 0)
+        red = np.where(sel, 1.0 - lev, 0.0).sum(axis=1)
+        q = np.where(sel, w * r * r, 0.0).sum(axis=1)
+        usable[:, g] = red >= 0.5
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out[:, g] = np.where(usable[:, g], q / red, 1.0)
+        usable[:, g] &= np.isfinite(out[:, g]) & (out[:, g] > 0)
+        out[:, g] = np.where(usable[:, g], out[:, g], 1.0)
+    return out, usable
+
+
+# ---- accuracy summaries from the covariance ----------------------------------------------------------------
+
+_THETA = (np.arange(32) + 0.5) * (np.pi / 2 / 32)
+_COS2, _SIN2 = np.cos(_THETA) ** 2, np.sin(_THETA) ** 2
+
+
+def cep_m(cov_xy: np.ndarray, p: float) -> np.ndarray:
+    """(B,) radius of the circle around the estimate that holds probability p of the horizontal error, for
+    (B,2,2) covariances of a zero-mean 2D Gaussian.
+
+    With principal standard deviations s1 >= s2, P(|e| <= r) = (1 / (s1 s2)) mean_theta (1 - exp(-r^2 a / 2)) / a,
+    a = cos^2 theta / s1^2 + sin^2 theta / s2^2 (the polar-coordinate integral, averaged over the circle; the
+    integrand is smooth and periodic, so the midpoint rule over a quarter turn converges geometrically).
+    Solved for r by safeguarded Newton iterations.
+    """
+    ev = np.linalg.eigvalsh(cov_xy)
+    s1 = np.sqrt(np.maximum(ev[:, 1], 0.0))
+    s2 = np.sqrt(np.maximum(ev[:, 0], 0.0))
+    ok = np.isfinite(s1) & (s1 > 0)
+    s1 = np.where(ok, s1, 1.0)
+    q = np.clip(np.where(ok, s2, 1.0) / s1, 1e-9, 1.0)  # ratio; rho = r / s1
+    a = _COS2[None, :] + _SIN2[None, :] / (q * q)[:, None]  # (B,K)
+    c = np.sqrt(-2.0 * np.log1p(-p))
+    lo, hi = q * c * 0.999, np.full_like(q, c * 1.001)
+    # 1-D Gaussian (q -> 0) quantile bounds the rho from above as well
+    rho = np.clip(0.5 * (1 + q) * c, lo, hi)
+    for _ in range(30):
+        ex = np.exp(-0.5 * rho[:, None] ** 2 * a)
+        F = ((1 - ex) / a).mean(axis=1) / q - p
+        dF = (rho[:, None] * ex).mean(axis=1) / q
+        lo = np.where(F < 0, rho, lo)
+        hi = np.where(F >= 0, rho, hi)
+        new = rho - F / np.where(dF > 0, dF, 1.0)
+        out = (new <= lo) | (new >= hi) | ~np.isfinite(new)
+        new = np.where(out, 0.5 * (lo + hi), new)
+        if np.all(np.abs(new - rho) <= 1e-12 * rho):
+            rho = new
+            break
+        rho = new
+    return np.where(ok, rho * s1, np.nan)
+
+
+def ellipsoid(cov: np.ndarray):
+    """(B,3) 1-sigma semi-axes (m, ascending), (B,3,3) axes as columns, from (B,3,3) covariances;
+    the 95 % semi-axes are sqrt(CHI2_3_95) times the 1-sigma ones."""
+    good = np.isfinite(cov).all(axis=(1, 2))
+    safe = np.where(good[:, None, None], cov, np.eye(3))
+    ev, vec = np.linalg.eigh(safe)
+    axes = np.sqrt(np.maximum(ev, 0.0))
+    axes[~good] = np.nan
+    vec[~good] = np.nan
+    return axes, vec

@@ -1,0 +1,64 @@
+"""Synthetic problems on the paper's simulation geometry (section 3.1), for tests, benchmarks and the example
+observations file.
+
+The platform flies a circular arc around the target at a fixed height, so that every frame sees the target at
+the same slant range; the arc's extent is set so that the first and last lines of sight make the intersection
+angle gamma. The camera looks at the target (target at the principal point). Noise, as in the paper: platform
+position (per axis), laser range, camera attitude (per axis, a small rotation applied to the measured attitude)
+and pixel extraction.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from pipeline.geometry.camera import intrinsics_matrix, look_at_rotation, project, projection_matrix
+from pipeline.solve.observations import ObservationBatch, Observations, Sigma
+
+PAPER_SIGMA = Sigma(pixel_px=0.1, range_m=2.5, position_m=5.0, attitude_deg=0.2)
+#: a 600 x 400 px camera (the paper's flight experiment resolution) with f = 1000 px
+PAPER_K = intrinsics_matrix(1000.0, 1000.0, 300.0, 200.0)
+
+
+def arc_platforms_m(n: int = 10, gamma_deg: float = 30.0, height_m: float = 2000.0, slant_m: float = 5000.0,
+                    target_m=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """(n,3) platform positions on a horizontal arc around the target: first and last lines of sight make
+    gamma_deg, every one has length slant_m, height_m above the target."""
+    target = np.asarray(target_m, dtype=np.float64)
+    horiz = np.sqrt(slant_m ** 2 - height_m ** 2)
+    # angle between two lines of sight with azimuth difference a: cos g = (horiz^2 cos a + h^2) / slant^2
+    cos_a = (np.cos(np.deg2rad(gamma_deg)) * slant_m ** 2 - height_m ** 2) / horiz ** 2
+    a = np.arccos(np.clip(cos_a, -1.0, 1.0))
+    az = np.linspace(-a / 2, a / 2, n) + np.pi / 2
+    return target + np.stack([horiz * np.cos(az), -horiz * np.sin(az), np.full(n, height_m)], axis=1)
+
+
+def paper_batch(B: int, n: int = 10, gamma_deg: float = 30.0, sigma: Sigma | None = PAPER_SIGMA,
+                seed: int | np.random.Generator = 0, height_m: float = 2000.0, slant_m: float = 5000.0,
+                K: np.ndarray = PAPER_K) -> ObservationBatch:
+    """B independent noisy problems on the arc geometry (sigma None or zeros: noise-free)."""
+    rng = np.random.default_rng(seed)
+    s = sigma if sigma is not None else Sigma(0.0, 0.0, 0.0, 0.0)
+    target = np.zeros(3)
+    true_pos = np.broadcast_to(arc_platforms_m(n, gamma_deg, height_m, slant_m, target), (B, n, 3))
+    R_true = look_at_rotation(true_pos, target)
+    P_true = projection_matrix(K, R_true, true_pos)
+    pixel = project(P_true, np.broadcast_to(target, (B, n, 3)))
+    pixel = pixel + rng.normal(0.0, s.pixel_px or 0.0, pixel.shape)
+    meas_pos = true_pos + rng.normal(0.0, s.position_m or 0.0, true_pos.shape)
+    rotvec = rng.normal(0.0, np.deg2rad(s.attitude_deg or 0.0), (B * n, 3))
+    R_err = Rotation.from_rotvec(rotvec).as_matrix().reshape(B, n, 3, 3)
+    P = projection_matrix(K, R_err @ R_true, meas_pos)
+    rng_m = np.linalg.norm(true_pos - target, axis=-1) + rng.normal(0.0, s.range_m or 0.0, (B, n))
+    return ObservationBatch(P=P, pixel=pixel, platform_m=meas_pos, range_m=rng_m,
+                            sigma=sigma if sigma is not None else Sigma(), truth_m=np.zeros((B, 3)) + target)
+
+
+def paper_problem(n: int = 10, gamma_deg: float = 30.0, sigma: Sigma | None = PAPER_SIGMA, seed: int = 0,
+                  **kwargs) -> Observations:
+    """One noisy problem on the arc geometry (see `paper_batch`)."""
+    b = paper_batch(1, n, gamma_deg, sigma, seed, **kwargs)
+    obs = b.problem(0)
+    return Observations(P=obs.P, pixel=obs.pixel, platform_m=obs.platform_m, range_m=obs.range_m,
+                        t_ns=np.arange(n, dtype=np.int64) * 1_000_000_000, sigma=b.sigma, truth_m=obs.truth_m)

@@ -1,0 +1,163 @@
+"""Batched observation arrays and the two measurement models (reprojection, range) every estimator shares.
+
+`Stacked` is an `ObservationBatch` (or one `Observations`, as B = 1) with missing pixels and ranges replaced
+by zeros and described by boolean masks, so that the batched kernels can weight missing rows with zero.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.solve.observations import ObservationBatch, Observations, Sigma
+
+
+@dataclass
+class Stacked:
+    """B problems of n frames. Shapes: M (B,n,3,3) = P[..., :3], p4 (B,n,3) = P[..., 3], pix (B,n,2) px
+    (0 where missing), has_pix (B,n) bool, platform_m (B,n,3), range_m (B,n) (0 where missing),
+    has_range (B,n) bool, truth_m (B,3) or None."""
+
+    M: np.ndarray
+    p4: np.ndarray
+    pix: np.ndarray
+    has_pix: np.ndarray
+    platform_m: np.ndarray
+    range_m: np.ndarray
+    has_range: np.ndarray
+    sigma: Sigma
+    truth_m: np.ndarray | None = None
+
+    @classmethod
+    def from_batch(cls, batch: ObservationBatch) -> Stacked:
+        return cls._build(batch.P, batch.pixel, batch.platform_m, batch.range_m, batch.sigma, batch.truth_m)
+
+    @classmethod
+    def from_observations(cls, obs: Observations) -> Stacked:
+        return cls._build(obs.P[None], obs.pixel[None], obs.platform_m[None], obs.range_m[None], obs.sigma,
+                          None if obs.truth_m is None else obs.truth_m[None])
+
+    @classmethod
+    def _build(cls, P, pixel, platform, rng, sigma, truth) -> Stacked:
+        has_pix = ~np.isnan(pixel[..., 0])
+        has_range = ~np.isnan(rng)
+        return cls(M=np.ascontiguousarray(P[..., :3]), p4=np.ascontiguousarray(P[..., 3]),
+                   pix=np.where(has_pix[..., None], pixel, 0.0), has_pix=has_pix,
+                   platform_m=np.asarray(platform, dtype=np.float64), range_m=np.where(has_range, rng, 0.0),
+                   has_range=has_range, sigma=sigma, truth_m=truth)
+
+    @property
+    def size(self) -> int:
+        return self.M.shape[0]
+
+    @property
+    def n(self) -> int:
+        return self.M.shape[1]
+
+    def take(self, idx: np.ndarray) -> Stacked:
+        """The problems at integer indices idx, as a new Stacked."""
+        return Stacked(M=self.M[idx], p4=self.p4[idx], pix=self.pix[idx], has_pix=self.has_pix[idx],
+                       platform_m=self.platform_m[idx], range_m=self.range_m[idx], has_range=self.has_range[idx],
+                       sigma=self.sigma, truth_m=None if self.truth_m is None else self.truth_m[idx])
+
+    # ---- derived camera quantities ---------------------------------------------------------------------
+
+    def depth_sign(self) -> np.ndarray:
+        """(B,n) sign of det(M): P and -P project alike, the sign says which side of the camera is 'front'."""
+        m = self.M
+        det = np.einsum("...i,...i->...", m[..., 0, :], np.cross(m[..., 1, :], m[..., 2, :]))
+        return np.where(det < 0, -1.0, 1.0)
+
+    def camera_centres_m(self) -> np.ndarray:
+        """(B,n,3) camera centres, the right null vector of P: C = -M^-1 p4."""
+        return -np.linalg.solve(self.M, self.p4[..., None])[..., 0]
+
+    def focal_px(self) -> tuple[np.ndarray, np.ndarray]:
+        """(B,n) focal lengths fx, fy in px from the rows m1, m2, m3 of M = lambda K R (zero skew assumed):
+        m1 x m3 = lambda^2 fx r1 x r3, so fx = |m1 x m3| / |m3|^2, and likewise fy with m2."""
+        m = self.M
+        m3 = m[..., 2, :]
+        n3 = np.einsum("...i,...i->...", m3, m3)
+        fx = np.linalg.norm(np.cross(m[..., 0, :], m3), axis=-1) / n3
+        fy = np.linalg.norm(np.cross(m[..., 1, :], m3), axis=-1) / n3
+        return fx, fy
+
+    def depths(self, X: np.ndarray) -> np.ndarray:
+        """(B,n) signed depth (positive in front) of points X (B,3) in each camera, up to the scale of P."""
+        q2 = np.einsum("bni,bi->bn", self.M[..., 2, :], X) + self.p4[..., 2]
+        return q2 * self.depth_sign()
+
+
+def pixel_model(st: Stacked, X: np.ndarray):
+    """Reprojection residuals and Jacobian at X (B,3).
+
+    Returns J (B,2n,3) d(u,v)/dX, r (B,2n) observed - predicted (px), mask (B,2n) bool. Rows are u_1, v_1,
+    u_2, ... With q = M X + p4: u = q1/q3, du/dX = (m1 - u m3)/q3 and dv/dX = (m2 - v m3)/q3 (m_k rows of M).
+    Rows with a missing pixel or a camera with q3 = 0 are masked (zero Jacobian and residual).
+    """
+    B, n = st.has_pix.shape
+    q = np.einsum("bnij,bj->bni", st.M, X) + st.p4
+    w = q[..., 2]
+    ok = st.has_pix & (w != 0)
+    w = np.where(ok, w, 1.0)
+    uv = q[..., :2] / w[..., None]  # (B,n,2)
+    J = (st.M[..., :2, :] - uv[..., None] * st.M[..., 2:3, :]) / w[..., None, None]  # (B,n,2,3)
+    r = st.pix - uv
+    okk = np.repeat(ok, 2, axis=1)
+    J = np.where(ok[..., None, None], J, 0.0).reshape(B, 2 * n, 3)
+    r = np.where(ok[..., None], r, 0.0).reshape(B, 2 * n)
+    return J, r, okk
+
+
+def range_model(st: Stacked, X: np.ndarray):
+    """Range residuals and Jacobian at X (B,3): J (B,n,3) = (X - s_i)/|X - s_i|, r (B,n) = d_i - |X - s_i| (m),
+    mask (B,n) bool (a missing range, or X on a platform position, is masked)."""
+    diff = X[:, None, :] - st.platform_m
+    dist = np.sqrt(np.einsum("bni,bni->bn", diff, diff))
+    ok = st.has_range & (dist > 0)
+    dist_safe = np.where(ok, dist, 1.0)
+    J = np.where(ok[..., None], diff / dist_safe[..., None], 0.0)
+    r = np.where(ok, st.range_m - dist, 0.0)
+    return J, r, ok
+
+
+def normal_equations(J: np.ndarray, r: np.ndarray, w: np.ndarray):
+    """N = J^T W J (B,k,k) and g = J^T W r (B,k) for diagonal weights w (B,m)."""
+    Jw = J * w[..., None]
+    Jt = np.swapaxes(Jw, 1, 2)
+    return Jt @ J, (Jt @ r[..., None])[..., 0]
+
+
+def solve_spd(N: np.ndarray, g: np.ndarray, singular_below: float = 1e-20):
+    """Solve N x = g for a batch of symmetric positive (semi-)definite N (B,k,k).
+
+    Returns x (B,k) and a (B,) bool 'singular' flag: the determinant of the Jacobi-scaled N (1 for orthogonal
+    columns, 0 for dependent ones) below `singular_below`, i.e. cond(design) beyond ~1e10. Singular
+    problems get x = NaN instead of a numpy LinAlgError for the whole batch.
+    """
+    d = np.sqrt(np.abs(np.einsum("bii->bi", N)))
+    bad_d = ~(d > 0) | ~np.isfinite(d)
+    d = np.where(bad_d, 1.0, d)
+    Ns = N / (d[:, :, None] * d[:, None, :])
+    det = np.linalg.det(Ns)
+    singular = bad_d.any(axis=1) | ~(det > singular_below)
+    if singular.any():
+        k = N.shape[-1]
+        Ns = np.where(singular[:, None, None], np.eye(k), Ns)
+    x = np.linalg.solve(Ns, (g / d)[..., None])[..., 0] / d
+    x[singular] = np.nan
+    return x, singular
+
+
+def condition_numbers(A: np.ndarray, equilibrate: bool = False) -> np.ndarray:
+    """(B,) 2-norm condition numbers of the design matrices A (B,m,k) (zero rows = unused); inf if singular.
+    equilibrate: of A with its columns scaled to unit length (invariant to the units of the unknowns), the
+    measure of rank deficiency used to flag DEGENERATE geometry."""
+    if equilibrate:
+        norm = np.linalg.norm(A, axis=1, keepdims=True)
+        A = A / np.where(norm > 0, norm, 1.0)
+    s = np.linalg.svd(A, compute_uv=False)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c = s[:, 0] / s[:, -1]
+    return np.where(np.isfinite(c), c, np.inf)

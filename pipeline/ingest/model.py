@@ -123,6 +123,34 @@ class ClockLink:
 
 
 @dataclass(frozen=True)
+class CameraEventSeries:
+    """Camera trigger / capture feedback: t_ns (n,) capture times, index (n,) image number from the log (-1 if
+    the message carries none)."""
+
+    t_ns: np.ndarray
+    index: np.ndarray
+    source: str = ""
+    clock: str = "unknown"
+
+    def __post_init__(self):
+        _check_series(f"camera event series {self.source!r}", self.t_ns, index=self.index)
+
+
+@dataclass(frozen=True)
+class CameraInfo:
+    """Intrinsics as a log states them (ROS CameraInfo): K (3, 3) px, D distortion coefficients in the order of
+    `distortion_model` (OpenCV k1, k2, p1, p2, k3 for plumb_bob), P (3, 4) px, image size in px."""
+
+    width_px: int
+    height_px: int
+    K: np.ndarray
+    D: np.ndarray
+    P: np.ndarray
+    distortion_model: str = ""
+    source: str = ""
+
+
+@dataclass(frozen=True)
 class StreamInfo:
     """One stream of a log as `ridgeloc inspect` shows it."""
 
@@ -147,6 +175,9 @@ class FlightLog:
     clock_links: list[ClockLink] = field(default_factory=list)
     streams: list[StreamInfo] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    camera_events: CameraEventSeries | None = None
+    camera_info: CameraInfo | None = None
+    formats: list[str] = field(default_factory=list)  # reader format of each file read ("tlog", "ros1", ...)
 
     def missing_for_localization(self) -> list[str]:
         """Quantities localization needs that this log does not supply."""

@@ -1,0 +1,149 @@
+"""File-type detection, one-file reading and merging several files of one flight into one FlightLog."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import InputError, LogReadError
+from pipeline.ingest.mapping import check_override, mapping_for
+from pipeline.ingest.model import FlightLog
+
+VIDEO_SUFFIXES = {".mp4", ".mov", ".avi", ".mkv", ".m4v", ".mpg", ".mpeg", ".ts", ".webm"}
+MAGIC = (
+    (b"ULog\x01\x12\x35", "ulog"),
+    (b"#ROSBAG V2.0", "ros1"),
+    (b"\x89MCAP0\r\n", "mcap"),
+    (b"\xa3\x95", "dataflash"),
+    (b"SQLite format 3\x00", "ros2"),
+)
+
+
+def detect_format(path: str | Path) -> str:
+    """One of tlog, dataflash, ulog, ros1, ros2, mcap, video, srt, by folder layout, magic bytes, then suffix."""
+    p = Path(path)
+    if not p.exists():
+        raise InputError("no such file or folder", path=p)
+    if p.is_dir():
+        if (p / "metadata.yaml").is_file():
+            return "ros2"
+        raise LogReadError("folder is not a ROS 2 bag (no metadata.yaml)", path=p)
+    suffix = p.suffix.lower()
+    if suffix in VIDEO_SUFFIXES:
+        return "video"
+    if suffix == ".srt":
+        return "srt"
+    with open(p, "rb") as f:
+        head = f.read(16)
+    for magic, fmt in MAGIC:
+        if head.startswith(magic):
+            if fmt in ("mcap", "ros2") and (p.parent / "metadata.yaml").is_file():
+                return "ros2"
+            return fmt
+    by_suffix = {".tlog": "tlog", ".bin": "dataflash", ".ulg": "ulog", ".bag": "ros1", ".mcap": "mcap",
+                 ".db3": "ros2"}
+    if suffix in by_suffix:
+        if not head:
+            raise LogReadError("empty file", path=p)
+        if suffix in (".tlog",):
+            return "tlog"
+        raise LogReadError(f"not a {by_suffix[suffix]} file (unexpected leading bytes {head[:8]!r})", path=p)
+    raise LogReadError(f"unknown log type (suffix {suffix or 'none'!r}, leading bytes {head[:8]!r})", path=p)
+
+
+def read_file(path: str | Path, mapping: dict | None = None) -> FlightLog:
+    """Read one log, bag folder, video or SRT into a FlightLog."""
+    fmt = detect_format(path)
+    p = Path(path)
+    if p.is_file() and fmt == "ros2":
+        p = p.parent
+    if fmt == "tlog":
+        from pipeline.ingest.tlog import read_tlog
+        return read_tlog(p, mapping_for("tlog", mapping))
+    if fmt == "dataflash":
+        from pipeline.ingest.dataflash import read_dataflash
+        return read_dataflash(p, mapping_for("dataflash", mapping))
+    if fmt == "ulog":
+        from pipeline.ingest.ulog import read_ulog
+        return read_ulog(p, mapping_for("ulog", mapping))
+    if fmt in ("ros1", "ros2"):
+        from pipeline.ingest.rosbag import read_rosbag
+        return read_rosbag(p, mapping_for("ros", mapping))
+    if fmt == "mcap":
+        from pipeline.ingest.mcap_plain import read_mcap
+        return read_mcap(p, mapping_for("mcap", mapping), mapping_for("ros", mapping))
+    if fmt == "video":
+        from pipeline.ingest.video import read_video
+        frames = read_video(p, frames_csv=mapping_for("video", mapping)["frames_csv"])
+        from pipeline.ingest.model import StreamInfo
+        stream = StreamInfo(p.name, "video", int(frames.t_ns.size),
+                            int(frames.t_ns[0]) if frames.t_ns.size else None,
+                            int(frames.t_ns[-1]) if frames.t_ns.size else None, ("frames",))
+        return FlightLog(path=str(p), frames=frames, streams=[stream], formats=["video"])
+    if fmt == "srt":
+        from pipeline.ingest.srt import read_srt
+        return read_srt(p, mapping_for("srt", mapping))
+    raise LogReadError(f"unsupported format {fmt}", path=p)
+
+
+QUANTITIES = ("position", "attitude", "gimbal", "range", "frames", "camera_events")
+
+
+def _concat(series_list: list, name: str, warnings: list[str]):
+    first = series_list[0]
+    same = [s for s in series_list if s.clock == first.clock and type(s) is type(first)]
+    if len(same) < len(series_list):
+        warnings.append(f"{name}: sources on different clocks ({', '.join(s.source for s in series_list)}); "
+                        f"using {first.source}")
+    if len(same) == 1:
+        return first
+    if hasattr(first, "alt_datum") and len({s.alt_datum for s in same}) > 1:
+        warnings.append(f"{name}: sources with different altitude datums; using {first.source}")
+        return first
+    if name == "frames":
+        warnings.append(f"frames: several frame sources; using {first.source}")
+        return first
+    t = np.concatenate([s.t_ns for s in same])
+    order = np.argsort(t, kind="stable")
+    changes = {"t_ns": t[order], "source": "+".join(s.source for s in same)}
+    for f in dataclasses.fields(first):
+        v = getattr(first, f.name)
+        if f.name != "t_ns" and isinstance(v, np.ndarray):
+            changes[f.name] = np.concatenate([getattr(s, f.name) for s in same])[order]
+    return dataclasses.replace(first, **changes)
+
+
+def merge_logs(logs: list[FlightLog]) -> FlightLog:
+    """Several files of one flight -> one FlightLog (series of one quantity on one clock are concatenated)."""
+    if len(logs) == 1:
+        return logs[0]
+    out = FlightLog(path=", ".join(log.path for log in logs))
+    for log in logs:
+        out.clock_links += log.clock_links
+        out.streams += log.streams
+        out.warnings += log.warnings
+        out.formats += log.formats
+        if out.camera_info is None:
+            out.camera_info = log.camera_info
+    for q in QUANTITIES:
+        found = [getattr(log, q) for log in logs if getattr(log, q) is not None]
+        if found:
+            setattr(out, q, _concat(found, q, out.warnings))
+    return out
+
+
+def read_flight(paths, mapping: dict | None = None) -> FlightLog:
+    """Read every file of one flight (logs, bag folders, video, SRT) and merge them into one FlightLog.
+
+    `mapping` overrides the per-format defaults (mappings/<format>.yaml), keyed by format: see docs/ingest.md.
+    Raises LogReadError (naming the file) for unreadable input; recoverable damage becomes a warning in
+    `FlightLog.warnings`.
+    """
+    if isinstance(paths, (str, Path)):
+        paths = [paths]
+    if not paths:
+        raise InputError("no input files given")
+    check_override(mapping)
+    return merge_logs([read_file(p, mapping) for p in paths])

@@ -1,0 +1,73 @@
+"""Attitude conventions -> the model's quaternions (w, x, y, z) rotating body/gimbal FRD into local level NED.
+
+- MAVLink ATTITUDE, DataFlash ATT/MNT, MOUNT_STATUS, DJI: ZYX (yaw, pitch, roll) Euler angles of FRD vs NED:
+  R_ned_from_frd = Rz(yaw) @ Ry(pitch) @ Rx(roll) = Rotation.from_euler("ZYX", [yaw, pitch, roll]).
+- ROS (REP-103): orientation rotates body FLU into local ENU; q_ned_from_frd = R_ned_from_enu * q_enu_from_flu *
+  R_flu_from_frd, both fixed rotations.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+R_NED_FROM_ENU = Rotation.from_matrix([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+R_FLU_FROM_FRD = Rotation.from_matrix([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def quat_wxyz_from_rotation(rot: Rotation) -> np.ndarray:
+    """(n, 4) w, x, y, z with w >= 0 (one sign per rotation, so series stay comparable)."""
+    q = np.atleast_2d(rot.as_quat(scalar_first=True))
+    return np.where(q[:, :1] < 0, -q, q)
+
+
+def rotation_from_quat_wxyz(q_wxyz: np.ndarray) -> Rotation:
+    return Rotation.from_quat(np.atleast_2d(np.asarray(q_wxyz, dtype=float)), scalar_first=True)
+
+
+def quat_ned_from_frd_euler(roll_rad, pitch_rad, yaw_rad) -> np.ndarray:
+    """ZYX Euler angles (rad) of FRD vs NED -> (n, 4) quaternion w, x, y, z (FRD -> NED)."""
+    angles = np.column_stack([np.asarray(yaw_rad, float).ravel(), np.asarray(pitch_rad, float).ravel(),
+                              np.asarray(roll_rad, float).ravel()])
+    return quat_wxyz_from_rotation(Rotation.from_euler("ZYX", angles))
+
+
+def quat_ned_frd_from_enu_flu(q_enu_from_flu_wxyz: np.ndarray) -> np.ndarray:
+    """ROS orientation (FLU -> ENU, w, x, y, z) -> (n, 4) FRD -> NED, w, x, y, z."""
+    rot = R_NED_FROM_ENU * rotation_from_quat_wxyz(q_enu_from_flu_wxyz) * R_FLU_FROM_FRD
+    return quat_wxyz_from_rotation(rot)
+
+
+def euler_zyx_from_quat_wxyz(q_wxyz: np.ndarray) -> np.ndarray:
+    """(n, 4) FRD -> NED quaternions -> (n, 3) roll, pitch, yaw in rad (ZYX)."""
+    ypr = rotation_from_quat_wxyz(q_wxyz).as_euler("ZYX")
+    return ypr[:, ::-1]
+
+
+def gimbal_to_earth(gimbal, attitude):
+    """GimbalSeries with yaw relative to the vehicle heading (per-sample flag) -> all earth-referenced.
+
+    For flagged samples the quaternion is expressed in the vehicle's heading frame (NED turned by the vehicle
+    yaw): q_ned_from_gimbal = Rz(vehicle_yaw(t)) * q. Vehicle yaw is interpolated (Slerp) at the gimbal times;
+    samples outside the attitude span are clamped to its ends. Both series must be on the same clock.
+    """
+    from pipeline.ingest.model import GimbalSeries
+
+    flag = np.asarray(gimbal.yaw_in_vehicle_frame, bool)
+    if not flag.any():
+        return gimbal
+    if attitude is None or attitude.t_ns.size == 0:
+        from pipeline.errors import InputError
+        raise InputError(f"gimbal series {gimbal.source!r}: yaw is relative to the vehicle, but there is no "
+                         "vehicle attitude to refer it to the earth")
+    t_att = attitude.t_ns
+    t = np.clip(gimbal.t_ns[flag], t_att[0], t_att[-1])
+    rots = rotation_from_quat_wxyz(attitude.quat_wxyz)
+    if t_att.size == 1:
+        yaw = np.full(t.shape, rots.as_euler("ZYX")[0, 0])
+    else:
+        t_rel, ref = (t_att - t_att[0]).astype(float), t_att[0]
+        yaw = Slerp(t_rel, rots)((t - ref).astype(float)).as_euler("ZYX")[:, 0]
+    q = gimbal.quat_wxyz.copy()
+    q[flag] = quat_wxyz_from_rotation(Rotation.from_euler("Z", yaw) * rotation_from_quat_wxyz(q[flag]))
+    return GimbalSeries(gimbal.t_ns, q, np.zeros_like(flag), source=gimbal.source, clock=gimbal.clock)

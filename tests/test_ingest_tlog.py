@@ -1,0 +1,161 @@
+"""MAVLink .tlog reader: units, frames, clocks, bad input, and the real ArduPilot tlog."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as ml
+from scipy.spatial.transform import Rotation
+
+from pipeline.errors import ConfigError, LogReadError
+from pipeline.ingest import read_flight
+from pipeline.ingest.writers import TlogWriter
+
+LOGS = Path(__file__).resolve().parents[1] / ".." / "shared" / "logs"
+T0_US = 1_700_000_000_000_000
+
+
+def _write_flight(path: Path, n: int = 20) -> None:
+    with TlogWriter(path) as w:
+        for i in range(n):
+            t = T0_US + i * 100_000
+            boot_ms = 5000 + i * 100
+            w.write(t, ml.MAVLink_heartbeat_message(2, 3, 0, 0, 0, 3))
+            w.write(t + 1, ml.MAVLink_system_time_message(T0_US - 4_000_000 + i * 100_000 - 250, boot_ms))
+            w.write(t + 2, ml.MAVLink_global_position_int_message(boot_ms, 473977419, 85455939, 500123, 100000,
+                                                                  0, 0, 0, 65535))
+            w.write(t + 3, ml.MAVLink_attitude_message(boot_ms, 0.0, math.radians(30), math.radians(90), 0, 0, 0))
+            w.write(t + 4, ml.MAVLink_gimbal_device_attitude_status_message(
+                0, 0, boot_ms, 64 if i % 2 else 32, [math.cos(0.25), 0.0, math.sin(0.25), 0.0],
+                0, 0, 0, 0), src_component=154)
+            w.write(t + 5, ml.MAVLink_distance_sensor_message(boot_ms, 20, 4000, [1234, 5000, 10, 65535][i % 4],
+                                                              0, 0, 25, 0), src_component=1)
+            w.write(t + 6, ml.MAVLink_camera_tracking_geo_status_message(
+                0, 0, 0, 0.0, 0, 0, 0, 0, 0, 0, [2500.5, float("nan"), -1.0, 812.25][i % 4], 0, 0))
+
+
+def test_units_and_frames_hand_computed(tmp_path):
+    p = tmp_path / "f.tlog"
+    _write_flight(p)
+    log = read_flight([p])
+    assert log.position.alt_datum == "amsl" and log.position.clock == "unix"
+    assert log.position.lat_deg[0] == pytest.approx(47.3977419, abs=1e-9)
+    assert log.position.lon_deg[0] == pytest.approx(8.5455939, abs=1e-9)
+    assert log.position.alt_m[0] == pytest.approx(500.123)
+    assert log.position.t_ns[0] == (T0_US + 2) * 1000
+    # heading east (yaw 90 deg), nose up 30 deg: body forward -> NED (0, cos30, -sin30)
+    fwd = Rotation.from_quat(log.attitude.quat_wxyz[0], scalar_first=True).apply([1, 0, 0])
+    np.testing.assert_allclose(fwd, [0, math.cos(math.radians(30)), -0.5], atol=1e-6)
+    # by hand: q = qz(90) * qy(30) = (c45 c15, -s45 s15, c45 s15, s45 c15)
+    c45, s45, c15, s15 = math.cos(math.pi / 4), math.sin(math.pi / 4), math.cos(math.pi / 12), math.sin(math.pi / 12)
+    np.testing.assert_allclose(log.attitude.quat_wxyz[0], [c45 * c15, -s45 * s15, c45 * s15, s45 * c15], atol=1e-6)
+    # gimbal: pitch 0.5 rad quaternion; flag 32 (vehicle frame) on even samples, 64 (earth) on odd
+    np.testing.assert_allclose(log.gimbal.quat_wxyz[0], [math.cos(0.25), 0, math.sin(0.25), 0], atol=1e-7)
+    assert log.gimbal.yaw_in_vehicle_frame[:4].tolist() == [True, False, True, False]
+    # default range carrier CAMERA_TRACKING_GEO_STATUS.dist (float m)
+    assert log.range.source.endswith("CAMERA_TRACKING_GEO_STATUS")
+    np.testing.assert_allclose(log.range.range_m[:4], [2500.5, np.nan, -1.0, 812.25])
+    assert log.range.valid[:4].tolist() == [True, False, False, True]
+    assert log.missing_for_localization() == ["frames"]
+
+
+def test_distance_sensor_cm_and_validity(tmp_path):
+    p = tmp_path / "f.tlog"
+    _write_flight(p, 8)
+    log = read_flight([p], mapping={"tlog": {"range": {"messages": ["DISTANCE_SENSOR"]}}})
+    np.testing.assert_allclose(log.range.range_m[:3], [12.34, 50.0, 0.10])
+    assert np.isnan(log.range.range_m[3])
+    # 12.34 m inside [0.2, 40] m; 50 m above max; 0.1 m below min; 65535 = no reading
+    assert log.range.valid[:4].tolist() == [True, False, False, False]
+
+
+def test_boot_time_through_system_time(tmp_path):
+    p = tmp_path / "f.tlog"
+    _write_flight(p)
+    log = read_flight([p], mapping={"tlog": {"time": "boot"}})
+    # SYSTEM_TIME: unix = T0 - 4 s - 250 us + (boot - 5000 ms)
+    assert log.position.t_ns[0] == (T0_US - 4_000_000 - 250) * 1000
+    assert log.clock_links[0].a == "boot" and log.clock_links[0].b == "unix"
+
+
+def test_unknown_mapping_key_rejected(tmp_path):
+    p = tmp_path / "f.tlog"
+    _write_flight(p, 2)
+    with pytest.raises(ConfigError, match="unknown key 'postion'"):
+        read_flight([p], mapping={"tlog": {"postion": {"messages": ["GPS_RAW_INT"]}}})
+    with pytest.raises(ConfigError, match="cannot supply"):
+        read_flight([p], mapping={"tlog": {"range": {"messages": ["HEARTBEAT"]}}})
+
+
+def test_truncated_tlog_warns_with_amount_read(tmp_path):
+    p = tmp_path / "f.tlog"
+    _write_flight(p, 20)
+    data = p.read_bytes()
+    cut = tmp_path / "cut.tlog"
+    cut.write_bytes(data[: len(data) // 2 + 7])
+    log = read_flight([cut])
+    assert any("truncated" in w and "messages" in w for w in log.warnings)
+    assert 5 <= log.position.t_ns.size < 20
+
+
+def test_garbage_in_the_middle_is_skipped(tmp_path):
+    p = tmp_path / "f.tlog"
+    _write_flight(p, 10)
+    data = p.read_bytes()
+    rng = np.random.default_rng(1)
+    bad = tmp_path / "bad.tlog"
+    bad.write_bytes(data[:500] + rng.integers(0, 256, 333, dtype=np.uint8).tobytes() + data[500:])
+    log = read_flight([bad])
+    assert any("skipped" in w for w in log.warnings)
+    assert log.position.t_ns.size >= 9
+
+
+def test_garbage_file_and_empty_file_fail_clearly(tmp_path):
+    g = tmp_path / "g.tlog"
+    g.write_bytes(np.random.default_rng(2).integers(0, 256, 4000, dtype=np.uint8).tobytes())
+    with pytest.raises(LogReadError, match=r"g\.tlog: no MAVLink records"):
+        read_flight([g])
+    e = tmp_path / "e.tlog"
+    e.write_bytes(b"")
+    with pytest.raises(LogReadError, match=r"e\.tlog: empty file"):
+        read_flight([e])
+
+
+def test_no_gps_fix_reported_missing(tmp_path):
+    p = tmp_path / "nofix.tlog"
+    with TlogWriter(p) as w:
+        for i in range(5):
+            w.write(T0_US + i * 1000, ml.MAVLink_global_position_int_message(i, 0, 0, 0, 0, 0, 0, 0, 0))
+            w.write(T0_US + i * 1000 + 1, ml.MAVLink_attitude_message(i, 0, 0, 0, 0, 0, 0))
+    log = read_flight([p])
+    assert log.position is None
+    assert "position" in log.missing_for_localization()
+    assert any("no GPS fix in 5 position messages" in w for w in log.warnings)
+
+
+def test_real_ardupilot_tlog_against_raw_pymavlink():
+    path = LOGS / "ardupilot_uavlogviewer_vtol.tlog"
+    raw = mavutil.mavlink_connection(str(path))
+    first_pos = raw.recv_match(type="GLOBAL_POSITION_INT")
+    t_pos_us = round(first_pos._timestamp * 1e6)
+    raw = mavutil.mavlink_connection(str(path))
+    first_att = raw.recv_match(type="ATTITUDE")
+    log = read_flight([path])
+    assert log.position.t_ns.size == 807 and log.attitude.t_ns.size == 888
+    assert log.position.t_ns[0] == t_pos_us * 1000
+    assert log.position.lat_deg[0] == pytest.approx(first_pos.lat / 1e7, abs=1e-12)
+    assert log.position.lon_deg[0] == pytest.approx(first_pos.lon / 1e7, abs=1e-12)
+    assert log.position.alt_m[0] == pytest.approx(first_pos.alt / 1000)
+    # hand-converted: yaw 2.45 rad, roll -0.0247, pitch 0.0025: heading 140.4 deg, nearly level
+    r, p_, y = first_att.roll, first_att.pitch, first_att.yaw
+    fwd = Rotation.from_quat(log.attitude.quat_wxyz[0], scalar_first=True).apply([1, 0, 0])
+    np.testing.assert_allclose(fwd, [math.cos(y) * math.cos(p_), math.sin(y) * math.cos(p_), -math.sin(p_)],
+                               atol=1e-7)
+    down = Rotation.from_quat(log.attitude.quat_wxyz[0], scalar_first=True).apply([0, 0, 1])
+    assert down[2] == pytest.approx(math.cos(r) * math.cos(p_), abs=1e-7)
+    assert log.gimbal is None and log.range is None
+    assert sum(s.count for s in log.streams) == 23894

@@ -1,0 +1,413 @@
+"""Flight configuration: what an operator knows about one flight (docs/flight_config.md documents every key).
+
+A YAML file is read into typed, frozen dataclasses. Every section rejects unknown keys (with a suggestion for a
+near miss such as `fx` for `fx_px`), checks types, shapes and ranges, resolves paths relative to the config
+file and names missing files. Units are in the key names (`_px`, `_m`, `_ns`, `_s`, `_deg`).
+
+A run config (configs/sample.yaml) lists flight configs under `groups:`; `load_run_config` accepts either.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import json
+import math
+import types
+import typing
+from dataclasses import dataclass, field
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from pipeline.errors import ConfigError
+
+# ---- a small declarative validator over dataclasses ---------------------------------------------------------
+
+
+class _Invalid(Exception):
+    def __init__(self, where: str, message: str):
+        super().__init__(f"{where}: {message}" if where else message)
+
+
+def _type_name(v) -> str:
+    return "null" if v is None else type(v).__name__
+
+
+def _number(v, where: str, *, integer: bool = False) -> float | int:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        if isinstance(v, str) and any(c.isalpha() for c in v):
+            raise _Invalid(where, f"must be a plain number (the unit is in the key's name), got {v!r}")
+        raise _Invalid(where, f"must be a number, got {_type_name(v)} {v!r}")
+    if integer:
+        if isinstance(v, float) and not v.is_integer():
+            raise _Invalid(where, f"must be an integer, got {v!r}")
+        return int(v)
+    if not math.isfinite(v):
+        raise _Invalid(where, f"must be finite, got {v!r}")
+    return float(v)
+
+
+def _coerce(value, tp, where: str):
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        args = typing.get_args(tp)
+        if value is None and type(None) in args:
+            return None
+        first: _Invalid | None = None
+        for arg in (a for a in args if a is not type(None)):
+            try:
+                return _coerce(value, arg, where)
+            except _Invalid as exc:
+                first = first or exc
+        raise first
+    if tp is typing.Any:
+        return value
+    if dataclasses.is_dataclass(tp):
+        return _build(tp, value, where)
+    if tp is float:
+        return _number(value, where)
+    if tp is int:
+        return _number(value, where, integer=True)
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise _Invalid(where, f"must be true or false, got {value!r}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise _Invalid(where, f"must be a string, got {_type_name(value)}")
+        return value
+    if origin is tuple:
+        args = typing.get_args(tp)
+        if not isinstance(value, (list, tuple)):
+            raise _Invalid(where, f"must be a list, got {_type_name(value)} {value!r}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_coerce(v, args[0], f"{where}[{i}]") for i, v in enumerate(value))
+        if len(value) != len(args):
+            raise _Invalid(where, f"must have {len(args)} elements, got {len(value)}")
+        return tuple(_coerce(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args, strict=True)))
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise _Invalid(where, f"must be a mapping, got {_type_name(value)}")
+        return dict(value)
+    if typing.get_origin(tp) is typing.Literal:
+        if value not in typing.get_args(tp):
+            raise _Invalid(where, f"must be one of {list(typing.get_args(tp))}, got {value!r}")
+        return value
+    raise TypeError(f"unsupported config type {tp}")  # a bug in this module, not a user error
+
+
+def _build(cls, d, where: str):
+    if not isinstance(d, dict):
+        raise _Invalid(where, f"must be a mapping of keys, got {_type_name(d)} {d!r}")
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    unknown = [k for k in d if k not in fields]
+    if unknown:
+        k = unknown[0]
+        with_unit = [f for f in fields if f.startswith(f"{k}_")]
+        near = with_unit or difflib.get_close_matches(str(k), list(fields), n=1, cutoff=0.5)
+        hint = f" (did you mean '{near[0]}'?)" if near else f" (known: {', '.join(fields)})"
+        raise _Invalid(f"{where}.{k}" if where else str(k), f"unknown key{hint}")
+    kwargs = {}
+    for name, f in fields.items():
+        sub = f"{where}.{name}" if where else name
+        if name in d:
+            kwargs[name] = _coerce(d[name], hints[name], sub)
+        elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            raise _Invalid(sub, "is required")
+    try:
+        return cls(**kwargs)
+    except ValueError as exc:
+        raise _Invalid(where, str(exc)) from None
+
+
+# ---- the flight configuration ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Files:
+    telemetry: tuple[str, ...]
+    video: str | None = None
+    frames_csv: str | None = None
+
+    def __post_init__(self):
+        if not self.telemetry:
+            raise ValueError("'telemetry' must list at least one file")
+
+
+@dataclass(frozen=True)
+class Camera:
+    width_px: int
+    height_px: int
+    fx_px: float
+    fy_px: float
+    cx_px: float
+    cy_px: float
+    dist: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
+    R_optical_from_gimbal: tuple[tuple[float, float, float], tuple[float, float, float],
+                                 tuple[float, float, float]] = ((0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0))
+
+    def __post_init__(self):
+        if self.width_px <= 0 or self.height_px <= 0 or self.fx_px <= 0 or self.fy_px <= 0:
+            raise ValueError("image size and focal lengths must be positive")
+        if len(self.dist) not in (4, 5, 8):
+            raise ValueError(f"'dist' must be [k1, k2, p1, p2] or [k1, k2, p1, p2, k3] (or 8), got {len(self.dist)}")
+        R = np.array(self.R_optical_from_gimbal)
+        if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+            raise ValueError("'R_optical_from_gimbal' must be a proper rotation matrix")
+
+    @property
+    def K(self) -> np.ndarray:
+        return np.array([[self.fx_px, 0.0, self.cx_px], [0.0, self.fy_px, self.cy_px], [0.0, 0.0, 1.0]])
+
+
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class LeverArms:
+    """Offsets from the GNSS antenna, body FRD metres."""
+
+    camera: Vec3 = (0.0, 0.0, 0.0)
+    rangefinder: Vec3 = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Clock:
+    """Offsets added to each source's timestamps to put them on the telemetry clock (ns)."""
+
+    video_to_telemetry_offset_ns: int = 0
+    range_offset_ns: int = 0
+    position_offset_ns: int = 0
+    attitude_offset_ns: int = 0
+    gimbal_offset_ns: int = 0
+
+
+@dataclass(frozen=True)
+class Altitude:
+    """Altitude datum conversion: ellipsoid height = AMSL altitude + geoid_separation_m."""
+
+    geoid_separation_m: float | None = None
+
+
+@dataclass(frozen=True)
+class Target:
+    """Where the operator marked the target: a pixel in a frame, or a template image."""
+
+    frame_index: int | None = None
+    pixel: tuple[float, float] | None = None
+    template: str | None = None
+    template_pixel: tuple[float, float] | None = None
+
+    def __post_init__(self):
+        if self.template is None and (self.frame_index is None or self.pixel is None):
+            raise ValueError("give either 'frame_index' and 'pixel', or 'template'")
+        if self.template is not None and self.pixel is not None:
+            raise ValueError("give either 'frame_index' and 'pixel', or 'template', not both")
+
+
+@dataclass(frozen=True)
+class ObservationSelection:
+    mode: typing.Literal["range_times", "frames"] = "range_times"
+    frame_tolerance_s: float = 0.1
+    max_range_gap_s: float = 0.1
+    frame_indices: tuple[int, ...] = ()
+
+    def __post_init__(self):
+        if self.frame_tolerance_s <= 0 or self.max_range_gap_s < 0:
+            raise ValueError("tolerances must be positive")
+        if self.mode == "frames" and not self.frame_indices:
+            raise ValueError("mode 'frames' needs 'frame_indices'")
+
+
+@dataclass(frozen=True)
+class Tracking:
+    n_features: int = 1500
+    ratio: float = 0.75
+    ransac_reproj_px: float = 3.0
+    min_inliers: int = 12
+    min_inlier_ratio: float = 0.25
+    min_correlation: float = 0.5
+    patch_half_px: int = 15
+    search_half_px: int = 6
+    keyframe_inlier_fraction: float = 0.5
+    neighbours: int = 2
+
+    def __post_init__(self):
+        if not 0 < self.ratio < 1:
+            raise ValueError("'ratio' must be in (0, 1)")
+        if self.min_inliers < 4:
+            raise ValueError("'min_inliers' must be at least 4 (a homography needs 4 points)")
+        if self.patch_half_px < 3 or self.search_half_px < 1 or self.n_features < 50:
+            raise ValueError("'patch_half_px' >= 3, 'search_half_px' >= 1 and 'n_features' >= 50 required")
+
+
+@dataclass(frozen=True)
+class Geodetic:
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+
+    def __post_init__(self):
+        if not (-90 <= self.lat_deg <= 90 and -180 <= self.lon_deg <= 360):
+            raise ValueError(f"latitude/longitude out of range: {self.lat_deg}, {self.lon_deg}")
+
+    def as_tuple(self) -> tuple[float, float, float]:
+        return (self.lat_deg, self.lon_deg, self.alt_m)
+
+
+@dataclass(frozen=True)
+class Solve:
+    methods: tuple[str, ...] | str = "all"
+    options: dict[str, typing.Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SigmaPriors:
+    pixel_px: float | None = None
+    range_m: float | None = None
+    position_m: float | None = None
+    attitude_deg: float | None = None
+
+
+@dataclass(frozen=True)
+class FlightConfig:
+    """One flight, resolved: every file path is absolute. `path` is the config file (None if built in code)."""
+
+    name: str
+    files: Files
+    camera: Camera
+    target: Target
+    mapping: dict[str, typing.Any] | None = None
+    lever_arms_m: LeverArms = field(default_factory=LeverArms)
+    clock: Clock = field(default_factory=Clock)
+    altitude: Altitude = field(default_factory=Altitude)
+    observations: ObservationSelection = field(default_factory=ObservationSelection)
+    tracking: Tracking = field(default_factory=Tracking)
+    origin: Geodetic | str = "auto"
+    truth: Geodetic | None = None
+    truth_file: str | None = None
+    solve: Solve = field(default_factory=Solve)
+    sigma: SigmaPriors = field(default_factory=SigmaPriors)
+    path: str | None = None
+
+    def __post_init__(self):
+        if isinstance(self.origin, str) and self.origin != "auto":
+            raise ValueError("'origin' must be 'auto' or {lat_deg, lon_deg, alt_m}")
+        if not self.name or any(c in self.name for c in "/\\:") or self.name.startswith("."):
+            raise ValueError(f"'name' must be a folder-safe name, got {self.name!r}")
+        if self.truth is not None and self.truth_file is not None:
+            raise ValueError("give 'truth' or 'truth_file', not both")
+
+    def to_dict(self) -> dict:
+        """JSON-serialisable form (for reports and GroupResult.settings)."""
+        return json.loads(json.dumps(dataclasses.asdict(self), default=str))
+
+    def truth_lla(self) -> tuple[float, float, float] | None:
+        """The target's true WGS84 position (ellipsoid height), from `truth` or `truth_file`, else None."""
+        if self.truth is not None:
+            return self.truth.as_tuple()
+        if self.truth_file is None:
+            return None
+        try:
+            doc = json.loads(Path(self.truth_file).read_text())
+            t = doc["target"]
+            return float(t["lat_deg"]), float(t["lon_deg"]), float(t["alt_m"])
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise ConfigError(f"cannot read the target truth: {exc}", self.truth_file) from None
+
+
+def _resolve(base: Path, p: str | None, what: str, where: Path) -> str | None:
+    if p is None:
+        return None
+    path = (base / p).resolve() if not Path(p).is_absolute() else Path(p)
+    if not path.exists():
+        raise ConfigError(f"{what}: file not found: {path}", where)
+    return str(path)
+
+
+def flight_config_from_dict(doc: dict, path: str | PathLike | None = None) -> FlightConfig:
+    """Validate a parsed flight config; relative paths are resolved against the config file's folder."""
+    where = Path(path) if path is not None else None
+    base = where.resolve().parent if where is not None else Path.cwd()
+    if isinstance(doc, dict) and "path" in doc:
+        raise ConfigError("path: unknown key", where)
+    try:
+        cfg = _build(FlightConfig, doc, "")
+    except _Invalid as exc:
+        raise ConfigError(str(exc), where) from None
+    files = dataclasses.replace(
+        cfg.files,
+        telemetry=tuple(_resolve(base, p, f"files.telemetry[{i}]", where) for i, p in enumerate(cfg.files.telemetry)),
+        video=_resolve(base, cfg.files.video, "files.video", where),
+        frames_csv=_resolve(base, cfg.files.frames_csv, "files.frames_csv", where))
+    target = cfg.target
+    if target.template is not None:
+        target = dataclasses.replace(target, template=_resolve(base, target.template, "target.template", where))
+    return dataclasses.replace(cfg, files=files, target=target,
+                               truth_file=_resolve(base, cfg.truth_file, "truth_file", where),
+                               path=None if where is None else str(where.resolve()))
+
+
+def _read_yaml(path: Path) -> dict:
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError("config file not found", path) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"cannot read: {exc}", path) from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        at = f" at line {mark.line + 1} column {mark.column + 1}" if mark else ""
+        raise ConfigError(f"not valid YAML{at}: {getattr(exc, 'problem', exc)}", path) from None
+    if not isinstance(doc, dict):
+        raise ConfigError("the top level must be a mapping of keys", path)
+    return doc
+
+
+def load_flight_config(path: str | PathLike) -> FlightConfig:
+    path = Path(path)
+    return flight_config_from_dict(_read_yaml(path), path)
+
+
+@dataclass(frozen=True)
+class GroupEntry:
+    """One flight group of a run: its config path, or the error that stops it from loading."""
+
+    source: str
+    config: FlightConfig | None = None
+    error: str | None = None
+
+
+def load_run_config(path: str | PathLike) -> list[GroupEntry]:
+    """The flight groups of a run config (`groups: [flight config paths]`), or of a single flight config.
+
+    A group whose flight config does not load is returned with its error (the others still run); a run config
+    that is itself malformed raises ConfigError."""
+    path = Path(path)
+    doc = _read_yaml(path)
+    if "groups" not in doc:
+        return [GroupEntry(str(path), load_flight_config(path))]
+    unknown = sorted(set(doc) - {"groups", "description"})
+    if unknown:
+        raise ConfigError(f"{unknown[0]}: unknown key in a run config (known: groups, description)", path)
+    groups = doc["groups"]
+    if not isinstance(groups, list) or not groups or not all(isinstance(g, str) for g in groups):
+        raise ConfigError("'groups' must be a non-empty list of flight config paths", path)
+    entries = []
+    names: set[str] = set()
+    for g in groups:
+        gpath = (path.resolve().parent / g).resolve()
+        try:
+            cfg = load_flight_config(gpath)
+        except ConfigError as exc:
+            entries.append(GroupEntry(str(gpath), error=str(exc)))
+            continue
+        if cfg.name in names:
+            raise ConfigError(f"two groups are named {cfg.name!r}", path)
+        names.add(cfg.name)
+        entries.append(GroupEntry(str(gpath), cfg))
+    return entries

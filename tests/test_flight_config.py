@@ -1,0 +1,110 @@
+import copy
+
+import pytest
+import yaml
+
+from pipeline.errors import ConfigError
+from pipeline.flight_config import flight_config_from_dict, load_flight_config, load_run_config
+
+
+def _doc():
+    return {
+        "name": "g1",
+        "files": {"telemetry": ["flight.tlog"], "video": "video.mp4"},
+        "camera": {"width_px": 600, "height_px": 400, "fx_px": 1000, "fy_px": 1000.5, "cx_px": 300, "cy_px": 200,
+                   "dist": [0.01, 0, 0, 0, 0]},
+        "target": {"frame_index": 3, "pixel": [301.5, 199]},
+        "clock": {"video_to_telemetry_offset_ns": 1_700_000_000_000_000_000},
+        "origin": {"lat_deg": 30, "lon_deg": 114, "alt_m": 10},
+        "sigma": {"pixel_px": 1.0},
+    }
+
+
+@pytest.fixture
+def flight_dir(tmp_path):
+    (tmp_path / "data").mkdir()
+    for name in ("flight.tlog", "video.mp4"):
+        (tmp_path / "data" / name).write_bytes(b"x")
+    return tmp_path
+
+
+def _write(path, doc):
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_paths_resolve_relative_to_the_config_and_values_are_typed(flight_dir):
+    doc = _doc()
+    doc["files"] = {"telemetry": ["data/flight.tlog"], "video": "data/video.mp4"}
+    cfg = load_flight_config(_write(flight_dir / "g1.yaml", doc))
+    assert cfg.files.telemetry == (str((flight_dir / "data/flight.tlog").resolve()),)
+    assert cfg.files.video == str((flight_dir / "data/video.mp4").resolve())
+    assert cfg.camera.fy_px == 1000.5 and isinstance(cfg.camera.width_px, int)
+    assert cfg.camera.K[0, 2] == 300.0
+    assert cfg.clock.video_to_telemetry_offset_ns == 1_700_000_000_000_000_000
+    assert cfg.origin.as_tuple() == (30.0, 114.0, 10.0)
+    assert cfg.observations.mode == "range_times" and cfg.tracking.ratio == 0.75  # defaults
+    assert cfg.to_dict()["camera"]["fx_px"] == 1000.0
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    (lambda d: d["camera"].update(fx=1000), r"camera\.fx: unknown key \(did you mean 'fx_px'\?\)"),
+    (lambda d: d["camera"].update(fx_px="1000 px"), r"camera\.fx_px: must be a plain number \(the unit"),
+    (lambda d: d.update(colour="red"), r"colour: unknown key"),
+    (lambda d: d["clock"].update(video_to_telemetry_offset_ns=1.5), r"must be an integer"),
+    (lambda d: d["camera"].update(dist=[1, 2, 3]), r"'dist' must be"),
+    (lambda d: d["camera"].pop("fx_px"), r"camera\.fx_px: is required"),
+    (lambda d: d.update(origin="here"), r"'origin' must be 'auto'"),
+    (lambda d: d["origin"].update(lat_deg=95), r"latitude/longitude out of range"),
+    (lambda d: d.update(observations={"mode": "every"}), r"observations\.mode: must be one of"),
+    (lambda d: d.update(lever_arms_m={"camera": [1, 2]}), r"lever_arms_m\.camera: must have 3 elements"),
+    (lambda d: d["target"].pop("pixel"), r"give either"),
+    (lambda d: d["files"].update(video="nope.mp4"), r"files\.video: file not found: .*nope\.mp4"),
+    (lambda d: d.update(name="a/b"), r"folder-safe"),
+])
+def test_mistakes_are_named(flight_dir, change, message):
+    doc = copy.deepcopy(_doc())
+    doc["files"] = {"telemetry": ["data/flight.tlog"], "video": "data/video.mp4"}
+    change(doc)
+    path = _write(flight_dir / "bad.yaml", doc)
+    with pytest.raises(ConfigError, match=message) as exc:
+        load_flight_config(path)
+    assert str(path) in str(exc.value)
+
+
+def test_missing_and_malformed_files(tmp_path):
+    with pytest.raises(ConfigError, match="config file not found"):
+        load_flight_config(tmp_path / "none.yaml")
+    (tmp_path / "bad.yaml").write_text("name: [unclosed\n")
+    with pytest.raises(ConfigError, match="not valid YAML at line"):
+        load_flight_config(tmp_path / "bad.yaml")
+    (tmp_path / "list.yaml").write_text("- 1\n")
+    with pytest.raises(ConfigError, match="top level must be a mapping"):
+        load_flight_config(tmp_path / "list.yaml")
+
+
+def test_run_config_lists_groups_and_keeps_a_bad_group_as_an_error(flight_dir):
+    good = _doc()
+    good["files"] = {"telemetry": ["data/flight.tlog"]}
+    _write(flight_dir / "good.yaml", good)
+    bad = copy.deepcopy(good)
+    bad["name"] = "g2"
+    bad["files"]["telemetry"] = ["data/missing.tlog"]
+    _write(flight_dir / "bad.yaml", bad)
+    run = _write(flight_dir / "run.yaml", {"groups": ["good.yaml", "bad.yaml"]})
+    entries = load_run_config(run)
+    assert entries[0].config.name == "g1" and entries[0].error is None
+    assert entries[1].config is None and "missing.tlog" in entries[1].error
+    single = load_run_config(flight_dir / "good.yaml")
+    assert len(single) == 1 and single[0].config.name == "g1"
+    with pytest.raises(ConfigError, match="unknown key in a run config"):
+        load_run_config(_write(flight_dir / "r2.yaml", {"groups": ["good.yaml"], "output": "x"}))
+
+
+def test_truth_from_file(flight_dir):
+    (flight_dir / "truth.json").write_text('{"target": {"lat_deg": 1.5, "lon_deg": 2.5, "alt_m": 3.5}}')
+    doc = _doc()
+    doc["files"] = {"telemetry": ["data/flight.tlog"]}
+    doc["truth_file"] = "truth.json"
+    cfg = flight_config_from_dict(doc, flight_dir / "x.yaml")
+    assert cfg.truth_lla() == (1.5, 2.5, 3.5)

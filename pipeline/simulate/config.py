@@ -82,12 +82,15 @@ class SolverConfig:
         "textbook".
     mle_sigma: "given" = the MLE is told the true noise standard deviations of this config; "estimated" = it
         is told nothing and must estimate them (variance components) from the data.
+    mle_robust: the MLE's loss; "none" = plain weighted least squares, the maximum-likelihood estimator for the
+        Gaussian noise simulated here; "huber" / "cauchy" = the robust losses meant for real data with outliers.
     """
 
     tol_m: float = 1e-4
     max_iterations: int = 100
     ridge_hkb: Literal["paper", "textbook"] = "paper"
     mle_sigma: Literal["given", "estimated"] = "given"
+    mle_robust: Literal["none", "huber", "cauchy"] = "none"
 
 
 @dataclass(frozen=True)

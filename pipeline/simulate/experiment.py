@@ -49,11 +49,15 @@ class SimulationResult:
 
 
 def solver_options(cfg: SimulationConfig, method: str) -> dict:
-    """The keyword options one estimator receives from the config."""
+    """The keyword options one estimator receives from the config (the closed-form dlt and los take none)."""
+    if method in ("dlt", "los"):
+        return {}
     s = cfg.solver
     opts: dict = {"tol_m": s.tol_m, "max_iterations": s.max_iterations}
     if method == "ridge":
         opts["hkb"] = s.ridge_hkb
+    if method == "mle":
+        opts["robust"] = None if s.mle_robust == "none" else s.mle_robust
     return opts
 
 

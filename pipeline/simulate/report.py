@@ -88,7 +88,7 @@ def setup_lines(result: SimulationResult) -> list[str]:
         f"- noise (1 sigma): platform position {nz.platform_position_m:g} m per axis, laser range {nz.range_m:g} m, "
         f"attitude {nz.attitude_deg:g}° per axis ({nz.attitude_model}), pixel {nz.pixel_px:g} px",
         f"- solver: tol {s.tol_m:g} m, at most {s.max_iterations} iterations, ridge HKB '{s.ridge_hkb}', "
-        f"MLE sigma {s.mle_sigma}",
+        f"MLE sigma {s.mle_sigma}, MLE loss {s.mle_robust}",
         f"- {cfg.trials} trials per angle, seed {cfg.seed}; measured intersection angles (deg): {measured}",
     ]
 

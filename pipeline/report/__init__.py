@@ -10,3 +10,19 @@ Modules:
 
 Layout and column lists are documented in docs/outputs.md.
 """
+
+import importlib
+
+# Lazy, so importing pipeline.report.table4 does not pull in matplotlib.
+_EXPORTS = {
+    "write_run_outputs": "outputs", "write_group_outputs": "outputs", "load_finished_group": "outputs",
+    "write_targets_csv": "exports", "write_targets_geojson": "exports", "write_targets_kml": "exports",
+    "TARGETS_CSV_COLUMNS": "exports", "write_report_html": "html", "render_group_figures": "figures",
+}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(f"pipeline.report.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module 'pipeline.report' has no attribute {name!r}")

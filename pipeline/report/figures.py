@@ -1,0 +1,247 @@
+"""Per-group figures like the paper's Fig. 7 (matplotlib, headless Agg backend).
+
+    map_figure(r)        flight path, lines of sight, every method's estimate, truth; a close-up panel in metres
+                         around the target with the 95 % horizontal error ellipse of each estimate that has one
+    view3d_figure(r)     the same in 3D (East, North, Up)
+    residuals_figure(r)  per-frame pixel residuals (px) and range residuals (m) of the main estimates
+    render_group_figures(r) -> {"map": png bytes, "view3d": ..., "residuals": ...}
+
+All coordinates are the group's local ENU metres.
+"""
+
+from __future__ import annotations
+
+import io
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.figure import Figure
+
+from pipeline.report.geometry import (
+    best_reference_m,
+    ellipse_points_en_m,
+    frame_residuals,
+    lines_of_sight_m,
+)
+from pipeline.report.labels import METHOD_COLORS, METHOD_MARKERS, method_label, ordered_methods
+from pipeline.results import GroupResult
+
+FIGURE_NAMES = ("map", "view3d", "residuals")
+DPI = 110
+RESIDUAL_METHODS = ("mle", "ridge", "fusion", "vision", "range")
+_PATH_COLOR = "#1F4E79"
+_LOS_COLOR = "#9A9A9A"
+
+
+def _finite_estimates(r: GroupResult) -> list[str]:
+    return [m for m in ordered_methods(r.estimates) if np.isfinite(r.estimates[m].position_m).all()]
+
+
+def _centre_m(r: GroupResult) -> np.ndarray | None:
+    return np.asarray(r.truth_m, float) if r.truth_m is not None else best_reference_m(r)
+
+
+def _closeup_half_width_m(r: GroupResult, centre: np.ndarray, methods: list[str]) -> float:
+    """Half width of the close-up: holds the ellipses and most estimates; far outliers are drawn as arrows."""
+    d = np.array([np.linalg.norm(r.estimates[m].position_m[:2] - centre[:2]) for m in methods]) if methods else []
+    ext = [5.0]
+    for m in methods:
+        cov = r.estimates[m].covariance_m2
+        if cov is not None and np.isfinite(cov).all():
+            ring = ellipse_points_en_m(np.asarray(cov)[:2, :2]) + r.estimates[m].position_m[:2] - centre[:2]
+            ext.append(float(np.abs(ring).max()))
+    if len(d):
+        # the estimates within 5x the median distance set the scale, so one wild estimate does not
+        near = d[d <= 5.0 * max(np.median(d), 1.0)]
+        ext.append(float(near.max()) if near.size else 0.0)
+    return 1.15 * max(ext)
+
+
+def _draw_estimates_2d(ax, r: GroupResult, methods: list[str], offset: np.ndarray, half: float | None,
+                       ellipses: bool) -> None:
+    for m in methods:
+        e = r.estimates[m]
+        xy = e.position_m[:2] - offset[:2]
+        color = METHOD_COLORS.get(m, "k")
+        marker = METHOD_MARKERS.get(m, "o")
+        if half is not None and np.abs(xy).max() > half:
+            # off the close-up: an arrow at the edge pointing at it, with the distance
+            u = xy / np.linalg.norm(xy)
+            edge = u * half * 0.86 / np.abs(u).max()
+            ax.annotate("", xy=edge + u * half * 0.12, xytext=edge,
+                        arrowprops={"arrowstyle": "-|>", "color": color, "lw": 1.6})
+            dist = np.linalg.norm(xy)
+            txt = f"{dist / 1000:.1f} km" if dist >= 1000 else f"{dist:.0f} m"
+            ax.text(*(edge - u * half * 0.06), txt, color=color, fontsize=8, ha="center", va="center",
+                    bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.7, "pad": 0.5})
+            continue
+        ax.plot(*xy, marker=marker, color=color, markersize=11 if m == "mle" else 8, markeredgecolor="k",
+                markeredgewidth=0.6, linestyle="none", zorder=5)
+        cov = e.covariance_m2
+        if ellipses and cov is not None and np.isfinite(cov).all():
+            ring = ellipse_points_en_m(np.asarray(cov)[:2, :2]) + xy
+            ax.plot(ring[:, 0], ring[:, 1], color=color, lw=1.4, ls="--", zorder=4)
+
+
+def map_figure(r: GroupResult) -> Figure:
+    """Plan view (East/North metres): overview of the whole flight and a close-up around the target."""
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(12.5, 6.2), layout="constrained",
+                                   gridspec_kw={"width_ratios": [1.15, 1]})
+    obs = r.observations
+    methods = _finite_estimates(r)
+    centre = _centre_m(r)
+    seg, _ = lines_of_sight_m(obs, best_reference_m(r), max_lines=60)
+    handles = {}
+
+    # overview
+    for s in seg:
+        (h,) = ax0.plot(s[:, 0], s[:, 1], color=_LOS_COLOR, lw=0.6, alpha=0.7, zorder=1)
+        handles["Lines of sight"] = h
+    (h,) = ax0.plot(obs.platform_m[:, 0], obs.platform_m[:, 1], color=_PATH_COLOR, lw=2.2, zorder=3)
+    handles["Flight path"] = h
+    (h,) = ax0.plot(*obs.platform_m[0, :2], "o", color=_PATH_COLOR, markersize=7, zorder=3)
+    handles["Path start"] = h
+    _draw_estimates_2d(ax0, r, methods, np.zeros(3), None, ellipses=False)
+    if r.truth_m is not None:
+        ax0.plot(*r.truth_m[:2], marker="*", color="k", markersize=15, markerfacecolor="yellow", ls="none",
+                 zorder=6)
+    ax0.set_aspect("equal", adjustable="datalim")
+    ax0.set_xlabel("East (m)")
+    ax0.set_ylabel("North (m)")
+    ax0.set_title("Overview: flight path and lines of sight")
+    ax0.grid(True, alpha=0.3)
+
+    # close-up
+    if centre is not None:
+        half = _closeup_half_width_m(r, centre, methods)
+        for s in seg:
+            # a line of sight as a line through the close-up, so the bundle's crossing shows
+            d = s[1] - s[0]
+            d = d / np.linalg.norm(d)
+            line = s[1] + np.outer([-4 * half, 4 * half], d)
+            ax1.plot(line[:, 0] - centre[0], line[:, 1] - centre[1], color=_LOS_COLOR, lw=0.6, alpha=0.6, zorder=1)
+        _draw_estimates_2d(ax1, r, methods, centre, half, ellipses=True)
+        if r.truth_m is not None:
+            ax1.plot(0, 0, marker="*", color="k", markersize=18, markerfacecolor="yellow", ls="none", zorder=6)
+        ax1.set_xlim(-half, half)
+        ax1.set_ylim(-half, half)
+        ax1.set_aspect("equal")
+        what = "truth" if r.truth_m is not None else "the reference estimate"
+        ax1.set_xlabel(f"East of {what} (m)")
+        ax1.set_ylabel(f"North of {what} (m)")
+        ax1.set_title("Close-up: estimates, dashed = 95 % error ellipse")
+        ax1.grid(True, alpha=0.3)
+        ax0.add_patch(plt.Rectangle((centre[0] - half, centre[1] - half), 2 * half, 2 * half, fill=False,
+                                    ec="k", lw=0.8, zorder=7))
+    else:
+        ax1.set_axis_off()
+
+    # one legend for both panels, under them, so it never covers data
+    for m in methods:
+        handles[method_label(m)] = plt.Line2D([], [], marker=METHOD_MARKERS.get(m, "o"), ls="none",
+                                              color=METHOD_COLORS.get(m, "k"), markeredgecolor="k",
+                                              markersize=9)
+    if r.truth_m is not None:
+        handles["Truth"] = plt.Line2D([], [], marker="*", ls="none", color="k", markerfacecolor="yellow",
+                                      markersize=13)
+    fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncol=min(6, len(handles)),
+               frameon=False, fontsize=9)
+    angle = f", intersection angle {r.intersection_angle_deg:.1f}°" if np.isfinite(r.intersection_angle_deg) else ""
+    fig.suptitle(f"{r.name}: {obs.n} observations{angle}", fontsize=13)
+    return fig
+
+
+def view3d_figure(r: GroupResult) -> Figure:
+    """3D view (East, North, Up metres) of the path, lines of sight, estimates and truth."""
+    fig = plt.figure(figsize=(8.5, 7.0), layout="constrained")
+    ax = fig.add_subplot(projection="3d")
+    obs = r.observations
+    seg, _ = lines_of_sight_m(obs, best_reference_m(r), max_lines=40)
+    for i, s in enumerate(seg):
+        ax.plot(s[:, 0], s[:, 1], s[:, 2], color=_LOS_COLOR, lw=0.6, alpha=0.7,
+                label="Lines of sight" if i == 0 else None)
+    ax.plot(*obs.platform_m.T, color=_PATH_COLOR, lw=2.2, label="Flight path")
+    ax.plot(*obs.platform_m[0], "o", color=_PATH_COLOR, markersize=6, label="Path start")
+    centre = _centre_m(r)
+    for m in _finite_estimates(r):
+        p = r.estimates[m].position_m
+        if centre is not None and np.linalg.norm(p - centre) > 0.2 * np.ptp(obs.platform_m[:, :2], axis=0).max() + 500:
+            continue  # far outliers would stretch the view; the map's close-up marks them
+        ax.plot(*p, marker=METHOD_MARKERS.get(m, "o"), color=METHOD_COLORS.get(m, "k"), markeredgecolor="k",
+                markersize=8, ls="none", label=method_label(m))
+    if r.truth_m is not None:
+        ax.plot(*r.truth_m, marker="*", color="k", markerfacecolor="yellow", markersize=14, ls="none",
+                label="Truth")
+    ax.set_xlabel("East (m)", labelpad=10)
+    ax.set_ylabel("North (m)", labelpad=10)
+    ax.set_zlabel("Up (m)", labelpad=8)
+    ax.set_title(f"{r.name}: 3D view")
+    fig.legend(loc="outside lower center", ncol=4, frameon=False, fontsize=9)
+    return fig
+
+
+def residuals_figure(r: GroupResult) -> Figure:
+    """Per-frame residuals of the main estimates: pixel reprojection error (px) and range residual (m)."""
+    obs = r.observations
+    t_s = (obs.t_ns - obs.t_ns[0]) / 1e9
+    fig, (ax0, ax1) = plt.subplots(2, 1, figsize=(9.0, 7.0), sharex=True, layout="constrained")
+    methods = [m for m in ordered_methods(r.estimates) if m in RESIDUAL_METHODS and m in _finite_estimates(r)]
+    methods = sorted(methods, key=lambda m: m != "mle")  # the MLE first: it sets the scales
+    scale_px, scale_m, handles, labels = [], [], [], []
+    for m in methods:
+        px, rg = frame_residuals(obs, r.estimates[m].position_m)
+        style = {"marker": METHOD_MARKERS.get(m, "o"), "color": METHOD_COLORS.get(m, "k"),
+                 "lw": 2.2 if m == "mle" else 1.2, "markersize": 6 if m == "mle" else 4.5}
+        rms = []
+        if np.isfinite(px).any():
+            ax0.plot(t_s, px, **style)
+            rms.append(f"{np.sqrt(np.nanmean(px ** 2)):.2f} px")
+            if m in ("mle", "ridge"):
+                scale_px.append(np.nanmax(px))
+        if np.isfinite(rg).any():
+            ax1.plot(t_s, rg, **style)
+            rms.append(f"{np.sqrt(np.nanmean(rg ** 2)):.1f} m")
+            if m in ("mle", "ridge"):
+                scale_m.append(np.nanmax(np.abs(rg)))
+        handles.append(plt.Line2D([], [], **style))
+        labels.append(f"{method_label(m)} (RMS {', '.join(rms)})")
+    # the well-fitting estimates set the scale; a badly fitting one runs off the plot (its RMS is in the legend)
+    if scale_px:
+        ax0.set_ylim(0, 3.0 * max(max(scale_px), 0.5))
+    if scale_m:
+        lim = 3.0 * max(max(scale_m), 1.0)
+        ax1.set_ylim(-lim, lim)
+    ax1.axhline(0, color="k", lw=0.8)
+    ax0.set_ylabel("Reprojection error (px)")
+    ax1.set_ylabel("Range residual |X − s| − d (m)")
+    ax1.set_xlabel("Time since first frame (s)")
+    ax0.set_title("Pixel residuals")
+    ax1.set_title("Range residuals")
+    for ax in (ax0, ax1):
+        ax.grid(True, alpha=0.3)
+        if not ax.lines:
+            ax.text(0.5, 0.5, "no observations of this kind", transform=ax.transAxes, ha="center")
+    if handles:
+        fig.legend(handles, labels, loc="outside lower center", ncol=2, frameon=False, fontsize=9)
+    fig.suptitle(f"{r.name}: residuals per frame", fontsize=13)
+    return fig
+
+
+def figure_png(fig: Figure) -> bytes:
+    """The figure as PNG bytes; the figure is closed."""
+    buf = io.BytesIO()
+    try:
+        fig.savefig(buf, format="png", dpi=DPI)
+    finally:
+        plt.close(fig)
+    return buf.getvalue()
+
+
+def render_group_figures(r: GroupResult) -> dict[str, bytes]:
+    """{"map", "view3d", "residuals"} -> PNG bytes of one group."""
+    return {"map": figure_png(map_figure(r)), "view3d": figure_png(view3d_figure(r)),
+            "residuals": figure_png(residuals_figure(r))}

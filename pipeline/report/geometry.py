@@ -1,0 +1,156 @@
+"""Geometry the outputs draw: lines of sight, error ellipses, CEP, per-frame residuals, ENU -> WGS84.
+
+All positions are ENU metres in the group's local frame unless a name says otherwise (`_deg` for geodetic).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pymap3d
+from scipy import integrate, optimize, stats
+
+from pipeline.geometry.camera import project
+from pipeline.results import GroupResult
+from pipeline.solve.estimate import Estimate
+from pipeline.solve.observations import Observations
+
+ELLIPSE_CONFIDENCE = 0.95
+ALT_DATUM = "WGS84 ellipsoidal height (EPSG:4979)"
+
+
+def geodetic_from_enu(enu_m: np.ndarray, origin_lla: tuple[float, float, float]) -> np.ndarray:
+    """(..., 3) ENU metres -> (..., 3) (lat_deg, lon_deg, alt_m) on WGS84, alt above the ellipsoid."""
+    enu = np.asarray(enu_m, dtype=np.float64)
+    lat, lon, alt = pymap3d.enu2geodetic(enu[..., 0], enu[..., 1], enu[..., 2], *origin_lla)
+    return np.stack([np.asarray(lat), np.asarray(lon), np.asarray(alt)], axis=-1)
+
+
+def camera_rays(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
+    """Camera centres (n, 3) m and unit viewing directions (n, 3) through each frame's target pixel (rows of NaN
+    where the target was not seen). The direction's sign puts the target in front of the camera."""
+    M = obs.P[:, :, :3]
+    p4 = obs.P[:, :, 3]
+    centre = -np.linalg.solve(M, p4[..., None])[..., 0]
+    xh = np.concatenate([obs.pixel, np.ones((obs.n, 1))], axis=1)
+    d = np.linalg.solve(M, xh[..., None])[..., 0] * np.sign(np.linalg.det(M))[:, None]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return centre, d
+
+
+def lines_of_sight_m(obs: Observations, reference_m: np.ndarray | None = None,
+                     max_lines: int | None = 200) -> tuple[np.ndarray, np.ndarray]:
+    """Line-of-sight segments (k, 2, 3) m and the frame index of each (k,).
+
+    A frame with a target pixel gives its camera ray from the camera centre, as long as the laser range when
+    there is one, else to the point of the ray closest to `reference_m`. A frame with only a range gives the
+    segment from the platform towards `reference_m`, as long as the range. Frames with neither (or no
+    reference where one is needed) give no segment. At most `max_lines` evenly spaced frames are kept.
+    """
+    centre, d = camera_rays(obs)
+    has_px = obs.has_pixel
+    rng = obs.range_m
+    ref = None if reference_m is None or not np.isfinite(reference_m).all() else np.asarray(reference_m, float)
+    start = np.where(has_px[:, None], centre, obs.platform_m)
+    direction = d.copy()
+    length = np.where(np.isfinite(rng), rng, np.nan)
+    if ref is not None:
+        to_ref = ref - obs.platform_m
+        dist = np.linalg.norm(to_ref, axis=1)
+        towards = to_ref / np.where(dist > 0, dist, 1.0)[:, None]
+        direction[~has_px] = towards[~has_px]
+        along = np.einsum("ij,ij->i", ref - centre, np.nan_to_num(d))
+        length = np.where(np.isfinite(length), length, np.where(has_px, along, np.nan))
+    ok = np.isfinite(length) & (length > 0) & np.isfinite(direction).all(axis=1)
+    idx = np.flatnonzero(ok)
+    if max_lines is not None and idx.size > max_lines:
+        idx = idx[np.unique(np.linspace(0, idx.size - 1, max_lines).round().astype(int))]
+    seg = np.stack([start[idx], start[idx] + length[idx, None] * direction[idx]], axis=1)
+    return seg, idx
+
+
+def ellipse_axes_m(cov_en_m2: np.ndarray, confidence: float = ELLIPSE_CONFIDENCE) -> tuple[float, float, float]:
+    """Semi-major and semi-minor axis (m) of the horizontal error ellipse holding `confidence` of a 2D Gaussian
+    with (2, 2) East-North covariance, and the major axis' azimuth in degrees clockwise from North [0, 180)."""
+    k2 = stats.chi2.ppf(confidence, 2)
+    w, v = np.linalg.eigh(np.asarray(cov_en_m2, dtype=np.float64))
+    w = np.clip(w, 0.0, None)
+    major = v[:, 1]
+    azimuth = float(np.degrees(np.arctan2(major[0], major[1])) % 180.0)
+    return float(np.sqrt(k2 * w[1])), float(np.sqrt(k2 * w[0])), azimuth
+
+
+def ellipse_points_en_m(cov_en_m2: np.ndarray, confidence: float = ELLIPSE_CONFIDENCE, n: int = 72) -> np.ndarray:
+    """(n + 1, 2) East-North offsets (m) of the error ellipse boundary, counter-clockwise, first point repeated
+    at the end (a closed ring)."""
+    k2 = stats.chi2.ppf(confidence, 2)
+    w, v = np.linalg.eigh(np.asarray(cov_en_m2, dtype=np.float64))
+    t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    circle = np.stack([np.cos(t), np.sin(t)], axis=1)
+    pts = circle * np.sqrt(k2 * np.clip(w, 0.0, None)) @ v.T
+    if np.linalg.det(v) < 0:  # a reflection would turn the ring clockwise
+        pts = pts[::-1]
+    return np.vstack([pts, pts[:1]])
+
+
+def circular_probability(cov_en_m2: np.ndarray, radius_m: float) -> float:
+    """P(|x| <= radius) for x ~ N(0, cov) in 2D, by the exact integral over the polar angle."""
+    w = np.clip(np.linalg.eigvalsh(np.asarray(cov_en_m2, dtype=np.float64)), 1e-300, None)
+
+    def integrand(theta):
+        a = np.cos(theta) ** 2 / w[0] + np.sin(theta) ** 2 / w[1]
+        return -np.expm1(-radius_m ** 2 * a / 2.0) / a
+
+    value, _ = integrate.quad(integrand, 0.0, 2.0 * np.pi, limit=200)
+    return float(value / (2.0 * np.pi * np.sqrt(w[0] * w[1])))
+
+
+def cep_m(cov_en_m2: np.ndarray, probability: float) -> float:
+    """Radius (m) of the circle centred on the estimate that holds `probability` of the horizontal error
+    (CEP50 for 0.5), for a zero-mean Gaussian with (2, 2) East-North covariance."""
+    w = np.clip(np.linalg.eigvalsh(np.asarray(cov_en_m2, dtype=np.float64)), 0.0, None)
+    if w[1] <= 0:
+        return 0.0
+    hi = np.sqrt(stats.chi2.ppf(probability, 2) * w[1])  # the circle of the larger variance bounds it
+    return float(optimize.brentq(lambda r: circular_probability(cov_en_m2, r) - probability, 0.0, hi * 1.0001,
+                                 xtol=1e-9 * hi))
+
+
+def uncertainty(e: Estimate) -> dict:
+    """CEP50, CEP90, vertical sigma and the 95 % horizontal ellipse of an estimate, where defined (with a
+    covariance); an estimator's own CEP values in `extras` (`cep50_m`, `cep90_m`) take precedence."""
+    out = {"cep50_m": None, "cep90_m": None, "sigma_up_m": None, "ellipse95_semi_major_m": None,
+           "ellipse95_semi_minor_m": None, "ellipse95_azimuth_deg": None}
+    cov = e.covariance_m2
+    if cov is not None and np.isfinite(cov).all():
+        en = np.asarray(cov)[:2, :2]
+        out["cep50_m"] = cep_m(en, 0.5)
+        out["cep90_m"] = cep_m(en, 0.9)
+        out["sigma_up_m"] = float(np.sqrt(max(cov[2][2], 0.0)))
+        a, b, az = ellipse_axes_m(en)
+        out.update(ellipse95_semi_major_m=a, ellipse95_semi_minor_m=b, ellipse95_azimuth_deg=az)
+    for key in ("cep50_m", "cep90_m", "sigma_up_m"):
+        v = e.extras.get(key)
+        if isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v):
+            out[key] = float(v)
+    return out
+
+
+def frame_residuals(obs: Observations, position_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-frame residuals of a target position: pixel reprojection error magnitude (n,) px and range
+    residual |X - s_i| - d_i (n,) m; NaN where the frame has no pixel / no range or X is not finite."""
+    X = np.asarray(position_m, dtype=np.float64)
+    if not np.isfinite(X).all():
+        nan = np.full(obs.n, np.nan)
+        return nan, nan.copy()
+    px = np.linalg.norm(project(obs.P, np.broadcast_to(X, (obs.n, 3))) - obs.pixel, axis=1)
+    rng = np.linalg.norm(X - obs.platform_m, axis=1) - obs.range_m
+    return px, rng
+
+
+def best_reference_m(r: GroupResult, order=("mle", "ridge", "fusion", "vision", "range")) -> np.ndarray | None:
+    """The position lines of sight are drawn towards: the first finite estimate in `order`, else any."""
+    for m in (*order, *r.estimates):
+        e = r.estimates.get(m)
+        if e is not None and np.isfinite(e.position_m).all():
+            return np.asarray(e.position_m, dtype=np.float64)
+    return None

@@ -1,0 +1,191 @@
+"""The run report: one self-contained HTML page (figures as base64 PNG data URIs, inline CSS, no scripts).
+
+Sections: a Table-4-like summary (error per method and group, the best per group highlighted, with the
+intersection angle and observation count of Table 3), the failures, one section per group (figures,
+estimates table, stage timings, settings) and the run's settings and software versions.
+"""
+
+from __future__ import annotations
+
+import base64
+import datetime as _dt
+import json
+from collections.abc import Mapping, Sequence
+from html import escape
+from os import PathLike
+
+import numpy as np
+
+from pipeline.atomic import atomic_write_text
+from pipeline.report.exports import target_rows
+from pipeline.report.geometry import ALT_DATUM
+from pipeline.report.labels import METHOD_COLORS, method_label, ordered_methods
+from pipeline.report.versions import software_versions
+from pipeline.results import GroupFailure, GroupResult
+
+_CSS = """
+body { font-family: -apple-system, "Segoe UI", Roboto, "Helvetica Neue", Arial, sans-serif; margin: 0;
+       color: #1d1d1f; background: #fafafa; line-height: 1.45; }
+main { max-width: 1240px; margin: 0 auto; padding: 24px 28px 60px; }
+h1 { font-size: 26px; margin: 8px 0 4px; }
+h2 { font-size: 21px; margin: 34px 0 10px; padding-top: 10px; border-top: 2px solid #ddd; }
+h3 { font-size: 16px; margin: 20px 0 8px; }
+.meta { color: #555; font-size: 14px; }
+.pill { display: inline-block; padding: 2px 10px; border-radius: 12px; font-size: 13px; margin-right: 6px; }
+.ok { background: #e3f4ea; color: #1e6b3a; } .bad { background: #fde8e8; color: #9b1c1c; }
+table { border-collapse: collapse; margin: 8px 0 14px; font-size: 14px; background: white; }
+th, td { border: 1px solid #d9d9d9; padding: 5px 10px; text-align: right; white-space: nowrap; }
+th { background: #f0f0f3; font-weight: 600; }
+td.l, th.l { text-align: left; }
+td.best { background: #d9f2e1; font-weight: 700; }
+td.na { color: #999; }
+.swatch { display: inline-block; width: 11px; height: 11px; border-radius: 2px; margin-right: 6px;
+          vertical-align: -1px; border: 1px solid #0003; }
+img { max-width: 100%; height: auto; background: white; border: 1px solid #e2e2e2; border-radius: 4px; }
+.row { display: flex; gap: 14px; flex-wrap: wrap; align-items: flex-start; }
+.row > figure { flex: 1 1 480px; margin: 0; }
+figure { margin: 0 0 12px; }
+figcaption { font-size: 13px; color: #555; margin-top: 2px; }
+pre { background: #f4f4f6; padding: 10px; overflow-x: auto; font-size: 12px; border-radius: 4px; }
+.fail td { color: #9b1c1c; }
+.note { font-size: 13px; color: #555; }
+details summary { cursor: pointer; color: #0b57d0; margin: 6px 0; }
+"""
+
+
+def _fmt(x, decimals: int = 2) -> str:
+    if x is None or (isinstance(x, float) and not np.isfinite(x)):
+        return "—"
+    if isinstance(x, float):
+        return f"{x:,.{decimals}f}"
+    return escape(str(x))
+
+
+def _img(png: bytes, alt: str) -> str:
+    data = base64.b64encode(png).decode("ascii")
+    return f'<img src="data:image/png;base64,{data}" alt="{escape(alt)}">'
+
+
+def _summary_table(results: Sequence[GroupResult]) -> str:
+    methods = ordered_methods(dict.fromkeys(m for r in results for m in r.estimates))
+    head = "".join(f'<th>{escape(r.name)}</th>' for r in results)
+    rows = [f'<tr><th class="l">Group</th>{head}</tr>']
+    rows.append('<tr><td class="l">Intersection angle /°</td>'
+                + "".join(f"<td>{_fmt(float(r.intersection_angle_deg))}</td>" for r in results) + "</tr>")
+    rows.append('<tr><td class="l">Observations</td>'
+                + "".join(f"<td>{r.n_observations}</td>" for r in results) + "</tr>")
+    errors = {r.name: r.errors_m() for r in results}
+    best = {}
+    for r in results:
+        finite = {m: e for m, e in errors[r.name].items() if e is not None and np.isfinite(e)}
+        best[r.name] = min(finite, key=finite.get) if finite else None
+    for m in methods:
+        color = METHOD_COLORS.get(m, "#000")
+        cells = []
+        for r in results:
+            if m not in r.estimates:
+                cells.append('<td class="na">no estimate</td>')
+                continue
+            e = errors[r.name][m]
+            if r.truth_m is None:
+                cells.append('<td class="na">no truth</td>')
+            elif e is None:
+                cells.append(f'<td class="na">{escape(r.estimates[m].status.name.lower())}</td>')
+            else:
+                flag = "" if r.estimates[m].converged else " †"
+                cls = ' class="best"' if best[r.name] == m else ""
+                cells.append(f"<td{cls}>{_fmt(e)}{flag}</td>")
+        rows.append(f'<tr><td class="l"><span class="swatch" style="background:{color}"></span>'
+                    f'{escape(method_label(m))} /m</td>{"".join(cells)}</tr>')
+    return ("<table>" + "".join(rows) + "</table>"
+            '<p class="note">3D localization error against the known target position (m); the lowest per group is '
+            "highlighted. † the estimator stopped without converging (iteration limit or divergence).</p>")
+
+
+def _estimates_table(r: GroupResult) -> str:
+    cols = (("Method", "method_label", "l"), ("Latitude /°", "lat_deg", ""), ("Longitude /°", "lon_deg", ""),
+            ("Height /m", "alt_m", ""), ("E /m", "e_m", ""), ("N /m", "n_m", ""), ("U /m", "u_m", ""),
+            ("Error /m", "error_m", ""), ("CEP50 /m", "cep50_m", ""), ("CEP90 /m", "cep90_m", ""),
+            ("σ up /m", "sigma_up_m", ""), ("Status", "status", "l"), ("Iterations", "iterations", ""))
+    head = "".join(f'<th class="{c}">{escape(t)}</th>' for t, _, c in cols)
+    body = []
+    for row in target_rows([r]):
+        cells = []
+        for _, key, c in cols:
+            v = row[key]
+            text = _fmt(v, 7) if key in ("lat_deg", "lon_deg") else _fmt(v)
+            cells.append(f'<td class="{c}">{text}</td>')
+        body.append("<tr>" + "".join(cells) + "</tr>")
+    return (f"<table><tr>{head}</tr>{''.join(body)}</table>"
+            f'<p class="note">Heights: {escape(ALT_DATUM)}. E, N, U: metres in the local frame at '
+            f"{_fmt(r.origin_lla[0], 7)}°, {_fmt(r.origin_lla[1], 7)}°, {_fmt(r.origin_lla[2])} m.</p>")
+
+
+def _kv_table(d: Mapping, decimals: int = 2) -> str:
+    rows = "".join(f'<tr><td class="l">{escape(str(k))}</td><td class="l">{_fmt(v, decimals)}</td></tr>'
+                   for k, v in d.items())
+    return f"<table>{rows}</table>"
+
+
+def _group_section(r: GroupResult, figures: Mapping[str, bytes]) -> str:
+    parts = [f'<h2 id="group-{escape(r.name)}">{escape(r.name)}</h2>']
+    angle = _fmt(float(r.intersection_angle_deg))
+    parts.append(f'<p class="meta">{r.n_observations} observations, intersection angle {angle}°'
+                 + ("" if r.truth_m is not None else ", target truth unknown") + "</p>")
+    if "map" in figures:
+        parts.append(f"<figure>{_img(figures['map'], f'{r.name} map view')}<figcaption>Plan view: flight path, "
+                     "lines of sight, each method's estimate and the truth; right, a close-up around the target "
+                     "with the 95 % horizontal error ellipse.</figcaption></figure>")
+    pair = [(k, cap) for k, cap in (("view3d", "3D view (East, North, Up)."),
+                                    ("residuals", "Residuals per frame of the main estimates.")) if k in figures]
+    if pair:
+        parts.append('<div class="row">' + "".join(
+            f"<figure>{_img(figures[k], f'{r.name} {k}')}<figcaption>{cap}</figcaption></figure>" for k, cap in pair)
+            + "</div>")
+    parts.append("<h3>Estimates</h3>" + _estimates_table(r))
+    if r.timings_s:
+        parts.append("<h3>Stage timings</h3>" + _kv_table({f"{k} /s": float(v) for k, v in r.timings_s.items()}, 3))
+    if r.settings:
+        parts.append("<details><summary>Flight settings</summary><pre>"
+                     + escape(json.dumps(r.settings, indent=2, default=str)) + "</pre></details>")
+    return "\n".join(parts)
+
+
+def report_html(results: Sequence[GroupResult], failures: Sequence[GroupFailure], settings: Mapping,
+                figures: Mapping[str, Mapping[str, bytes]] | None = None, title: str = "ridgeloc run report") -> str:
+    """The report page as a string. `figures`: group name -> {"map"|"view3d"|"residuals": PNG bytes}; groups
+    missing from it are rendered here."""
+    from pipeline.report.figures import render_group_figures  # matplotlib only when a page is made
+
+    figures = dict(figures or {})
+    for r in results:
+        if r.name not in figures:
+            figures[r.name] = render_group_figures(r)
+    now = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    status = (f'<span class="pill ok">{len(results)} group(s) processed</span>'
+              + (f'<span class="pill bad">{len(failures)} failed</span>' if failures else ""))
+    out = [f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>{escape(title)}</title>"
+           f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><style>{_CSS}</style></head>"
+           f"<body><main><h1>{escape(title)}</h1><p class=\"meta\">Generated {now}. {status}</p>"]
+    if results:
+        nav = " · ".join(f'<a href="#group-{escape(r.name)}">{escape(r.name)}</a>' for r in results)
+        out.append(f'<p class="meta">Groups: {nav}</p>')
+        out.append("<h2>Localization error per group (as the paper's Table 4)</h2>" + _summary_table(results))
+    if failures:
+        rows = "".join(f'<tr><td class="l">{escape(f.name)}</td><td class="l">{escape(f.source)}</td>'
+                       f'<td class="l">{escape(f.message)}</td></tr>' for f in failures)
+        out.append(f"<h2>Failed groups ({len(failures)})</h2><p class=\"note\">These groups were skipped; the other "
+                   'groups are complete.</p><table class="fail"><tr><th class="l">Group</th><th class="l">Source</th>'
+                   f'<th class="l">Error</th></tr>{rows}</table>')
+    for r in results:
+        out.append(_group_section(r, figures[r.name]))
+    out.append("<h2>Run settings</h2><pre>" + escape(json.dumps(dict(settings), indent=2, default=str)) + "</pre>")
+    out.append("<h2>Software</h2>" + _kv_table(software_versions()))
+    out.append("</main></body></html>\n")
+    return "\n".join(out)
+
+
+def write_report_html(path: str | PathLike, results: Sequence[GroupResult], failures: Sequence[GroupFailure],
+                      settings: Mapping, figures: Mapping[str, Mapping[str, bytes]] | None = None) -> None:
+    """Write the self-contained report page (atomically); see `report_html`."""
+    atomic_write_text(path, report_html(results, failures, settings, figures))

@@ -1,0 +1,44 @@
+"""Display names, order and colours of the estimators, as the paper's Table 4 names them."""
+
+from __future__ import annotations
+
+# The order of the paper's Table 4, then ours (dlt, mle).
+METHOD_ORDER = ("vision", "range", "los", "fusion-raw", "fusion", "ridge", "dlt", "mle")
+
+METHOD_LABELS = {
+    "dlt": "DLT triangulation",
+    "vision": "Vision algorithm",
+    "range": "Laser ranging algorithm",
+    "los": "Line of sight algorithm",
+    "fusion-raw": "Fusion without normalization",
+    "fusion": "Fusion algorithm",
+    "ridge": "Fusion under ridge estimation",
+    "mle": "Weighted MLE",
+}
+
+# Colour-blind-safe (Okabe-Ito) colours, one per method.
+METHOD_COLORS = {
+    "vision": "#0072B2",
+    "range": "#E69F00",
+    "los": "#999999",
+    "fusion-raw": "#CC79A7",
+    "fusion": "#56B4E9",
+    "ridge": "#009E73",
+    "dlt": "#F0E442",
+    "mle": "#D55E00",
+}
+
+METHOD_MARKERS = {
+    "vision": "s", "range": "D", "los": "v", "fusion-raw": "P", "fusion": "X", "ridge": "o", "dlt": "^", "mle": "h",
+}
+
+
+def method_label(method: str) -> str:
+    return METHOD_LABELS.get(method, method)
+
+
+def ordered_methods(methods) -> list[str]:
+    """`methods` in Table-4 order; unknown names last, in their given order."""
+    methods = list(methods)
+    known = [m for m in METHOD_ORDER if m in methods]
+    return known + [m for m in methods if m not in METHOD_ORDER]

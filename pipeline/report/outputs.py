@@ -1,0 +1,113 @@
+"""Writing a run's output folder.
+
+    OUTDIR/
+      report.html                  self-contained report (html.py)
+      targets.csv / .geojson / .kml  GIS exports of every group (exports.py)
+      run.json                     groups done, failures with their messages, settings, software versions
+      <group>/                     one folder per group, written atomically, then marked finished:
+        result.json                the GroupResult (store.py), reused by a re-run
+        map.png view3d.png residuals.png
+        targets.geojson            this group's features alone
+        .done                      hash of the configuration that produced the folder
+
+Every file and folder is written atomically (pipeline.atomic): after a crash or Ctrl-C a file is either the old
+one, the new one, or absent, and a group folder without `.done` is never reused.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from os import PathLike
+from pathlib import Path
+
+from pipeline.atomic import (
+    atomic_dir,
+    atomic_write_text,
+    is_done,
+    remove_stale_temporaries,
+    write_done_marker,
+)
+from pipeline.errors import InputError
+from pipeline.report.exports import targets_geojson, write_targets_csv, write_targets_geojson, write_targets_kml
+from pipeline.report.html import write_report_html
+from pipeline.report.store import load_group_result, save_group_result
+from pipeline.report.versions import software_versions
+from pipeline.results import GroupFailure, GroupResult
+
+RESULT_FILE = "result.json"
+
+
+def group_dir(outdir: str | PathLike, name: str) -> Path:
+    return Path(outdir) / name
+
+
+def write_group_outputs(outdir: str | PathLike, r: GroupResult, config_digest: str = "",
+                        extra_files: Mapping[str, bytes | str] | None = None, figures: bool = True) -> Path:
+    """Write OUTDIR/<group>/ atomically (result.json, figures, targets.geojson, `extra_files` name -> content) and
+    mark it finished for `config_digest` (see pipeline.atomic.config_hash). Returns the folder."""
+    from pipeline.report.figures import render_group_figures
+
+    final = group_dir(outdir, r.name)
+    with atomic_dir(final) as tmp:
+        save_group_result(tmp / RESULT_FILE, r)
+        if figures:
+            for name, png in render_group_figures(r).items():
+                (tmp / f"{name}.png").write_bytes(png)
+        (tmp / "targets.geojson").write_text(json.dumps(targets_geojson([r]), allow_nan=False) + "\n")
+        for name, content in (extra_files or {}).items():
+            p = tmp / name
+            p.parent.mkdir(parents=True, exist_ok=True)
+            p.write_bytes(content if isinstance(content, bytes) else content.encode("utf-8"))
+        write_done_marker(tmp, config_digest)
+    return final
+
+
+def load_finished_group(outdir: str | PathLike, name: str, config_digest: str | None = None) -> GroupResult | None:
+    """The GroupResult of a finished group folder (for `config_digest` when given), or None when the folder is
+    missing, unfinished, made with another configuration, or unreadable (it is then simply redone)."""
+    folder = group_dir(outdir, name)
+    if not is_done(folder, config_digest):
+        return None
+    try:
+        return load_group_result(folder / RESULT_FILE)
+    except InputError:
+        return None
+
+
+def _group_figures(outdir: Path, name: str) -> dict[str, bytes]:
+    out = {}
+    for key in ("map", "view3d", "residuals"):
+        p = outdir / name / f"{key}.png"
+        if p.is_file():
+            out[key] = p.read_bytes()
+    return out
+
+
+def write_run_outputs(outdir: str | PathLike, results: Sequence[GroupResult], failures: Sequence[GroupFailure],
+                      settings: Mapping) -> dict[str, Path]:
+    """Write the run-level outputs (report.html, targets.csv/.geojson/.kml, run.json) and every group folder that
+    is not written yet. Returns name -> path of the run-level files."""
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(outdir)
+    results = sorted(results, key=lambda r: r.name)
+    failures = sorted(failures, key=lambda f: f.name)
+    figures = {}
+    for r in results:
+        if not is_done(group_dir(outdir, r.name)):
+            write_group_outputs(outdir, r)
+        figures[r.name] = _group_figures(outdir, r.name)  # missing ones are rendered by the page itself
+    paths = {k: outdir / f for k, f in (("csv", "targets.csv"), ("geojson", "targets.geojson"),
+                                        ("kml", "targets.kml"), ("html", "report.html"), ("run", "run.json"))}
+    write_targets_csv(paths["csv"], results)
+    write_targets_geojson(paths["geojson"], results)
+    write_targets_kml(paths["kml"], results)
+    write_report_html(paths["html"], results, failures, settings, {k: v for k, v in figures.items() if v})
+    atomic_write_text(paths["run"], json.dumps({
+        "groups": [r.name for r in results],
+        "failures": [{"name": f.name, "source": f.source, "message": f.message} for f in failures],
+        "settings": dict(settings),
+        "software": software_versions(),
+    }, indent=1, default=str) + "\n")
+    return paths

@@ -1,0 +1,111 @@
+"""A `GroupResult` to and from JSON (`OUTDIR/<group>/result.json`), so a re-run can reuse finished groups.
+
+Strict JSON: NaN is written as null and read back as NaN.
+"""
+
+from __future__ import annotations
+
+import json
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.atomic import atomic_write_text
+from pipeline.errors import InputError
+from pipeline.results import GroupResult
+from pipeline.solve.estimate import Estimate, Status
+from pipeline.solve.observations import Observations
+
+FORMAT = "ridgeloc-group-result"
+VERSION = 1
+
+
+def _nan_to_none(values) -> list:
+    return [None if not np.isfinite(v) else float(v) for v in np.asarray(values, dtype=np.float64).ravel()]
+
+
+def _none_to_nan(values) -> np.ndarray:
+    return np.array([np.nan if v is None else v for v in values], dtype=np.float64)
+
+
+def estimate_to_json(e: Estimate) -> dict:
+    return {
+        "method": e.method,
+        "position_m": _nan_to_none(e.position_m),
+        "iterations": int(e.iterations),
+        "status": e.status.name,
+        "residuals": _nan_to_none(e.residuals),
+        "condition_number": _nan_to_none([e.condition_number])[0],
+        "covariance_m2": None if e.covariance_m2 is None else np.asarray(e.covariance_m2).tolist(),
+        "extras": e.extras,
+    }
+
+
+def estimate_from_json(d: dict) -> Estimate:
+    cov = d.get("covariance_m2")
+    cond = d.get("condition_number")
+    return Estimate(method=d["method"], position_m=_none_to_nan(d["position_m"]), iterations=int(d["iterations"]),
+                    status=Status[d["status"]], residuals=_none_to_nan(d.get("residuals", [])),
+                    condition_number=float("nan") if cond is None else float(cond),
+                    covariance_m2=None if cov is None else np.asarray(cov, dtype=np.float64),
+                    extras=d.get("extras") or {})
+
+
+def group_result_to_json(r: GroupResult) -> dict:
+    angle = r.intersection_angle_deg
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "name": r.name,
+        "origin_lla": [float(v) for v in r.origin_lla],
+        "observations": r.observations.to_dict(),
+        "estimates": {m: estimate_to_json(e) for m, e in r.estimates.items()},
+        "truth_m": None if r.truth_m is None else [float(v) for v in r.truth_m],
+        "intersection_angle_deg": float(angle) if np.isfinite(angle) else None,
+        "timings_s": {k: float(v) for k, v in r.timings_s.items()},
+        "settings": r.settings,
+        "tracking": r.tracking,
+    }
+
+
+def group_result_from_json(doc: dict) -> GroupResult:
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise InputError(f"not a {FORMAT} document")
+    if doc.get("version") != VERSION:
+        raise InputError(f"unsupported {FORMAT} version {doc.get('version')!r} (expected {VERSION})")
+    angle = doc.get("intersection_angle_deg")
+    truth = doc.get("truth_m")
+    return GroupResult(
+        name=doc["name"],
+        origin_lla=tuple(float(v) for v in doc["origin_lla"]),
+        observations=Observations.from_dict(doc["observations"]),
+        estimates={m: estimate_from_json(e) for m, e in doc["estimates"].items()},
+        truth_m=None if truth is None else np.asarray(truth, dtype=np.float64),
+        intersection_angle_deg=float("nan") if angle is None else float(angle),
+        timings_s=dict(doc.get("timings_s", {})),
+        settings=doc.get("settings", {}),
+        tracking=doc.get("tracking", {}),
+    )
+
+
+def save_group_result(path: str | PathLike, r: GroupResult) -> None:
+    """Write `r` as JSON to `path` (atomically)."""
+    atomic_write_text(path, json.dumps(group_result_to_json(r), indent=1, allow_nan=False))
+
+
+def load_group_result(path: str | PathLike) -> GroupResult:
+    """Read a `GroupResult` written by `save_group_result`; InputError naming the file if it cannot."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise InputError("file not found", path) from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"cannot read group result: {exc}", path) from None
+    try:
+        return group_result_from_json(doc)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"malformed group result: {exc!r}", path) from None
+    except InputError as exc:
+        raise InputError(str(exc), path) from None

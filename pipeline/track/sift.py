@@ -1,0 +1,315 @@
+"""Carry the operator's target mark from frame to frame: SIFT features, ratio-test matching, RANSAC homography
+through key frames, then sub-pixel refinement against the ORIGINAL mark.
+
+For each frame (processed outward from the mark frame, forward and backward in time):
+1. SIFT features are matched to the current key frame (Lowe's ratio test) and a homography H_cur_from_key is
+   fitted with RANSAC; the ground at kilometres of range is close to a plane, so one homography maps it.
+2. The mark's pixel is predicted through the chain H_cur_from_mark = H_cur_from_key @ H_key_from_mark.
+3. The mark image is warped into the current frame by H_cur_from_mark and the patch around the target is
+   located in the current frame by normalised cross-correlation in a small window, with a parabolic fit of the
+   peak for the sub-pixel position. The template always comes from the mark frame, so errors of the chain shift
+   only the prediction, not the answer: drift does not accumulate.
+4. Quality: inlier count and ratio, RANSAC reprojection RMS, peak correlation. Below thresholds the frame is
+   flagged lost (pixel NaN), never guessed. A failed frame is retried against the mark frame itself
+   (re-acquisition) and through intermediate frames (stepping stones) when the caller offers them.
+5. The current frame becomes the key frame when its inliers fall below a fraction of the key's first match, or
+   after a re-acquisition, so later frames match a recent view.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from pipeline.errors import InputError
+
+
+@dataclass(frozen=True)
+class TrackerSettings:
+    """Thresholds of the tracker (flight config `tracking:` keys of the same names)."""
+
+    n_features: int = 1500
+    ratio: float = 0.75
+    ransac_reproj_px: float = 3.0
+    min_inliers: int = 12
+    min_inlier_ratio: float = 0.25
+    min_correlation: float = 0.5
+    patch_half_px: int = 15
+    search_half_px: int = 6
+    keyframe_inlier_fraction: float = 0.5
+    neighbours: int = 2
+    detect_scale: float = 1.0  # features are found on the image resized by this factor (speed); refinement is full-res
+
+
+@dataclass
+class _View:
+    """A decoded frame's features."""
+
+    index: int
+    image: np.ndarray  # grayscale uint8
+    keypoints_px: np.ndarray  # (k, 2)
+    descriptors: np.ndarray | None  # (k, 128) float32
+
+
+@dataclass
+class _Key:
+    view: _View
+    H_key_from_mark: np.ndarray
+    first_inliers: int | None = None
+
+
+@dataclass
+class FrameTrack:
+    """One frame's tracking outcome."""
+
+    frame_index: int
+    pixel_px: tuple[float, float] = (float("nan"), float("nan"))
+    lost: bool = True
+    inliers: int = 0
+    inlier_ratio: float = 0.0
+    reproj_px: float = float("nan")
+    correlation: float = float("nan")
+    keyframe: bool = False
+    via: str = ""  # "mark" (the mark frame), "key", "reacquired", "bridge", or why it was lost
+
+
+@dataclass
+class TrackResult:
+    """Tracking of m frames, in the order asked: frame_index (m,), pixel_px (m, 2) image pixels (distorted, as
+    seen) or NaN when lost, lost (m,) bool, and per-frame quality."""
+
+    frames: list[FrameTrack] = field(default_factory=list)
+
+    @property
+    def frame_index(self) -> np.ndarray:
+        return np.array([f.frame_index for f in self.frames], dtype=np.int64)
+
+    @property
+    def pixel_px(self) -> np.ndarray:
+        return np.array([f.pixel_px for f in self.frames], dtype=np.float64).reshape(-1, 2)
+
+    @property
+    def lost(self) -> np.ndarray:
+        return np.array([f.lost for f in self.frames], dtype=bool)
+
+    def to_dict(self) -> dict:
+        """Per-frame columns, JSON-serialisable (NaN -> None)."""
+        def clean(v):
+            return None if isinstance(v, float) and not np.isfinite(v) else v
+
+        cols = ("frame_index", "lost", "inliers", "inlier_ratio", "reproj_px", "correlation", "keyframe", "via")
+        out = {c: [clean(getattr(f, c)) for f in self.frames] for c in cols}
+        out["pixel_px"] = [None if f.lost else [float(f.pixel_px[0]), float(f.pixel_px[1])] for f in self.frames]
+        return out
+
+
+def to_gray(image: np.ndarray) -> np.ndarray:
+    if image.ndim == 2:
+        return image
+    return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+
+
+def _subpixel_peak(r: np.ndarray) -> tuple[float, float, float]:
+    """(x, y, value) of the maximum of a correlation surface, refined by a parabola through its neighbours."""
+    _, peak, _, (x, y) = cv2.minMaxLoc(r)
+    dx = dy = 0.0
+    if 0 < x < r.shape[1] - 1:
+        a, b, c = r[y, x - 1], r[y, x], r[y, x + 1]
+        den = a - 2 * b + c
+        dx = 0.5 * (a - c) / den if den < 0 else 0.0
+    if 0 < y < r.shape[0] - 1:
+        a, b, c = r[y - 1, x], r[y, x], r[y + 1, x]
+        den = a - 2 * b + c
+        dy = 0.5 * (a - c) / den if den < 0 else 0.0
+    return x + float(np.clip(dx, -0.5, 0.5)), y + float(np.clip(dy, -0.5, 0.5)), float(peak)
+
+
+class SiftTracker:
+    """Track one marked ground point through chosen frames of a flight (see the module docstring)."""
+
+    def __init__(self, settings: TrackerSettings | None = None):
+        self.s = settings or TrackerSettings()
+        self._sift = cv2.SIFT_create(nfeatures=self.s.n_features)
+        self._matcher = cv2.FlannBasedMatcher({"algorithm": 1, "trees": 4}, {"checks": 48})
+
+    # ---- features and matching ---------------------------------------------------------------------------
+
+    def view(self, index: int, image: np.ndarray) -> _View:
+        gray = to_gray(image)
+        f = self.s.detect_scale
+        small = gray if f == 1.0 else cv2.resize(gray, None, fx=f, fy=f, interpolation=cv2.INTER_AREA)
+        kp, desc = self._sift.detectAndCompute(small, None)
+        # keypoints back to full-resolution pixel coordinates (pixel centres at integers in both)
+        pts = ((np.array([k.pt for k in kp], dtype=np.float32).reshape(-1, 2) + 0.5) / f - 0.5).astype(np.float32)
+        return _View(int(index), gray, pts, desc)
+
+    def homography(self, src: _View, dst: _View) -> tuple[np.ndarray | None, int, float, float]:
+        """H_dst_from_src by ratio-test matches and RANSAC: (H or None, inliers, inlier ratio, RMS reprojection
+        px of the inliers)."""
+        if src.descriptors is None or dst.descriptors is None or len(src.descriptors) < 4 or len(dst.descriptors) < 4:
+            return None, 0, 0.0, float("nan")
+        pairs = self._matcher.knnMatch(src.descriptors, dst.descriptors, k=2)
+        good = [p[0] for p in pairs if len(p) == 2 and p[0].distance < self.s.ratio * p[1].distance]
+        if len(good) < max(4, self.s.min_inliers):
+            return None, len(good), 0.0, float("nan")
+        a = src.keypoints_px[[m.queryIdx for m in good]]
+        b = dst.keypoints_px[[m.trainIdx for m in good]]
+        H, mask = cv2.findHomography(a, b, cv2.RANSAC, self.s.ransac_reproj_px, maxIters=2000, confidence=0.999)
+        if H is None or not np.isfinite(H).all():
+            return None, 0, 0.0, float("nan")
+        inl = mask.ravel().astype(bool)
+        proj = cv2.perspectiveTransform(a[inl].reshape(-1, 1, 2).astype(np.float64), H).reshape(-1, 2)
+        rms = float(np.sqrt(np.mean(np.sum((proj - b[inl]) ** 2, axis=1)))) if inl.any() else float("nan")
+        return H, int(inl.sum()), float(inl.mean()), rms
+
+    # ---- refinement against the mark ---------------------------------------------------------------------
+
+    def refine(self, mark: _View, mark_px: np.ndarray, cur: _View, H_cur_from_mark: np.ndarray
+               ) -> tuple[np.ndarray, float]:
+        """Sub-pixel target position in `cur` near the prediction H_cur_from_mark(mark_px), and the peak
+        normalised correlation of the mark's warped patch there."""
+        h, s = self.s.patch_half_px, self.s.search_half_px
+        pred = cv2.perspectiveTransform(mark_px.reshape(1, 1, 2).astype(np.float64), H_cur_from_mark).reshape(2)
+        # Warp only the neighbourhood: translate so the prediction lands at the patch centre.
+        T = np.array([[1.0, 0.0, h - pred[0]], [0.0, 1.0, h - pred[1]], [0.0, 0.0, 1.0]])
+        templ = cv2.warpPerspective(mark.image, T @ H_cur_from_mark, (2 * h + 1, 2 * h + 1), flags=cv2.INTER_LINEAR,
+                                    borderMode=cv2.BORDER_REPLICATE)
+        size = 2 * (h + s) + 1
+        window = cv2.getRectSubPix(cur.image, (size, size), (float(pred[0]), float(pred[1])))
+        if float(templ.std()) < 1e-3 or float(window.std()) < 1e-3:
+            return pred, float("nan")
+        r = cv2.matchTemplate(window.astype(np.float32), templ.astype(np.float32), cv2.TM_CCOEFF_NORMED)
+        x, y, peak = _subpixel_peak(r)
+        return pred + np.array([x - s, y - s]), peak
+
+    # ---- the tracking loop -------------------------------------------------------------------------------
+
+    def _in_image(self, px: np.ndarray, view: _View) -> bool:
+        m = self.s.patch_half_px
+        hgt, wid = view.image.shape[:2]
+        return bool(np.isfinite(px).all() and m <= px[0] < wid - m and m <= px[1] < hgt - m)
+
+    def _attempt(self, key: _Key, mark: _View, mark_px: np.ndarray, cur: _View, via: str
+                 ) -> tuple[FrameTrack, np.ndarray | None]:
+        H, inl, ratio, rms = self.homography(key.view, cur)
+        ft = FrameTrack(cur.index, inliers=inl, inlier_ratio=ratio, reproj_px=rms)
+        if H is None or inl < self.s.min_inliers or ratio < self.s.min_inlier_ratio:
+            ft.via = "too few matches"
+            return ft, None
+        H_cur_from_mark = H @ key.H_key_from_mark
+        pred = cv2.perspectiveTransform(mark_px.reshape(1, 1, 2).astype(np.float64), H_cur_from_mark).reshape(2)
+        if not self._in_image(pred, cur):
+            ft.via = "out of image"
+            return ft, None
+        px, corr = self.refine(mark, mark_px, cur, H_cur_from_mark)
+        ft.correlation = corr
+        if not np.isfinite(corr) or corr < self.s.min_correlation or not self._in_image(px, cur):
+            ft.via = "low correlation"
+            return ft, None
+        ft.pixel_px = (float(px[0]), float(px[1]))
+        ft.lost = False
+        ft.via = via
+        return ft, H_cur_from_mark
+
+    def track(self, decode: Callable[[Sequence[int]], dict[int, np.ndarray]], mark_index: int,
+              mark_px: Sequence[float], wanted: Sequence[int], available: Sequence[int] | None = None
+              ) -> TrackResult:
+        """Track the point marked at `mark_px` (image pixel) in frame `mark_index` through the `wanted` frames.
+
+        `decode(indices)` returns {index: image} (BGR or gray) for frame numbers; `available` lists every frame
+        number that could be decoded, from which stepping stones are taken when a wanted frame cannot be matched
+        directly. Returns the wanted frames' tracks in the order of `wanted`."""
+        wanted = [int(i) for i in wanted]
+        mark_index = int(mark_index)
+        p0 = np.asarray(mark_px, dtype=np.float64)
+        images = decode(sorted(set(wanted) | {mark_index}))
+        if mark_index not in images:
+            raise InputError(f"the target's mark frame {mark_index} cannot be decoded")
+        mark = self.view(mark_index, images[mark_index])
+        if not self._in_image(p0, mark):
+            raise InputError(f"the target mark {p0.tolist()} is not inside frame {mark_index} "
+                             f"({mark.image.shape[1]}x{mark.image.shape[0]} px) with a {self.s.patch_half_px} px "
+                             "margin")
+        if mark.descriptors is None or len(mark.descriptors) < self.s.min_inliers:
+            raise InputError(f"the target's mark frame {mark_index} has too few SIFT features to track")
+        views: dict[int, _View] = {mark_index: mark}
+        out: dict[int, FrameTrack] = {mark_index: FrameTrack(mark_index, (float(p0[0]), float(p0[1])), False,
+                                                             len(mark.keypoints_px), 1.0, 0.0, 1.0, True, "mark")}
+        avail = sorted(set(int(i) for i in (available if available is not None else [])))
+        for direction in (1, -1):
+            seq = sorted((i for i in set(wanted) if (i - mark_index) * direction > 0), key=lambda i: i * direction)
+            key = _Key(mark, np.eye(3))
+            for idx in seq:
+                if idx not in images:
+                    out[idx] = FrameTrack(idx, via="not decodable")
+                    continue
+                cur = views.setdefault(idx, self.view(idx, images.pop(idx)))
+                ft, H = self._attempt(key, mark, p0, cur, "key")
+                if H is None and key.view is not mark:  # re-acquisition against the mark itself
+                    ft2, H = self._attempt(_Key(mark, np.eye(3)), mark, p0, cur, "reacquired")
+                    ft = ft2 if H is not None else ft
+                if H is None:
+                    ft, H = self._bridge(decode, key, mark, p0, cur, avail, direction, views, ft)
+                out[idx] = ft
+                if H is None:
+                    continue
+                if key.first_inliers is None and ft.via == "key":
+                    key.first_inliers = ft.inliers
+                floor = self.s.keyframe_inlier_fraction * (key.first_inliers or 0)
+                weak = key.first_inliers is not None and ft.inliers < floor
+                if weak or ft.via in ("reacquired", "bridge"):
+                    key = _Key(cur, H)
+                    ft.keyframe = True
+        return TrackResult([out[i] if i in out else FrameTrack(i, via="not tracked") for i in wanted])
+
+    def _bridge(self, decode, key: _Key, mark: _View, p0: np.ndarray, cur: _View, avail: list[int], direction: int,
+                views: dict[int, _View], failed: FrameTrack) -> tuple[FrameTrack, np.ndarray | None]:
+        """Try intermediate frames between the key frame and `cur` as stepping stones (nearest to the key first,
+        at most `neighbours` of them)."""
+        lo, hi = sorted((key.view.index, cur.index))
+        between = [i for i in avail if lo < i < hi]
+        if not between or self.s.neighbours <= 0:
+            return failed, None
+        between.sort(key=lambda i: abs(i - key.view.index))
+        step = max(1, len(between) // (self.s.neighbours + 1))
+        stones = between[step - 1::step][: self.s.neighbours] or between[:1]
+        images = decode([i for i in stones if i not in views])
+        k = key
+        for i in stones:
+            if i not in views:
+                if i not in images:
+                    continue
+                views[i] = self.view(i, images[i])
+            ft, H = self._attempt(k, mark, p0, views[i], "bridge")
+            if H is not None:
+                k = _Key(views[i], H)
+        if k is key:
+            return failed, None
+        ft, H = self._attempt(k, mark, p0, cur, "bridge")
+        return (ft, H) if H is not None else (failed, None)
+
+    # ---- marking by a template image ---------------------------------------------------------------------
+
+    def acquire(self, template: np.ndarray, template_px: Sequence[float] | None,
+                decode: Callable[[Sequence[int]], dict[int, np.ndarray]], candidates: Sequence[int]
+                ) -> tuple[int, tuple[float, float]]:
+        """Find a template image (a view of the target area; the target at `template_px`, default its centre)
+        in the first of `candidates` frames where it matches: returns (frame index, image pixel) to use as the
+        mark. Raises InputError when no candidate frame matches."""
+        tview = self.view(-1, template)
+        hgt, wid = tview.image.shape[:2]
+        tp = np.asarray(template_px if template_px is not None else ((wid - 1) / 2, (hgt - 1) / 2), dtype=np.float64)
+        for start in range(0, len(candidates), 8):
+            chunk = [int(i) for i in candidates[start:start + 8]]
+            images = decode(chunk)
+            for idx in chunk:
+                if idx not in images:
+                    continue
+                cur = self.view(idx, images[idx])
+                ft, _ = self._attempt(_Key(tview, np.eye(3)), tview, tp, cur, "template")
+                if not ft.lost:
+                    return idx, ft.pixel_px
+        raise InputError("the target template matches none of the observation frames")

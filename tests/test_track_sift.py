@@ -1,0 +1,122 @@
+"""The tracker on scenes whose truth is known exactly: a textured ground image with a cross target, seen by
+frames made with cv2.warpPerspective by known homographies (the ground of a distant camera is a plane)."""
+
+import cv2
+import numpy as np
+import pytest
+
+from pipeline.errors import InputError
+from pipeline.track import SiftTracker, TrackerSettings
+
+SIZE = 1400
+CENTRE = np.array([SIZE / 2, SIZE / 2])
+
+
+@pytest.fixture(scope="module")
+def ground():
+    rng = np.random.default_rng(7)
+    img = np.zeros((SIZE, SIZE), np.float32)
+    for cell, weight in ((2, 1.0), (6, 2.0), (20, 3.0), (60, 3.0)):
+        small = rng.normal(0, 1, (SIZE // cell, SIZE // cell)).astype(np.float32)
+        img += weight * cv2.resize(small, (SIZE, SIZE), interpolation=cv2.INTER_CUBIC)
+    img = cv2.normalize(img, None, 40, 200, cv2.NORM_MINMAX)
+    c = int(CENTRE[0])
+    cv2.rectangle(img, (c - 10, c - 10), (c + 10, c + 10), 235, -1)
+    cv2.line(img, (c - 10, c), (c + 10, c), 20, 2)
+    cv2.line(img, (c, c - 10), (c, c + 10), 20, 2)
+    return img.astype(np.uint8)
+
+
+def homography(k: float, shift=(0.0, 0.0)) -> np.ndarray:
+    """Frame k: the ground turned 1.5 deg, scaled 1 % and tilted a little per step; the target near the centre."""
+    a, s = np.deg2rad(1.5 * k), 1.0 + 0.01 * k
+    R = s * np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    H = np.eye(3)
+    H[:2, :2] = R
+    H[:2, 2] = np.array([300.0, 200.0]) + np.asarray(shift) - R @ (CENTRE + np.array([2.0 * k, -1.5 * k]))
+    H[2, :2] = [2e-5 * k, -1e-5 * k]
+    return H
+
+
+def render(ground, H):
+    return cv2.warpPerspective(ground, H, (600, 400), flags=cv2.INTER_LINEAR)
+
+
+def true_px(H):
+    # The cross centre is the centre of the drawn pixels: half a pixel off CENTRE in OpenCV's pixel-centre convention
+    return cv2.perspectiveTransform((CENTRE - 0.5).reshape(1, 1, 2), H).ravel()
+
+
+class Decoder:
+    def __init__(self, frames):
+        self.frames = frames
+        self.asked: list[int] = []
+
+    def __call__(self, indices):
+        self.asked.extend(indices)
+        return {i: self.frames[i] for i in indices if i in self.frames}
+
+
+def test_tracks_to_a_small_fraction_of_a_pixel_and_decodes_only_what_is_asked(ground):
+    Hs = {k: homography(k) for k in range(0, 30)}
+    frames = {k: render(ground, H) for k, H in Hs.items()}
+    dec = Decoder(frames)
+    wanted = list(range(0, 30, 3))
+    res = SiftTracker().track(dec, 0, true_px(Hs[0]), wanted, available=list(frames))
+    assert not res.lost.any()
+    err = np.linalg.norm(res.pixel_px - np.array([true_px(Hs[k]) for k in wanted]), axis=1)
+    assert np.median(err) < 0.1 and err.max() < 0.25, err
+    assert set(dec.asked) == set(wanted)  # nothing else decoded while tracking succeeds
+    d = res.to_dict()
+    assert d["via"][0] == "mark" and all(v == "key" for v in d["via"][1:])
+    assert min(d["correlation"]) > 0.9 and min(d["inliers"]) >= 12
+
+
+def test_mark_in_the_middle_tracks_both_ways_with_downscaled_detection(ground):
+    Hs = {k: homography(k) for k in range(0, 21, 4)}
+    frames = {k: render(ground, H) for k, H in Hs.items()}
+    res = SiftTracker(TrackerSettings(detect_scale=0.5)).track(Decoder(frames), 8, true_px(Hs[8]), sorted(Hs))
+    err = np.linalg.norm(res.pixel_px - np.array([true_px(Hs[k]) for k in sorted(Hs)]), axis=1)
+    assert not res.lost.any() and err.max() < 0.3, err
+
+
+def test_lost_frames_are_flagged_not_guessed_and_the_target_is_reacquired(ground):
+    Hs = {k: homography(k) for k in range(6)}
+    Hs[2] = homography(2, shift=(400.0, 0.0))  # target pushed out of the image (scene still overlaps)
+    frames = {k: render(ground, H) for k, H in Hs.items()}
+    frames[3] = np.random.default_rng(0).integers(0, 255, (400, 600), dtype=np.uint8)  # garbage frame
+    occluded = frames[4].copy()
+    p4 = true_px(Hs[4]).round().astype(int)
+    occluded[p4[1] - 18:p4[1] + 19, p4[0] - 18:p4[0] + 19] = 128  # target covered, scene intact
+    frames[4] = occluded
+    res = SiftTracker().track(Decoder(frames), 0, true_px(Hs[0]), list(range(6)))
+    np.testing.assert_array_equal(res.lost, [False, False, True, True, True, False])
+    assert np.isnan(res.pixel_px[2:5]).all()
+    vias = [f.via for f in res.frames]
+    assert vias[2] == "out of image" and vias[3] == "too few matches" and vias[4] == "low correlation"
+    assert np.linalg.norm(res.pixel_px[5] - true_px(Hs[5])) < 0.25
+
+
+def test_template_image_acquires_the_mark(ground):
+    c = int(CENTRE[0])
+    template = ground[c - 120:c + 121, c - 160:c + 161]  # a 321 x 241 crop
+    target_in_template = (159.5, 119.5)  # the cross centre, CENTRE - 0.5, in the crop's pixels
+    Hs = {k: homography(k) for k in (5, 9)}
+    frames = {k: render(ground, H) for k, H in Hs.items()}
+    frames[1] = np.full((400, 600), 90, np.uint8)  # featureless: cannot match
+    idx, px = SiftTracker().acquire(template, target_in_template, Decoder(frames), [1, 5, 9])
+    assert idx == 5
+    assert np.linalg.norm(np.array(px) - true_px(Hs[5])) < 0.25
+    with pytest.raises(InputError, match="matches none"):
+        SiftTracker().acquire(template, None, Decoder(frames), [1])
+
+
+def test_bad_marks_are_input_errors(ground):
+    frames = {0: render(ground, homography(0))}
+    with pytest.raises(InputError, match="not inside frame 0"):
+        SiftTracker().track(Decoder(frames), 0, (599.0, 5.0), [0])
+    with pytest.raises(InputError, match="cannot be decoded"):
+        SiftTracker().track(Decoder(frames), 3, (300.0, 200.0), [0])
+    flat = {0: np.full((400, 600), 100, np.uint8)}
+    with pytest.raises(InputError, match="too few SIFT features"):
+        SiftTracker().track(Decoder(flat), 0, (300.0, 200.0), [0])

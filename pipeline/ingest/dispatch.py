@@ -53,8 +53,9 @@ def detect_format(path: str | Path) -> str:
     raise LogReadError(f"unknown log type (suffix {suffix or 'none'!r}, leading bytes {head[:8]!r})", path=p)
 
 
-def read_file(path: str | Path, mapping: dict | None = None) -> FlightLog:
-    """Read one log, bag folder, video or SRT into a FlightLog."""
+def read_file(path: str | Path, mapping: dict | None = None, scan_all: bool = False) -> FlightLog:
+    """Read one log, bag folder, video or SRT into a FlightLog. scan_all: also time every stream the
+    quantities do not need (for `inspect`; otherwise those are only counted where the format allows)."""
     fmt = detect_format(path)
     p = Path(path)
     if p.is_file() and fmt == "ros2":
@@ -64,16 +65,16 @@ def read_file(path: str | Path, mapping: dict | None = None) -> FlightLog:
         return read_tlog(p, mapping_for("tlog", mapping))
     if fmt == "dataflash":
         from pipeline.ingest.dataflash import read_dataflash
-        return read_dataflash(p, mapping_for("dataflash", mapping))
+        return read_dataflash(p, mapping_for("dataflash", mapping), scan_all=scan_all)
     if fmt == "ulog":
         from pipeline.ingest.ulog import read_ulog
-        return read_ulog(p, mapping_for("ulog", mapping))
+        return read_ulog(p, mapping_for("ulog", mapping), scan_all=scan_all)
     if fmt in ("ros1", "ros2"):
         from pipeline.ingest.rosbag import read_rosbag
-        return read_rosbag(p, mapping_for("ros", mapping))
+        return read_rosbag(p, mapping_for("ros", mapping), scan_all=scan_all)
     if fmt == "mcap":
         from pipeline.ingest.mcap_plain import read_mcap
-        return read_mcap(p, mapping_for("mcap", mapping), mapping_for("ros", mapping))
+        return read_mcap(p, mapping_for("mcap", mapping), mapping_for("ros", mapping), scan_all=scan_all)
     if fmt == "video":
         from pipeline.ingest.video import read_video
         frames = read_video(p, frames_csv=mapping_for("video", mapping)["frames_csv"])

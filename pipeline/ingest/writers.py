@@ -30,3 +30,24 @@ class TlogWriter:
 
     def __exit__(self, *exc):
         self.close()
+
+
+def write_json_mcap(path, messages: dict[str, list[dict]]) -> None:
+    """Plain MCAP with one JSON channel per topic (jsonschema schema); log_time = publish_time = msg["t_ns"]."""
+    import json
+
+    from mcap.writer import Writer
+
+    with open(Path(path), "wb") as f:
+        w = Writer(f)
+        w.start()
+        chans = {}
+        for topic in messages:
+            sid = w.register_schema(name=topic.strip("/").replace("/", "_"), encoding="jsonschema",
+                                    data=json.dumps({"type": "object"}).encode())
+            chans[topic] = w.register_channel(topic=topic, message_encoding="json", schema_id=sid)
+        rows = sorted(((m["t_ns"], topic, m) for topic, msgs in messages.items() for m in msgs),
+                      key=lambda r: r[0])
+        for t, topic, m in rows:
+            w.add_message(chans[topic], log_time=int(t), publish_time=int(t), data=json.dumps(m).encode())
+        w.finish()

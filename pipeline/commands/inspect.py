@@ -1,0 +1,39 @@
+"""`ridgeloc inspect LOG...`: what each log, bag or video holds and what is missing for localization."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+HELP = "summarise flight logs, bags and videos: streams, counts, rates, spans, and what localization lacks"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("logs", nargs="+", metavar="LOG",
+                        help="telemetry logs (.tlog .bin .ulg .bag .mcap .SRT), ROS 2 bag folders, videos")
+    parser.add_argument("--json", action="store_true", help="print one JSON document instead of tables")
+
+
+def main(args) -> int:
+    from pipeline.ingest.inspect import combined_missing, format_result, inspect_paths, result_as_dict
+
+    results = inspect_paths(args.logs)
+    if args.json:
+        doc = {"files": [result_as_dict(r) for r in results]}
+        both = combined_missing(results)
+        if both is not None:
+            doc["missing_for_localization_all_files"] = both
+        print(json.dumps(doc, indent=2))
+    else:
+        for r in results:
+            if r.log is not None:
+                print(format_result(r))
+                print()
+        both = combined_missing(results)
+        if both is not None:
+            print("all files together, missing for localization: " + (", ".join(both) if both else "nothing"))
+    failed = [r for r in results if r.error is not None]
+    for r in failed:
+        print(f"ridgeloc: error: {r.error}", file=sys.stderr)
+    return 1 if failed else 0

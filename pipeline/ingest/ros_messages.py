@@ -1,0 +1,194 @@
+"""ROS message -> model samples, shared by bags (rosbags) and ROS 2 channels in plain MCAP (mcap_ros2).
+
+Works on any decoded message object with ROS 2 attribute names (rosbags gives ROS 1 messages the same
+`header.stamp.sec/nanosec`); ROS 1 CameraInfo `K D P` and ROS 2 `k d p` are both accepted.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.errors import ConfigError
+from pipeline.ingest.columns import Columns, sort_by_time
+from pipeline.ingest.frames import quat_ned_frd_from_enu_flu, quat_wxyz_from_rotation, rotation_from_quat_wxyz
+from pipeline.ingest.model import (
+    AttitudeSeries,
+    CameraInfo,
+    FrameSeries,
+    GimbalSeries,
+    PositionSeries,
+    RangeSeries,
+)
+
+NAVSAT = ("sensor_msgs/msg/NavSatFix",)
+ORIENTATION = ("sensor_msgs/msg/Imu", "geometry_msgs/msg/QuaternionStamped", "geometry_msgs/msg/PoseStamped")
+RANGE = ("sensor_msgs/msg/Range",)
+IMAGES = ("sensor_msgs/msg/CompressedImage", "sensor_msgs/msg/Image")
+CAMERA_INFO = ("sensor_msgs/msg/CameraInfo",)
+TYPES = {"position": NAVSAT, "attitude": ORIENTATION, "gimbal": ORIENTATION, "range": RANGE, "images": IMAGES,
+         "camera_info": CAMERA_INFO}
+SUPPLIES = {t: q for q in ("position", "attitude", "range", "camera_info") for t in TYPES[q]}
+SUPPLIES.update({t: "frames" for t in IMAGES})
+ORIENTATION_SUPPLIES = ("attitude", "gimbal")
+
+
+def normalize_type(msgtype: str) -> str:
+    """'sensor_msgs/NavSatFix' (ROS 1) -> 'sensor_msgs/msg/NavSatFix'."""
+    parts = msgtype.split("/")
+    return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else msgtype
+
+
+def supplies_of(msgtype: str) -> tuple[str, ...]:
+    t = normalize_type(msgtype)
+    if t in ORIENTATION:
+        return ORIENTATION_SUPPLIES
+    return (SUPPLIES[t],) if t in SUPPLIES else ()
+
+
+def stamp_ns(msg, record_ns: int, mode: str) -> int:
+    """header.stamp in ns (mode "header", falling back to record time when the stamp is zero) or record time."""
+    if mode == "record":
+        return record_ns
+    if mode != "header":
+        raise ConfigError(f"ros mapping: stamp must be 'header' or 'record', not {mode!r}")
+    header = getattr(msg, "header", None)
+    if header is None:
+        return record_ns
+    st = header.stamp
+    ns = int(st.sec) * 1_000_000_000 + int(getattr(st, "nanosec", getattr(st, "nsec", 0)))
+    return ns if ns > 0 else record_ns
+
+
+def _orientation(msg, msgtype: str):
+    if msgtype.endswith("Imu"):
+        cov = msg.orientation_covariance
+        if len(cov) and cov[0] == -1:
+            return None  # no orientation estimate
+        o = msg.orientation
+    elif msgtype.endswith("QuaternionStamped"):
+        o = msg.quaternion
+    else:
+        o = msg.pose.orientation
+    return o.w, o.x, o.y, o.z
+
+
+class RosAccumulator:
+    """Collects samples of one quantity from one topic; `series()` builds the model series."""
+
+    def __init__(self, quantity: str, topic: str, msgtype: str, cfg: dict, stamp_mode: str, source: str):
+        self.quantity, self.topic, self.msgtype = quantity, topic, normalize_type(msgtype)
+        self.cfg, self.stamp_mode, self.source = cfg, stamp_mode, source
+        self.dropped = 0
+        self.info: CameraInfo | None = None
+        self.size = (0, 0)
+        if quantity == "position":
+            self.cols = Columns(t="q", lat="d", lon="d", alt="d")
+        elif quantity in ("attitude", "gimbal"):
+            self.cols = Columns(t="q", w="d", x="d", y="d", z="d")
+        elif quantity == "range":
+            self.cols = Columns(t="q", r="d", lo="d", hi="d")
+        else:
+            self.cols = Columns(t="q", i="q")
+        self.n = 0
+
+    def add(self, msg, record_ns: int) -> None:
+        t = stamp_ns(msg, record_ns, self.stamp_mode)
+        q = self.quantity
+        i = self.n
+        self.n += 1
+        if q == "position":
+            if msg.status.status < 0 or not (np.isfinite(msg.latitude) and np.isfinite(msg.longitude)):
+                self.dropped += 1  # STATUS_NO_FIX
+                return
+            self.cols.add(t=t, lat=msg.latitude, lon=msg.longitude, alt=msg.altitude)
+        elif q in ("attitude", "gimbal"):
+            o = _orientation(msg, self.msgtype)
+            if o is None:
+                self.dropped += 1
+                return
+            self.cols.add(t=t, w=o[0], x=o[1], y=o[2], z=o[3])
+        elif q == "range":
+            self.cols.add(t=t, r=msg.range, lo=msg.min_range, hi=msg.max_range)
+        elif q == "images":
+            if self.size == (0, 0):
+                if hasattr(msg, "width"):
+                    self.size = (int(msg.width), int(msg.height))
+                else:  # CompressedImage: the size is only known by decoding one
+                    try:
+                        img = decode_image(msg, self.msgtype)
+                        self.size = (img.shape[1], img.shape[0])
+                    except ValueError:
+                        pass
+            self.cols.add(t=t, i=i)
+        elif q == "camera_info" and self.info is None:
+            def get(*names):
+                for n in names:
+                    if hasattr(msg, n):
+                        return np.asarray(getattr(msg, n), float)
+                return np.zeros(0)
+            self.info = CameraInfo(int(msg.width), int(msg.height), get("k", "K").reshape(3, 3), get("d", "D"),
+                                   get("p", "P").reshape(3, 4), str(msg.distortion_model), source=self.source)
+
+    def series(self):
+        a = self.cols.arrays()
+        q, src = self.quantity, self.source
+        if q == "camera_info":
+            return self.info
+        if len(self.cols) == 0:
+            return None
+        if q == "position":
+            t, lat, lon, alt = sort_by_time(a["t"], a["lat"], a["lon"], a["alt"])
+            return PositionSeries(t, lat, lon, alt, "ellipsoid", source=src, clock="unix")
+        if q in ("attitude", "gimbal"):
+            raw = np.column_stack([a["w"], a["x"], a["y"], a["z"]])
+            frame = self.cfg.get("frame", "flu_enu")
+            if frame == "flu_enu":
+                quat = quat_ned_frd_from_enu_flu(raw)
+            elif frame == "frd_ned":
+                quat = quat_wxyz_from_rotation(rotation_from_quat_wxyz(raw))
+            else:
+                raise ConfigError(f"ros mapping: {q}.frame must be 'flu_enu' or 'frd_ned', not {frame!r}")
+            t, quat = sort_by_time(a["t"], quat)
+            if q == "attitude":
+                return AttitudeSeries(t, quat, source=src, clock="unix")
+            veh = np.full(t.shape, bool(self.cfg.get("yaw_in_vehicle_frame", False)))
+            return GimbalSeries(t, quat, veh, source=src, clock="unix")
+        if q == "range":
+            r = a["r"]
+            with np.errstate(invalid="ignore"):
+                valid = np.isfinite(r) & (r >= a["lo"]) & (r <= a["hi"])
+            t, r, valid = sort_by_time(a["t"], r, valid)
+            return RangeSeries(t, r, valid, source=src, clock="unix")
+        t, idx = sort_by_time(a["t"], a["i"])
+        return FrameSeries(t, idx, source=src, clock="unix", width_px=self.size[0], height_px=self.size[1])
+
+
+def decode_image(msg, msgtype: str) -> np.ndarray:
+    """sensor_msgs CompressedImage (cv2.imdecode) or Image (by encoding) -> BGR uint8 (h, w, 3) or mono (h, w)
+    (mono16 stays uint16)."""
+    import cv2
+
+    data = np.frombuffer(bytes(msg.data), np.uint8)
+    if normalize_type(msgtype).endswith("CompressedImage"):
+        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        if img is None:
+            raise ValueError(f"cannot decode compressed image (format {msg.format!r})")
+        return img
+    enc = msg.encoding.lower()
+    h, w, step = int(msg.height), int(msg.width), int(msg.step)
+    layouts = {"mono8": (np.uint8, 1), "8uc1": (np.uint8, 1), "rgb8": (np.uint8, 3), "bgr8": (np.uint8, 3),
+               "rgba8": (np.uint8, 4), "bgra8": (np.uint8, 4), "mono16": (np.uint16, 1), "16uc1": (np.uint16, 1)}
+    if enc not in layouts:
+        raise ValueError(f"unsupported image encoding {msg.encoding!r}")
+    dtype, ch = layouts[enc]
+    itemsize = np.dtype(dtype).itemsize
+    rows = data[: h * step].reshape(h, step)[:, : w * ch * itemsize]
+    img = rows.copy().view(dtype if not msg.is_bigendian else np.dtype(dtype).newbyteorder(">"))
+    img = img.astype(dtype).reshape(h, w, ch) if ch > 1 else img.astype(dtype).reshape(h, w)
+    if enc == "rgb8":
+        img = cv2.cvtColor(img, cv2.COLOR_RGB2BGR)
+    elif enc == "rgba8":
+        img = cv2.cvtColor(img, cv2.COLOR_RGBA2BGR)
+    elif enc == "bgra8":
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
+    return img

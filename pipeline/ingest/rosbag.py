@@ -1,0 +1,234 @@
+"""ROS 1 bags and ROS 2 bags (sqlite3 / MCAP storage) through rosbags' AnyReader (no ROS installation).
+
+Only the connections of the topics the mapping selects are read, and only their messages are deserialized.
+A ROS 2 bag whose metadata.yaml QoS differs from its MCAP file's can make rosbags iterate zero messages
+silently (FIELD_NOTES); counts are checked against the metadata and the MCAP files are then read directly.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
+
+from pipeline.errors import LogReadError
+from pipeline.ingest.model import FlightLog, FrameSeries, StreamInfo
+from pipeline.ingest.ros_messages import TYPES, RosAccumulator, decode_image, normalize_type, supplies_of
+
+QUANTITIES = ("position", "attitude", "gimbal", "range", "images", "camera_info")
+
+
+def resolve_topics(cfg: dict, topic_types: dict[str, str], warnings: list[str], where: str) -> dict[str, str]:
+    """quantity -> topic chosen from the mapping: the named topic, else the first fallback present, else (by_type)
+    the only topic of a matching type. A topic of the wrong type is a warning, not a guess."""
+    chosen: dict[str, str] = {}
+    for q in QUANTITIES:
+        c = cfg[q]
+        types = TYPES[q]
+        for topic in [c["topic"], *c["fallback_topics"]]:
+            if topic in topic_types:
+                if normalize_type(topic_types[topic]) in types:
+                    chosen[q] = topic
+                    break
+                warnings.append(f"{where}: topic {topic} has type {topic_types[topic]}, not one of "
+                                f"{', '.join(types)}; not used for {q}")
+        if q in chosen or not c["by_type"]:
+            continue
+        taken = set(chosen.values())
+        cands = [t for t, ty in topic_types.items() if normalize_type(ty) in types and t not in taken]
+        if len(cands) == 1:
+            chosen[q] = cands[0]
+            warnings.append(f"{where}: {q} from {cands[0]} (the only {topic_types[cands[0]]} topic; "
+                            f"set ros.{q}.topic to silence)")
+        elif len(cands) > 1:
+            warnings.append(f"{where}: several topics could supply {q} ({', '.join(cands)}); set ros.{q}.topic")
+    return chosen
+
+
+def _typestore():
+    return get_typestore(Stores.ROS2_HUMBLE)
+
+
+def _open_reader(path: Path) -> AnyReader:
+    try:
+        reader = AnyReader([path], default_typestore=_typestore())
+        reader.open()
+    except Exception as exc:  # rosbags raises its own ReaderError/ValueError/KeyError variants
+        raise LogReadError(f"cannot open bag: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}",
+                           path=path) from None
+    return reader
+
+
+def _metadata_counts(path: Path) -> dict[str, int]:
+    meta = path / "metadata.yaml"
+    if not meta.is_file():
+        return {}
+    import yaml
+    try:
+        info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
+        return {t["topic_metadata"]["name"]: int(t["message_count"]) for t in info["topics_with_message_count"]}
+    except Exception:
+        return {}
+
+
+class _McapDirect:
+    """Iterate the MCAP files of a ROS 2 bag folder with the mcap library (CDR decoded by mcap_ros2)."""
+
+    def __init__(self, path: Path):
+        import yaml
+        info = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+        self.files = [path / f for f in info["relative_file_paths"]]
+
+    def messages(self, topics):
+        from mcap.reader import make_reader
+        from mcap_ros2.decoder import DecoderFactory
+        for f in self.files:
+            with open(f, "rb") as fh:
+                reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+                for schema, channel, message, decoded in reader.iter_decoded_messages(topics=list(topics)):
+                    yield channel.topic, schema.name, message.log_time, decoded
+
+
+def read_rosbag(path: str | Path, mapping: dict, scan_all: bool = False) -> FlightLog:
+    """Read a ROS 1 .bag or a ROS 2 bag folder into a FlightLog on the UNIX clock (mappings/ros.yaml)."""
+    path = Path(path)
+    fmt = "ros2" if path.is_dir() else "ros1"
+    warnings: list[str] = []
+    reader = _open_reader(path)
+    try:
+        topic_types = {c.topic: c.msgtype for c in reader.connections}
+        chosen = resolve_topics(mapping, topic_types, warnings, str(path))
+        # frames name the full path: BagImages(path, topic) / pipeline.ingest.frame_decoder reopen it
+        accs = {q: RosAccumulator(q, t, topic_types[t], mapping[q], mapping["stamp"],
+                                  f"{path}:{t}" if q == "images" else f"{path.name}:{t}")
+                for q, t in chosen.items()}
+        by_topic: dict[str, list[RosAccumulator]] = {}
+        for acc in accs.values():
+            by_topic.setdefault(acc.topic, []).append(acc)
+        stats = {c.topic: [0, None, None] for c in reader.connections}
+        conns = list(reader.connections) if scan_all else [c for c in reader.connections if c.topic in by_topic]
+        n_iter = 0
+        if conns:
+            try:
+                for conn, t_rec, raw in reader.messages(connections=conns):
+                    n_iter += 1
+                    st = stats[conn.topic]
+                    st[0] += 1
+                    st[1] = t_rec if st[1] is None else st[1]
+                    st[2] = t_rec
+                    if conn.topic in by_topic:
+                        msg = reader.deserialize(raw, conn.msgtype)
+                        for acc in by_topic[conn.topic]:
+                            acc.add(msg, t_rec)
+            except LogReadError:
+                raise
+            except Exception as exc:
+                read = sum(s[0] for s in stats.values())
+                msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                if read == 0:
+                    raise LogReadError(f"cannot read messages: {msg}", path=path) from None
+                warnings.append(f"{path}: reading stopped after {read} messages: {msg} (truncated or corrupt)")
+        meta_counts = _metadata_counts(path) if fmt == "ros2" else {}
+        expected = sum(meta_counts.get(c.topic, 0) for c in conns)
+        if fmt == "ros2" and n_iter == 0 and expected > 0:
+            warnings.append(f"{path}: rosbags iterated 0 of {expected} messages that metadata.yaml lists (QoS "
+                            "mismatch between metadata.yaml and the storage file?); read the MCAP file directly")
+            if reader.connections and all(str(f).endswith(".mcap") for f in _McapDirect(path).files):
+                for topic, _schema, t_rec, msg in _McapDirect(path).messages({c.topic for c in conns}):
+                    st = stats[topic]
+                    st[0] += 1
+                    st[1] = t_rec if st[1] is None else st[1]
+                    st[2] = t_rec
+                    for acc in by_topic.get(topic, []):
+                        acc.add(msg, t_rec)
+        streams = []
+        for c in reader.connections:
+            n, t0, t1 = stats[c.topic]
+            if c.topic not in {k.topic for k in conns}:
+                n = meta_counts.get(c.topic, c.msgcount)
+            streams.append(StreamInfo(c.topic, normalize_type(c.msgtype), int(n), t0, t1, supplies_of(c.msgtype)))
+    finally:
+        reader.close()
+    log = FlightLog(path=str(path), streams=streams, warnings=warnings, formats=[fmt])
+    _fill(log, accs, warnings, path)
+    return log
+
+
+def _fill(log: FlightLog, accs: dict[str, RosAccumulator], warnings: list[str], path) -> None:
+    for q, acc in accs.items():
+        s = acc.series()
+        if acc.dropped:
+            what = "without a GPS fix" if q == "position" else "without an orientation"
+            warnings.append(f"{path}: {acc.dropped} of {acc.n} {acc.topic} messages {what} dropped")
+        if q == "position" and s is None and acc.n:
+            warnings.append(f"{path}: no GPS fix in {acc.n} {acc.topic} messages; no position read")
+        if q == "images":
+            log.frames = s
+        elif q == "camera_info":
+            log.camera_info = s
+        else:
+            setattr(log, q, s)
+
+
+class BagImages:
+    """The images of one topic of a bag (ROS 1 file or ROS 2 folder): `frames` (FrameSeries: header stamps on
+    the UNIX clock, index = message number on the topic) and `read(indices)` decoding only those messages."""
+
+    def __init__(self, path, topic: str | None = None, mapping: dict | None = None):
+        from pipeline.ingest.mapping import mapping_for
+
+        self.path = Path(path)
+        cfg = mapping_for("ros", mapping)
+        if topic is not None:
+            cfg["images"]["topic"] = topic
+        reader = _open_reader(self.path)
+        try:
+            topic_types = {c.topic: c.msgtype for c in reader.connections}
+            warnings: list[str] = []
+            chosen = resolve_topics(cfg, topic_types, warnings, str(self.path))
+            if "images" not in chosen:
+                raise LogReadError(f"no image topic ({topic or cfg['images']['topic']}) in the bag", path=self.path)
+            self.topic = chosen["images"]
+            self.msgtype = topic_types[self.topic]
+            acc = RosAccumulator("images", self.topic, self.msgtype, cfg["images"], cfg["stamp"],
+                                 f"{self.path}:{self.topic}")
+            conns = [c for c in reader.connections if c.topic == self.topic]
+            first = None
+            for _conn, t_rec, raw in reader.messages(connections=conns):
+                msg = reader.deserialize(raw, self.msgtype)  # header stamp; pixels stay an undecoded byte array
+                first = msg if first is None else first
+                acc.add(msg, t_rec)
+        finally:
+            reader.close()
+        frames = acc.series()
+        if frames is None:
+            raise LogReadError(f"image topic {self.topic} has no messages", path=self.path)
+        if frames.width_px == 0 and first is not None:
+            img = decode_image(first, self.msgtype)
+            frames = FrameSeries(frames.t_ns, frames.index, frames.source, frames.clock, img.shape[1], img.shape[0])
+        self.frames = frames
+
+    def read(self, indices) -> dict[int, np.ndarray]:
+        """Decode the messages with these indices (message number on the topic) -> {index: image}."""
+        want = sorted(set(int(i) for i in indices))
+        out: dict[int, np.ndarray] = {}
+        if not want:
+            return out
+        reader = _open_reader(self.path)
+        try:
+            conns = [c for c in reader.connections if c.topic == self.topic]
+            wanted = set(want)
+            for i, (_conn, _t, raw) in enumerate(reader.messages(connections=conns)):
+                if i in wanted:
+                    out[i] = decode_image(reader.deserialize(raw, self.msgtype), self.msgtype)
+                    if len(out) == len(wanted):
+                        break
+        finally:
+            reader.close()
+        missing = [i for i in want if i not in out]
+        if missing:
+            raise LogReadError(f"image topic {self.topic} has no message {missing[0]}", path=self.path)
+        return out
+

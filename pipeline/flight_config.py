@@ -23,6 +23,7 @@ import numpy as np
 import yaml
 
 from pipeline.errors import ConfigError
+from pipeline.track.sift import TrackerSettings
 
 # ---- a small declarative validator over dataclasses ---------------------------------------------------------
 
@@ -224,28 +225,6 @@ class ObservationSelection:
 
 
 @dataclass(frozen=True)
-class Tracking:
-    n_features: int = 1500
-    ratio: float = 0.75
-    ransac_reproj_px: float = 3.0
-    min_inliers: int = 12
-    min_inlier_ratio: float = 0.25
-    min_correlation: float = 0.5
-    patch_half_px: int = 15
-    search_half_px: int = 6
-    keyframe_inlier_fraction: float = 0.5
-    neighbours: int = 2
-
-    def __post_init__(self):
-        if not 0 < self.ratio < 1:
-            raise ValueError("'ratio' must be in (0, 1)")
-        if self.min_inliers < 4:
-            raise ValueError("'min_inliers' must be at least 4 (a homography needs 4 points)")
-        if self.patch_half_px < 3 or self.search_half_px < 1 or self.n_features < 50:
-            raise ValueError("'patch_half_px' >= 3, 'search_half_px' >= 1 and 'n_features' >= 50 required")
-
-
-@dataclass(frozen=True)
 class Geodetic:
     lat_deg: float
     lon_deg: float
@@ -286,7 +265,7 @@ class FlightConfig:
     clock: Clock = field(default_factory=Clock)
     altitude: Altitude = field(default_factory=Altitude)
     observations: ObservationSelection = field(default_factory=ObservationSelection)
-    tracking: Tracking = field(default_factory=Tracking)
+    tracking: TrackerSettings = field(default_factory=TrackerSettings)
     origin: Geodetic | str = "auto"
     truth: Geodetic | None = None
     truth_file: str | None = None

@@ -43,6 +43,16 @@ class TrackerSettings:
     neighbours: int = 2
     detect_scale: float = 1.0  # features are found on the image resized by this factor (speed); refinement is full-res
 
+    def __post_init__(self):
+        if not 0 < self.ratio < 1:
+            raise ValueError("'ratio' must be in (0, 1)")
+        if self.min_inliers < 4:
+            raise ValueError("'min_inliers' must be at least 4 (a homography needs 4 points)")
+        if self.patch_half_px < 3 or self.search_half_px < 1 or self.n_features < 50:
+            raise ValueError("'patch_half_px' >= 3, 'search_half_px' >= 1 and 'n_features' >= 50 required")
+        if not 0.1 <= self.detect_scale <= 1.0:
+            raise ValueError("'detect_scale' must be in [0.1, 1]")
+
 
 @dataclass
 class _View:

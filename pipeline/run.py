@@ -1,0 +1,261 @@
+"""`ridgeloc run`: one flight group through every stage, ingest -> track -> sync (geometry) -> solve -> compare.
+
+`process_group(config)` is a pure top-level function of a `FlightConfig` (picklable both ways), so a batch can
+run groups in worker processes. It returns a `GroupResult` with the wall time of each stage:
+  ingest  reading telemetry and the frame index (no pixels decoded),
+  decode  decoding the frames the tracker asked for,
+  track   SIFT, matching, homographies and refinement,
+  sync    interpolation of the vehicle state, poses, projection matrices, undistortion,
+  solve   every estimator.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import time
+from collections.abc import Sequence
+from os import PathLike
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from pipeline.errors import ConfigError, InputError, RidgelocError
+from pipeline.flight_config import FlightConfig
+from pipeline.geometry.frames import ellipsoid_from_amsl_m, enu_from_lla
+from pipeline.ingest.model import FlightLog, FrameSeries
+from pipeline.results import GroupResult
+from pipeline.solve.estimate import Estimate
+from pipeline.solve.observations import Observations, Sigma
+from pipeline.sync.assemble import assemble_observations, frame_states
+from pipeline.sync.select import plan_observations
+from pipeline.track.sift import SiftTracker
+
+
+class _TimedDecoder:
+    """Decodes chosen frame numbers to grayscale and accumulates the time spent."""
+
+    def __init__(self, read):
+        self._read = read
+        self.seconds = 0.0
+        self.decoded = 0
+
+    def __call__(self, indices: Sequence[int]) -> dict[int, np.ndarray]:
+        t = time.perf_counter()
+        images = self._read(sorted(set(int(i) for i in indices)))
+        out = {i: (img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)) for i, img in images.items()}
+        self.seconds += time.perf_counter() - t
+        self.decoded += len(out)
+        return out
+
+
+def open_frames(config: FlightConfig, log: FlightLog) -> tuple[FrameSeries, _TimedDecoder, object]:
+    """The flight's frame index and a decoder of chosen frames: the video file when the config names one,
+    else the image topic of a bag the telemetry came from. Returns (frames, decoder, closable)."""
+    from pipeline import ingest
+
+    if config.files.video is not None:
+        frames = ingest.read_video(config.files.video, frames_csv=config.files.frames_csv or "auto")
+        video = ingest.VideoFrames(config.files.video)
+        return frames, _TimedDecoder(video.read), video
+    if log.frames is None:
+        raise ConfigError("the flight has no video (files.video) and its logs carry no images", config.path)
+    source = log.frames.source
+    for path in config.files.telemetry:
+        try:
+            images = ingest.BagImages(path, source)
+        except RidgelocError:
+            continue
+        return log.frames, _TimedDecoder(images.read), images
+    raise ConfigError(f"cannot open the image stream {source!r} of the flight's logs", config.path)
+
+
+def _origin(config: FlightConfig, log: FlightLog) -> tuple[float, float, float]:
+    if config.origin != "auto":
+        return config.origin.as_tuple()
+    pos = log.position
+    alt = float(pos.alt_m[0])
+    if pos.alt_datum == "amsl":
+        if config.altitude.geoid_separation_m is None:
+            raise ConfigError("altitudes are AMSL: set altitude.geoid_separation_m", config.path)
+        alt = float(ellipsoid_from_amsl_m(alt, config.altitude.geoid_separation_m))
+    return float(pos.lat_deg[0]), float(pos.lon_deg[0]), alt
+
+
+def intersection_angle_deg(platform_m: np.ndarray, target_m: np.ndarray) -> float:
+    """Angle between the first and last lines of sight to target_m (the paper's gamma), degrees."""
+    u = np.asarray(target_m, dtype=np.float64) - np.asarray(platform_m, dtype=np.float64)[[0, -1]]
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return math.degrees(math.acos(float(np.clip(u[0] @ u[1], -1.0, 1.0))))
+
+
+def _methods(config: FlightConfig) -> list[str]:
+    from pipeline.solve import METHODS
+
+    if config.solve.methods == "all":
+        return list(METHODS)
+    methods = [config.solve.methods] if isinstance(config.solve.methods, str) else list(config.solve.methods)
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        raise ConfigError(f"solve.methods: unknown method(s) {unknown} (known: {', '.join(METHODS)})", config.path)
+    return methods
+
+
+def solve_all(obs: Observations, methods: Sequence[str], options: dict) -> tuple[dict[str, Estimate], dict]:
+    """Every method on one problem: (estimates, {method: error message} for those that could not run)."""
+    from pipeline.solve import solve
+
+    estimates, failures = {}, {}
+    for m in methods:
+        try:
+            estimates[m] = solve(m, obs, **dict(options.get(m) or {}))
+        except (RidgelocError, ValueError, np.linalg.LinAlgError) as exc:
+            failures[m] = str(exc)
+    return estimates, failures
+
+
+def process_group(config: FlightConfig) -> GroupResult:
+    """Ingest, track, synchronize and solve one flight group (see the module docstring)."""
+    from pipeline.ingest import read_flight
+
+    timings: dict[str, float] = {}
+    notes: list[str] = []
+    t0 = time.perf_counter()
+    log = read_flight(list(config.files.telemetry), mapping=config.mapping)
+    missing = [q for q in ("position", "attitude", "gimbal") if getattr(log, q) is None]
+    if missing:
+        raise InputError(f"the flight's logs supply no {', '.join(missing)}: check `mapping:` "
+                         "(see `ridgeloc inspect`)", config.path)
+    frames, decoder, closable = open_frames(config, log)
+    notes.extend(log.warnings)
+    timings["ingest"] = time.perf_counter() - t0
+    try:
+        # Which frames are observations (needs only timestamps).
+        c, sel = config.clock, config.observations
+        plan = plan_observations(frames, log.range, mode=sel.mode, video_offset_ns=c.video_to_telemetry_offset_ns,
+                                 range_offset_ns=c.range_offset_ns, frame_tolerance_s=sel.frame_tolerance_s,
+                                 max_range_gap_s=sel.max_range_gap_s, frame_indices=sel.frame_indices)
+        notes.extend(plan.notes)
+        t1 = time.perf_counter()
+        tracker = SiftTracker(config.tracking)
+        if config.target.template is not None:
+            template = cv2.imread(config.target.template, cv2.IMREAD_GRAYSCALE)
+            if template is None:
+                raise ConfigError("target.template: not a readable image", config.target.template)
+            mark_index, mark_px = tracker.acquire(template, config.target.template_pixel, decoder,
+                                                  plan.frame_index.tolist())
+        else:
+            mark_index, mark_px = config.target.frame_index, config.target.pixel
+            if mark_index not in set(np.asarray(frames.index).tolist()):
+                raise ConfigError(f"target.frame_index {mark_index} is not a frame of the video", config.path)
+        track = tracker.track(decoder, mark_index, mark_px, plan.frame_index.tolist(),
+                              available=np.asarray(frames.index).tolist())
+        timings["decode"] = decoder.seconds
+        timings["track"] = time.perf_counter() - t1 - decoder.seconds
+    finally:
+        close = getattr(closable, "close", None)
+        if close is not None:
+            close()
+    if track.lost.any():
+        notes.append(f"target lost in {int(track.lost.sum())} of {plan.n} observation frames (pixel not used)")
+
+    t2 = time.perf_counter()
+    origin = _origin(config, log)
+    states = frame_states(log, plan.t_ns, position_offset_ns=c.position_offset_ns,
+                          attitude_offset_ns=c.attitude_offset_ns, gimbal_offset_ns=c.gimbal_offset_ns,
+                          geoid_separation_m=config.altitude.geoid_separation_m)
+    if not states.inside.all():
+        notes.append(f"{int((~states.inside).sum())} observation(s) outside the telemetry span were dropped")
+    truth_lla = config.truth_lla()
+    truth_m = None if truth_lla is None else enu_from_lla(*truth_lla, origin)
+    cam = config.camera
+    sigma = Sigma.from_dict(dataclasses.asdict(config.sigma), "sigma")
+    useful = states.inside & (~track.lost | ~np.isnan(plan.range_m))
+    if (states.inside & ~useful).any():
+        notes.append(f"{int((states.inside & ~useful).sum())} observation(s) with neither pixel nor range dropped")
+    if not useful.any():
+        raise InputError("no usable observation: the target was never tracked and no laser range is valid",
+                         config.path)
+    sub = dataclasses.replace(states, inside=useful)
+    obs, _ = assemble_observations(sub, track.pixel_px, plan.range_m, K=cam.K, dist=cam.dist, origin_lla=origin,
+                                       R_optical_from_gimbal=np.array(cam.R_optical_from_gimbal),
+                                       lever_camera_m=config.lever_arms_m.camera,
+                                       lever_rangefinder_m=config.lever_arms_m.rangefinder, sigma=sigma,
+                                       truth_m=truth_m)
+    timings["sync"] = time.perf_counter() - t2
+
+    t3 = time.perf_counter()
+    estimates, failures = solve_all(obs, _methods(config), config.solve.options)
+    timings["solve"] = time.perf_counter() - t3
+    if not estimates:
+        raise InputError(f"no estimator could solve the flight: {failures}", config.path)
+
+    reference = truth_m
+    if reference is None:
+        best = estimates.get("mle") or next(iter(estimates.values()))
+        reference = best.position_m
+    gamma = intersection_angle_deg(obs.platform_m, reference) if obs.n >= 2 and np.isfinite(reference).all() else \
+        float("nan")
+    kept = np.flatnonzero(useful)
+    tracking = track.to_dict()
+    tracking = {k: [v[i] for i in kept] for k, v in tracking.items()}
+    tracking["t_ns"] = [int(t) for t in plan.t_ns[kept]]
+    tracking["range_t_ns"] = [int(t) for t in plan.range_t_ns[kept]]
+    tracking["mark"] = {"frame_index": int(mark_index), "pixel_px": [float(mark_px[0]), float(mark_px[1])]}
+    settings = config.to_dict()
+    settings["notes"] = notes
+    settings["solve_failures"] = failures
+    settings["frames_decoded"] = decoder.decoded
+    return GroupResult(name=config.name, origin_lla=origin, observations=obs, estimates=estimates, truth_m=truth_m,
+                       intersection_angle_deg=gamma, timings_s=timings, settings=settings, tracking=tracking)
+
+
+# ---- outputs of one group ------------------------------------------------------------------------------------
+
+
+def estimates_document(result: GroupResult) -> dict:
+    """The `ridgeloc solve --json` structure for the group's estimates."""
+    try:
+        from pipeline.commands.solve import estimates_json  # the solve command's own serialisation, when present
+    except ImportError:
+        estimates_json = None
+    if estimates_json is not None:
+        return estimates_json(result.observations, result.estimates)
+    doc = {"n_observations": result.n_observations,
+           "estimates": {m: e.to_dict(result.truth_m) for m, e in result.estimates.items()}}
+    if result.truth_m is not None:
+        doc["truth_m"] = [float(v) for v in result.truth_m]
+    return doc
+
+
+def _json_default(o):
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.floating, np.integer, np.bool_)):
+        return o.item()
+    raise TypeError(f"not JSON-serialisable: {type(o).__name__}")
+
+
+def group_files(result: GroupResult) -> dict[str, str]:
+    """The per-group files `ridgeloc run` writes, name -> text: observations.json (the `ridgeloc solve` input,
+    to re-solve without re-processing video), estimates.json (its --json output) and tracking.json (per-frame
+    tracking quality). The report stage can pass them on as extra files of the group's folder."""
+    return {
+        "observations.json": json.dumps(result.observations.to_dict(), indent=1) + "\n",
+        "estimates.json": json.dumps(estimates_document(result), indent=1, default=_json_default) + "\n",
+        "tracking.json": json.dumps(result.tracking, indent=1, default=_json_default) + "\n",
+    }
+
+
+def write_group_outputs(outdir: str | PathLike, result: GroupResult) -> Path:
+    """Write OUTDIR/<group>/ with `group_files(result)`, atomically: the folder is complete or absent."""
+    from pipeline.atomic import atomic_dir
+
+    final = Path(outdir) / result.name
+    files = group_files(result)
+    with atomic_dir(final) as tmp:
+        for name, text in files.items():
+            (tmp / name).write_text(text)
+    return final

@@ -128,8 +128,12 @@ def _solve_stacked(method: str, st: Stacked, o: dict) -> BatchEstimate:
         init_status = None
         if x0 is None:
             x0, init_status, _ = linear.dlt(st)
+            # fewer than two pixels, or no baseline (the DLT point is then a camera centre, or behind):
+            # start from the line-of-sight points
             need = ~np.isfinite(x0).all(axis=1)
-            if need.any():  # fewer than two pixels: start from the line-of-sight points
+            near = 1e-3 * (1.0 + st.range_m.max(axis=1, keepdims=True))
+            need |= ((st.depths(np.where(need[:, None], 0.0, x0)) <= near) & st.has_pix).any(axis=1)
+            if need.any():
                 Xl, sl, _, _ = linear.los(st.take(np.flatnonzero(need)))
                 x0[need], init_status[need] = Xl, sl
         sigma = o.get("sigma") or st.sigma

@@ -32,8 +32,8 @@ def iterate(st: Stacked, X0: np.ndarray, step: StepFn, tol_m: float, max_iterati
             init_status: np.ndarray | None = None, extra_names: tuple[str, ...] = ()):
     """Run `step(sub, X_sub) -> (dX (b,3), singular (b,) bool, extras {name: (b,)})` to convergence.
 
-    Returns X (B,3) (NaN where DIVERGED or DEGENERATE), iterations (B,), status (B,) int8 and the extras of
-    each problem's last iteration (B,) arrays.
+    Returns X (B,3) (the last finite iterate; callers blank DIVERGED and DEGENERATE ones with `finish`),
+    iterations (B,), status (B,) int8 and the extras of each problem's last iteration (B,) arrays.
     """
     B = st.size
     X = np.array(X0, dtype=np.float64, copy=True)
@@ -71,15 +71,18 @@ def iterate(st: Stacked, X0: np.ndarray, step: StepFn, tol_m: float, max_iterati
         st_idx[done_conv] = Status.CONVERGED
         status[idx] = st_idx
         active[idx] = ~(singular | exploded | done_conv)
-    failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
-    X[failed] = np.nan
     return X, iterations, status, extras
 
 
-def flag_degenerate(X: np.ndarray, status: np.ndarray, design: np.ndarray) -> None:
+def finish(X: np.ndarray, status: np.ndarray, design: np.ndarray, geometry: np.ndarray | None = None) -> np.ndarray:
     """In place: problems whose final design matrix (B,m,k) is numerically rank deficient (condition number
-    of the column-equilibrated matrix above DEGENERATE_CONDITION) become DEGENERATE."""
-    cond = condition_numbers(design, equilibrate=True)
-    bad = (cond > DEGENERATE_CONDITION) & np.isfinite(X).all(axis=1)
-    status[bad] = Status.DEGENERATE
-    X[bad] = np.nan
+    of the column-equilibrated matrix above DEGENERATE_CONDITION) become DEGENERATE; DIVERGED and DEGENERATE
+    positions become NaN. Returns the (B,) condition numbers of the design matrices as they are.
+    geometry: the columns judged for rank deficiency, when not all of design's."""
+    cond = condition_numbers(design)
+    cond_eq = condition_numbers(design if geometry is None else geometry, equilibrate=True)
+    finite = np.isfinite(X).all(axis=1)
+    status[(cond_eq > DEGENERATE_CONDITION) & finite] = Status.DEGENERATE
+    cond[~finite] = np.nan
+    X[(status == Status.DIVERGED) | (status == Status.DEGENERATE)] = np.nan
+    return cond

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.solve.iterate import flag_degenerate, iterate
-from pipeline.solve.stacked import Stacked, condition_numbers, normal_equations, pixel_model, range_model, solve_spd
+from pipeline.solve.iterate import finish, iterate
+from pipeline.solve.stacked import Stacked, normal_equations, pixel_model, range_model, solve_spd
 
 HKB_VARIANTS = ("paper", "textbook")
 
@@ -33,9 +33,7 @@ def _fused_model(st: Stacked, X: np.ndarray):
 def _run(st, X0, model, tol_m, max_iterations, init_status):
     X, it, status, _ = iterate(st, X0, _gn_step(model), tol_m, max_iterations, init_status)
     J, _, _ = model(st, np.where(np.isfinite(X), X, 0.0))
-    cond = condition_numbers(J)
-    cond[~np.isfinite(X).all(axis=1)] = np.nan
-    flag_degenerate(X, status, J)
+    cond = finish(X, status, J)
     return X, it, status, cond
 
 
@@ -115,6 +113,20 @@ def hkb_k(N, g, dPhi, rows, variant: str = "paper"):
     return np.where(np.isfinite(k) & ~singular, k, 0.0)
 
 
+def _solve_augmented(N, g, k):
+    """beta = (N + k I)^-1 g for the 4-unknown system [dX; a]. Where that is singular but the 3 dX columns are
+    not (the 4th column of T vanishes when every residual is zero, Max = Min = 0, e.g. at an exact fit), the
+    4th unknown is held at the value 1 the paper writes: dX = (N33 + k I)^-1 (g3 - N[:3, 3])."""
+    beta, singular = solve_spd(N + k[:, None, None] * np.eye(4), g)
+    if singular.any():
+        i = np.flatnonzero(singular)
+        dX, sing3 = solve_spd(N[i, :3, :3] + k[i, None, None] * np.eye(3), g[i, :3] - N[i, :3, 3])
+        beta[i, :3] = dX
+        beta[i, 3] = 1.0
+        singular[i] = sing3
+    return beta, singular
+
+
 def _normalized_step(k_fixed: float | None, hkb: str | None):
     def step(sub: Stacked, X: np.ndarray):
         T, dPhi, rows = normalized_system(sub, X)
@@ -122,17 +134,16 @@ def _normalized_step(k_fixed: float | None, hkb: str | None):
         B = N.shape[0]
         if hkb is None:
             k = np.zeros(B) if k_fixed is None else np.full(B, float(k_fixed))
-            beta, singular = solve_spd(N + k[:, None, None] * np.eye(4), g)
+            beta, singular = _solve_augmented(N, g, k)
         else:
             k = hkb_k(N, g, dPhi, rows, hkb)
             if hkb == "textbook":
                 d = np.sqrt(np.einsum("bii->bi", N))
                 d = np.where(d > 0, d, 1.0)
-                Ns = N / (d[:, :, None] * d[:, None, :]) + k[:, None, None] * np.eye(4)
-                gamma, singular = solve_spd(Ns, g / d)
+                gamma, singular = _solve_augmented(N / (d[:, :, None] * d[:, None, :]), g / d, k)
                 beta = gamma / d
             else:
-                beta, singular = solve_spd(N + k[:, None, None] * np.eye(4), g)
+                beta, singular = _solve_augmented(N, g, k)
         return beta[:, :3], singular, {"k": k, "augmented": beta[:, 3]}
     return step
 
@@ -144,11 +155,10 @@ def normalized_fusion(st: Stacked, X0, tol_m, max_iterations, init_status=None, 
     1) and updates X by dX only.
 
     Returns X, iterations, status, cond (of T at the final iterate), extras {k, augmented} of the last iteration.
+    Degeneracy is judged on the 3 dX columns of T (the geometry), not on the 4th.
     """
     X, it, status, extras = iterate(st, X0, _normalized_step(k, hkb), tol_m, max_iterations, init_status,
                                     extra_names=("k", "augmented"))
     T, _, _ = normalized_system(st, np.where(np.isfinite(X), X, 0.0))
-    cond = condition_numbers(T)
-    cond[~np.isfinite(X).all(axis=1)] = np.nan
-    flag_degenerate(X, status, T)
+    cond = finish(X, status, T, T[..., :3])
     return X, it, status, cond, extras

@@ -6,6 +6,7 @@ estimation, posterior covariance, CEP and error ellipsoid. Batched over B proble
 from __future__ import annotations
 
 import numpy as np
+from scipy.special import erf, erfinv
 
 from pipeline.solve.estimate import Status
 from pipeline.solve.iterate import DEGENERATE_CONDITION, DIVERGENCE_FACTOR, problem_scale_m
@@ -23,7 +24,9 @@ VCE_TOL = 0.01
 
 
 def _rho_and_weight(e: np.ndarray, robust: str | None):
-    """Loss rho(e) and IRLS weight rho'(e)/e of standardized residuals e."""
+    """Loss rho(e) and IRLS weight rho'(e)/e of standardized residuals e. (A Newton step with rho'' in the
+    normal matrix was tried: for Huber it overshoots where residuals cross the threshold and needs many LM
+    rejections; IRLS never increased the cost in our tests and converges in ~8 iterations.)"""
     if robust is None:
         return 0.5 * e * e, np.ones_like(e)
     a = np.abs(e)
@@ -120,8 +123,8 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
         var_i = var0[idx] * vf[idx][:, group]
         e = r[idx] / np.sqrt(var_i)
         _, wr = _rho_and_weight(e, robust)
-        w = okf[idx] * wr / var_i
-        N, g = normal_equations(J[idx], r[idx], w)
+        w = okf[idx] / var_i
+        N, g = normal_equations(J[idx], r[idx], w * wr)
         lam_i = lam[idx]
         Nd = N + lam_i[:, None, None] * (np.einsum("bii->bi", N)[:, :, None] * np.eye(3))
         dX, singular = solve_spd(Nd, g)
@@ -230,44 +233,54 @@ def _vce_factors(st: Stacked, J, r, okf, var, group, robust):
 
 # ---- accuracy summaries from the covariance ----------------------------------------------------------------
 
-_THETA = (np.arange(32) + 0.5) * (np.pi / 2 / 32)
-_COS2, _SIN2 = np.cos(_THETA) ** 2, np.sin(_THETA) ** 2
+_Q_GRID = np.linspace(0.0, 1.0, 1025)
+_CEP_TABLES: dict[float, np.ndarray] = {}
+
+
+def _prob_within(rho: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """P(|e| <= rho) for e ~ N(0, diag(1, q^2)), elementwise over rho, q (q <= 1).
+
+    Conditioning on the major component z1 = rho sin t: P = int_{-pi/2}^{pi/2} phi(rho sin t)
+    erf(rho cos t / (sqrt(2) q)) rho cos t dt, by 64-point Gauss-Legendre (smooth integrand; the steep erf at
+    the ends is damped by cos t).
+    """
+    x, w = np.polynomial.legendre.leggauss(64)
+    t = 0.5 * np.pi * x
+    rho = rho[:, None]
+    qq = np.maximum(q, 1e-12)[:, None]
+    z1 = rho * np.sin(t)
+    f = np.exp(-0.5 * z1 * z1) / np.sqrt(2 * np.pi) * erf(rho * np.cos(t) / (np.sqrt(2) * qq)) * rho * np.cos(t)
+    return 0.5 * np.pi * (f * w).sum(axis=1)
+
+
+def _cep_table(p: float) -> np.ndarray:
+    """rho_p(q) on _Q_GRID: the radius, in units of the major standard deviation, holding probability p."""
+    table = _CEP_TABLES.get(p)
+    if table is None:
+        lo = np.full(_Q_GRID.shape, np.sqrt(2.0) * erfinv(p))  # the 1-D quantile: q = 0
+        hi = np.full(_Q_GRID.shape, np.sqrt(-2.0 * np.log1p(-p)))  # the circular one: q = 1
+        lo, hi = lo * (1 - 1e-9), hi * (1 + 1e-9)
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            below = _prob_within(mid, _Q_GRID) < p
+            lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
+        table = _CEP_TABLES[p] = 0.5 * (lo + hi)
+    return table
 
 
 def cep_m(cov_xy: np.ndarray, p: float) -> np.ndarray:
     """(B,) radius of the circle around the estimate that holds probability p of the horizontal error, for
     (B,2,2) covariances of a zero-mean 2D Gaussian.
 
-    With principal standard deviations s1 >= s2, P(|e| <= r) = (1 / (s1 s2)) mean_theta (1 - exp(-r^2 a / 2)) / a,
-    a = cos^2 theta / s1^2 + sin^2 theta / s2^2 (the polar-coordinate integral, averaged over the circle; the
-    integrand is smooth and periodic, so the midpoint rule over a quarter turn converges geometrically).
-    Solved for r by safeguarded Newton iterations.
+    With principal standard deviations s1 >= s2 the radius is s1 rho_p(s2/s1); rho_p is tabulated once per p
+    on 1025 ratios (exact integral `_prob_within`, bisection) and interpolated linearly (relative error < 1e-5).
     """
-    ev = np.linalg.eigvalsh(cov_xy)
+    ev = np.linalg.eigvalsh(np.where(np.isfinite(cov_xy), cov_xy, 0.0))
     s1 = np.sqrt(np.maximum(ev[:, 1], 0.0))
     s2 = np.sqrt(np.maximum(ev[:, 0], 0.0))
-    ok = np.isfinite(s1) & (s1 > 0)
-    s1 = np.where(ok, s1, 1.0)
-    q = np.clip(np.where(ok, s2, 1.0) / s1, 1e-9, 1.0)  # ratio; rho = r / s1
-    a = _COS2[None, :] + _SIN2[None, :] / (q * q)[:, None]  # (B,K)
-    c = np.sqrt(-2.0 * np.log1p(-p))
-    lo, hi = q * c * 0.999, np.full_like(q, c * 1.001)
-    # 1-D Gaussian (q -> 0) quantile bounds the rho from above as well
-    rho = np.clip(0.5 * (1 + q) * c, lo, hi)
-    for _ in range(30):
-        ex = np.exp(-0.5 * rho[:, None] ** 2 * a)
-        F = ((1 - ex) / a).mean(axis=1) / q - p
-        dF = (rho[:, None] * ex).mean(axis=1) / q
-        lo = np.where(F < 0, rho, lo)
-        hi = np.where(F >= 0, rho, hi)
-        new = rho - F / np.where(dF > 0, dF, 1.0)
-        out = (new <= lo) | (new >= hi) | ~np.isfinite(new)
-        new = np.where(out, 0.5 * (lo + hi), new)
-        if np.all(np.abs(new - rho) <= 1e-12 * rho):
-            rho = new
-            break
-        rho = new
-    return np.where(ok, rho * s1, np.nan)
+    ok = np.isfinite(cov_xy).all(axis=(1, 2)) & (s1 > 0)
+    q = np.where(ok, s2 / np.where(ok, s1, 1.0), 1.0)
+    return np.where(ok, s1 * np.interp(q, _Q_GRID, _cep_table(float(p))), np.nan)
 
 
 def ellipsoid(cov: np.ndarray):

@@ -84,9 +84,11 @@ class Stacked:
         return fx, fy
 
     def depths(self, X: np.ndarray) -> np.ndarray:
-        """(B,n) signed depth (positive in front) of points X (B,3) in each camera, up to the scale of P."""
-        q2 = np.einsum("bni,bi->bn", self.M[..., 2, :], X) + self.p4[..., 2]
-        return q2 * self.depth_sign()
+        """(B,n) signed depth in metres along each optical axis (positive in front) of points X (B,3):
+        q3 / |m3| with q = M X + p4, since m3 = lambda r3 for P = lambda K [R | t]."""
+        m3 = self.M[..., 2, :]
+        q2 = np.einsum("bni,bi->bn", m3, X) + self.p4[..., 2]
+        return q2 * self.depth_sign() / np.linalg.norm(m3, axis=-1)
 
 
 def pixel_model(st: Stacked, X: np.ndarray):

@@ -1,0 +1,149 @@
+"""Every input an estimator cannot use gets its own clear error, never a bare numpy exception."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import pipeline.solve.iterate as iterate_mod
+from pipeline.errors import GeometryError, ObservationError, SolverError
+from pipeline.geometry.camera import intrinsics_matrix, look_at_rotation, project, projection_matrix
+from pipeline.solve import METHODS, solve
+from pipeline.solve.estimate import Status
+from pipeline.solve.iterate import iterate
+from pipeline.solve.observations import Observations
+from pipeline.solve.scenes import paper_problem
+from pipeline.solve.stacked import Stacked
+
+
+@pytest.fixture
+def obs():
+    return paper_problem(gamma_deg=30.0, seed=1)
+
+
+def _drop(obs, pixels=(), ranges=()):
+    pixel, rng = obs.pixel.copy(), obs.range_m.copy()
+    pixel[list(pixels)] = np.nan
+    rng[list(ranges)] = np.nan
+    return dataclasses.replace(obs, pixel=pixel, range_m=rng)
+
+
+def test_vision_needs_two_pixels(obs):
+    one = _drop(obs, pixels=range(1, obs.n))
+    for method in ("vision", "dlt"):
+        with pytest.raises(ObservationError, match="at least two frames with a target pixel, got 1"):
+            solve(method, one)
+    with pytest.raises(ObservationError, match="initialised from vision"):
+        solve("fusion", one)
+    # with an initial value the fused estimators do not need the vision start
+    est = solve("fusion-raw", one, initial_m=[5.0, 5.0, 5.0])
+    assert est.converged
+
+
+def test_range_only_needs_three_ranges(obs):
+    with pytest.raises(ObservationError, match="at least three laser ranges, got 2"):
+        solve("range", _drop(obs, ranges=range(2, obs.n)))
+
+
+def test_los_needs_a_frame_with_pixel_and_range(obs):
+    bad = _drop(obs, pixels=range(0, obs.n, 2), ranges=range(1, obs.n, 2))
+    with pytest.raises(ObservationError, match="both a target pixel and a range"):
+        solve("los", bad)
+
+
+def test_fusion_needs_ranges(obs):
+    with pytest.raises(ObservationError, match="no ranges; use vision"):
+        solve("ridge", _drop(obs, ranges=range(obs.n)))
+
+
+def test_mle_needs_a_start_and_three_observations(obs):
+    with pytest.raises(ObservationError, match="mle starts from"):
+        solve("mle", _drop(obs, pixels=range(1, obs.n), ranges=[0]))
+    with pytest.raises(ObservationError, match="at least three observations"):
+        solve("mle", _drop(obs, pixels=range(obs.n), ranges=range(2, obs.n)), initial_m=[0.0, 0.0, 0.0])
+
+
+def test_non_finite_and_mismatched_inputs(obs):
+    with pytest.raises(ObservationError, match="NaN"):
+        Observations(P=obs.P * np.nan, pixel=obs.pixel, platform_m=obs.platform_m, range_m=obs.range_m)
+    with pytest.raises(ObservationError, match="infinite"):
+        Observations(P=obs.P, pixel=obs.pixel + np.inf, platform_m=obs.platform_m, range_m=obs.range_m)
+    with pytest.raises(ObservationError, match="mismatched lengths"):
+        Observations(P=obs.P, pixel=obs.pixel, platform_m=obs.platform_m, range_m=obs.range_m[:-1])
+
+
+def test_coincident_camera_positions(obs):
+    K = intrinsics_matrix(1000, 1000, 300, 200)
+    c = np.tile([0.0, -4500.0, 2000.0], (obs.n, 1))
+    P = projection_matrix(K, look_at_rotation(c, np.zeros(3)), c)
+    same = Observations(P=P, pixel=project(P, np.zeros((obs.n, 3))), platform_m=c,
+                        range_m=np.full(obs.n, np.linalg.norm(c[0])))
+    with pytest.raises(GeometryError, match="one camera position"):
+        solve("vision", same)
+    with pytest.raises(GeometryError, match="share one platform position"):
+        solve("range", same, initial_m=[1.0, 1.0, 1.0])
+    # a pixel and a range from one position do locate the target: the fused estimators cope
+    est = solve("mle", same)
+    assert np.linalg.norm(est.position_m) < 1e-3
+
+
+def test_collinear_platforms_for_range_only(obs):
+    n = obs.n
+    s = np.stack([np.linspace(-400, 400, n), np.full(n, -4500.0), np.full(n, 2000.0)], axis=1)
+    line = dataclasses.replace(obs, platform_m=s, range_m=np.linalg.norm(s, axis=1))
+    with pytest.raises(GeometryError, match="collinear"):
+        solve("range", line)
+
+
+def test_target_behind_the_cameras(obs):
+    K = intrinsics_matrix(1000, 1000, 300, 200)
+    c = obs.platform_m
+    # cameras looking away from the target still "see" its projection through P, from behind
+    away = 2 * c - obs.truth_m
+    P = projection_matrix(K, look_at_rotation(c, away), c)
+    pix = project(P, np.broadcast_to(obs.truth_m, (obs.n, 3)))
+    behind = dataclasses.replace(obs, P=P, pixel=pix)
+    for method in ("dlt", "vision", "fusion-raw"):
+        with pytest.raises(GeometryError, match="behind the camera"):
+            solve(method, behind)
+    # mle starts from the lines of sight instead, so its answer (a poor fit) stays in front of the cameras
+    est = solve("mle", behind)
+    assert (Stacked.from_observations(behind).depths(est.position_m[None]) > 0).all()
+
+
+def test_a_flipped_projection_matrix_is_not_behind(obs):
+    flipped = dataclasses.replace(obs, P=-obs.P)  # P and -P are the same camera
+    np.testing.assert_allclose(solve("vision", flipped).position_m, solve("vision", obs).position_m, atol=1e-9)
+    np.testing.assert_allclose(solve("los", flipped).position_m, solve("los", obs).position_m, atol=1e-9)
+
+
+def test_singular_projection_matrix(obs):
+    P = obs.P.copy()
+    P[3, :, :3] = 0.0
+    with pytest.raises(ObservationError, match="not a finite camera"):
+        solve("vision", dataclasses.replace(obs, P=P))
+
+
+@pytest.mark.parametrize("method", [m for m in METHODS if m not in ("dlt", "los")])
+def test_divergence_raises_solver_error(obs, method, monkeypatch):
+    monkeypatch.setattr(iterate_mod, "DIVERGENCE_FACTOR", 1e-9)
+    import pipeline.solve.mle as mle_mod
+    monkeypatch.setattr(mle_mod, "DIVERGENCE_FACTOR", 1e-9)
+    with pytest.raises(SolverError, match="diverged"):
+        solve(method, obs, initial_m=[50.0, 50.0, 50.0])
+
+
+def test_driver_flags_exploding_and_non_finite_steps(obs):
+    st = Stacked.from_observations(obs)
+
+    def doubling(sub, X):
+        return X * 10.0 + 1.0, np.zeros(len(X), dtype=bool), {}
+
+    _, it, status, _ = iterate(st, np.array([[1.0, 1.0, 1.0]]), doubling, 1e-4, 50)
+    assert status[0] == Status.DIVERGED and it[0] < 50
+
+    def nan_step(sub, X):
+        return np.full_like(X, np.nan), np.zeros(len(X), dtype=bool), {}
+
+    _, it, status, _ = iterate(st, np.array([[1.0, 1.0, 1.0]]), nan_step, 1e-4, 50)
+    assert status[0] == Status.DIVERGED and it[0] == 1

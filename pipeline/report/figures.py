@@ -6,20 +6,18 @@
     residuals_figure(r)  per-frame pixel residuals (px) and range residuals (m) of the main estimates
     render_group_figures(r) -> {"map": png bytes, "view3d": ..., "residuals": ...}
 
-All coordinates are the group's local ENU metres.
+All coordinates are the group's local ENU metres. Figures are built with the object API (no pyplot), so they
+are headless and safe to make from several threads at once.
 """
 
 from __future__ import annotations
 
 import io
 
-import matplotlib
-
-matplotlib.use("Agg")
-
-import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Rectangle
 
 from pipeline.report.geometry import (
     best_reference_m,
@@ -89,8 +87,8 @@ def _draw_estimates_2d(ax, r: GroupResult, methods: list[str], offset: np.ndarra
 
 def map_figure(r: GroupResult) -> Figure:
     """Plan view (East/North metres): overview of the whole flight and a close-up around the target."""
-    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(12.5, 6.2), layout="constrained",
-                                   gridspec_kw={"width_ratios": [1.15, 1]})
+    fig = Figure(figsize=(12.5, 6.2), layout="constrained")
+    ax0, ax1 = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.15, 1]})
     obs = r.observations
     methods = _finite_estimates(r)
     centre = _centre_m(r)
@@ -135,18 +133,18 @@ def map_figure(r: GroupResult) -> Figure:
         ax1.set_ylabel(f"North of {what} (m)")
         ax1.set_title("Close-up: estimates, dashed = 95 % error ellipse")
         ax1.grid(True, alpha=0.3)
-        ax0.add_patch(plt.Rectangle((centre[0] - half, centre[1] - half), 2 * half, 2 * half, fill=False,
+        ax0.add_patch(Rectangle((centre[0] - half, centre[1] - half), 2 * half, 2 * half, fill=False,
                                     ec="k", lw=0.8, zorder=7))
     else:
         ax1.set_axis_off()
 
     # one legend for both panels, under them, so it never covers data
     for m in methods:
-        handles[method_label(m)] = plt.Line2D([], [], marker=METHOD_MARKERS.get(m, "o"), ls="none",
+        handles[method_label(m)] = Line2D([], [], marker=METHOD_MARKERS.get(m, "o"), ls="none",
                                               color=METHOD_COLORS.get(m, "k"), markeredgecolor="k",
                                               markersize=9)
     if r.truth_m is not None:
-        handles["Truth"] = plt.Line2D([], [], marker="*", ls="none", color="k", markerfacecolor="yellow",
+        handles["Truth"] = Line2D([], [], marker="*", ls="none", color="k", markerfacecolor="yellow",
                                       markersize=13)
     fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncol=min(6, len(handles)),
                frameon=False, fontsize=9)
@@ -157,7 +155,7 @@ def map_figure(r: GroupResult) -> Figure:
 
 def view3d_figure(r: GroupResult) -> Figure:
     """3D view (East, North, Up metres) of the path, lines of sight, estimates and truth."""
-    fig = plt.figure(figsize=(8.5, 7.0), layout="constrained")
+    fig = Figure(figsize=(8.5, 7.0), layout="constrained")
     ax = fig.add_subplot(projection="3d")
     obs = r.observations
     seg, _ = lines_of_sight_m(obs, best_reference_m(r), max_lines=40)
@@ -188,7 +186,8 @@ def residuals_figure(r: GroupResult) -> Figure:
     """Per-frame residuals of the main estimates: pixel reprojection error (px) and range residual (m)."""
     obs = r.observations
     t_s = (obs.t_ns - obs.t_ns[0]) / 1e9
-    fig, (ax0, ax1) = plt.subplots(2, 1, figsize=(9.0, 7.0), sharex=True, layout="constrained")
+    fig = Figure(figsize=(9.0, 7.0), layout="constrained")
+    ax0, ax1 = fig.subplots(2, 1, sharex=True)
     methods = [m for m in ordered_methods(r.estimates) if m in RESIDUAL_METHODS and m in _finite_estimates(r)]
     methods = sorted(methods, key=lambda m: m != "mle")  # the MLE first: it sets the scales
     scale_px, scale_m, handles, labels = [], [], [], []
@@ -207,7 +206,7 @@ def residuals_figure(r: GroupResult) -> Figure:
             rms.append(f"{np.sqrt(np.nanmean(rg ** 2)):.1f} m")
             if m in ("mle", "ridge"):
                 scale_m.append(np.nanmax(np.abs(rg)))
-        handles.append(plt.Line2D([], [], **style))
+        handles.append(Line2D([], [], **style))
         labels.append(f"{method_label(m)} (RMS {', '.join(rms)})")
     # the well-fitting estimates set the scale; a badly fitting one runs off the plot (its RMS is in the legend)
     if scale_px:
@@ -232,12 +231,9 @@ def residuals_figure(r: GroupResult) -> Figure:
 
 
 def figure_png(fig: Figure) -> bytes:
-    """The figure as PNG bytes; the figure is closed."""
+    """The figure as PNG bytes."""
     buf = io.BytesIO()
-    try:
-        fig.savefig(buf, format="png", dpi=DPI)
-    finally:
-        plt.close(fig)
+    fig.savefig(buf, format="png", dpi=DPI)
     return buf.getvalue()
 
 

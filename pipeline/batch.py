@@ -1,0 +1,409 @@
+"""Run many flight jobs: in this process, in local worker processes, or on a Dask distributed cluster.
+
+    run_jobs(jobs, fn, workers=1, executor="local" | "dask", scheduler=None) -> (results, failures)
+    report_stage("track")          called by a job function to show the stage it has entered
+    discover_flights(path)         flight configs in a folder, or listed in a manifest
+
+A job that raises (a RidgelocError, or any other exception: a bug, but one flight's bug) becomes a
+`GroupFailure` with a one-line message; the other jobs finish. Ctrl-C cancels the jobs not yet finished, stops
+the workers and re-raises KeyboardInterrupt. Results come back in the order of `jobs`, whatever the order in
+which they finished, so every executor gives the same output.
+
+Progress: one bar for the whole batch and, on a terminal, one bar per running flight showing its stage
+(`report_stage`), plus one line per finished flight with its stage timings (`GroupResult.timings_s`).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import contextlib
+import contextvars
+import multiprocessing
+import queue as queue_mod
+import signal
+import sys
+import time
+import traceback
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from pipeline.errors import ConfigError, InputError, RidgelocError
+from pipeline.results import GroupFailure
+
+EXECUTORS = ("local", "dask")
+STAGE_TOPIC = "ridgeloc-stage"
+_POLL_S = 0.1
+
+_reporter: contextvars.ContextVar[Callable[[str], None] | None] = contextvars.ContextVar("ridgeloc_stage",
+                                                                                          default=None)
+
+
+@dataclass(frozen=True)
+class Job:
+    """One unit of work: `fn(payload)` is called in a worker. `name` names the outputs (the group), `source`
+    the input (a config path) in messages. `payload` must be picklable for process and Dask executors."""
+
+    name: str
+    source: str
+    payload: Any
+
+
+def report_stage(stage: str) -> None:
+    """Announce that the current job entered `stage` (e.g. "ingest", "track", "solve"). No-op outside run_jobs."""
+    reporter = _reporter.get()
+    if reporter is not None:
+        with contextlib.suppress(Exception):  # progress display must never fail a flight
+            reporter(stage)
+
+
+# ---- what a worker runs ------------------------------------------------------------------------------------
+
+@dataclass
+class _Outcome:
+    name: str
+    ok: bool
+    value: Any = None
+    message: str = ""
+    detail: str = ""
+    elapsed_s: float = 0.0
+
+
+def _one_line(text: str) -> str:
+    lines = [ln.strip() for ln in str(text).strip().splitlines() if ln.strip()]
+    return " ".join(lines) if lines else ""
+
+
+def _call(fn: Callable, job: Job, sink: Callable[[str, str], None] | None) -> _Outcome:
+    """Run one job, turning any exception into a failed outcome (so nothing unpicklable crosses processes)."""
+    token = _reporter.set((lambda stage: sink(job.name, stage)) if sink is not None else None)
+    t0 = time.perf_counter()
+    try:
+        value = fn(job.payload)
+        return _Outcome(job.name, True, value, elapsed_s=time.perf_counter() - t0)
+    except RidgelocError as exc:
+        return _Outcome(job.name, False, message=_one_line(str(exc)), elapsed_s=time.perf_counter() - t0)
+    except Exception as exc:
+        return _Outcome(job.name, False, message=_one_line(f"internal error ({type(exc).__name__}): {exc}"),
+                        detail=traceback.format_exc(), elapsed_s=time.perf_counter() - t0)
+    finally:
+        _reporter.reset(token)
+
+
+class _QueueSink:
+    """Stage reports from worker processes through a multiprocessing queue (picklable)."""
+
+    def __init__(self, q):
+        self.q = q
+
+    def __call__(self, name: str, stage: str) -> None:
+        self.q.put((name, stage))
+
+
+class _DaskSink:
+    """Stage reports from Dask workers as structured events the client subscribes to."""
+
+    def __call__(self, name: str, stage: str) -> None:
+        from distributed import get_worker
+
+        get_worker().log_event(STAGE_TOPIC, {"name": name, "stage": stage})
+
+
+def _ignore_sigint() -> None:
+    # Ctrl-C goes to the whole process group; the parent decides, the workers must not print tracebacks
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+# ---- progress display ---------------------------------------------------------------------------------------
+
+class _Progress:
+    """A batch bar plus one bar per running flight (terminal only); lines for finished flights."""
+
+    def __init__(self, total: int, enabled: bool, stages: Sequence[str] | None, max_bars: int):
+        from tqdm.auto import tqdm
+
+        self._tqdm = tqdm
+        self.enabled = enabled
+        self.stages = list(stages) if stages else None
+        self.max_bars = max_bars
+        self.ok = self.failed = 0
+        disable = None if enabled else True  # None: tqdm shows bars only on a terminal
+        self.bar = tqdm(total=total, desc="flights", unit="flight", position=0, disable=disable, file=sys.stderr,
+                        dynamic_ncols=True)
+        self.flight_bars: dict[str, Any] = {}
+        self.free_slots = list(range(1, max_bars + 1))
+
+    def stage(self, name: str, stage: str) -> None:
+        if self.bar.disable:
+            return
+        fb = self.flight_bars.get(name)
+        if fb is None:
+            if not self.free_slots:
+                return
+            slot = self.free_slots.pop(0)
+            fb = self._tqdm(total=len(self.stages) if self.stages else None, desc=f"  {name}", position=slot,
+                            leave=False, file=sys.stderr, dynamic_ncols=True,
+                            bar_format="{desc} |{bar}| {n_fmt}/{total_fmt} [{elapsed}]" if self.stages
+                            else "{desc} [{elapsed}]")
+            fb.slot = slot
+            self.flight_bars[name] = fb
+        if self.stages and stage in self.stages:
+            fb.n = self.stages.index(stage)
+        fb.set_description_str(f"  {name}: {stage}")
+
+    def finished(self, name: str, failure: GroupFailure | None, elapsed_s: float, timings: dict | None) -> None:
+        fb = self.flight_bars.pop(name, None)
+        if fb is not None:
+            fb.close()
+            self.free_slots.append(fb.slot)
+            self.free_slots.sort()
+        if failure is None:
+            self.ok += 1
+            parts = ", ".join(f"{k} {v:.1f}" for k, v in (timings or {}).items()
+                              if isinstance(v, (int, float)))
+            line = f"{name}: done in {elapsed_s:.1f} s" + (f" ({parts} s)" if parts else "")
+        else:
+            self.failed += 1
+            line = f"{name}: FAILED: {failure.message}"
+        if self.enabled:
+            self._tqdm.write(line, file=sys.stderr)
+        self.bar.set_postfix(ok=self.ok, failed=self.failed)
+        self.bar.update(1)
+
+    def close(self) -> None:
+        for fb in self.flight_bars.values():
+            fb.close()
+        self.flight_bars.clear()
+        self.bar.close()
+
+
+# ---- executors -------------------------------------------------------------------------------------------------
+
+def _to_result(job: Job, out: _Outcome):
+    if out.ok:
+        return out.value, None
+    return None, GroupFailure(name=job.name, source=job.source, message=out.message)
+
+
+def _run_inline(jobs, fn, progress: _Progress, on_done):
+    outcomes = {}
+    for job in jobs:
+        progress.stage(job.name, "start")
+        out = _call(fn, job, progress.stage)
+        outcomes[job.name] = out
+        on_done(job, out)
+    return outcomes
+
+
+def _run_processes(jobs, fn, workers: int, progress: _Progress, on_done):
+    outcomes = {}
+    ctx = multiprocessing.get_context("spawn") if sys.platform == "win32" else multiprocessing.get_context()
+    manager = ctx.Manager()
+    try:
+        stage_q = manager.Queue()
+        sink = _QueueSink(stage_q)
+        executor = cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_ignore_sigint)
+        try:
+            futures = {executor.submit(_call, fn, job, sink): job for job in jobs}
+            pending = set(futures)
+            while pending:
+                done, pending = cf.wait(pending, timeout=_POLL_S, return_when=cf.FIRST_COMPLETED)
+                _drain(stage_q, progress)
+                for f in done:
+                    job = futures[f]
+                    try:
+                        out = f.result()
+                    except Exception as exc:  # the worker process died (killed, out of memory, segfault)
+                        out = _Outcome(job.name, False, message=_one_line(f"worker process failed: {exc!r}"))
+                    outcomes[job.name] = out
+                    on_done(job, out)
+        except BaseException:
+            # Ctrl-C (or a bug here): drop what has not started, stop what runs, leave no worker behind
+            executor.shutdown(wait=False, cancel_futures=True)
+            for p in list(getattr(executor, "_processes", {}).values()):  # no public API before Python 3.14
+                with contextlib.suppress(Exception):
+                    p.terminate()
+            raise
+        executor.shutdown(wait=True)
+    finally:
+        manager.shutdown()
+    return outcomes
+
+
+def _drain(q, progress: _Progress) -> None:
+    while True:
+        try:
+            name, stage = q.get_nowait()
+        except (queue_mod.Empty, EOFError, OSError):
+            return
+        progress.stage(name, stage)
+
+
+def _dask_client(scheduler, workers: int):
+    """(client, owned): a Client for `scheduler` (an address, a Client, or None for a LocalCluster of
+    `workers` processes); owned = this call created it and must close it."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise ConfigError("the Dask executor needs the optional extra: pip install 'ridgeloc[dask]'") from None
+    if isinstance(scheduler, Client):
+        return scheduler, False
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+        client._ridgeloc_cluster = cluster
+        return client, True
+    try:
+        return Client(scheduler, timeout="20s"), True
+    except (OSError, TimeoutError) as exc:
+        raise ConfigError(f"cannot connect to the Dask scheduler at {scheduler}: {exc}") from None
+
+
+def _run_dask(jobs, fn, workers: int, scheduler, progress: _Progress, on_done):
+    client, owned = _dask_client(scheduler, workers)
+    events: queue_mod.Queue = queue_mod.Queue()
+    outcomes = {}
+    try:
+        with contextlib.suppress(Exception):
+            client.subscribe_topic(STAGE_TOPIC, lambda ev: events.put(ev[1]))
+        # pure=False: two jobs with equal payloads are still two runs
+        futures = {client.submit(_call, fn, job, _DaskSink(), pure=False, key=f"ridgeloc-{i}-{job.name}"): job
+                   for i, job in enumerate(jobs)}
+        pending = list(futures)
+        try:
+            while pending:
+                still = []
+                for f in pending:
+                    if not f.done():
+                        still.append(f)
+                        continue
+                    job = futures[f]
+                    try:
+                        out = f.result()
+                    except Exception as exc:  # the worker died or the task could not run
+                        out = _Outcome(job.name, False, message=_one_line(f"dask task failed: {exc!r}"))
+                    outcomes[job.name] = out
+                    on_done(job, out)
+                pending = still
+                while True:
+                    try:
+                        ev = events.get_nowait()
+                    except queue_mod.Empty:
+                        break
+                    progress.stage(ev["name"], ev["stage"])
+                if pending:
+                    time.sleep(_POLL_S)
+        except BaseException:
+            with contextlib.suppress(Exception):
+                client.cancel(list(futures))
+            raise
+    finally:
+        with contextlib.suppress(Exception):
+            client.unsubscribe_topic(STAGE_TOPIC)
+        if owned:
+            cluster = getattr(client, "_ridgeloc_cluster", None)
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    return outcomes
+
+
+def run_jobs(jobs: Sequence[Job], fn: Callable[[Any], Any], *, workers: int = 1, executor: str = "local",
+             scheduler=None, progress: bool = True, stages: Sequence[str] | None = None,
+             on_done: Callable[[Job, Any, GroupFailure | None], None] | None = None
+             ) -> tuple[list[Any], list[GroupFailure]]:
+    """Run `fn(job.payload)` for every job; returns (results, failures), each in the order of `jobs`.
+
+    executor "local": in this process when workers == 1, else a pool of `workers` processes (`fn` and payloads
+    must be picklable: a module-level function). executor "dask": on the cluster at `scheduler` (an address such
+    as "tcp://host:8786", or a `distributed.Client`), or on a new LocalCluster of `workers` processes when None.
+    `stages`: the stage names `fn` reports through `report_stage`, in order, for the per-flight bars.
+    `on_done(job, result, failure)` is called in this process as each job finishes (exactly one of result and
+    failure is None), e.g. to log or to write outputs. Job names must be unique.
+    """
+    jobs = list(jobs)
+    if executor not in EXECUTORS:
+        raise ConfigError(f"unknown executor {executor!r}; choose one of {', '.join(EXECUTORS)}")
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ConfigError(f"workers must be an integer >= 1, got {workers!r}")
+    names = [j.name for j in jobs]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ConfigError(f"two jobs are named {dup[0]!r}; job names must be unique")
+    if not jobs:
+        return [], []
+    bars = _Progress(len(jobs), progress, stages, max_bars=min(workers, 8) if executor == "local" else 8)
+
+    def done(job: Job, out: _Outcome) -> None:
+        result, failure = _to_result(job, out)
+        bars.finished(job.name, failure, out.elapsed_s, getattr(result, "timings_s", None))
+        if on_done is not None:
+            on_done(job, result, failure)
+
+    try:
+        if executor == "dask":
+            outcomes = _run_dask(jobs, fn, workers, scheduler, bars, done)
+        elif workers == 1:
+            outcomes = _run_inline(jobs, fn, bars, done)
+        else:
+            outcomes = _run_processes(jobs, fn, workers, bars, done)
+    finally:
+        bars.close()
+    results, failures = [], []
+    for job in jobs:
+        result, failure = _to_result(job, outcomes[job.name])
+        if failure is None:
+            results.append(result)
+        else:
+            failures.append(failure)
+    return results, failures
+
+
+def summarize_failures(failures: Iterable[GroupFailure], total: int) -> str:
+    """A short multi-line summary: 'k of n flight(s) failed:' then one line per failure."""
+    failures = list(failures)
+    if not failures:
+        return f"all {total} flight(s) finished"
+    lines = [f"{len(failures)} of {total} flight(s) failed (the others finished):"]
+    lines += [f"  {f.name} ({f.source}): {f.message}" for f in failures]
+    return "\n".join(lines)
+
+
+# ---- finding flights -------------------------------------------------------------------------------------------
+
+def discover_flights(path: str | PathLike, config_name: str = "flight.yaml") -> list[Path]:
+    """Flight config files to run, from:
+
+    - a folder: every `config_name` file in it or below (hidden folders skipped), sorted by path;
+    - a manifest YAML file: a list of flight config paths, or a mapping with such a list under `groups`
+      (a run config); relative paths are relative to the manifest's folder;
+    - any other YAML file: that one flight config.
+
+    Listed files are not opened or checked here: a missing or broken one fails as its own job.
+    """
+    path = Path(path)
+    if path.is_dir():
+        found = sorted(p for p in path.rglob(config_name)
+                       if p.is_file() and not any(part.startswith(".") for part in p.relative_to(path).parts[:-1]))
+        if not found:
+            raise InputError(f"no flight configs named {config_name} in this folder or below", path)
+        return [p.resolve() for p in found]
+    if not path.is_file():
+        raise InputError("no such file or folder", path)
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"cannot read: {exc}", path) from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"not valid YAML: {exc}", path) from None
+    listed = doc if isinstance(doc, list) else doc.get("groups") if isinstance(doc, dict) else None
+    if listed is None:
+        return [path.resolve()]
+    if not isinstance(listed, list) or not listed or not all(isinstance(p, str) and p for p in listed):
+        raise ConfigError("a manifest must be a non-empty list of flight config paths", path)
+    return [(path.resolve().parent / p).resolve() for p in listed]

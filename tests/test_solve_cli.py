@@ -1,0 +1,104 @@
+"""`ridgeloc solve` on the shipped example file and on broken files; the example file is reproducible."""
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.cli import main
+from pipeline.solve import METHODS
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLE = ROOT / "configs" / "example_observations.json"
+
+
+def _load_script():
+    spec = importlib.util.spec_from_file_location("make_example", ROOT / "scripts" / "make_example_observations.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _numbers_close(a, b):
+    if isinstance(a, dict):
+        assert a.keys() == b.keys()
+        for k in a:
+            _numbers_close(a[k], b[k])
+    elif isinstance(a, list):
+        assert len(a) == len(b)
+        for x, y in zip(a, b, strict=True):
+            _numbers_close(x, y)
+    elif isinstance(a, float):
+        assert a == pytest.approx(b, rel=1e-12, abs=1e-9)
+    else:
+        assert a == b
+
+
+def test_example_file_is_what_the_script_generates():
+    _numbers_close(_load_script().build(), json.loads(EXAMPLE.read_text()))
+
+
+def test_solve_all_json(capsys):
+    assert main(["solve", str(EXAMPLE), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    est = doc["estimates"]
+    assert list(est) == list(METHODS)
+    for d in est.values():
+        assert len(d["position_m"]) == 3
+        assert isinstance(d["iterations"], int) and isinstance(d["converged"], bool)
+        assert "condition_number" in d and d["error_m"] >= 0
+    assert len(est["los"]["points_m"]) == 10 and est["los"]["points_m"][3] is None  # frame 3 has no pixel
+    assert est["los"]["oracle_error_m"] > 0
+    assert np.array(est["mle"]["covariance_m2"]).shape == (3, 3)
+    assert 0 < est["mle"]["cep50_m"] < est["mle"]["cep90_m"]
+    # the weighted MLE is accurate on this problem; the paper's range-only is not (small arc)
+    assert est["mle"]["error_m"] < 15
+    assert est["range"]["error_m"] > est["mle"]["error_m"]
+
+
+def test_solve_table_and_selected_methods(capsys):
+    assert main(["solve", str(EXAMPLE), "--method", "vision", "--method", "mle"]) == 0
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    assert lines[0].split()[:4] == ["method", "x_m", "y_m", "z_m"]
+    assert lines[1].startswith("vision") and lines[2].startswith("mle")
+    assert "CEP50" in out
+
+
+def _write(tmp_path, doc):
+    path = tmp_path / "obs.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_bad_file_is_one_line_error(tmp_path, capsys):
+    doc = json.loads(EXAMPLE.read_text())
+    doc["observations"][2]["P"] = [[1, 2, 3]]
+    path = _write(tmp_path, doc)
+    assert main(["solve", str(path)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and str(path) in err and "must be 3x4" in err
+
+
+def test_method_that_cannot_solve_exits_non_zero(tmp_path, capsys):
+    doc = json.loads(EXAMPLE.read_text())
+    for row in doc["observations"][2:]:
+        row["range_m"] = None
+    path = _write(tmp_path, doc)
+    assert main(["solve", str(path), "--method", "range"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "at least three laser ranges" in err
+    # the others still print, the failure is listed and the exit status says so
+    assert main(["solve", str(path), "--json"]) == 1
+    captured = capsys.readouterr()
+    doc = json.loads(captured.out)
+    assert "range" in doc["failures"] and "mle" in doc["estimates"]
+    assert list(doc["failures"]) == ["range"] and "at least three laser ranges" in captured.err
+
+
+def test_unknown_method_is_rejected_by_argparse(capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["solve", str(EXAMPLE), "--method", "magic"])
+    assert info.value.code == 2

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pymap3d
-from scipy import integrate, optimize, stats
+from scipy import integrate, optimize, special, stats
 
 from pipeline.geometry.camera import project
 from pipeline.results import GroupResult
@@ -93,15 +93,21 @@ def ellipse_points_en_m(cov_en_m2: np.ndarray, confidence: float = ELLIPSE_CONFI
 
 
 def circular_probability(cov_en_m2: np.ndarray, radius_m: float) -> float:
-    """P(|x| <= radius) for x ~ N(0, cov) in 2D, by the exact integral over the polar angle."""
-    w = np.clip(np.linalg.eigvalsh(np.asarray(cov_en_m2, dtype=np.float64)), 1e-300, None)
+    """P(|x| <= radius) for x ~ N(0, cov) in 2D: along the major axis x1 ~ N(0, s1^2), and given x1 the minor
+    component must stay within +-sqrt(r^2 - x1^2), so P = 2 int_0^r pdf1(x1) erf(sqrt(r^2 - x1^2) / (s2 sqrt 2)).
+    The integrand stays bounded when s2 -> 0 (the 1D limit), unlike the polar-angle form."""
+    w = np.clip(np.linalg.eigvalsh(np.asarray(cov_en_m2, dtype=np.float64)), 0.0, None)
+    s1, s2 = np.sqrt(w[1]), np.sqrt(w[0])
+    if s1 == 0.0:
+        return 1.0 if radius_m > 0 else 0.0
 
-    def integrand(theta):
-        a = np.cos(theta) ** 2 / w[0] + np.sin(theta) ** 2 / w[1]
-        return -np.expm1(-radius_m ** 2 * a / 2.0) / a
+    def integrand(x):
+        half_width = np.sqrt(max(radius_m ** 2 - x * x, 0.0))
+        inner = special.erf(half_width / (s2 * np.sqrt(2.0))) if s2 > 0 else 1.0
+        return np.exp(-0.5 * (x / s1) ** 2) / (s1 * np.sqrt(2.0 * np.pi)) * inner
 
-    value, _ = integrate.quad(integrand, 0.0, 2.0 * np.pi, limit=200)
-    return float(value / (2.0 * np.pi * np.sqrt(w[0] * w[1])))
+    value, _ = integrate.quad(integrand, 0.0, radius_m, limit=200, epsabs=1e-12)
+    return float(min(2.0 * value, 1.0))
 
 
 def cep_m(cov_en_m2: np.ndarray, probability: float) -> float:

@@ -1,0 +1,149 @@
+"""targets.csv against its documented columns, targets.kml as KML 2.2, and the uncertainty numbers in them."""
+
+from __future__ import annotations
+
+import csv
+import math
+import re
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_export_geojson import ORIGIN, hand_group, rotated_cov
+
+from pipeline.report.exports import TARGETS_CSV_COLUMNS, write_targets_csv, write_targets_geojson, write_targets_kml
+from pipeline.report.geometry import cep_m, ellipse_axes_m
+from pipeline.report.store import load_group_result, save_group_result
+
+DOCS = Path(__file__).resolve().parent.parent / "docs" / "outputs.md"
+KML = "{http://www.opengis.net/kml/2.2}"
+
+
+def documented_csv_columns() -> list[str]:
+    """The first column of the table under '## `targets.csv`' in docs/outputs.md."""
+    text = DOCS.read_text()
+    section = text.split("## `targets.csv`", 1)[1].split("\n## ", 1)[0]
+    return re.findall(r"^\| `([a-z0-9_]+)` \|", section, flags=re.M)
+
+
+@pytest.fixture(scope="module")
+def groups():
+    return [hand_group("g1"), hand_group("g2", truth=False, seed=4)]
+
+
+def test_csv_columns_are_the_documented_ones(tmp_path, groups):
+    path = tmp_path / "targets.csv"
+    write_targets_csv(path, groups)
+    with path.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    documented = documented_csv_columns()
+    assert len(documented) > 20
+    assert list(rows[0].keys()) == documented == list(TARGETS_CSV_COLUMNS)
+    assert len(rows) == 8  # 2 groups x 4 methods, the diverged one included
+    assert {r["alt_datum"] for r in rows} == {"WGS84 ellipsoidal height (EPSG:4979)"}
+
+
+def test_csv_values(tmp_path, groups):
+    path = tmp_path / "targets.csv"
+    write_targets_csv(path, groups)
+    with path.open(newline="") as f:
+        rows = {(r["group"], r["method"]): r for r in csv.DictReader(f)}
+    g1 = groups[0]
+    # Table-4 order within a group
+    assert [m for (g, m) in rows if g == "g1"] == ["vision", "range", "ridge", "mle"]
+    for m in ("vision", "ridge", "mle"):
+        r = rows[("g1", m)]
+        pos = g1.estimates[m].position_m
+        d = pos - g1.truth_m
+        assert float(r["error_m"]) == pytest.approx(math.sqrt(d @ d), abs=1e-3)
+        assert float(r["error_horizontal_m"]) == pytest.approx(math.hypot(d[0], d[1]), abs=1e-3)
+        assert float(r["error_up_m"]) == pytest.approx(d[2], abs=1e-3)
+        assert [float(r[k]) for k in ("e_m", "n_m", "u_m")] == pytest.approx(pos, abs=1e-3)
+        assert 28.0 < float(r["lat_deg"]) < 29.0 or abs(float(r["lat_deg"]) - ORIGIN[0]) < 0.1
+        assert r["converged"] == "true"
+    mle = rows[("g1", "mle")]
+    assert float(mle["sigma_up_m"]) == pytest.approx(3.0)
+    assert float(mle["ellipse95_azimuth_deg"]) == pytest.approx(30.0, abs=0.01)
+    assert float(mle["cep50_m"]) < float(mle["cep90_m"])
+    assert rows[("g1", "vision")]["cep50_m"] == ""  # no covariance: undefined, not zero
+    rng = rows[("g1", "range")]
+    assert rng["lat_deg"] == "" and rng["error_m"] == "" and rng["status"] == "diverged"
+    assert rng["converged"] == "false"
+    assert rows[("g2", "mle")]["error_m"] == ""  # no truth known
+
+
+def test_kml_is_kml22_and_agrees_with_geojson(tmp_path, groups):
+    import json
+
+    write_targets_kml(tmp_path / "t.kml", groups)
+    write_targets_geojson(tmp_path / "t.geojson", groups)
+    root = ET.parse(tmp_path / "t.kml").getroot()
+    assert root.tag == f"{KML}kml"
+    folders = root.findall(f"{KML}Document/{KML}Folder")
+    assert [f.findtext(f"{KML}name") for f in folders] == ["g1", "g2"]
+    gj = json.loads((tmp_path / "t.geojson").read_text())
+    for folder in folders:
+        group = folder.findtext(f"{KML}name")
+        pts = {}
+        for pm in folder.findall(f"{KML}Placemark"):
+            c = pm.findtext(f"{KML}Point/{KML}coordinates")
+            if c is not None:
+                data = {d.get("name"): d.findtext(f"{KML}value") for d in pm.iter(f"{KML}Data")}
+                pts[data.get("method", "truth")] = [float(v) for v in c.split(",")]
+            ring = pm.findtext(f".//{KML}LinearRing/{KML}coordinates")
+            if ring is not None:
+                coords = [tuple(map(float, p.split(","))) for p in ring.split()]
+                assert coords[0] == coords[-1] and len(coords) >= 4
+        for f in gj["features"]:
+            p = f["properties"]
+            if p["group"] == group and p["kind"] == "estimate":
+                assert pts[p["method"]][:2] == pytest.approx(f["geometry"]["coordinates"][:2], abs=1e-7)
+        # every Placemark style refers to a defined Style
+        styles = {s.get("id") for s in root.iter(f"{KML}Style")}
+        for pm in folder.iter(f"{KML}Placemark"):
+            assert pm.findtext(f"{KML}styleUrl").lstrip("#") in styles
+
+
+@pytest.mark.parametrize("sigma", [0.5, 2.0, 10.0])
+def test_cep_closed_forms_circular(sigma):
+    cov = np.diag([sigma ** 2, sigma ** 2])
+    assert cep_m(cov, 0.5) == pytest.approx(sigma * math.sqrt(2 * math.log(2)), rel=1e-6)
+    assert cep_m(cov, 0.9) == pytest.approx(sigma * math.sqrt(2 * math.log(10)), rel=1e-6)
+
+
+def test_cep_degenerate_and_correlated():
+    # one axis vanishing: the 1D half-normal quantiles (0.674490, 1.644854 sigma)
+    assert cep_m(np.diag([9.0, 1e-10]), 0.5) == pytest.approx(3 * 0.6744897501960817, rel=1e-4)
+    assert cep_m(np.diag([9.0, 1e-10]), 0.9) == pytest.approx(3 * 1.6448536269514722, rel=1e-4)
+    # correlated: the fraction of Gaussian samples inside the CEP circles
+    cov = rotated_cov(5.0, 1.5, 70.0)[:2, :2]
+    x = np.random.default_rng(0).multivariate_normal([0, 0], cov, 200_000)
+    r = np.hypot(x[:, 0], x[:, 1])
+    assert np.mean(r <= cep_m(cov, 0.5)) == pytest.approx(0.5, abs=0.004)
+    assert np.mean(r <= cep_m(cov, 0.9)) == pytest.approx(0.9, abs=0.003)
+    a, b, az = ellipse_axes_m(cov)
+    inside = (x @ np.array([math.sin(math.radians(az)), math.cos(math.radians(az))])) ** 2 / a ** 2 + (
+        x @ np.array([math.cos(math.radians(az)), -math.sin(math.radians(az))])) ** 2 / b ** 2 <= 1
+    assert np.mean(inside) == pytest.approx(0.95, abs=0.003)
+
+
+def test_group_result_round_trip(tmp_path, groups):
+    g = groups[0]
+    g.timings_s["solve"] = 0.25
+    save_group_result(tmp_path / "result.json", g)
+    back = load_group_result(tmp_path / "result.json")
+    assert back.name == g.name and back.origin_lla == g.origin_lla
+    np.testing.assert_array_equal(back.truth_m, g.truth_m)
+    np.testing.assert_array_equal(back.observations.P, g.observations.P)
+    np.testing.assert_array_equal(back.observations.pixel, g.observations.pixel)
+    assert back.intersection_angle_deg == g.intersection_angle_deg
+    assert back.timings_s == {"solve": 0.25}
+    for m, e in g.estimates.items():
+        b = back.estimates[m]
+        np.testing.assert_array_equal(b.position_m, e.position_m)  # NaN stays NaN
+        assert (b.status, b.iterations, b.method) == (e.status, e.iterations, e.method)
+        if e.covariance_m2 is None:
+            assert b.covariance_m2 is None
+        else:
+            np.testing.assert_array_equal(b.covariance_m2, e.covariance_m2)

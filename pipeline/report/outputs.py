@@ -85,25 +85,28 @@ def _group_figures(outdir: Path, name: str) -> dict[str, bytes]:
 
 
 def write_run_outputs(outdir: str | PathLike, results: Sequence[GroupResult], failures: Sequence[GroupFailure],
-                      settings: Mapping) -> dict[str, Path]:
+                      settings: Mapping, figures: bool = True) -> dict[str, Path]:
     """Write the run-level outputs (report.html, targets.csv/.geojson/.kml, run.json) and every group folder that
-    is not written yet. Returns name -> path of the run-level files."""
+    is not written yet. `figures=False` leaves the figures out of new group folders and of the report (fast).
+    Returns name -> path of the run-level files."""
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(outdir)
     results = sorted(results, key=lambda r: r.name)
     failures = sorted(failures, key=lambda f: f.name)
-    figures = {}
+    pngs = {}
     for r in results:
         if not is_done(group_dir(outdir, r.name)):
-            write_group_outputs(outdir, r)
-        figures[r.name] = _group_figures(outdir, r.name)  # missing ones are rendered by the page itself
+            write_group_outputs(outdir, r, figures=figures)
+        # figures missing from a folder are rendered by the page itself
+        pngs[r.name] = _group_figures(outdir, r.name) if figures else {}
     paths = {k: outdir / f for k, f in (("csv", "targets.csv"), ("geojson", "targets.geojson"),
                                         ("kml", "targets.kml"), ("html", "report.html"), ("run", "run.json"))}
     write_targets_csv(paths["csv"], results)
     write_targets_geojson(paths["geojson"], results)
     write_targets_kml(paths["kml"], results)
-    write_report_html(paths["html"], results, failures, settings, {k: v for k, v in figures.items() if v})
+    write_report_html(paths["html"], results, failures, settings,
+                      {k: v for k, v in pngs.items() if v or not figures})
     atomic_write_text(paths["run"], json.dumps({
         "groups": [r.name for r in results],
         "failures": [{"name": f.name, "source": f.source, "message": f.message} for f in failures],

@@ -56,8 +56,10 @@ def _open_reader(path: Path) -> AnyReader:
         reader = AnyReader([path], default_typestore=_typestore())
         reader.open()
     except Exception as exc:  # rosbags raises its own ReaderError/ValueError/KeyError variants
-        raise LogReadError(f"cannot open bag: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}",
-                           path=path) from None
+        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        if "index" in text.lower():
+            text += " (a bag cut off while recording has no index; `rosbag reindex` repairs it)"
+        raise LogReadError(f"cannot open bag: {text}", path=path) from None
     return reader
 
 

@@ -34,6 +34,22 @@ SUPPLIES = {"vehicle_global_position": "position", "sensor_gps": "position", "ve
 GPS_TOPICS = ("sensor_gps", "vehicle_gps_position")
 
 
+def _ends_mid_message(path: Path) -> bool:
+    """True when the last ULog message is cut short (pyulog stops there silently): walk the 3-byte message
+    headers (uint16 size, uint8 type) after the 16-byte file header."""
+    import mmap
+    import struct
+
+    size = path.stat().st_size
+    if size <= 16:
+        return size > 0
+    with open(path, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+        pos, unpack = 16, struct.Struct("<H").unpack_from
+        while pos + 3 <= size:
+            pos += 3 + unpack(mm, pos)[0]
+    return pos != size
+
+
 def _quat(d: dict) -> np.ndarray:
     return np.column_stack([d[f"q[{i}]"] for i in range(4)]).astype(float)
 
@@ -76,9 +92,11 @@ def read_ulog(path: str | Path, mapping: dict, scan_all: bool = False) -> Flight
     except Exception as exc:  # pyulog raises bare Exception / struct.error / IndexError on bad files
         text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise LogReadError(f"not a readable ULog: {text}", path=path) from None
+    if not ulog.message_formats:
+        raise LogReadError("no ULog message formats (garbage after the header, or not a ULog)", path=path)
     warnings: list[str] = []
     n_read = sum(len(d.data["timestamp"]) for d in ulog.data_list)
-    if getattr(ulog, "file_corruption", False):
+    if getattr(ulog, "file_corruption", False) or _ends_mid_message(path):
         span = (ulog.last_timestamp - ulog.start_timestamp) / 1e6
         warnings.append(f"{path}: file is corrupt or cut off; read {n_read} messages of the selected topics "
                         f"covering {span:.1f} s")

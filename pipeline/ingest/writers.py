@@ -32,14 +32,14 @@ class TlogWriter:
         self.close()
 
 
-def write_json_mcap(path, messages: dict[str, list[dict]]) -> None:
+def write_json_mcap(path, messages: dict[str, list[dict]], chunk_size: int = 1024 * 1024) -> None:
     """Plain MCAP with one JSON channel per topic (jsonschema schema); log_time = publish_time = msg["t_ns"]."""
     import json
 
     from mcap.writer import Writer
 
     with open(Path(path), "wb") as f:
-        w = Writer(f)
+        w = Writer(f, chunk_size=chunk_size)
         w.start()
         chans = {}
         for topic in messages:
@@ -51,3 +51,81 @@ def write_json_mcap(path, messages: dict[str, list[dict]]) -> None:
         for t, topic, m in rows:
             w.add_message(chans[topic], log_time=int(t), publish_time=int(t), data=json.dumps(m).encode())
         w.finish()
+
+
+def ros_message(kind: str, t_ns: int, **kw):
+    """Build one ROS message (rosbags ROS 2 Humble types) by short kind name: navsat, imu, quat, range,
+    compressed, image, camera_info. Returns (msgtype, message)."""
+    import numpy as np
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    T = ts.types
+    header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=int(t_ns // 10**9),
+                                                                             nanosec=int(t_ns % 10**9)),
+                                      frame_id=kw.get("frame_id", "base_link"))
+    Q = T["geometry_msgs/msg/Quaternion"]
+    V = T["geometry_msgs/msg/Vector3"]
+    z9 = np.zeros(9)
+    if kind == "navsat":
+        st = T["sensor_msgs/msg/NavSatStatus"](status=kw.get("status", 0), service=1)
+        return "sensor_msgs/msg/NavSatFix", T["sensor_msgs/msg/NavSatFix"](
+            header=header, status=st, latitude=kw["lat"], longitude=kw["lon"], altitude=kw["alt"],
+            position_covariance=z9, position_covariance_type=0)
+    if kind == "imu":
+        x, y, z, w = kw["q_xyzw"]
+        cov = np.zeros(9)
+        cov[0] = kw.get("cov0", 0.0)
+        return "sensor_msgs/msg/Imu", T["sensor_msgs/msg/Imu"](
+            header=header, orientation=Q(x=x, y=y, z=z, w=w), orientation_covariance=cov,
+            angular_velocity=V(x=0.0, y=0.0, z=0.0), angular_velocity_covariance=z9,
+            linear_acceleration=V(x=0.0, y=0.0, z=9.81), linear_acceleration_covariance=z9)
+    if kind == "quat":
+        x, y, z, w = kw["q_xyzw"]
+        return "geometry_msgs/msg/QuaternionStamped", T["geometry_msgs/msg/QuaternionStamped"](
+            header=header, quaternion=Q(x=x, y=y, z=z, w=w))
+    if kind == "range":
+        return "sensor_msgs/msg/Range", T["sensor_msgs/msg/Range"](
+            header=header, radiation_type=1, field_of_view=0.001, min_range=kw.get("min_range", 1.0),
+            max_range=kw.get("max_range", 5000.0), range=kw["range"])
+    if kind == "compressed":
+        return "sensor_msgs/msg/CompressedImage", T["sensor_msgs/msg/CompressedImage"](
+            header=header, format=kw.get("format", "jpeg"), data=np.frombuffer(kw["data"], np.uint8))
+    if kind == "image":
+        img = kw["img"]
+        return "sensor_msgs/msg/Image", T["sensor_msgs/msg/Image"](
+            header=header, height=img.shape[0], width=img.shape[1], encoding=kw["encoding"], is_bigendian=0,
+            step=img.strides[0], data=np.frombuffer(img.tobytes(), np.uint8))
+    if kind == "camera_info":
+        return "sensor_msgs/msg/CameraInfo", T["sensor_msgs/msg/CameraInfo"](
+            header=header, height=kw["height"], width=kw["width"], distortion_model="plumb_bob",
+            d=np.asarray(kw["d"], float), k=np.asarray(kw["k"], float).ravel(), r=np.eye(3).ravel(),
+            p=np.asarray(kw["p"], float).ravel(), binning_x=0, binning_y=0,
+            roi=T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False))
+    raise ValueError(kind)
+
+
+def write_ros_bag(path, messages: list[tuple[str, int, str, object]], storage: str = "ros1") -> None:
+    """Write (topic, record_time_ns, msgtype, message) rows to a ROS 1 .bag ("ros1") or a ROS 2 bag folder
+    ("sqlite3" or "mcap" storage), through rosbags' writers."""
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    path = Path(path)
+    if storage == "ros1":
+        from rosbags.rosbag1 import Writer
+
+        writer, ser = Writer(path), lambda m, t: ts.serialize_ros1(m, t)
+        open_kw = {}
+    else:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+        writer, ser = Writer(path, version=8, storage_plugin=plugin), lambda m, t: ts.serialize_cdr(m, t)
+        open_kw = {}
+    conns = {}
+    with writer:
+        for topic, t_ns, msgtype, msg in sorted(messages, key=lambda r: r[1]):
+            if topic not in conns:
+                conns[topic] = writer.add_connection(topic, msgtype, typestore=ts, **open_kw)
+            writer.write(conns[topic], int(t_ns), ser(msg, msgtype))

@@ -1,0 +1,99 @@
+"""PX4 ULog and ArduPilot DataFlash readers on the real logs, checked against raw pyulog / DFReader values."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from pipeline.errors import LogReadError
+from pipeline.ingest import read_flight
+
+LOGS = Path(__file__).resolve().parents[1] / ".." / "shared" / "logs"
+
+
+def _raw_ulog(name, topic):
+    from pyulog import ULog
+    return ULog(str(LOGS / name), message_name_filter_list=[topic]).get_dataset(topic).data
+
+
+def test_ulog_old_gps_int_fields_and_attitude():
+    name = "px4_pyulog_sample_log_small.ulg"
+    gps = _raw_ulog(name, "vehicle_gps_position")
+    att = _raw_ulog(name, "vehicle_attitude")
+    log = read_flight([LOGS / name])
+    pos = log.position
+    assert pos.source.endswith("vehicle_gps_position") and pos.clock == "unix"
+    # int 1e-7 deg and mm (old vehicle_gps_position), ellipsoid height by default
+    assert pos.lat_deg[0] == pytest.approx(gps["lat"][0] * 1e-7, abs=1e-12) == pytest.approx(63.4170622)
+    assert pos.lon_deg[0] == pytest.approx(10.4082151)
+    assert pos.alt_datum == "ellipsoid" and pos.alt_m[0] == pytest.approx(106.766)
+    # boot -> UNIX through time_utc_usec: the first fix's UTC time within 50 ms
+    assert abs(pos.t_ns[0] - int(gps["time_utc_usec"][0]) * 1000) < 50_000_000
+    q_raw = np.array([att[f"q[{i}]"][0] for i in range(4)])
+    q = log.attitude.quat_wxyz[0]
+    np.testing.assert_allclose(q, q_raw * np.sign(q_raw[0]), atol=1e-7)
+    assert log.attitude.t_ns.size == 1298
+    amsl = read_flight([LOGS / name], mapping={"ulog": {"position": {"datum": "amsl"}}}).position
+    assert amsl.alt_datum == "amsl" and amsl.alt_m[0] == pytest.approx(66.814)
+
+
+def test_ulog_new_topics_and_global_position():
+    log = read_flight([LOGS / "foxglove_mcap_test_ulog.ulg"])
+    gp = _raw_ulog("foxglove_mcap_test_ulog.ulg", "vehicle_global_position")
+    assert log.position.source.endswith("vehicle_global_position")
+    assert log.position.lat_deg[0] == gp["lat"][0] and log.position.t_ns.size == 34
+    assert log.position.alt_m[0] == pytest.approx(float(gp["alt_ellipsoid"][0]))
+    log2 = read_flight([LOGS / "px4_pyulog_tagged_default_params.ulg"])
+    assert log2.position.source.endswith("vehicle_gps_position")
+    assert log2.position.lat_deg[0] == pytest.approx(47.397, abs=1e-3)
+    assert log2.attitude.t_ns.size == 1730
+    assert log2.missing_for_localization() == ["gimbal", "range", "frames"]
+
+
+def test_ulog_truncated_and_garbage(tmp_path):
+    data = (LOGS / "px4_pyulog_tagged_default_params.ulg").read_bytes()
+    cut = tmp_path / "cut.ulg"
+    cut.write_bytes(data[: len(data) // 2])
+    log = read_flight([cut])
+    assert 0 < log.attitude.t_ns.size < 1730
+    assert any("corrupt or cut off" in w and "covering" in w for w in log.warnings)
+    bad = tmp_path / "bad.ulg"
+    bad.write_bytes(b"ULog\x01\x12\x35" + bytes(range(256)) * 3)
+    with pytest.raises(LogReadError, match=r"bad\.ulg: "):
+        read_flight([bad])
+
+
+def test_dataflash_truncated_real_log():
+    from pymavlink import DFReader
+
+    path = LOGS / "ardupilot_pymavlink_test.BIN"
+    raw = DFReader.DFReader_binary(str(path), zero_time_base=True)
+    gps = raw.recv_match(type="GPS")
+    raw.rewind()
+    att = raw.recv_match(type="ATT")
+    log = read_flight([path])
+    assert any("truncated" in w and "1.0 s" in w for w in log.warnings)
+    pos = log.position
+    assert pos.alt_datum == "amsl" and pos.clock == "unix" and pos.t_ns.size == 5
+    assert (pos.lat_deg[0], pos.lon_deg[0], pos.alt_m[0]) == (gps.Lat, gps.Lng, gps.Alt)
+    assert pos.lat_deg[0] == pytest.approx(-35.3626277)
+    # GPS week 1973, 6448000 ms: 315964800 + 1973 * 604800 + 6448 - 18 (leap) = 1509241630 s UTC
+    assert (gps.GWk, gps.GMS) == (1973, 6448000)
+    assert abs(pos.t_ns[0] - 1_509_241_630 * 10**9) < 20_000_000
+    # ATT degrees, ZYX: roll -7.18, pitch 2.58, yaw 337.1
+    r, p, y = map(math.radians, (att.Roll, att.Pitch, att.Yaw))
+    fwd = Rotation.from_quat(log.attitude.quat_wxyz[0], scalar_first=True).apply([1, 0, 0])
+    np.testing.assert_allclose(fwd, [math.cos(y) * math.cos(p), math.sin(y) * math.cos(p), -math.sin(p)], atol=1e-9)
+    right = Rotation.from_quat(log.attitude.quat_wxyz[0], scalar_first=True).apply([0, 1, 0])
+    assert right[2] == pytest.approx(math.sin(r) * math.cos(p), abs=1e-9)
+
+
+def test_dataflash_garbage(tmp_path):
+    g = tmp_path / "g.bin"
+    g.write_bytes(b"\xa3\x95" + bytes(range(256)) * 4)
+    with pytest.raises(LogReadError, match=r"g\.bin: "):
+        read_flight([g])

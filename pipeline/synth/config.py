@@ -1,0 +1,385 @@
+"""A synthetic flight's configuration: typed defaults, loaded from YAML, unknown keys rejected.
+
+Every number the generator uses is a key here (docs/synth.md explains each default). Defaults describe the
+paper's flight experiments (section 3.2): 600x400 px camera at 25 Hz, about 2 km above and 5 km from the
+target (observation angle 66.42 deg), laser noise ~5 m, position noise ~2 m, attitude noise ~0.2 deg.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from os import PathLike
+from pathlib import Path
+from typing import Literal
+
+import yaml
+
+from pipeline.errors import ConfigError
+
+FORMATS = ("tlog", "ros1", "ros2-sqlite3", "ros2-mcap", "mcap")
+
+
+@dataclass(frozen=True)
+class SiteConfig:
+    """Where the target stands. lat/lon WGS84 degrees, alt_m above the WGS84 ellipsoid (the ground there).
+
+    geoid_separation_m: N = ellipsoid height - AMSL height, held constant over the flight (used to write AMSL
+        altitudes in MAVLink; ~ -28 m on the Guanzhong plain near Xi'an, the default site).
+    """
+
+    lat_deg: float = 34.36
+    lon_deg: float = 108.76
+    alt_m: float = 372.0
+    geoid_separation_m: float = -28.0
+    target_size_m: float = 36.0
+
+
+@dataclass(frozen=True)
+class PathConfig:
+    """The camera's path in the target's local ENU frame.
+
+    kind: "arc" = a circle around the target at height_m above it and slant_distance_m from it; "straight" =
+        a level line perpendicular to the horizontal line of sight at its midpoint (slant_distance_m there);
+        "waypoints" = a smooth curve through waypoints_enu_m (E, N, Up metres from the target) at speed_mps.
+    intersection_angle_deg: arc / straight: the angle between the first and last lines of sight (exact).
+    start_azimuth_deg: arc / straight: azimuth (from north, clockwise) of the platform seen from the target at
+        the first observation (straight: at the line's midpoint).
+    direction: "cw" or "ccw" seen from above (arc); straight: which way along the line.
+    speed_mps: nominal ground speed; the observation spacing is a whole number of seconds near it, so the
+        actual speed is adjusted slightly (truth.json records it).
+    """
+
+    kind: Literal["arc", "straight", "waypoints"] = "arc"
+    height_m: float = 2000.0
+    slant_distance_m: float = 5000.0
+    intersection_angle_deg: float = 40.0
+    start_azimuth_deg: float = 200.0
+    direction: Literal["cw", "ccw"] = "ccw"
+    speed_mps: float = 35.0
+    waypoints_enu_m: tuple[tuple[float, ...], ...] = ()
+    pitch_deg: float = 2.0
+
+
+@dataclass(frozen=True)
+class ObservationConfig:
+    """count: observation epochs (laser shot + video frame). spacing_s: seconds between them (0 = derived from
+    the path length and speed; waypoints need it). lead_in_s / lead_out_s: flight time before the first and
+    after the last observation."""
+
+    count: int = 10
+    spacing_s: int = 0
+    lead_in_s: float = 8.0
+    lead_out_s: float = 4.0
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    """OpenCV pinhole + distortion (k1, k2, p1, p2, k3), 25 Hz video."""
+
+    width_px: int = 600
+    height_px: int = 400
+    fx_px: float = 1800.0
+    fy_px: float = 1800.0
+    cx_px: float = 301.7
+    cy_px: float = 198.4
+    dist: tuple[float, ...] = (-0.12, 0.08, 0.0006, -0.0004, 0.0)
+    fps: int = 25
+
+
+@dataclass(frozen=True)
+class GimbalConfig:
+    """jitter_px: std of the tracker's pointing error (Ornstein-Uhlenbeck, per image axis, in pixels at the
+    principal point) so the target is near but not at the centre; jitter_tau_s its correlation time.
+    yaw_in_vehicle_frame: log the gimbal quaternion with yaw relative to the vehicle heading (MAVLink flag 32)."""
+
+    jitter_px: float = 2.0
+    jitter_tau_s: float = 2.0
+    yaw_in_vehicle_frame: bool = False
+
+
+@dataclass(frozen=True)
+class LeverArmConfig:
+    """Camera and rangefinder origins relative to the GNSS antenna, body FRD metres."""
+
+    camera: tuple[float, ...] = (0.35, 0.0, 0.42)
+    rangefinder: tuple[float, ...] = (0.35, 0.06, 0.42)
+
+
+@dataclass(frozen=True)
+class RatesConfig:
+    """Logging rates, Hz. The laser fires on video frames (a multiple of the frame period)."""
+
+    gps_hz: float = 5.0
+    attitude_hz: float = 25.0
+    gimbal_hz: float = 25.0
+    laser_hz: float = 1.0
+    system_time_hz: float = 1.0
+
+
+@dataclass(frozen=True)
+class NoiseConfig:
+    """Telemetry errors (standard deviations).
+
+    gnss_drift_m / gnss_white_m: per axis (E, N, U), a first-order Gauss-Markov drift with time constant
+        gnss_tau_s plus white noise (default total ~2 m per axis).
+    attitude_deg / gimbal_deg: per axis, a slowly varying error (Gauss-Markov, attitude_tau_s) of the vehicle's
+        and the gimbal's logged attitude (0.2 deg as the paper's flights).
+    laser_m: range noise; laser_dropout: probability that a shot is missing (never at observation epochs unless
+        laser_dropout_at_observations).
+    vehicle_wobble_deg / vehicle_wobble_tau_s: true turbulence on the vehicle's roll, pitch, yaw (not noise).
+    pixel_noise_dn: sensor noise on rendered frames (8-bit digital numbers).
+    """
+
+    gnss_drift_m: float = 1.7
+    gnss_white_m: float = 1.0
+    gnss_tau_s: float = 60.0
+    attitude_deg: float = 0.2
+    gimbal_deg: float = 0.2
+    attitude_tau_s: float = 20.0
+    laser_m: float = 5.0
+    laser_dropout: float = 0.05
+    laser_dropout_at_observations: bool = False
+    vehicle_wobble_deg: float = 0.6
+    vehicle_wobble_tau_s: float = 1.5
+    pixel_noise_dn: float = 1.5
+
+
+@dataclass(frozen=True)
+class LaserConfig:
+    """min_range_m / max_range_m: the rangefinder's limits (outside => logged invalid).
+    aim: "target" = a shot measures the distance to the target (the tracker holds the laser spot on it, as the
+        paper's model assumes); "beam" = to where the optical axis meets the ground plane.
+    outlier_observations: observation indices whose shot is an outlier (valid flag set, range off by
+        outlier_offset_m, signs alternating), e.g. the beam catching a nearer obstacle."""
+
+    min_range_m: float = 50.0
+    max_range_m: float = 12000.0
+    aim: Literal["target", "beam"] = "target"
+    outlier_observations: tuple[int, ...] = ()
+    outlier_offset_m: tuple[float, ...] = (-420.0, 310.0, -650.0)
+
+
+@dataclass(frozen=True)
+class LostTargetConfig:
+    """Observations whose frames do not show the target: occluded (a cloud drifts over it) or slipped (the
+    gimbal loses lock and points slip_px to the side: the target leaves the image, the laser hits ground)."""
+
+    occluded_observations: tuple[int, ...] = ()
+    slipped_observations: tuple[int, ...] = ()
+    slip_px: float = 420.0
+
+
+@dataclass(frozen=True)
+class VideoConfig:
+    """mode: "bursts" = a triggered camera records burst_frames frames centred on each observation;
+    "continuous" = every frame at fps from video start to the end.
+    start_delay_s: video clock zero relative to the telemetry start (defines the clock offset).
+    images_in_bag: bags only: frames as sensor_msgs/CompressedImage in the bag instead of video.mp4.
+    jpeg_quality: for CompressedImage frames."""
+
+    mode: Literal["bursts", "continuous"] = "bursts"
+    burst_frames: int = 9
+    start_delay_s: float = 2.316
+    images_in_bag: bool = False
+    jpeg_quality: int = 85
+
+
+@dataclass(frozen=True)
+class SceneConfig:
+    """The procedural ground texture: texture_px square pixels of texture_res_m metres, centred on the target;
+    supersample: rendering factor before the anti-aliasing downsample; haze_km: visibility scale."""
+
+    seed: int = 7
+    texture_px: int = 4096
+    texture_res_m: float = 1.5
+    supersample: int = 2
+    haze_km: float = 16.0
+
+
+@dataclass(frozen=True)
+class SynthConfig:
+    """One synthetic flight; `group` names the output (defaults to the config file's stem)."""
+
+    group: str = "example"
+    description: str = ""
+    seed: int = 1
+    format: Literal["tlog", "ros1", "ros2-sqlite3", "ros2-mcap", "mcap"] = "tlog"
+    start_time_utc: str = "2024-05-14T02:30:00Z"
+    site: SiteConfig = field(default_factory=SiteConfig)
+    path: PathConfig = field(default_factory=PathConfig)
+    observations: ObservationConfig = field(default_factory=ObservationConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    gimbal: GimbalConfig = field(default_factory=GimbalConfig)
+    lever_arms_m: LeverArmConfig = field(default_factory=LeverArmConfig)
+    rates: RatesConfig = field(default_factory=RatesConfig)
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
+    laser: LaserConfig = field(default_factory=LaserConfig)
+    lost_target: LostTargetConfig = field(default_factory=LostTargetConfig)
+    video: VideoConfig = field(default_factory=VideoConfig)
+    scene: SceneConfig = field(default_factory=SceneConfig)
+
+    def __post_init__(self):
+        _check(self)
+
+    @property
+    def start_time_ns(self) -> int:
+        """Telemetry start, UNIX ns."""
+        try:
+            dt = datetime.fromisoformat(self.start_time_utc.replace("Z", "+00:00"))
+        except ValueError:
+            raise ConfigError(f"'start_time_utc' is not an ISO 8601 time: {self.start_time_utc!r}") from None
+        if dt.tzinfo is None:
+            dt = dt.replace(tzinfo=timezone.utc)
+        return round(dt.timestamp()) * 1_000_000_000 + dt.microsecond * 1000
+
+    @classmethod
+    def from_dict(cls, doc: dict | None, path: str | PathLike | None = None) -> SynthConfig:
+        doc = {} if doc is None else doc
+        if isinstance(doc, dict) and "group" not in doc and path is not None:
+            doc = {**doc, "group": Path(path).stem}
+        try:
+            return _build(cls, doc, "")
+        except ConfigError as exc:
+            raise ConfigError(str(exc), path) from None
+
+    @classmethod
+    def load(cls, path: str | PathLike) -> SynthConfig:
+        path = Path(path)
+        try:
+            doc = yaml.safe_load(path.read_text())
+        except FileNotFoundError:
+            raise ConfigError("config file not found", path) from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"cannot read: {exc}", path) from None
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"not valid YAML: {exc}".replace("\n", " "), path) from None
+        return cls.from_dict(doc, path)
+
+    def replace(self, **changes) -> SynthConfig:
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict:
+        return _to_plain(dataclasses.asdict(self))
+
+
+def _to_plain(value):
+    if isinstance(value, dict):
+        return {k: _to_plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_to_plain(v) for v in value]
+    return value
+
+
+def _check(c: SynthConfig) -> None:
+    p, o, cam = c.path, c.observations, c.camera
+    c.start_time_ns  # noqa: B018 (validates the time string)
+    if o.count < 2:
+        raise ConfigError(f"'observations.count' must be >= 2, got {o.count}")
+    if o.spacing_s < 0 or o.lead_in_s < 1 or o.lead_out_s < 1:
+        raise ConfigError("'observations.spacing_s' must be >= 0 and lead_in_s, lead_out_s >= 1")
+    if not 0 < p.height_m < p.slant_distance_m:
+        raise ConfigError(f"'path.height_m' ({p.height_m}) must be > 0 and below 'path.slant_distance_m'")
+    if p.kind == "arc":
+        theta = math.asin(math.sqrt(p.slant_distance_m ** 2 - p.height_m ** 2) / p.slant_distance_m)
+        max_deg = math.degrees(2 * theta)
+        if not 0 < p.intersection_angle_deg < max_deg:
+            raise ConfigError(f"'path.intersection_angle_deg' must be in (0, {max_deg:.1f}) for an arc at this "
+                              f"height and slant distance, got {p.intersection_angle_deg}")
+    elif p.kind == "straight":
+        if not 0 < p.intersection_angle_deg < 170:
+            raise ConfigError(f"'path.intersection_angle_deg' must be in (0, 170), got {p.intersection_angle_deg}")
+    else:
+        if len(p.waypoints_enu_m) < 2 or any(len(w) != 3 for w in p.waypoints_enu_m):
+            raise ConfigError("'path.waypoints_enu_m' must list at least two [E, N, Up] points")
+        if o.spacing_s < 1:
+            raise ConfigError("a waypoints path needs 'observations.spacing_s' >= 1")
+    if not 5 <= p.speed_mps <= 120:
+        raise ConfigError(f"'path.speed_mps' must be in [5, 120], got {p.speed_mps}")
+    if cam.width_px < 16 or cam.height_px < 16 or cam.fx_px <= 0 or cam.fy_px <= 0 or len(cam.dist) != 5:
+        raise ConfigError("'camera' needs width/height >= 16 px, positive focal lengths and 5 'dist' coefficients")
+    if cam.fps < 1:
+        raise ConfigError(f"'camera.fps' must be >= 1, got {cam.fps}")
+    for name in ("camera", "rangefinder"):
+        if len(getattr(c.lever_arms_m, name)) != 3:
+            raise ConfigError(f"'lever_arms_m.{name}' must be [x, y, z]")
+    r = c.rates
+    for name in ("gps_hz", "attitude_hz", "gimbal_hz", "laser_hz", "system_time_hz"):
+        if not 0 < getattr(r, name) <= 200:
+            raise ConfigError(f"'rates.{name}' must be in (0, 200], got {getattr(r, name)}")
+    frames_per_shot = cam.fps / r.laser_hz
+    if abs(frames_per_shot - round(frames_per_shot)) > 1e-9:
+        raise ConfigError(f"'rates.laser_hz' must divide the frame rate {cam.fps} (the laser fires on frames)")
+    for name in ("gnss_drift_m", "gnss_white_m", "attitude_deg", "gimbal_deg", "laser_m", "vehicle_wobble_deg",
+                 "pixel_noise_dn"):
+        if getattr(c.noise, name) < 0:
+            raise ConfigError(f"'noise.{name}' must be >= 0")
+    if not 0 <= c.noise.laser_dropout < 1:
+        raise ConfigError(f"'noise.laser_dropout' must be in [0, 1), got {c.noise.laser_dropout}")
+    for name, idx in (("laser.outlier_observations", c.laser.outlier_observations),
+                      ("lost_target.occluded_observations", c.lost_target.occluded_observations),
+                      ("lost_target.slipped_observations", c.lost_target.slipped_observations)):
+        bad = [i for i in idx if not 0 <= i < o.count]
+        if bad:
+            raise ConfigError(f"'{name}' has indices outside 0..{o.count - 1}: {bad}")
+    if c.laser.outlier_observations and not c.laser.outlier_offset_m:
+        raise ConfigError("'laser.outlier_offset_m' must list at least one offset")
+    if c.video.burst_frames < 1:
+        raise ConfigError("'video.burst_frames' must be >= 1")
+    if c.video.images_in_bag and c.format in ("tlog", "mcap"):
+        raise ConfigError("'video.images_in_bag' needs a bag format (ros1, ros2-sqlite3, ros2-mcap)")
+    if not 1 <= c.video.jpeg_quality <= 100:
+        raise ConfigError("'video.jpeg_quality' must be in [1, 100]")
+    s = c.scene
+    if s.texture_px < 256 or s.texture_res_m <= 0 or s.supersample < 1:
+        raise ConfigError("'scene' needs texture_px >= 256, texture_res_m > 0, supersample >= 1")
+
+
+# ---- a small typed loader over the dataclasses above --------------------------------------------------------
+
+def _convert(tp, value, where: str):
+    origin = typing.get_origin(tp)
+    if dataclasses.is_dataclass(tp):
+        if not isinstance(value, dict):
+            raise ConfigError(f"'{where}' must be a mapping of keys, got {type(value).__name__}")
+        return _build(tp, value, where + ".")
+    if origin is Literal:
+        if value not in typing.get_args(tp):
+            raise ConfigError(f"'{where}' must be one of {', '.join(map(repr, typing.get_args(tp)))}, got {value!r}")
+        return value
+    if origin is tuple:
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(f"'{where}' must be a list, got {type(value).__name__} {value!r}")
+        item = typing.get_args(tp)[0]
+        return tuple(_convert(item, v, f"{where}[{i}]") for i, v in enumerate(value))
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"'{where}' must be true or false, got {value!r}")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"'{where}' must be an integer, got {type(value).__name__} {value!r}")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ConfigError(f"'{where}' must be a finite number, got {type(value).__name__} {value!r}")
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"'{where}' must be a string, got {type(value).__name__} {value!r}")
+        return value
+    raise TypeError(f"unsupported config type {tp}")
+
+
+def _build(cls, doc: dict, prefix: str):
+    if not isinstance(doc, dict):
+        raise ConfigError(f"the top level must be a mapping of keys, got {type(doc).__name__}")
+    hints = typing.get_type_hints(cls)
+    names = [f.name for f in dataclasses.fields(cls)]
+    unknown = sorted(set(doc) - set(names))
+    if unknown:
+        raise ConfigError(f"unknown key(s) {', '.join(prefix + k for k in unknown)} (known: {', '.join(names)})")
+    return cls(**{k: _convert(hints[k], v, prefix + k) for k, v in doc.items()})

@@ -216,6 +216,7 @@ class ObservationSelection:
     frame_tolerance_s: float = 0.1
     max_range_gap_s: float = 0.1
     frame_indices: tuple[int, ...] = ()
+    max_laser_offset_px: float | None = 50.0
 
     def __post_init__(self):
         if self.frame_tolerance_s <= 0 or self.max_range_gap_s < 0:

@@ -62,14 +62,13 @@ def open_frames(config: FlightConfig, log: FlightLog) -> tuple[FrameSeries, _Tim
         return frames, _TimedDecoder(video.read), video
     if log.frames is None:
         raise ConfigError("the flight has no video (files.video) and its logs carry no images", config.path)
-    source = log.frames.source
     for path in config.files.telemetry:
         try:
-            images = ingest.BagImages(path, source)
-        except RidgelocError:
+            images = ingest.BagImages(path, None, mapping=config.mapping)
+        except (RidgelocError, ValueError, KeyError):
             continue
-        return log.frames, _TimedDecoder(images.read), images
-    raise ConfigError(f"cannot open the image stream {source!r} of the flight's logs", config.path)
+        return images.frames, _TimedDecoder(images.read), None
+    raise ConfigError(f"cannot open the image stream {log.frames.source!r} of the flight's logs", config.path)
 
 
 def _origin(config: FlightConfig, log: FlightLog) -> tuple[float, float, float]:
@@ -160,6 +159,16 @@ def process_group(config: FlightConfig) -> GroupResult:
             close()
     if track.lost.any():
         notes.append(f"target lost in {int(track.lost.sum())} of {plan.n} observation frames (pixel not used)")
+    range_m = plan.range_m.copy()
+    if sel.max_laser_offset_px is not None:
+        # The laser is boresighted: when the target is far from the principal point the shot is not on it.
+        where = np.where(np.isnan(track.pixel_px), track.predicted_px, track.pixel_px)
+        offset = np.hypot(where[:, 0] - config.camera.cx_px, where[:, 1] - config.camera.cy_px)
+        off_target = (offset > sel.max_laser_offset_px) & ~np.isnan(range_m)
+        if off_target.any():
+            range_m[off_target] = np.nan
+            notes.append(f"{int(off_target.sum())} range(s) not used: the target was more than "
+                         f"{sel.max_laser_offset_px:g} px from the image centre, off the laser's axis")
 
     t2 = time.perf_counter()
     origin = _origin(config, log)
@@ -172,14 +181,14 @@ def process_group(config: FlightConfig) -> GroupResult:
     truth_m = None if truth_lla is None else enu_from_lla(*truth_lla, origin)
     cam = config.camera
     sigma = Sigma.from_dict(dataclasses.asdict(config.sigma), "sigma")
-    useful = states.inside & (~track.lost | ~np.isnan(plan.range_m))
+    useful = states.inside & (~track.lost | ~np.isnan(range_m))
     if (states.inside & ~useful).any():
         notes.append(f"{int((states.inside & ~useful).sum())} observation(s) with neither pixel nor range dropped")
     if not useful.any():
         raise InputError("no usable observation: the target was never tracked and no laser range is valid",
                          config.path)
     sub = dataclasses.replace(states, inside=useful)
-    obs, _ = assemble_observations(sub, track.pixel_px, plan.range_m, K=cam.K, dist=cam.dist, origin_lla=origin,
+    obs, _ = assemble_observations(sub, track.pixel_px, range_m, K=cam.K, dist=cam.dist, origin_lla=origin,
                                        R_optical_from_gimbal=np.array(cam.R_optical_from_gimbal),
                                        lever_camera_m=config.lever_arms_m.camera,
                                        lever_rangefinder_m=config.lever_arms_m.rangefinder, sigma=sigma,
@@ -216,17 +225,12 @@ def process_group(config: FlightConfig) -> GroupResult:
 
 
 def estimates_document(result: GroupResult) -> dict:
-    """The `ridgeloc solve --json` structure for the group's estimates."""
-    try:
-        from pipeline.commands.solve import estimates_json  # the solve command's own serialisation, when present
-    except ImportError:
-        estimates_json = None
-    if estimates_json is not None:
-        return estimates_json(result.observations, result.estimates)
-    doc = {"n_observations": result.n_observations,
-           "estimates": {m: e.to_dict(result.truth_m) for m, e in result.estimates.items()}}
-    if result.truth_m is not None:
-        doc["truth_m"] = [float(v) for v in result.truth_m]
+    """The `ridgeloc solve OBS.json --method all --json` document of the group's observations:
+    {"estimates": {method: Estimate.to_dict(truth)}, "failures": {method: message} (only when some failed)}."""
+    doc: dict = {"estimates": {m: e.to_dict(result.truth_m) for m, e in result.estimates.items()}}
+    failures = result.settings.get("solve_failures") or {}
+    if failures:
+        doc["failures"] = dict(failures)
     return doc
 
 

@@ -31,7 +31,7 @@ from pipeline.errors import InputError
 class TrackerSettings:
     """Thresholds of the tracker (flight config `tracking:` keys of the same names)."""
 
-    n_features: int = 1500
+    n_features: int = 1000
     ratio: float = 0.75
     ransac_reproj_px: float = 3.0
     min_inliers: int = 12
@@ -41,7 +41,7 @@ class TrackerSettings:
     search_half_px: int = 6
     keyframe_inlier_fraction: float = 0.5
     neighbours: int = 2
-    detect_scale: float = 1.0  # features are found on the image resized by this factor (speed); refinement is full-res
+    detect_scale: float = 0.5  # features are found on the image resized by this factor (speed); refinement is full-res
 
     def __post_init__(self):
         if not 0 < self.ratio < 1:
@@ -84,6 +84,7 @@ class FrameTrack:
     correlation: float = float("nan")
     keyframe: bool = False
     via: str = ""  # "mark" (the mark frame), "key", "reacquired", "bridge", or why it was lost
+    predicted_px: tuple[float, float] = (float("nan"), float("nan"))  # where the homography puts the mark, if any
 
 
 @dataclass
@@ -102,6 +103,11 @@ class TrackResult:
         return np.array([f.pixel_px for f in self.frames], dtype=np.float64).reshape(-1, 2)
 
     @property
+    def predicted_px(self) -> np.ndarray:
+        """(m, 2) where the homography chain puts the mark, also in lost frames (NaN where no homography)."""
+        return np.array([f.predicted_px for f in self.frames], dtype=np.float64).reshape(-1, 2)
+
+    @property
     def lost(self) -> np.ndarray:
         return np.array([f.lost for f in self.frames], dtype=bool)
 
@@ -113,6 +119,8 @@ class TrackResult:
         cols = ("frame_index", "lost", "inliers", "inlier_ratio", "reproj_px", "correlation", "keyframe", "via")
         out = {c: [clean(getattr(f, c)) for f in self.frames] for c in cols}
         out["pixel_px"] = [None if f.lost else [float(f.pixel_px[0]), float(f.pixel_px[1])] for f in self.frames]
+        out["predicted_px"] = [None if not np.isfinite(f.predicted_px).all() else [float(v) for v in f.predicted_px]
+                               for f in self.frames]
         return out
 
 
@@ -211,6 +219,7 @@ class SiftTracker:
             return ft, None
         H_cur_from_mark = H @ key.H_key_from_mark
         pred = cv2.perspectiveTransform(mark_px.reshape(1, 1, 2).astype(np.float64), H_cur_from_mark).reshape(2)
+        ft.predicted_px = (float(pred[0]), float(pred[1]))
         if not self._in_image(pred, cur):
             ft.via = "out of image"
             return ft, None
@@ -247,7 +256,8 @@ class SiftTracker:
             raise InputError(f"the target's mark frame {mark_index} has too few SIFT features to track")
         views: dict[int, _View] = {mark_index: mark}
         out: dict[int, FrameTrack] = {mark_index: FrameTrack(mark_index, (float(p0[0]), float(p0[1])), False,
-                                                             len(mark.keypoints_px), 1.0, 0.0, 1.0, True, "mark")}
+                                                             len(mark.keypoints_px), 1.0, 0.0, 1.0, True, "mark",
+                                                             (float(p0[0]), float(p0[1])))}
         avail = sorted(set(int(i) for i in (available if available is not None else [])))
         for direction in (1, -1):
             seq = sorted((i for i in set(wanted) if (i - mark_index) * direction > 0), key=lambda i: i * direction)

@@ -1,0 +1,85 @@
+"""Tracking accuracy: the tracked target pixel against the true projection, per flight group.
+
+    python scripts/track_accuracy.py [CONFIG]          (default: configs/sample.yaml)
+
+For every group whose flight config has a `truth_file` (a synthetic flight's truth.json), the observation
+frames are tracked exactly as `ridgeloc run` tracks them, and each tracked pixel (image pixels, distorted) is
+compared with the frame's `true_target_pixel`. Frames where the target is truly visible but was flagged lost, and
+frames where it is not visible but was reported, are counted separately. Prints a table and the pooled median
+and 95th percentile.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.flight_config import load_run_config
+from pipeline.ingest import read_flight
+from pipeline.run import open_frames
+from pipeline.sync.select import plan_observations
+from pipeline.track.sift import SiftTracker
+
+
+def track_group(cfg):
+    log = read_flight(list(cfg.files.telemetry), mapping=cfg.mapping)
+    frames, decoder, closable = open_frames(cfg, log)
+    try:
+        c, sel = cfg.clock, cfg.observations
+        plan = plan_observations(frames, log.range, mode=sel.mode, video_offset_ns=c.video_to_telemetry_offset_ns,
+                                 range_offset_ns=c.range_offset_ns, frame_tolerance_s=sel.frame_tolerance_s,
+                                 max_range_gap_s=sel.max_range_gap_s, frame_indices=sel.frame_indices)
+        tracker = SiftTracker(cfg.tracking)
+        res = tracker.track(decoder, cfg.target.frame_index, cfg.target.pixel, plan.frame_index.tolist(),
+                            available=np.asarray(frames.index).tolist())
+    finally:
+        if closable is not None:
+            closable.close()
+    return res
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("config", nargs="?", default="configs/sample.yaml")
+    args = ap.parse_args(argv)
+    pooled = []
+    print(f"{'group':<14} {'frames':>6} {'tracked':>7} {'lost(vis)':>9} {'false':>5} {'median px':>9} {'p95 px':>7} "
+          f"{'max px':>7}")
+    for entry in load_run_config(args.config):
+        cfg = entry.config
+        if cfg is None or cfg.truth_file is None:
+            continue
+        truth = json.loads(Path(cfg.truth_file).read_text())
+        by_index = {f["frame_index"]: f for f in truth["frames"]}
+        res = track_group(cfg)
+        errs, lost_visible, false_reports = [], 0, 0
+        for ft in res.frames:
+            t = by_index.get(ft.frame_index)
+            if t is None:
+                continue
+            visible = bool(t.get("target_visible", True)) and not t.get("occluded", False)
+            if ft.lost:
+                lost_visible += visible
+                continue
+            if not visible:
+                false_reports += 1
+                continue
+            errs.append(float(np.hypot(*(np.array(ft.pixel_px) - np.array(t["true_target_pixel"])))))
+        e = np.array(errs)
+        pooled.extend(errs)
+        fmt = (lambda v: f"{v:.3f}") if e.size else (lambda v: "-")
+        print(f"{cfg.name:<14} {len(res.frames):>6} {e.size:>7} {lost_visible:>9} {false_reports:>5} "
+              f"{fmt(np.median(e) if e.size else 0):>9} {fmt(np.percentile(e, 95) if e.size else 0):>7} "
+              f"{fmt(e.max() if e.size else 0):>7}")
+    if pooled:
+        p = np.array(pooled)
+        print(f"pooled: {p.size} frames, median {np.median(p):.3f} px, 95th percentile {np.percentile(p, 95):.3f} px")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

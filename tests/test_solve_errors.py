@@ -127,8 +127,6 @@ def test_singular_projection_matrix(obs):
 @pytest.mark.parametrize("method", [m for m in METHODS if m not in ("dlt", "los")])
 def test_divergence_raises_solver_error(obs, method, monkeypatch):
     monkeypatch.setattr(iterate_mod, "DIVERGENCE_FACTOR", 1e-9)
-    import pipeline.solve.mle as mle_mod
-    monkeypatch.setattr(mle_mod, "DIVERGENCE_FACTOR", 1e-9)
     with pytest.raises(SolverError, match="diverged"):
         solve(method, obs, initial_m=[50.0, 50.0, 50.0])
 

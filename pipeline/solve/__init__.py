@@ -20,6 +20,7 @@ from pipeline.errors import GeometryError, ObservationError, SolverError
 from pipeline.solve import least_squares, linear
 from pipeline.solve import mle as _mle
 from pipeline.solve.estimate import BatchEstimate, Estimate, Status
+from pipeline.solve.mle_single import mle_one
 from pipeline.solve.observations import ObservationBatch, Observations, Sigma
 from pipeline.solve.stacked import Stacked, pixel_model, range_model
 
@@ -124,27 +125,10 @@ def _solve_stacked(method: str, st: Stacked, o: dict) -> BatchEstimate:
         if method == "ridge":
             extras["k"] = ex["k"]
     elif method == "mle":
-        x0 = _initial(o, B)
-        init_status = None
-        if x0 is None:
-            x0, init_status, _ = linear.dlt(st)
-            # fewer than two pixels, or no baseline (the DLT point is then a camera centre, or behind):
-            # start from the line-of-sight points
-            need = ~np.isfinite(x0).all(axis=1)
-            near = 1e-3 * (1.0 + st.range_m.max(axis=1, keepdims=True))
-            need |= ((st.depths(np.where(need[:, None], 0.0, x0)) <= near) & st.has_pix).any(axis=1)
-            if need.any():
-                Xl, sl, _, _ = linear.los(st.take(np.flatnonzero(need)))
-                x0[need], init_status[need] = Xl, sl
-        sigma = o.get("sigma") or st.sigma
-        vce = o.get("estimate_variance_components")
-        if vce is None:
-            vce = sigma.pixel_px is None or sigma.range_m is None
-        X, it, status, cond, cov, ex = _mle.mle(st, x0, sigma, o.get("robust", "huber"), bool(vce), tol, itmax,
+        x0, init_status, sigma, vce = _mle_start(st, o)
+        X, it, status, cond, cov, ex = _mle.mle(st, x0, sigma, o.get("robust", "huber"), vce, tol, itmax,
                                                 init_status)
-        axes, vecs = _mle.ellipsoid(cov)
-        extras = {"cep50_m": _mle.cep_m(cov[:, :2, :2], 0.5), "cep90_m": _mle.cep_m(cov[:, :2, :2], 0.9),
-                  "ellipsoid_semi_axes_1sigma_m": axes, "ellipsoid_axes": vecs, **ex}
+        extras = {**_mle_summaries(cov), **ex}
     else:  # pragma: no cover - _check_options rejects it
         raise ValueError(method)
     if method in _USES_PIXELS:
@@ -155,6 +139,51 @@ def _solve_stacked(method: str, st: Stacked, o: dict) -> BatchEstimate:
         extras["behind_camera"] = behind
     return BatchEstimate(method=method, position_m=X, iterations=it, status=status.astype(np.int8),
                          condition_number=cond, covariance_m2=cov, extras=extras)
+
+
+def _mle_start(st: Stacked, o: dict):
+    """Initial values (B,3) and their status, the sigmas and whether to estimate variance components."""
+    x0 = _initial(o, st.size)
+    init_status = None
+    if x0 is None:
+        x0, init_status, _ = linear.dlt(st)
+        # fewer than two pixels, or no baseline (the DLT point is then a camera centre, or behind):
+        # start from the line-of-sight points
+        need = ~np.isfinite(x0).all(axis=1)
+        near = 1e-3 * (1.0 + st.range_m.max(axis=1, keepdims=True))
+        need |= ((st.depths(np.where(need[:, None], 0.0, x0)) <= near) & st.has_pix).any(axis=1)
+        if need.any():
+            Xl, sl, _, _ = linear.los(st.take(np.flatnonzero(need)))
+            x0[need], init_status[need] = Xl, sl
+    sigma = o.get("sigma") or st.sigma
+    vce = o.get("estimate_variance_components")
+    if vce is None:
+        vce = sigma.pixel_px is None or sigma.range_m is None
+    return x0, init_status, sigma, bool(vce)
+
+
+def _mle_summaries(cov: np.ndarray) -> dict:
+    axes, vecs = _mle.ellipsoid(cov)
+    return {"cep50_m": _mle.cep_m(cov[:, :2, :2], 0.5), "cep90_m": _mle.cep_m(cov[:, :2, :2], 0.9),
+            "ellipsoid_semi_axes_1sigma_m": axes, "ellipsoid_axes": vecs}
+
+
+def _solve_one(method: str, st: Stacked, o: dict) -> BatchEstimate:
+    """A batch-of-one answer; `mle` through its single-problem iteration (same algorithm, less overhead)."""
+    if method != "mle":
+        return _solve_stacked(method, st, o)
+    x0, init_status, sigma, vce = _mle_start(st, o)
+    X, it, status, cond, cov, ex = mle_one(st, x0[0], sigma, o.get("robust", "huber"), vce, o["tol_m"],
+                                           o["max_iterations"], None if init_status is None else init_status[0])
+    X, cov = X[None], cov[None]
+    extras = {**_mle_summaries(cov), **{k: np.array([v]) for k, v in ex.items()}}
+    behind = _behind_camera(st, X)
+    if behind[0]:
+        status = Status.DEGENERATE
+        X[:] = np.nan
+    extras["behind_camera"] = behind
+    return BatchEstimate(method=method, position_m=X, iterations=np.array([it]), status=np.array([status], np.int8),
+                         condition_number=np.array([cond]), covariance_m2=cov, extras=extras)
 
 
 def _behind_camera(st: Stacked, X: np.ndarray) -> np.ndarray:
@@ -240,7 +269,7 @@ def solve(method: str, obs: Observations, **options) -> Estimate:
         raise TypeError(f"solve wants an Observations, got {type(obs).__name__}")
     _check_inputs(method, obs, o)
     st = Stacked.from_observations(obs)
-    be = _solve_stacked(method, st, o)
+    be = _solve_one(method, st, o)
     status = Status(int(be.status[0]))
     cond = float(be.condition_number[0])
     if status == Status.DEGENERATE:

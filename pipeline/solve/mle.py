@@ -8,8 +8,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import erf, erfinv
 
+from pipeline.solve import iterate as _iterate
 from pipeline.solve.estimate import Status
-from pipeline.solve.iterate import DEGENERATE_CONDITION, DIVERGENCE_FACTOR, problem_scale_m
+from pipeline.solve.iterate import problem_scale_m
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import Stacked, condition_numbers, normal_equations, pixel_model, range_model, solve_spd
 
@@ -106,7 +107,7 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     lam = np.zeros(B)
     vce_rounds = np.zeros(B, dtype=np.int64)
     centre = st.platform_m.mean(axis=1)
-    bound = DIVERGENCE_FACTOR * problem_scale_m(st, np.where(finite0[:, None], X0, centre))
+    bound = _iterate.DIVERGENCE_FACTOR * problem_scale_m(st, np.where(finite0[:, None], X0, centre))
 
     def costs(var, vfac, rr, okk):
         e = rr / np.sqrt(var * vfac[:, group])
@@ -186,7 +187,7 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     cov, singular = _inverse_spd(N)
     Jw = J * np.sqrt(w)[..., None]
     cond = condition_numbers(Jw)
-    bad_cond = (condition_numbers(Jw, equilibrate=True) > DEGENERATE_CONDITION) | singular
+    bad_cond = (condition_numbers(Jw, equilibrate=True) > _iterate.DEGENERATE_CONDITION) | singular
     status[bad_cond & ~failed] = Status.DEGENERATE
     failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
     X[failed] = np.nan

@@ -223,10 +223,14 @@ def _run_processes(jobs, fn, workers: int, progress: _Progress, on_done):
                     on_done(job, out)
         except BaseException:
             # Ctrl-C (or a bug here): drop what has not started, stop what runs, leave no worker behind
+            procs = list((getattr(executor, "_processes", None) or {}).values())  # no public API before 3.14
             executor.shutdown(wait=False, cancel_futures=True)
-            for p in list(getattr(executor, "_processes", {}).values()):  # no public API before Python 3.14
+            for p in procs:
                 with contextlib.suppress(Exception):
                     p.terminate()
+            for p in procs:
+                with contextlib.suppress(Exception):
+                    p.join(timeout=5)
             raise
         executor.shutdown(wait=True)
     finally:

@@ -1,0 +1,170 @@
+"""Batch runs: one bad flight is reported and skipped, executors agree, Ctrl-C stops everything."""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.batch import Job, discover_flights, report_stage, run_jobs, summarize_failures
+from pipeline.errors import ConfigError, InputError
+from pipeline.report import write_run_outputs
+from pipeline.report.synthetic import (
+    DEFAULT_ORIGIN_LLA,
+    los_intersection_angle_deg,
+    solve_all,
+    synthetic_observations,
+)
+from pipeline.results import GroupResult
+from pipeline.solve.observations import Observations
+
+STAGES = ("load", "solve")
+
+
+def solve_flight(path: str) -> GroupResult:
+    """A job: load one flight's observations file and run every estimator on it."""
+    report_stage("load")
+    obs = Observations.load(path)
+    report_stage("solve")
+    estimates, t_solve = solve_all(obs)
+    return GroupResult(name=Path(path).stem, origin_lla=DEFAULT_ORIGIN_LLA, observations=obs, estimates=estimates,
+                       truth_m=obs.truth_m, intersection_angle_deg=los_intersection_angle_deg(obs.platform_m,
+                                                                                               obs.truth_m),
+                       timings_s={"solve": t_solve})
+
+
+def make_flights(folder: Path, n: int, broken=(4, 13)) -> list[Job]:
+    """n generated flights as observation files; the `broken` ones are damaged in two different ways."""
+    jobs = []
+    for i in range(n):
+        name = f"flight{i:02d}"
+        path = folder / name / f"{name}.json"
+        path.parent.mkdir(parents=True)
+        obs, _ = synthetic_observations(seed=100 + i, intersection_angle_deg=20 + 3 * i, n_frames=8 + i % 5)
+        text = json.dumps(obs.to_dict())
+        if i == broken[0]:
+            text = text[: len(text) // 2]  # truncated mid-write
+        elif i == broken[1]:
+            doc = obs.to_dict()
+            doc["observations"][3]["platform_m"] = [1.0, 2.0]  # a corrupt row
+            text = json.dumps(doc)
+        path.write_text(text)
+        jobs.append(Job(name, str(path), str(path)))
+    return jobs
+
+
+def test_twenty_flights_two_broken(tmp_path):
+    jobs = make_flights(tmp_path / "flights", 20)
+    seen = []
+    results, failures = run_jobs(jobs, solve_flight, workers=2, progress=False, stages=STAGES,
+                                 on_done=lambda job, r, f: seen.append((job.name, r is None, f is None)))
+    assert len(results) == 18 and len(failures) == 2
+    assert [r.name for r in results] == [j.name for j in jobs if j.name not in ("flight04", "flight13")]
+    assert sorted(seen) == sorted((j.name, j.name in ("flight04", "flight13"), j.name not in ("flight04", "flight13"))
+                                  for j in jobs)
+    f4, f13 = failures
+    assert (f4.name, f13.name) == ("flight04", "flight13")
+    assert f4.source.endswith("flight04.json") and "not valid JSON" in f4.message and "flight04.json" in f4.message
+    assert "observations[3].platform_m must be [x, y, z]" in f13.message
+    assert all("\n" not in f.message for f in failures)
+    summary = summarize_failures(failures, len(jobs))
+    assert summary.splitlines()[0] == "2 of 20 flight(s) failed (the others finished):"
+    assert "flight04" in summary and "flight13" in summary
+
+    out = tmp_path / "out"
+    write_run_outputs(out, results, failures, {"workers": 2}, figures=False)
+    assert sorted(p.name for p in out.iterdir() if p.is_dir()) == [r.name for r in results]
+    assert all((out / r.name / ".done").is_file() for r in results)
+    csv_rows = (out / "targets.csv").read_text().strip().splitlines()
+    assert len(csv_rows) == 1 + sum(len(r.estimates) for r in results)
+    html = (out / "report.html").read_text()
+    assert "Failed groups (2)" in html and "not valid JSON" in html
+
+
+@pytest.fixture(scope="module")
+def dask_client():
+    distributed = pytest.importorskip("distributed")
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None)
+    client = distributed.Client(cluster)
+    yield client
+    client.close()
+    cluster.close()
+
+
+def test_dask_gives_the_same_results_as_local(tmp_path, dask_client):
+    jobs = make_flights(tmp_path, 6, broken=(2, 99))
+    local = run_jobs(jobs, solve_flight, workers=1, progress=False)
+    remote = run_jobs(jobs, solve_flight, executor="dask", scheduler=dask_client, progress=False, stages=STAGES)
+    by_address = run_jobs(jobs[:2], solve_flight, executor="dask", scheduler=dask_client.scheduler.address,
+                          progress=False)
+    for (res_a, fail_a), (res_b, fail_b) in ((local, remote), ((local[0][:2], []), by_address)):
+        assert [r.name for r in res_a] == [r.name for r in res_b]
+        assert [(f.name, f.message) for f in fail_a] == [(f.name, f.message) for f in fail_b]
+        for a, b in zip(res_a, res_b, strict=True):
+            assert a.estimates.keys() == b.estimates.keys()
+            for m in a.estimates:
+                np.testing.assert_array_equal(a.estimates[m].position_m, b.estimates[m].position_m)
+    assert len(local[0]) == 5 and local[1][0].name == "flight02"
+
+
+def _sleepy(x):
+    report_stage("sleeping")
+    time.sleep(x)
+    return x
+
+
+def _interrupt(job, result, failure):
+    raise KeyboardInterrupt
+
+
+def test_ctrl_c_stops_the_workers():
+    jobs = [Job("fast", "-", 0.05)] + [Job(f"slow{i}", "-", 30.0) for i in range(6)]
+    t0 = time.perf_counter()
+    with pytest.raises(KeyboardInterrupt):
+        run_jobs(jobs, _sleepy, workers=2, progress=False, on_done=_interrupt)
+    assert time.perf_counter() - t0 < 10.0  # did not wait for the 30 s jobs
+    deadline = time.time() + 5
+    while multiprocessing.active_children() and time.time() < deadline:
+        time.sleep(0.05)
+    assert multiprocessing.active_children() == []
+
+
+def test_bad_arguments_are_clear():
+    with pytest.raises(ConfigError, match="unknown executor 'spark'"):
+        run_jobs([Job("a", "-", 1)], _sleepy, executor="spark")
+    with pytest.raises(ConfigError, match="workers must be an integer >= 1"):
+        run_jobs([Job("a", "-", 1)], _sleepy, workers=0)
+    with pytest.raises(ConfigError, match="two jobs are named 'a'"):
+        run_jobs([Job("a", "-", 1), Job("a", "-", 2)], _sleepy)
+    assert run_jobs([], _sleepy) == ([], [])
+
+
+def test_discover_flights(tmp_path):
+    for name in ("b", "a", "nested/c", ".tmp-x"):
+        (tmp_path / "flights" / name).mkdir(parents=True)
+        (tmp_path / "flights" / name / "flight.yaml").write_text("name: x\n")
+    (tmp_path / "flights" / "a" / "notes.yaml").write_text("x: 1\n")
+    found = discover_flights(tmp_path / "flights")
+    assert [p.relative_to(tmp_path / "flights").as_posix() for p in found] == [
+        "a/flight.yaml", "b/flight.yaml", "nested/c/flight.yaml"]
+    manifest = tmp_path / "flights" / "manifest.yaml"
+    manifest.write_text("- b/flight.yaml\n- nested/c/flight.yaml\n- missing/flight.yaml\n")
+    assert [p.name for p in discover_flights(manifest)] == ["flight.yaml"] * 3
+    assert discover_flights(manifest)[2] == (tmp_path / "flights" / "missing" / "flight.yaml").resolve()
+    run_config = tmp_path / "flights" / "run.yaml"
+    run_config.write_text("groups: [a/flight.yaml]\n")
+    assert discover_flights(run_config) == [(tmp_path / "flights" / "a" / "flight.yaml").resolve()]
+    single = tmp_path / "flights" / "a" / "flight.yaml"
+    assert discover_flights(single) == [single.resolve()]
+    with pytest.raises(InputError, match=r"no flight configs named none\.yaml"):
+        discover_flights(tmp_path / "flights", config_name="none.yaml")
+    with pytest.raises(InputError, match="no such file or folder"):
+        discover_flights(tmp_path / "nowhere")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("groups: []\n")
+    with pytest.raises(ConfigError, match="non-empty list"):
+        discover_flights(bad)

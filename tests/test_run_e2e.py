@@ -1,0 +1,114 @@
+"""One small synthetic flight through every stage (synth -> ingest -> track -> sync -> solve -> outputs).
+
+Error bound, from the generator's noise (set below), not from the estimator's output:
+- line-of-sight angle error per axis: the gimbal's logged earth-referenced attitude, 0.02 deg = 0.35 mrad, i.e.
+  1.75 m across the line of sight at the 5 km slant range (the vehicle's attitude error, 0.02 deg, only turns
+  the sub-metre lever arms); a slow Gauss-Markov process (tau 20 s, as long as the flight), so no averaging over
+  observations is credited;
+- tracking error: below 0.3 px (tests/test_track_sift.py; checked here too) = 0.17 mrad = 0.8 m at 5 km;
+- GNSS 0.3 m per axis; laser 1 m along the line of sight.
+  sigma_3d <= sqrt(2 * (1.75^2 + 0.8^2) + 3 * 0.3^2 + 1^2) = 2.9 m; the bound is 4 sigma_3d = 11.8 m.
+A convention error anywhere in the chain (a frame, a sign, a clock offset, the datum, the lens) is tens to
+thousands of metres at 5 km.
+"""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from pipeline.cli import main as cli_main
+from pipeline.flight_config import load_flight_config
+from pipeline.run import process_group
+from pipeline.solve.observations import Observations
+
+SIGMA_3D_M = math.sqrt(2 * (1.75**2 + 0.8**2) + 3 * 0.3**2 + 1.0**2)
+BOUND_M = 4 * SIGMA_3D_M
+
+synth = pytest.importorskip("pipeline.synth.flight")
+SynthConfig = pytest.importorskip("pipeline.synth.config").SynthConfig
+
+
+def _flight_config(folder, out_path):
+    """What an operator would write for the flight (camera, lever arms, clock offset, mark), from truth.json's
+    metadata; truth_file only feeds the error columns."""
+    d = json.loads((folder / "truth.json").read_text())
+    cam = d["camera"]
+    lines = [
+        "name: tiny",
+        "files: {telemetry: [flight/flight.tlog], video: flight/video.mp4, frames_csv: flight/video.frames.csv}",
+        f"altitude: {{geoid_separation_m: {d['metadata']['geoid_separation_m']}}}",
+        "camera: {" + ", ".join(f"{k}: {cam[k]}" for k in ("width_px", "height_px", "fx_px", "fy_px", "cx_px",
+                                                           "cy_px", "dist", "R_optical_from_gimbal")) + "}",
+        f"lever_arms_m: {{camera: {d['lever_arms_m']['camera']}, rangefinder: {d['lever_arms_m']['rangefinder']}}}",
+        f"clock: {{video_to_telemetry_offset_ns: {d['metadata']['clock']['video_to_telemetry_offset_ns']}}}",
+        f"target: {{frame_index: {d['target_mark']['frame_index']}, pixel: {d['target_mark']['pixel']}}}",
+        "truth_file: flight/truth.json",
+    ]
+    out_path.write_text("\n".join(lines) + "\n")
+    return out_path
+
+
+@pytest.fixture(scope="module")
+def tiny_flight(tmp_path_factory):
+    root = tmp_path_factory.mktemp("e2e")
+    cfg = SynthConfig.from_dict({
+        "group": "tiny", "seed": 11,
+        "observations": {"count": 6, "lead_in_s": 3.0, "lead_out_s": 1.0},
+        "path": {"intersection_angle_deg": 50.0, "speed_mps": 120.0},
+        "noise": {"gnss_drift_m": 0.25, "gnss_white_m": 0.15, "attitude_deg": 0.02, "gimbal_deg": 0.02,
+                  "laser_m": 1.0},
+        "video": {"burst_frames": 1, "start_delay_s": 0.5},
+        "scene": {"texture_px": 2048, "texture_res_m": 2.0, "supersample": 1},
+    })
+    synth.generate(cfg, root / "flight")
+    return root, _flight_config(root / "flight", root / "tiny.yaml")
+
+
+def test_every_stage_locates_the_target_within_the_noise_bound(tiny_flight):
+    root, cfg_path = tiny_flight
+    r = process_group(load_flight_config(cfg_path))
+    truth = json.loads((root / "flight" / "truth.json").read_text())
+    assert r.n_observations == truth["n_observations"] == 6
+    assert r.intersection_angle_deg == pytest.approx(truth["intersection_angle_deg"], abs=0.5)
+    # tracking against the true projections
+    true_px = {f["frame_index"]: f["true_target_pixel"] for f in truth["frames"]}
+    tracked = [(p, true_px[i]) for i, p in zip(r.tracking["frame_index"], r.tracking["pixel_px"], strict=True)]
+    assert all(p is not None for p, _ in tracked)
+    err_px = [math.dist(p, t) for p, t in tracked]
+    assert max(err_px) < 0.6 and np.median(err_px) < 0.3, err_px
+    errors = r.errors_m()
+    assert errors["mle"] < BOUND_M, errors
+    assert errors["ridge"] < BOUND_M, errors
+    assert set(r.timings_s) == {"ingest", "decode", "track", "sync", "solve"}
+
+
+def test_run_command_writes_the_report_and_skips_a_bad_group(tiny_flight, capsys):
+    root, cfg_path = tiny_flight
+    (root / "broken.yaml").write_text(cfg_path.read_text().replace("name: tiny", "name: broken")
+                                      .replace("flight/flight.tlog", "flight/missing.tlog"))
+    (root / "run.yaml").write_text("groups: [tiny.yaml, broken.yaml]\n")
+    out = root / "out"
+    assert cli_main(["run", str(root / "run.yaml"), "-o", str(out), "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "broken" in err and "missing.tlog" in err and len(err.strip().splitlines()) == 1
+    assert not (out / "broken").exists()
+    rows = (out / "table4.csv").read_text().splitlines()
+    assert rows[0] == "method,tiny"
+    names = [row.split(",")[0] for row in rows[1:]]
+    assert names[-2:] == ["intersection_angle_deg", "observations"] and "mle" in names and "ridge" in names
+    assert rows[-1] == "observations,6"
+    report = (out / "report.md").read_text()
+    assert "Weighted MLE" in report and "broken" in report
+    # observations.json is the `ridgeloc solve` input: re-solving it gives estimates.json again
+    obs = Observations.load(out / "tiny" / "observations.json")
+    assert obs.n == 6 and obs.truth_m is not None
+    doc = json.loads((out / "tiny" / "estimates.json").read_text())
+    capsys.readouterr()
+    assert cli_main(["solve", str(out / "tiny" / "observations.json"), "--method", "mle", "--json"]) == 0
+    again = json.loads(capsys.readouterr().out)
+    np.testing.assert_allclose(again["estimates"]["mle"]["position_m"], doc["estimates"]["mle"]["position_m"],
+                               atol=1e-6)
+    mle_err = float(rows[names.index("mle") + 1].split(",")[1])
+    assert mle_err == pytest.approx(doc["estimates"]["mle"]["error_m"], abs=1e-3)

@@ -173,8 +173,8 @@ def _solve_one(method: str, st: Stacked, o: dict) -> BatchEstimate:
     if method != "mle":
         return _solve_stacked(method, st, o)
     x0, init_status, sigma, vce = _mle_start(st, o)
-    X, it, status, cond, cov, ex = mle_one(st, x0[0], sigma, o.get("robust", "huber"), vce, o["tol_m"],
-                                           o["max_iterations"], None if init_status is None else init_status[0])
+    X, it, status, cond, cov, ex, resid = mle_one(st, x0[0], sigma, o.get("robust", "huber"), vce, o["tol_m"],
+                                                  o["max_iterations"], None if init_status is None else init_status[0])
     X, cov = X[None], cov[None]
     extras = {**_mle_summaries(cov), **{k: np.array([v]) for k, v in ex.items()}}
     behind = _behind_camera(st, X)
@@ -182,6 +182,7 @@ def _solve_one(method: str, st: Stacked, o: dict) -> BatchEstimate:
         status = Status.DEGENERATE
         X[:] = np.nan
     extras["behind_camera"] = behind
+    extras["residuals"] = resid
     return BatchEstimate(method=method, position_m=X, iterations=np.array([it]), status=np.array([status], np.int8),
                          condition_number=np.array([cond]), covariance_m2=cov, extras=extras)
 
@@ -207,17 +208,20 @@ def _spread_m(points: np.ndarray) -> float:
     return float(np.linalg.norm(points - points.mean(axis=0), axis=1).max()) if len(points) else 0.0
 
 
-def _check_inputs(method: str, obs: Observations, o: dict) -> None:
-    npix = int(obs.has_pixel.sum())
-    nrng = int(obs.has_range.sum())
-    nboth = int((obs.has_pixel & obs.has_range).sum())
+def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
+    has_pix, has_rng = st.has_pix[0], st.has_range[0]
+    npix = int(has_pix.sum())
+    nrng = int(has_rng.sum())
+    nboth = int((has_pix & has_rng).sum())
     has_init = o.get("initial_m") is not None
-    det = np.linalg.det(obs.P[:, :, :3])
-    scale = np.abs(obs.P[:, :, :3]).max(axis=(1, 2)) ** 3
-    bad = np.flatnonzero(~(np.abs(det) > 1e-12 * scale))
-    if bad.size and method != "range":
-        raise ObservationError(f"frame(s) {bad.tolist()}: the left 3x3 block of P is singular, not a finite "
-                               "camera")
+    if method != "range":
+        # |det M| against |M|^3 (the rows' lengths, from the Gram matrix M M^T)
+        g = st._gram()[0]
+        scale = np.sqrt(g[:, 0, 0] * g[:, 1, 1] * g[:, 2, 2])
+        bad = np.flatnonzero(~(np.abs(st.det_M()[0]) > 1e-12 * scale))
+        if bad.size:
+            raise ObservationError(f"frame(s) {bad.tolist()}: the left 3x3 block of P is singular, not a finite "
+                                   "camera")
     if method == "los":
         if nboth == 0:
             raise ObservationError("los needs at least one frame with both a target pixel and a range")
@@ -237,14 +241,14 @@ def _check_inputs(method: str, obs: Observations, o: dict) -> None:
         raise ObservationError(f"{what} needs at least two frames with a target pixel, got {npix}"
                                + ("" if method in ("dlt", "vision") else "; or pass initial_m"))
     if needs_pixels:
-        centres = np.linalg.solve(obs.P[obs.has_pixel, :, :3], -obs.P[obs.has_pixel, :, 3:])[..., 0]
+        centres = np.linalg.solve(obs.P[has_pix, :, :3], -obs.P[has_pix, :, 3:])[..., 0]
         if _spread_m(centres) <= 1e-6 * (1.0 + np.abs(centres).max()):
             raise GeometryError("all frames with a target pixel share one camera position: no baseline to "
                                 "intersect the lines of sight")
     if method == "range":
         if nrng < 3:
             raise ObservationError(f"range needs at least three laser ranges, got {nrng}")
-        s = obs.platform_m[obs.has_range]
+        s = obs.platform_m[has_rng]
         sv = np.linalg.svd(s - s.mean(axis=0), compute_uv=False)
         if sv[0] <= 1e-6 * (1.0 + np.abs(s).max()):
             raise GeometryError("all ranged frames share one platform position: ranges from one point do not "
@@ -267,8 +271,8 @@ def solve(method: str, obs: Observations, **options) -> Estimate:
     o = _check_options(method, options)
     if not isinstance(obs, Observations):
         raise TypeError(f"solve wants an Observations, got {type(obs).__name__}")
-    _check_inputs(method, obs, o)
     st = Stacked.from_observations(obs)
+    _check_inputs(method, obs, st, o)
     be = _solve_one(method, st, o)
     status = Status(int(be.status[0]))
     cond = float(be.condition_number[0])
@@ -309,8 +313,9 @@ def solve(method: str, obs: Observations, **options) -> Estimate:
             "vce_rounds": int(be.extras["vce_rounds"][0]),
             "robust": o.get("robust", "huber"),
         })
+    resid = be.extras["residuals"] if "residuals" in be.extras else _residuals(method, st, X)
     return Estimate(method=method, position_m=X, iterations=int(be.iterations[0]), status=status,
-                    residuals=_residuals(method, st, X), condition_number=cond, covariance_m2=cov, extras=extras)
+                    residuals=resid, condition_number=cond, covariance_m2=cov, extras=extras)
 
 
 def _residuals(method: str, st: Stacked, X: np.ndarray) -> np.ndarray:

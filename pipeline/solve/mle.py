@@ -44,7 +44,8 @@ def base_variances(st: Stacked, X0: np.ndarray, sigma: Sigma):
     """A priori variances (B, 2n+n) of the residual rows [u_1, v_1, ..., d_1, ...], from the sensor sigmas.
 
     pixel: sigma_px^2 + (f sigma_att)^2 + (f sigma_pos / D)^2, f the focal length of that axis (`focal_px`),
-    D the camera-to-target distance at the initial estimate: an attitude error turns the line of sight by
+    D the platform-to-target distance at the initial estimate (the camera's lever arm is negligible at this
+    scale): an attitude error turns the line of sight by
     sigma_att (f sigma_att px), a platform position error moves it sideways by sigma_pos/D radians.
     range: sigma_range^2 + sigma_pos^2, the position error's component along the line of sight.
     Unknown sigmas: pixel 1 px, range 1 m, position and attitude 0 (variance component estimation then
@@ -57,8 +58,8 @@ def base_variances(st: Stacked, X0: np.ndarray, sigma: Sigma):
     fx, fy = st.focal_px()
     B, n = fx.shape
     if s_pos > 0:
-        C = st.camera_centres_m()
-        D = np.linalg.norm(X0[:, None, :] - C, axis=-1)
+        diff = X0[:, None, :] - st.platform_m
+        D = np.sqrt(np.einsum("bni,bni->bn", diff, diff))
         D = np.where(np.isfinite(D) & (D > 0), D, np.inf)
         pos_rad2 = (s_pos / D) ** 2
     else:
@@ -185,9 +186,8 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     w = okf * wr / var_f
     N, _ = normal_equations(J, r, w)
     cov, singular = _inverse_spd(N)
-    Jw = J * np.sqrt(w)[..., None]
-    cond = condition_numbers(Jw)
-    bad_cond = (condition_numbers(Jw, equilibrate=True) > _iterate.DEGENERATE_CONDITION) | singular
+    cond = condition_numbers(J * np.sqrt(w)[..., None])
+    bad_cond = singular  # the Jacobi-scaled criterion of the iteration: cond of the scaled design ~> 1e10
     status[bad_cond & ~failed] = Status.DEGENERATE
     failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
     X[failed] = np.nan
@@ -273,13 +273,16 @@ def cep_m(cov_xy: np.ndarray, p: float) -> np.ndarray:
     """(B,) radius of the circle around the estimate that holds probability p of the horizontal error, for
     (B,2,2) covariances of a zero-mean 2D Gaussian.
 
-    With principal standard deviations s1 >= s2 the radius is s1 rho_p(s2/s1); rho_p is tabulated once per p
-    on 1025 ratios (exact integral `_prob_within`, bisection) and interpolated linearly (relative error < 1e-5).
+    With principal standard deviations s1 >= s2 (closed-form 2x2 eigenvalues) the radius is s1 rho_p(s2/s1);
+    rho_p is tabulated once per p on 1025 ratios (exact integral `_prob_within`, bisection) and interpolated
+    linearly (relative error < 1e-5).
     """
-    ev = np.linalg.eigvalsh(np.where(np.isfinite(cov_xy), cov_xy, 0.0))
-    s1 = np.sqrt(np.maximum(ev[:, 1], 0.0))
-    s2 = np.sqrt(np.maximum(ev[:, 0], 0.0))
-    ok = np.isfinite(cov_xy).all(axis=(1, 2)) & (s1 > 0)
+    a, b, c = cov_xy[:, 0, 0], cov_xy[:, 0, 1], cov_xy[:, 1, 1]
+    mean = 0.5 * (a + c)
+    half = np.sqrt(0.25 * (a - c) ** 2 + b * b)
+    s1 = np.sqrt(np.maximum(mean + half, 0.0))
+    s2 = np.sqrt(np.maximum(mean - half, 0.0))
+    ok = np.isfinite(s1) & (s1 > 0)
     q = np.where(ok, s2 / np.where(ok, s1, 1.0), 1.0)
     return np.where(ok, s1 * np.interp(q, _Q_GRID, _cep_table(float(p))), np.nan)
 

@@ -50,7 +50,7 @@ def _inv3(N: np.ndarray):
 def mle_one(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
             max_iterations: int, init_status: int | None):
     """One problem (st of size 1). Returns X (3,), iterations, status, cond, covariance (3,3), extras dict of
-    floats (the keys of `mle.mle`)."""
+    floats (the keys of `mle.mle`) and the final residuals (pixels u v interleaved, then ranges)."""
     pix_f = np.flatnonzero(st.has_pix[0])
     rng_f = np.flatnonzero(st.has_range[0])
     Mp = st.M[0, pix_f]
@@ -152,13 +152,9 @@ def mle_one(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: 
     w = wr / var
     JW = J.T * w
     cov, singular = _inv3(JW @ J)
-    Jw = J * np.sqrt(w)[:, None]
-    s = np.linalg.svd(Jw, compute_uv=False)
+    s = np.linalg.svd(J * np.sqrt(w)[:, None], compute_uv=False)
     cond = s[0] / s[-1] if s[-1] > 0 else math.inf
-    norms = np.linalg.norm(Jw, axis=0)
-    se = np.linalg.svd(Jw / np.where(norms > 0, norms, 1.0), compute_uv=False)
-    cond_eq = se[0] / se[-1] if se[-1] > 0 else math.inf
-    bad_cond = cond_eq > _iterate.DEGENERATE_CONDITION or singular
+    bad_cond = singular  # the Jacobi-scaled criterion of the iteration: cond of the scaled design ~> 1e10
     if bad_cond and not failed:
         status = Status.DEGENERATE
     failed = status in (Status.DIVERGED, Status.DEGENERATE)
@@ -170,7 +166,7 @@ def mle_one(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: 
     sigma0_sq = float((w * r * r).sum() / (m - 3)) if m > 3 else math.nan
     extras = {"variance_factor_pixel": vf[0], "variance_factor_range": vf[1], "sigma0_sq": sigma0_sq,
               "vce_rounds": vce_rounds}
-    return X, iterations, status, cond, 0.5 * (cov + cov.T), extras
+    return X, iterations, status, cond, 0.5 * (cov + cov.T), extras, r
 
 
 def _vce_factors(J, r, var, npix, robust):

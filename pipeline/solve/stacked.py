@@ -63,11 +63,28 @@ class Stacked:
 
     # ---- derived camera quantities ---------------------------------------------------------------------
 
+    def _gram(self) -> np.ndarray:
+        """(B,n,3,3) M M^T (the rows' dot products), computed once."""
+        g = self.__dict__.get("_gram_cache")
+        if g is None:
+            g = self.__dict__["_gram_cache"] = self.M @ np.swapaxes(self.M, -1, -2)
+        return g
+
+    def det_M(self) -> np.ndarray:
+        """(B,n) det of the left 3x3 block of each P, computed once."""
+        det = self.__dict__.get("_det_cache")
+        if det is None:
+            m = self.M
+            a, b, c = m[..., 0, :], m[..., 1, :], m[..., 2, :]
+            det = self.__dict__["_det_cache"] = (
+                a[..., 0] * (b[..., 1] * c[..., 2] - b[..., 2] * c[..., 1])
+                - a[..., 1] * (b[..., 0] * c[..., 2] - b[..., 2] * c[..., 0])
+                + a[..., 2] * (b[..., 0] * c[..., 1] - b[..., 1] * c[..., 0]))
+        return det
+
     def depth_sign(self) -> np.ndarray:
         """(B,n) sign of det(M): P and -P project alike, the sign says which side of the camera is 'front'."""
-        m = self.M
-        det = np.einsum("...i,...i->...", m[..., 0, :], np.cross(m[..., 1, :], m[..., 2, :]))
-        return np.where(det < 0, -1.0, 1.0)
+        return np.where(self.det_M() < 0, -1.0, 1.0)
 
     def camera_centres_m(self) -> np.ndarray:
         """(B,n,3) camera centres, the right null vector of P: C = -M^-1 p4."""
@@ -75,20 +92,20 @@ class Stacked:
 
     def focal_px(self) -> tuple[np.ndarray, np.ndarray]:
         """(B,n) focal lengths fx, fy in px from the rows m1, m2, m3 of M = lambda K R (zero skew assumed):
-        m1 x m3 = lambda^2 fx r1 x r3, so fx = |m1 x m3| / |m3|^2, and likewise fy with m2."""
-        m = self.M
-        m3 = m[..., 2, :]
-        n3 = np.einsum("...i,...i->...", m3, m3)
-        fx = np.linalg.norm(np.cross(m[..., 0, :], m3), axis=-1) / n3
-        fy = np.linalg.norm(np.cross(m[..., 1, :], m3), axis=-1) / n3
+        m1 x m3 = lambda^2 fx r1 x r3, so fx = |m1 x m3| / |m3|^2 = sqrt(|m1|^2 |m3|^2 - (m1.m3)^2) / |m3|^2,
+        and likewise fy with m2."""
+        g = self._gram()
+        g33 = g[..., 2, 2]
+        fx = np.sqrt(np.maximum(g[..., 0, 0] * g33 - g[..., 0, 2] ** 2, 0.0)) / g33
+        fy = np.sqrt(np.maximum(g[..., 1, 1] * g33 - g[..., 1, 2] ** 2, 0.0)) / g33
         return fx, fy
 
     def depths(self, X: np.ndarray) -> np.ndarray:
         """(B,n) signed depth in metres along each optical axis (positive in front) of points X (B,3):
         q3 / |m3| with q = M X + p4, since m3 = lambda r3 for P = lambda K [R | t]."""
         m3 = self.M[..., 2, :]
-        q2 = np.einsum("bni,bi->bn", m3, X) + self.p4[..., 2]
-        return q2 * self.depth_sign() / np.linalg.norm(m3, axis=-1)
+        q2 = (m3 @ X[:, :, None])[..., 0] + self.p4[..., 2]
+        return q2 * self.depth_sign() / np.sqrt(self._gram()[..., 2, 2])
 
 
 def pixel_model(st: Stacked, X: np.ndarray):

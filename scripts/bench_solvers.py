@@ -1,0 +1,162 @@
+"""Benchmark the estimators on the paper's geometry (10 frames, 5 km slant range, 2 km height, paper noise).
+
+Reports, in one run:
+  * median microseconds per `solve()` call for every method (single problem, the CLI path);
+  * batched throughput (problems per second) of `solve_batch()` for every method on B problems;
+  * scipy.optimize.least_squares on the same weighted problem as `mle` (robust off, and Huber), time and the
+    largest difference from `mle`;
+  * GTSAM (optional extra `gtsam`): a factor graph of projection factors from fixed cameras
+    (TriangulationFactorCal3_S2) and range factors (RangeFactor3 (Point3-Point3) to platform points pinned by tight priors),
+    Levenberg-Marquardt; time and the largest difference from `mle` without robust loss.
+
+    python scripts/bench_solvers.py [--problems 40] [--batch 8000] [--gamma 30]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+import scipy.linalg
+from scipy.optimize import least_squares
+
+from pipeline.geometry.camera import project
+from pipeline.solve import METHODS, solve, solve_batch
+from pipeline.solve.mle import HUBER_C, base_variances
+from pipeline.solve.scenes import paper_batch, paper_problem
+from pipeline.solve.stacked import Stacked
+
+
+def _time_calls(fn, items, repeats: int) -> float:
+    """Median seconds per call of fn(item) over `repeats` passes through items (after one warm-up pass)."""
+    for it in items:
+        fn(it)
+    times = []
+    for _ in range(repeats):
+        for it in items:
+            t = time.perf_counter()
+            fn(it)
+            times.append(time.perf_counter() - t)
+    return statistics.median(times)
+
+
+def _sigmas(obs, x0):
+    var = base_variances(Stacked.from_observations(obs), x0[None], obs.sigma)[0]
+    sd = np.sqrt(var)
+    return sd[:2 * obs.n].reshape(obs.n, 2), sd[2 * obs.n:]
+
+
+def _scipy_mle(obs, robust: bool):
+    x0 = solve("dlt", obs).position_m
+    sd_px, sd_r = _sigmas(obs, x0)
+
+    def f(x):
+        pix = (obs.pixel - project(obs.P, np.broadcast_to(x, (obs.n, 3)))) / sd_px
+        return np.r_[pix.reshape(-1), (obs.range_m - np.linalg.norm(x - obs.platform_m, axis=1)) / sd_r]
+
+    if robust:
+        return least_squares(f, x0, loss="huber", f_scale=HUBER_C, method="trf", xtol=1e-12).x
+    return least_squares(f, x0, method="lm", xtol=1e-12).x
+
+
+def _gtsam_setup(obs):
+    """Cameras and noise models built once per problem (like the DLT start, outside the timed part)."""
+    import gtsam
+
+    x0 = solve("dlt", obs).position_m
+    sd_px, sd_r = _sigmas(obs, x0)
+    cams = []
+    for P in obs.P:
+        K, R = scipy.linalg.rq(P[:, :3])
+        D = np.diag(np.sign(np.diag(K)))  # make K's diagonal positive
+        K, R = K @ D, D @ R
+        if np.linalg.det(R) < 0:
+            R = -R
+        K = K / K[2, 2]
+        C = -np.linalg.solve(P[:, :3], P[:, 3])
+        cal = gtsam.Cal3_S2(K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2])
+        cams.append(gtsam.PinholeCameraCal3_S2(gtsam.Pose3(gtsam.Rot3(R.T), C), cal))
+    return x0, sd_px, sd_r, cams
+
+
+def _gtsam_solve(obs, setup):
+    import gtsam
+
+    x0, sd_px, sd_r, cams = setup
+    graph = gtsam.NonlinearFactorGraph()
+    values = gtsam.Values()
+    X = 0
+    values.insertPoint3(X, x0)
+    pin = gtsam.noiseModel.Isotropic.Sigma(3, 1e-6)
+    for i in range(obs.n):
+        if obs.has_pixel[i]:
+            graph.add(gtsam.TriangulationFactorCal3_S2(cams[i], obs.pixel[i], gtsam.noiseModel.Diagonal.Sigmas(sd_px[i]),
+                                                       X))
+        if obs.has_range[i]:
+            key = 1 + i
+            graph.add(gtsam.PriorFactorPoint3(key, obs.platform_m[i], pin))
+            values.insertPoint3(key, obs.platform_m[i])
+            graph.add(gtsam.RangeFactor3(X, key, float(obs.range_m[i]),
+                                          gtsam.noiseModel.Isotropic.Sigma(1, float(sd_r[i]))))
+    params = gtsam.LevenbergMarquardtParams()
+    params.setRelativeErrorTol(1e-12)
+    params.setAbsoluteErrorTol(1e-12)
+    result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+    return result.atPoint3(X)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--problems", type=int, default=40, help="distinct problems for the single-solve timings")
+    ap.add_argument("--batch", type=int, default=8000, help="problems per batched call")
+    ap.add_argument("--gamma", type=float, default=30.0, help="intersection angle, degrees")
+    args = ap.parse_args(argv)
+    probs = [paper_problem(gamma_deg=args.gamma, seed=s) for s in range(args.problems)]
+    print(f"geometry: 10 frames, 5 km slant range, 2 km height, intersection {args.gamma:g} deg, paper noise")
+    print("\nsingle problem, solve(): median microseconds per call (all of solve: checks, start value, result)")
+    for m in METHODS:
+        repeats = 2 if m in ("fusion", "ridge") else 5
+        us = _time_calls(lambda o, m=m: solve(m, o), probs, repeats) * 1e6
+        it = np.median([solve(m, o).iterations for o in probs])
+        print(f"  {m:<11}{us:9.1f} us   (median iterations {it:g})")
+    mle_plain = {id(o): solve("mle", o, robust=None).position_m for o in probs}
+    mle_huber = {id(o): solve("mle", o).position_m for o in probs}
+    us = _time_calls(lambda o: solve("mle", o, robust=None), probs, 5) * 1e6
+    print(f"  {'mle robust=None':<11}{us:9.1f} us")
+
+    print("\nscipy.optimize.least_squares on the same weighted problem (same DLT start)")
+    for robust in (False, True):
+        ref = mle_huber if robust else mle_plain
+        diff = max(np.abs(_scipy_mle(o, robust) - ref[id(o)]).max() for o in probs)
+        us = _time_calls(lambda o, r=robust: _scipy_mle(o, r), probs, 2) * 1e6
+        print(f"  {'huber' if robust else 'no robust loss':<15}{us:9.1f} us per solve, max |scipy - mle| "
+              f"{diff:.2e} m")
+
+    try:
+        import gtsam  # noqa: F401
+    except ImportError:
+        print("\nGTSAM: not installed (pip install 'ridgeloc[gtsam]'), skipped")
+    else:
+        setups = {id(o): _gtsam_setup(o) for o in probs}
+        diff = max(np.abs(_gtsam_solve(o, setups[id(o)]) - mle_plain[id(o)]).max() for o in probs)
+        us = _time_calls(lambda o: _gtsam_solve(o, setups[id(o)]), probs, 3) * 1e6
+        print(f"\nGTSAM factor graph (TriangulationFactorCal3_S2 + RangeFactor3, LM; graph built in the timed part, "
+              f"cameras not): {us:.1f} us per solve, max |gtsam - mle(robust=None)| {diff:.2e} m")
+
+    print(f"\nbatched, solve_batch() on B = {args.batch} problems: problems per second (microseconds per problem)")
+    batch = paper_batch(args.batch, gamma_deg=args.gamma, seed=123)
+    for m in METHODS:
+        t = time.perf_counter()
+        be = solve_batch(m, batch)
+        dt = time.perf_counter() - t
+        err = np.nanmedian(be.errors_m(batch.truth_m))
+        conv = be.converged.mean() * 100
+        print(f"  {m:<11}{args.batch / dt:11.0f} /s  ({dt / args.batch * 1e6:6.2f} us)   median error {err:7.2f} m, "
+              f"converged {conv:5.1f} %")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -75,6 +75,18 @@ def markdown_table(result: SimulationResult, stat: str, with_paper: bool) -> lis
     return lines
 
 
+def mle_ratio_lines(result: SimulationResult) -> list[str]:
+    """The weighted MLE's median error over the paper's ridge-fusion figure, per angle (issue 3 asks <= 0.45)."""
+    if "mle" not in result.rows:
+        return []
+    cells = []
+    for a, v in zip(result.angles_deg, result.rows["mle"]["median_m"], strict=True):
+        paper = paper_median_m("ridge", a)
+        cells.append("–" if paper is None or math.isnan(v) else f"{v / paper:.3f}")
+    return ["", "Weighted MLE median ÷ the paper's ridge-fusion median: "
+            + ", ".join(f"{angle_label(a)}° {c}" for a, c in zip(result.angles_deg, cells, strict=True)) + "."]
+
+
 def setup_lines(result: SimulationResult) -> list[str]:
     cfg = result.config
     g, c, nz, s = cfg.geometry, cfg.camera, cfg.noise, cfg.solver
@@ -112,6 +124,8 @@ def table_markdown(result: SimulationResult) -> str:
     ]
     for stat, title, paper in sections:
         out += ["", f"## {title}", "", *markdown_table(result, stat, paper)]
+        if stat == "median_m":
+            out += mle_ratio_lines(result)
     out += ["", "## Run time", "", "| method | total s | ms per batch of one angle | µs per problem |",
             "|---|---:|---:|---:|"]
     for m, sec in result.method_seconds.items():

@@ -1,0 +1,48 @@
+import csv
+import io
+
+import numpy as np
+
+from pipeline.report.table4 import report_markdown, table4_csv_text, write_table4
+from pipeline.results import GroupFailure, GroupResult
+from pipeline.solve.estimate import Estimate, Status
+from pipeline.solve.observations import Observations
+
+
+def _result(name, truth, positions, angle=30.0):
+    n = 3
+    P = np.tile(np.hstack([np.eye(3), np.zeros((3, 1))]), (n, 1, 1))
+    obs = Observations(P=P, pixel=np.array([[0.1, 0.2], [np.nan, np.nan], [0.3, 0.1]]),
+                       platform_m=np.array([[0.0, -1000, 500], [500, -1000, 500], [1000, -900, 500]]),
+                       range_m=np.array([1200.0, np.nan, 1300.0]), truth_m=truth)
+    ests = {m: Estimate(m, np.asarray(p, float), 3, Status.CONVERGED) for m, p in positions.items()}
+    return GroupResult(name=name, origin_lla=(34.0, 108.0, 400.0), observations=obs, estimates=ests,
+                       truth_m=None if truth is None else np.asarray(truth, float), intersection_angle_deg=angle,
+                       timings_s={"ingest": 0.1, "track": 0.2, "sync": 0.01, "solve": 0.02},
+                       tracking={"correlation": [1.0, None, 0.9], "lost": [False, True, False]})
+
+
+def test_csv_layout_errors_and_blanks():
+    a = _result("group1", [0.0, 0.0, 0.0], {"mle": [3.0, 4.0, 0.0], "ridge": [0.0, 0.0, 10.0]})
+    b = _result("group2", None, {"mle": [1.0, 1.0, 1.0]}, angle=24.5)
+    rows = list(csv.reader(io.StringIO(table4_csv_text([a, b]))))
+    assert rows[0] == ["method", "group1", "group2"]
+    body = {r[0]: r[1:] for r in rows[1:]}
+    assert [r[0] for r in rows[1:]] == ["ridge", "mle", "intersection_angle_deg", "observations"]  # Table 4 order
+    assert body["mle"] == ["5.000", ""]  # no truth: no error
+    assert body["ridge"] == ["10.000", ""]  # not run for group2
+    assert body["intersection_angle_deg"] == ["30.00", "24.50"]
+    assert body["observations"] == ["3", "3"]
+
+
+def test_markdown_has_paper_beside_ours_estimates_and_failures(tmp_path):
+    a = _result("group2", [0.0, 0.0, 0.0], {"ridge": [0.0, 0.0, 10.0], "mle": [3.0, 4.0, 0.0]})
+    md = report_markdown([a], [GroupFailure("group9", "cfg.yaml", "cfg.yaml: files.video: file not found")])
+    assert "| paper:ridge | 46.33 |" in md and "| ours:ridge | 10.00 |" in md
+    assert "**5.00**" in md  # the best of the group in bold
+    assert "| Intersection angle (deg) | 30.00 |" in md and "| paper: intersection angle (deg) | 24.03 |" in md
+    assert "34.0000000" in md  # the origin's latitude; estimates are given as WGS84 too
+    assert "group9 (cfg.yaml): cfg.yaml: files.video: file not found" in md
+    md_path, csv_path = write_table4(tmp_path / "out", [a])
+    assert md_path.read_text().startswith("# ridgeloc run report") and csv_path.exists()
+    assert not list((tmp_path / "out").glob(".tmp-*"))

@@ -120,3 +120,17 @@ def test_bad_marks_are_input_errors(ground):
     flat = {0: np.full((400, 600), 100, np.uint8)}
     with pytest.raises(InputError, match="too few SIFT features"):
         SiftTracker().track(Decoder(flat), 0, (300.0, 200.0), [0])
+
+
+def test_a_target_washed_out_by_cloud_is_lost_although_it_still_correlates(ground):
+    Hs = {k: homography(k) for k in range(3)}
+    frames = {k: render(ground, H) for k, H in Hs.items()}
+    p = true_px(Hs[1])
+    yy, xx = np.mgrid[0:400, 0:600]
+    cloud = np.exp(-((xx - p[0]) ** 2 + (yy - p[1]) ** 2) / (2 * 25.0**2))  # a soft white blob on the target
+    frames[1] = (frames[1] * (1 - 0.95 * cloud) + 250 * 0.95 * cloud).astype(np.uint8)
+    res = SiftTracker().track(Decoder(frames), 0, true_px(Hs[0]), [0, 1, 2])
+    np.testing.assert_array_equal(res.lost, [False, True, False])
+    f = res.frames[1]
+    assert f.via == "low contrast" and f.contrast < 0.3
+    assert f.correlation > TrackerSettings().min_correlation  # correlation alone would have accepted it

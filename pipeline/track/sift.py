@@ -37,6 +37,7 @@ class TrackerSettings:
     min_inliers: int = 12
     min_inlier_ratio: float = 0.25
     min_correlation: float = 0.5
+    min_contrast_ratio: float = 0.6
     patch_half_px: int = 15
     search_half_px: int = 6
     keyframe_inlier_fraction: float = 0.5
@@ -50,6 +51,8 @@ class TrackerSettings:
             raise ValueError("'min_inliers' must be at least 4 (a homography needs 4 points)")
         if self.patch_half_px < 3 or self.search_half_px < 1 or self.n_features < 50:
             raise ValueError("'patch_half_px' >= 3, 'search_half_px' >= 1 and 'n_features' >= 50 required")
+        if not 0 < self.min_contrast_ratio <= 1:
+            raise ValueError("'min_contrast_ratio' must be in (0, 1]")
         if not 0.1 <= self.detect_scale <= 1.0:
             raise ValueError("'detect_scale' must be in [0.1, 1]")
 
@@ -82,6 +85,7 @@ class FrameTrack:
     inlier_ratio: float = 0.0
     reproj_px: float = float("nan")
     correlation: float = float("nan")
+    contrast: float = float("nan")
     keyframe: bool = False
     via: str = ""  # "mark" (the mark frame), "key", "reacquired", "bridge", or why it was lost
     predicted_px: tuple[float, float] = (float("nan"), float("nan"))  # where the homography puts the mark, if any
@@ -116,7 +120,8 @@ class TrackResult:
         def clean(v):
             return None if isinstance(v, float) and not np.isfinite(v) else v
 
-        cols = ("frame_index", "lost", "inliers", "inlier_ratio", "reproj_px", "correlation", "keyframe", "via")
+        cols = ("frame_index", "lost", "inliers", "inlier_ratio", "reproj_px", "correlation", "contrast", "keyframe",
+                "via")
         out = {c: [clean(getattr(f, c)) for f in self.frames] for c in cols}
         out["pixel_px"] = [None if f.lost else [float(f.pixel_px[0]), float(f.pixel_px[1])] for f in self.frames]
         out["predicted_px"] = [None if not np.isfinite(f.predicted_px).all() else [float(v) for v in f.predicted_px]
@@ -186,9 +191,11 @@ class SiftTracker:
     # ---- refinement against the mark ---------------------------------------------------------------------
 
     def refine(self, mark: _View, mark_px: np.ndarray, cur: _View, H_cur_from_mark: np.ndarray
-               ) -> tuple[np.ndarray, float]:
-        """Sub-pixel target position in `cur` near the prediction H_cur_from_mark(mark_px), and the peak
-        normalised correlation of the mark's warped patch there."""
+               ) -> tuple[np.ndarray, float, float]:
+        """Sub-pixel target position in `cur` near the prediction H_cur_from_mark(mark_px), the peak normalised
+        correlation of the mark's warped patch there, and the contrast ratio std(found patch) / std(mark patch).
+        Correlation ignores gain and offset, so a target washed out by cloud or haze still correlates; the
+        contrast ratio tells it apart."""
         h, s = self.s.patch_half_px, self.s.search_half_px
         pred = cv2.perspectiveTransform(mark_px.reshape(1, 1, 2).astype(np.float64), H_cur_from_mark).reshape(2)
         # Warp only the neighbourhood: translate so the prediction lands at the patch centre.
@@ -198,10 +205,12 @@ class SiftTracker:
         size = 2 * (h + s) + 1
         window = cv2.getRectSubPix(cur.image, (size, size), (float(pred[0]), float(pred[1])))
         if float(templ.std()) < 1e-3 or float(window.std()) < 1e-3:
-            return pred, float("nan")
+            return pred, float("nan"), 0.0
         r = cv2.matchTemplate(window.astype(np.float32), templ.astype(np.float32), cv2.TM_CCOEFF_NORMED)
         x, y, peak = _subpixel_peak(r)
-        return pred + np.array([x - s, y - s]), peak
+        px = pred + np.array([x - s, y - s])
+        found = cv2.getRectSubPix(cur.image, (2 * h + 1, 2 * h + 1), (float(px[0]), float(px[1])))
+        return px, peak, float(found.std()) / float(templ.std())
 
     # ---- the tracking loop -------------------------------------------------------------------------------
 
@@ -223,10 +232,14 @@ class SiftTracker:
         if not self._in_image(pred, cur):
             ft.via = "out of image"
             return ft, None
-        px, corr = self.refine(mark, mark_px, cur, H_cur_from_mark)
+        px, corr, contrast = self.refine(mark, mark_px, cur, H_cur_from_mark)
         ft.correlation = corr
+        ft.contrast = contrast
         if not np.isfinite(corr) or corr < self.s.min_correlation or not self._in_image(px, cur):
             ft.via = "low correlation"
+            return ft, None
+        if not self.s.min_contrast_ratio <= contrast <= 1.0 / self.s.min_contrast_ratio:
+            ft.via = "low contrast"
             return ft, None
         ft.pixel_px = (float(px[0]), float(px[1]))
         ft.lost = False
@@ -255,9 +268,10 @@ class SiftTracker:
         if mark.descriptors is None or len(mark.descriptors) < self.s.min_inliers:
             raise InputError(f"the target's mark frame {mark_index} has too few SIFT features to track")
         views: dict[int, _View] = {mark_index: mark}
-        out: dict[int, FrameTrack] = {mark_index: FrameTrack(mark_index, (float(p0[0]), float(p0[1])), False,
-                                                             len(mark.keypoints_px), 1.0, 0.0, 1.0, True, "mark",
-                                                             (float(p0[0]), float(p0[1])))}
+        p0_t = (float(p0[0]), float(p0[1]))
+        out: dict[int, FrameTrack] = {mark_index: FrameTrack(
+            mark_index, pixel_px=p0_t, lost=False, inliers=len(mark.keypoints_px), inlier_ratio=1.0, reproj_px=0.0,
+            correlation=1.0, contrast=1.0, keyframe=True, via="mark", predicted_px=p0_t)}
         avail = sorted(set(int(i) for i in (available if available is not None else [])))
         for direction in (1, -1):
             seq = sorted((i for i in set(wanted) if (i - mark_index) * direction > 0), key=lambda i: i * direction)

@@ -14,15 +14,16 @@ ridge: hkb ("paper" | "textbook"), k (a fixed ridge parameter; k=0 is `fusion`);
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from pipeline.errors import GeometryError, ObservationError, SolverError
-from pipeline.solve import least_squares, linear
+from pipeline.solve import least_squares, linear, single
 from pipeline.solve import mle as _mle
 from pipeline.solve.estimate import BatchEstimate, Estimate, Status
-from pipeline.solve.mle_single import mle_one
 from pipeline.solve.observations import ObservationBatch, Observations, Sigma
-from pipeline.solve.stacked import Stacked, pixel_model, range_model
+from pipeline.solve.stacked import Stacked
 
 METHODS = ("dlt", "vision", "range", "los", "fusion-raw", "fusion", "ridge", "mle")
 
@@ -141,20 +142,30 @@ def _solve_stacked(method: str, st: Stacked, o: dict) -> BatchEstimate:
                          condition_number=cond, covariance_m2=cov, extras=extras)
 
 
-def _mle_start(st: Stacked, o: dict):
-    """Initial values (B,3) and their status, the sigmas and whether to estimate variance components."""
+def _mle_start(st: Stacked, o: dict, fr: single.Frames | None = None):
+    """Initial values (B,3) and their status (or (3,) and a Status with fr, one problem), the sigmas and
+    whether to estimate variance components.
+
+    The start is the DLT point; where there are fewer than two pixels, or the DLT point is not in front of
+    every camera with a pixel (no baseline: it is then a camera centre, or behind), the line-of-sight median.
+    """
     x0 = _initial(o, st.size)
     init_status = None
-    if x0 is None:
-        x0, init_status, _ = linear.dlt(st)
-        # fewer than two pixels, or no baseline (the DLT point is then a camera centre, or behind):
-        # start from the line-of-sight points
-        need = ~np.isfinite(x0).all(axis=1)
+    if x0 is not None and fr is not None:
+        x0 = x0[0]
+    elif x0 is None:
         near = 1e-3 * (1.0 + st.range_m.max(axis=1, keepdims=True))
-        need |= ((st.depths(np.where(need[:, None], 0.0, x0)) <= near) & st.has_pix).any(axis=1)
-        if need.any():
-            Xl, sl, _, _ = linear.los(st.take(np.flatnonzero(need)))
-            x0[need], init_status[need] = Xl, sl
+        if fr is not None:
+            x0, init_status, _ = single.dlt_one(fr)
+            if not np.isfinite(x0).all() or ((st.depths(x0[None]) <= near) & st.has_pix).any():
+                x0, init_status, _, _ = single.los_one(fr)
+        else:
+            x0, init_status, _ = linear.dlt(st)
+            need = ~np.isfinite(x0).all(axis=1)
+            need |= ((st.depths(np.where(need[:, None], 0.0, x0)) <= near) & st.has_pix).any(axis=1)
+            if need.any():
+                Xl, sl, _, _ = linear.los(st.take(np.flatnonzero(need)))
+                x0[need], init_status[need] = Xl, sl
     sigma = o.get("sigma") or st.sigma
     vce = o.get("estimate_variance_components")
     if vce is None:
@@ -169,22 +180,53 @@ def _mle_summaries(cov: np.ndarray) -> dict:
 
 
 def _solve_one(method: str, st: Stacked, o: dict) -> BatchEstimate:
-    """A batch-of-one answer; `mle` through its single-problem iteration (same algorithm, less overhead)."""
-    if method != "mle":
-        return _solve_stacked(method, st, o)
-    x0, init_status, sigma, vce = _mle_start(st, o)
-    X, it, status, cond, cov, ex, resid = mle_one(st, x0[0], sigma, o.get("robust", "huber"), vce, o["tol_m"],
-                                                  o["max_iterations"], None if init_status is None else init_status[0])
-    X, cov = X[None], cov[None]
-    extras = {**_mle_summaries(cov), **{k: np.array([v]) for k, v in ex.items()}}
-    behind = _behind_camera(st, X)
-    if behind[0]:
-        status = Status.DEGENERATE
-        X[:] = np.nan
-    extras["behind_camera"] = behind
-    extras["residuals"] = resid
+    """A batch-of-one answer through `single` (the same algorithms without the batch bookkeeping)."""
+    fr = single.Frames(st)
+    tol, itmax = o["tol_m"], o["max_iterations"]
+    extras: dict = {}
+    cov = None
+    it = 0
+    if method == "dlt":
+        X, status, cond = single.dlt_one(fr)
+    elif method == "los":
+        X, status, pts, oracle = single.los_one(fr)
+        cond = math.nan
+        extras = {"points_m": pts[None], "oracle_error_m": np.array([oracle])}
+    elif method == "mle":
+        x0, init_status, sigma, vce = _mle_start(st, o, fr)
+        X, it, status, cond, cov, ex, resid = single.mle_one(fr, x0, sigma, o.get("robust", "huber"), vce, tol,
+                                                             itmax, init_status)
+        cov = cov[None]
+        extras = {**_mle_summaries(cov), **{k: np.array([v]) for k, v in ex.items()}, "residuals": resid}
+    else:
+        x0 = _initial(o, 1)
+        init_status = None
+        if x0 is not None:
+            x0 = x0[0]
+        elif method == "vision":
+            x0, init_status, _ = single.dlt_one(fr)
+        else:
+            x0, init_status, _ = single.dlt_one(fr)
+            x0, _, init_status, _ = single.gn_one(fr, fr.pixel, x0, init_status, tol, itmax)
+        if method in ("fusion", "ridge"):
+            k = o.get("k") if method == "ridge" else None
+            hkb = None if method == "fusion" or k is not None else o.get("hkb", "paper")
+            X, it, status, cond, ex = single.normalized_one(fr, x0, init_status, tol, itmax, k=k, hkb=hkb)
+            extras = {"augmented_component": np.array([ex.get("augmented", math.nan)])}
+            if method == "ridge":
+                extras["k"] = np.array([ex.get("k", math.nan)])
+        else:
+            model = {"vision": fr.pixel, "range": fr.range, "fusion-raw": fr.both}[method]
+            X, it, status, cond = single.gn_one(fr, model, x0, init_status, tol, itmax)
+    X = np.asarray(X, dtype=np.float64)[None]
+    if method in _USES_PIXELS:
+        behind = _behind_camera(st, X)
+        if behind[0]:
+            status = Status.DEGENERATE
+            X[:] = np.nan
+        extras["behind_camera"] = behind
     return BatchEstimate(method=method, position_m=X, iterations=np.array([it]), status=np.array([status], np.int8),
-                         condition_number=np.array([cond]), covariance_m2=cov, extras=extras)
+                         condition_number=np.array([cond], dtype=np.float64), covariance_m2=cov, extras=extras)
 
 
 def _behind_camera(st: Stacked, X: np.ndarray) -> np.ndarray:
@@ -321,12 +363,12 @@ def solve(method: str, obs: Observations, **options) -> Estimate:
 def _residuals(method: str, st: Stacked, X: np.ndarray) -> np.ndarray:
     """Observed minus predicted of the observations the method used: pixels (px, u v interleaved), then
     ranges (m)."""
-    X = X[None]
+    if not np.isfinite(X).all():
+        return np.zeros(0)
+    fr = single.Frames(st)
     parts = []
     if method in _USES_PIXELS or method == "los":
-        _, r, ok = pixel_model(st, X)
-        parts.append(r[ok])
+        parts.append(fr.pixel(X)[1])
     if method not in ("dlt", "vision"):
-        _, r, ok = range_model(st, X)
-        parts.append(r[ok])
+        parts.append(fr.range(X)[1])
     return np.concatenate(parts) if parts else np.zeros(0)

@@ -12,12 +12,10 @@ from collections.abc import Callable
 import numpy as np
 
 from pipeline.solve.estimate import Status
-from pipeline.solve.stacked import Stacked, condition_numbers
+from pipeline.solve.stacked import Stacked, condition_numbers, is_singular
 
 #: an estimate further than this many times the problem's size from the platforms has diverged
 DIVERGENCE_FACTOR = 1e3
-#: cond(design) beyond this: the geometry does not determine the target
-DEGENERATE_CONDITION = 1e10
 
 StepFn = Callable[[Stacked, np.ndarray], tuple[np.ndarray, np.ndarray, dict]]
 
@@ -74,15 +72,14 @@ def iterate(st: Stacked, X0: np.ndarray, step: StepFn, tol_m: float, max_iterati
     return X, iterations, status, extras
 
 
-def finish(X: np.ndarray, status: np.ndarray, design: np.ndarray, geometry: np.ndarray | None = None) -> np.ndarray:
-    """In place: problems whose final design matrix (B,m,k) is numerically rank deficient (condition number
-    of the column-equilibrated matrix above DEGENERATE_CONDITION) become DEGENERATE; DIVERGED and DEGENERATE
-    positions become NaN. Returns the (B,) condition numbers of the design matrices as they are.
-    geometry: the columns judged for rank deficiency, when not all of design's."""
-    cond = condition_numbers(design)
-    cond_eq = condition_numbers(design if geometry is None else geometry, equilibrate=True)
+def finish(X: np.ndarray, status: np.ndarray, N: np.ndarray, N_geometry: np.ndarray | None = None) -> np.ndarray:
+    """In place: problems whose final normal matrix N = A^T A (B,k,k) is singular (`is_singular`: the geometry
+    does not determine the target) become DEGENERATE; DIVERGED and DEGENERATE positions become NaN. Returns
+    the (B,) condition numbers of the design matrices A. N_geometry: the block judged for singularity, when
+    not all of N."""
+    cond = condition_numbers(N)
     finite = np.isfinite(X).all(axis=1)
-    status[(cond_eq > DEGENERATE_CONDITION) & finite] = Status.DEGENERATE
+    status[is_singular(N if N_geometry is None else N_geometry) & finite] = Status.DEGENERATE
     cond[~finite] = np.nan
     X[(status == Status.DIVERGED) | (status == Status.DEGENERATE)] = np.nan
     return cond

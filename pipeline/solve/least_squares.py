@@ -12,6 +12,10 @@ from pipeline.solve.iterate import finish, iterate
 from pipeline.solve.stacked import Stacked, normal_equations, pixel_model, range_model, solve_spd
 
 HKB_VARIANTS = ("paper", "textbook")
+#: the min-max normalization can scale one block by 1/(max - min) -> huge when that block's residuals are
+#: nearly equal, making T ill-conditioned without any geometric cause; its solves are therefore only refused
+#: near machine precision, and degeneracy is judged on the geometry, the unnormalized [H; h]
+NORMALIZED_SINGULAR_DET = 1e-20
 
 
 def _gn_step(model):
@@ -32,8 +36,9 @@ def _fused_model(st: Stacked, X: np.ndarray):
 
 def _run(st, X0, model, tol_m, max_iterations, init_status):
     X, it, status, _ = iterate(st, X0, _gn_step(model), tol_m, max_iterations, init_status)
-    J, _, _ = model(st, np.where(np.isfinite(X), X, 0.0))
-    cond = finish(X, status, J)
+    J, r, ok = model(st, np.where(np.isfinite(X), X, 0.0))
+    N, _ = normal_equations(J, r, ok.astype(np.float64))
+    cond = finish(X, status, N)
     return X, it, status, cond
 
 
@@ -117,10 +122,11 @@ def _solve_augmented(N, g, k):
     """beta = (N + k I)^-1 g for the 4-unknown system [dX; a]. Where that is singular but the 3 dX columns are
     not (the 4th column of T vanishes when every residual is zero, Max = Min = 0, e.g. at an exact fit), the
     4th unknown is held at the value 1 the paper writes: dX = (N33 + k I)^-1 (g3 - N[:3, 3])."""
-    beta, singular = solve_spd(N + k[:, None, None] * np.eye(4), g)
+    beta, singular = solve_spd(N + k[:, None, None] * np.eye(4), g, NORMALIZED_SINGULAR_DET)
     if singular.any():
         i = np.flatnonzero(singular)
-        dX, sing3 = solve_spd(N[i, :3, :3] + k[i, None, None] * np.eye(3), g[i, :3] - N[i, :3, 3])
+        dX, sing3 = solve_spd(N[i, :3, :3] + k[i, None, None] * np.eye(3), g[i, :3] - N[i, :3, 3],
+                              NORMALIZED_SINGULAR_DET)
         beta[i, :3] = dX
         beta[i, 3] = 1.0
         singular[i] = sing3
@@ -155,10 +161,14 @@ def normalized_fusion(st: Stacked, X0, tol_m, max_iterations, init_status=None, 
     1) and updates X by dX only.
 
     Returns X, iterations, status, cond (of T at the final iterate), extras {k, augmented} of the last iteration.
-    Degeneracy is judged on the 3 dX columns of T (the geometry), not on the 4th.
+    Degeneracy is judged on the geometry (the unnormalized [H; h]), not on T.
     """
     X, it, status, extras = iterate(st, X0, _normalized_step(k, hkb), tol_m, max_iterations, init_status,
                                     extra_names=("k", "augmented"))
-    T, _, _ = normalized_system(st, np.where(np.isfinite(X), X, 0.0))
-    cond = finish(X, status, T, T[..., :3])
+    Xf = np.where(np.isfinite(X), X, 0.0)
+    T, dPhi, _ = normalized_system(st, Xf)
+    N, _ = normal_equations(T, dPhi, np.ones(dPhi.shape))
+    J, r, ok = _fused_model(st, Xf)
+    Ng, _ = normal_equations(J, r, ok.astype(np.float64))
+    cond = finish(X, status, N, Ng)
     return X, it, status, cond, extras

@@ -24,10 +24,20 @@ VCE_MAX_ROUNDS = 10
 VCE_TOL = 0.01
 
 
+def _curvature(e: np.ndarray, robust: str) -> np.ndarray:
+    """Newton weights of the normal matrix: rho''(e) (0 beyond Huber's c, negative beyond Cauchy's c), floored
+    at a thousandth of the IRLS weight rho'(e)/e so that the normal matrix stays regular when most residuals are
+    large (a far start)."""
+    if robust == "huber":
+        a = np.abs(e)
+        return np.where(a <= HUBER_C, 1.0, 0.001 * HUBER_C / np.where(a <= HUBER_C, 1.0, a))
+    z = (e / CAUCHY_C) ** 2
+    w = 1.0 / (1.0 + z)
+    return np.maximum((1.0 - z) * w * w, 0.001 * w)
+
+
 def _rho_and_weight(e: np.ndarray, robust: str | None):
-    """Loss rho(e) and IRLS weight rho'(e)/e of standardized residuals e. (A Newton step with rho'' in the
-    normal matrix was tried: for Huber it overshoots where residuals cross the threshold and needs many LM
-    rejections; IRLS never increased the cost in our tests and converges in ~8 iterations.)"""
+    """Loss rho(e) and IRLS weight rho'(e)/e of standardized residuals e."""
     if robust is None:
         return 0.5 * e * e, np.ones_like(e)
     a = np.abs(e)
@@ -106,6 +116,7 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
 
     iterations = np.zeros(B, dtype=np.int64)
     lam = np.zeros(B)
+    newton_ok = np.ones(B, dtype=bool)
     vce_rounds = np.zeros(B, dtype=np.int64)
     centre = st.platform_m.mean(axis=1)
     bound = _iterate.DIVERGENCE_FACTOR * problem_scale_m(st, np.where(finite0[:, None], X0, centre))
@@ -127,6 +138,9 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
         _, wr = _rho_and_weight(e, robust)
         w = okf[idx] / var_i
         N, g = normal_equations(J[idx], r[idx], w * wr)
+        if robust is not None:  # Newton: the loss's curvature in the normal matrix, unless it just failed
+            Nh, _ = normal_equations(J[idx], r[idx], w * _curvature(e, robust))
+            N = np.where(newton_ok[idx][:, None, None], Nh, N)
         lam_i = lam[idx]
         Nd = N + lam_i[:, None, None] * (np.einsum("bii->bi", N)[:, :, None] * np.eye(3))
         dX, singular = solve_spd(Nd, g)
@@ -148,6 +162,11 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
         cost[a_idx] = cost_n[accept]
         lam[a_idx] = np.where(lam[a_idx] / 10 < 1e-9, 0.0, lam[a_idx] / 10)
         rej = idx[~accept]
+        # a rejected Newton step is retried as the IRLS step (a descent step) before damping
+        fallback = rej[newton_ok[rej]] if robust is not None else rej[:0]
+        newton_ok[idx[accept]] = True
+        newton_ok[fallback] = False
+        rej = rej[~np.isin(rej, fallback)]
         lam[rej] = np.where(lam[rej] == 0, 1e-4, lam[rej] * 10)
         small = step_norm <= tol_m
         inner_done = small & ~singular & ~exploded
@@ -186,7 +205,7 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     w = okf * wr / var_f
     N, _ = normal_equations(J, r, w)
     cov, singular = _inverse_spd(N)
-    cond = condition_numbers(J * np.sqrt(w)[..., None])
+    cond = condition_numbers(N)
     bad_cond = singular  # the Jacobi-scaled criterion of the iteration: cond of the scaled design ~> 1e10
     status[bad_cond & ~failed] = Status.DEGENERATE
     failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)

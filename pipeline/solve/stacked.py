@@ -148,12 +148,17 @@ def normal_equations(J: np.ndarray, r: np.ndarray, w: np.ndarray):
     return Jt @ J, (Jt @ r[..., None])[..., 0]
 
 
-def solve_spd(N: np.ndarray, g: np.ndarray, singular_below: float = 1e-20):
+#: a normal matrix whose Jacobi-scaled determinant (1 for orthogonal columns, 0 for dependent ones) is below
+#: this is singular: the smallest eigenvalue of the scaled normal matrix is then below ~1e-12, i.e. the
+#: column-equilibrated design matrix has a condition number beyond ~1e6; well above rounding (~1e-16)
+SINGULAR_DET = 1e-12
+
+
+def solve_spd(N: np.ndarray, g: np.ndarray, singular_below: float = SINGULAR_DET):
     """Solve N x = g for a batch of symmetric positive (semi-)definite N (B,k,k).
 
-    Returns x (B,k) and a (B,) bool 'singular' flag: the determinant of the Jacobi-scaled N (1 for orthogonal
-    columns, 0 for dependent ones) below `singular_below`, i.e. cond(design) beyond ~1e10. Singular
-    problems get x = NaN instead of a numpy LinAlgError for the whole batch.
+    Returns x (B,k) and a (B,) bool 'singular' flag (`SINGULAR_DET`). Singular problems get x = NaN instead of
+    a numpy LinAlgError for the whole batch.
     """
     d = np.sqrt(np.abs(np.einsum("bii->bi", N)))
     bad_d = ~(d > 0) | ~np.isfinite(d)
@@ -169,14 +174,22 @@ def solve_spd(N: np.ndarray, g: np.ndarray, singular_below: float = 1e-20):
     return x, singular
 
 
-def condition_numbers(A: np.ndarray, equilibrate: bool = False) -> np.ndarray:
-    """(B,) 2-norm condition numbers of the design matrices A (B,m,k) (zero rows = unused); inf if singular.
-    equilibrate: of A with its columns scaled to unit length (invariant to the units of the unknowns), the
-    measure of rank deficiency used to flag DEGENERATE geometry."""
-    if equilibrate:
-        norm = np.linalg.norm(A, axis=1, keepdims=True)
-        A = A / np.where(norm > 0, norm, 1.0)
-    s = np.linalg.svd(A, compute_uv=False)
+def is_singular(N: np.ndarray) -> np.ndarray:
+    """(B,) the `solve_spd` criterion alone, for normal matrices N (B,k,k)."""
+    d = np.sqrt(np.abs(np.einsum("bii->bi", N)))
+    ok = (d > 0).all(axis=1) & np.isfinite(N).all(axis=(1, 2))
+    d = np.where(d > 0, d, 1.0)
+    det = np.linalg.det(np.where(ok[:, None, None], N / (d[:, :, None] * d[:, None, :]), 0.0))
+    return ~ok | ~(det > SINGULAR_DET)
+
+
+def condition_numbers(N: np.ndarray) -> np.ndarray:
+    """(B,) 2-norm condition numbers of design matrices A from their normal matrices N = A^T A (B,k,k):
+    sqrt(largest / smallest eigenvalue); inf when singular. Through N, values beyond ~1e7 are only indicative
+    (rounding); degeneracy is decided by `is_singular`, not by this number."""
+    good = np.isfinite(N).all(axis=(1, 2))
+    ev = np.linalg.eigvalsh(np.where(good[:, None, None], N, 0.0))
     with np.errstate(divide="ignore", invalid="ignore"):
-        c = s[:, 0] / s[:, -1]
-    return np.where(np.isfinite(c), c, np.inf)
+        c = np.sqrt(ev[:, -1] / ev[:, 0])
+    c = np.where(ev[:, 0] > 0, c, np.inf)
+    return np.where(good, c, np.nan)

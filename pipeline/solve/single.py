@@ -1,0 +1,443 @@
+"""Every estimator for one problem, written without the batch bookkeeping (masks, index sets, frozen
+problems), so that `solve()` costs a few dozen small numpy calls per iteration instead of a few hundred.
+
+Each function is the batched kernel's algorithm step by step (same start values, steps, stopping rules,
+degeneracy criterion and final quantities); tests check that `solve` and `solve_batch` agree.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pipeline.solve import iterate as _iterate
+from pipeline.solve.estimate import Status
+from pipeline.solve.least_squares import NORMALIZED_SINGULAR_DET
+from pipeline.solve.mle import VCE_MAX_ROUNDS, VCE_TOL, _curvature, _rho_and_weight, base_variances
+from pipeline.solve.observations import Sigma
+from pipeline.solve.stacked import SINGULAR_DET, Stacked
+
+# ---- small dense algebra on Python floats (the sizes are 3 and 4) --------------------------------------------
+
+def spd_solve(N: np.ndarray, g: np.ndarray, singular_below: float = SINGULAR_DET):
+    """(x (k,), singular) for symmetric N (k,k): Jacobi scaling, Cholesky, and the criterion of
+    `stacked.solve_spd` (the scaled determinant, the product of the squared Cholesky pivots)."""
+    A = N.tolist()
+    b = g.tolist()
+    k = len(b)
+    d = []
+    for i in range(k):
+        a = A[i][i]
+        if not (a > 0 and math.isfinite(a)):
+            return None, True
+        d.append(math.sqrt(a))
+    L = [[0.0] * k for _ in range(k)]
+    det = 1.0
+    for j in range(k):
+        Lj = L[j]
+        s = A[j][j] / (d[j] * d[j]) - sum(v * v for v in Lj[:j])
+        if not s > 0:
+            return None, True
+        det *= s
+        Lj[j] = ljj = math.sqrt(s)
+        for i in range(j + 1, k):
+            Li = L[i]
+            Li[j] = (A[i][j] / (d[i] * d[j]) - sum(Li[m] * Lj[m] for m in range(j))) / ljj
+    if not det > singular_below:
+        return None, True
+    y = [0.0] * k
+    for i in range(k):
+        Li = L[i]
+        y[i] = (b[i] / d[i] - sum(Li[m] * y[m] for m in range(i))) / Li[i]
+    x = [0.0] * k
+    for i in range(k - 1, -1, -1):
+        x[i] = (y[i] - sum(L[m][i] * x[m] for m in range(i + 1, k))) / L[i][i]
+    return np.array([x[i] / d[i] for i in range(k)]), False
+
+
+def inv3(N: np.ndarray):
+    """(inverse (3,3), singular) of a symmetric 3x3 N with the `solve_spd` criterion."""
+    (a, b, c), (_, e, f), (_, _, i) = N.tolist()
+    if not (a > 0 and e > 0 and i > 0) or not all(map(math.isfinite, (a, b, c, e, f, i))):
+        return np.full((3, 3), np.nan), True
+    A, Bc, C = e * i - f * f, c * f - b * i, b * f - c * e
+    det = a * A + b * Bc + c * C
+    if not det / (a * e * i) > SINGULAR_DET:
+        return np.full((3, 3), np.nan), True
+    E, F, I = a * i - c * c, b * c - a * f, a * e - b * b
+    return np.array([[A, Bc, C], [Bc, E, F], [C, F, I]]) / det, False
+
+
+def condition(N: np.ndarray) -> float:
+    """cond of the design matrix from its normal matrix, as `stacked.condition_numbers`."""
+    if not np.isfinite(N).all():
+        return math.nan
+    ev = np.linalg.eigvalsh(N)
+    return math.sqrt(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
+
+
+def _finite(x: np.ndarray) -> bool:
+    return all(map(math.isfinite, x.tolist()))
+
+
+# ---- the measurement models for one problem ------------------------------------------------------------------
+
+class Frames:
+    """One problem's frames with a pixel and frames with a range, as dense arrays."""
+
+    def __init__(self, st: Stacked):
+        self.st = st
+        self.pix_f = np.flatnonzero(st.has_pix[0])
+        self.rng_f = np.flatnonzero(st.has_range[0])
+        self.Mp = st.M[0, self.pix_f]
+        self.M12, self.M3 = self.Mp[:, :2, :], self.Mp[:, 2:3, :]
+        self.p4 = st.p4[0, self.pix_f]
+        self.pix = st.pix[0, self.pix_f]
+        self.S = st.platform_m[0, self.rng_f]
+        self.d = st.range_m[0, self.rng_f]
+        self.npix = 2 * self.pix_f.size
+        self.centre = st.platform_m[0].mean(axis=0)
+
+    def pixel(self, X: np.ndarray):
+        """J (2k,3), r (2k,) of the k frames with a pixel (rows u1 v1 u2 ...), as `stacked.pixel_model`."""
+        q = self.Mp @ X + self.p4
+        w = q[:, 2:3]
+        uv = q[:, :2] / w
+        return ((self.M12 - uv[..., None] * self.M3) / w[..., None]).reshape(-1, 3), (self.pix - uv).ravel()
+
+    def range(self, X: np.ndarray):
+        """J (k,3), r (k,) of the k frames with a range, as `stacked.range_model`."""
+        diff = X - self.S
+        dist = np.sqrt((diff * diff).sum(axis=1))
+        return diff / dist[:, None], self.d - dist
+
+    def both(self, X: np.ndarray):
+        Jp, rp = self.pixel(X)
+        Jr, rr = self.range(X)
+        return np.concatenate((Jp, Jr)), np.concatenate((rp, rr))
+
+    def bound(self, X0: np.ndarray) -> float:
+        """The divergence bound of `iterate.iterate` for the start X0."""
+        s = np.asarray(X0 if _finite(X0) else self.centre) - self.st.platform_m[0]
+        scale = math.sqrt(float((s * s).sum(axis=1).max()))
+        return _iterate.DIVERGENCE_FACTOR * (max(scale, 1.0) if math.isfinite(scale) else 1.0)
+
+
+# ---- closed forms ---------------------------------------------------------------------------------------------
+
+def dlt_one(fr: Frames):
+    """`linear.dlt` for one problem: X (3,), status, cond."""
+    st = fr.st
+    if fr.pix_f.size < 2:
+        return np.full(3, np.nan), Status.DEGENERATE, math.inf
+    c = fr.centre
+    dev = st.platform_m[0] - c
+    spread = math.sqrt(float((dev * dev).sum()) / st.n)
+    sc = spread if spread > 1.0 else 1.0
+    Pp = np.concatenate((fr.Mp * sc, (fr.Mp @ c + fr.p4)[:, :, None]), axis=2)
+    A = (fr.pix[:, :, None] * Pp[:, 2:3, :] - Pp[:, :2, :]).reshape(-1, 4)
+    norm = np.sqrt((A * A).sum(axis=1))
+    A = A / np.where(norm > 0, norm, 1.0)[:, None]
+    evals, evecs = np.linalg.eigh(A.T @ A)
+    x = evecs[:, 0]
+    cond = math.sqrt(evals[3] / evals[1]) if evals[1] > 0 else math.inf
+    if not abs(x[3]) > 1e-12 * math.sqrt(float(x[:3] @ x[:3])):
+        return np.full(3, np.nan), Status.DEGENERATE, cond
+    return c + sc * x[:3] / x[3], Status.CLOSED_FORM, cond
+
+
+def los_one(fr: Frames):
+    """`linear.los` for one problem: X (3,), status, points (n,3), oracle error."""
+    st = fr.st
+    n = st.n
+    valid = np.flatnonzero(st.has_pix[0] & st.has_range[0])
+    pts = np.full((n, 3), np.nan)
+    if valid.size == 0:
+        return np.full(3, np.nan), Status.DEGENERATE, pts, math.nan
+    M = st.M[0, valid]
+    Minv = np.linalg.inv(M)
+    C = -(Minv @ st.p4[0, valid][:, :, None])[:, :, 0]
+    xh = np.concatenate((st.pix[0, valid], np.ones((valid.size, 1))), axis=1)
+    a = (Minv @ xh[:, :, None])[:, :, 0] * st.depth_sign()[0, valid][:, None]
+    a /= np.sqrt((a * a).sum(axis=1))[:, None]
+    cs = C - st.platform_m[0, valid]
+    b = (a * cs).sum(axis=1)
+    disc = b * b - ((cs * cs).sum(axis=1) - st.range_m[0, valid] ** 2)
+    t = -b + np.sqrt(np.maximum(disc, 0.0))
+    p = C + t[:, None] * a
+    pts[valid] = p
+    oracle = math.nan
+    if st.truth_m is not None:
+        e = p - st.truth_m[0]
+        oracle = math.sqrt(float((e * e).sum(axis=1).min()))
+    return np.median(p, axis=0), Status.CLOSED_FORM, pts, oracle
+
+
+# ---- Gauss-Newton family --------------------------------------------------------------------------------------
+
+def _iterate_one(X0, init_status, step, tol_m, max_iterations, bound, centre):
+    """`iterate.iterate` for one problem: X (last finite iterate), iterations, status, extras."""
+    extras: dict = {}
+    if (init_status is not None and init_status in (Status.DIVERGED, Status.DEGENERATE)) or not _finite(X0):
+        return X0.copy(), 0, (Status.DIVERGED if init_status == Status.DIVERGED else Status.DEGENERATE), extras
+    X = X0.copy()
+    status = Status.MAX_ITERATIONS
+    it = 0
+    for _ in range(max_iterations):
+        dX, singular, ex = step(X)
+        extras.update(ex)
+        it += 1
+        if singular:
+            status = Status.DEGENERATE
+            break
+        Xn = X + dX
+        finite = _finite(Xn)
+        if finite:
+            X = Xn
+        diff = Xn - centre
+        if not finite or math.sqrt(float(diff @ diff)) > bound:
+            status = Status.DIVERGED
+            break
+        if math.sqrt(float(dX @ dX)) <= tol_m:
+            status = Status.CONVERGED
+            break
+    return X, it, status, extras
+
+
+def _finish_one(X, status, N, N_geometry=None):
+    """`iterate.finish` for one problem: (X or NaN, status, cond)."""
+    finite = _finite(X)
+    cond = condition(N) if finite else math.nan
+    G = N if N_geometry is None else N_geometry
+    if finite and spd_solve(G, np.zeros(G.shape[0]))[1]:
+        status = Status.DEGENERATE
+    if status in (Status.DIVERGED, Status.DEGENERATE):
+        X = np.full(3, np.nan)
+    return X, status, cond
+
+
+def gn_one(fr: Frames, model, X0, init_status, tol_m, max_iterations):
+    """vision / range / fusion-raw: plain Gauss-Newton on model(X) -> (J, r). Returns X, it, status, cond."""
+    def step(X):
+        J, r = model(X)
+        JT = J.T
+        dX, singular = spd_solve(JT @ J, JT @ r)
+        return dX, singular, {}
+
+    X, it, status, _ = _iterate_one(X0, init_status, step, tol_m, max_iterations, fr.bound(X0), fr.centre)
+    if _finite(X):
+        J, _ = model(X)
+        N = J.T @ J
+    else:
+        N = np.full((3, 3), np.nan)
+    X, status, cond = _finish_one(X, status, N)
+    return X, it, status, cond
+
+
+def _block(J, r):
+    """min-max normalization of one block: rows [J/span, -lo/span], (r - lo)/span (`least_squares._minmax`)."""
+    if r.size == 0:
+        return np.zeros((0, 4)), r
+    lo = float(r.min())
+    span = float(r.max()) - lo
+    if not (span > 0 and math.isfinite(span)):
+        span = 1.0
+    T = np.empty((r.size, 4))
+    T[:, :3] = J / span
+    T[:, 3] = -lo / span
+    return T, (r - lo) / span
+
+
+def normalized_system_one(fr: Frames, X):
+    Jp, rp = fr.pixel(X)
+    Jr, rr = fr.range(X)
+    Tp, dp = _block(Jp, rp)
+    Tr, dr = _block(Jr, rr)
+    return np.concatenate((Tp, Tr)), np.concatenate((dp, dr))
+
+
+def _solve_augmented_one(N, g, k):
+    beta, singular = spd_solve(N + k * np.eye(4) if k else N, g, NORMALIZED_SINGULAR_DET)
+    if singular:
+        dX, singular = spd_solve(N[:3, :3] + k * np.eye(3) if k else N[:3, :3], g[:3] - N[:3, 3],
+                                 NORMALIZED_SINGULAR_DET)
+        beta = None if singular else np.append(dX, 1.0)
+    return beta, singular
+
+
+def _hkb_one(N, g, dPhi, variant):
+    """`least_squares.hkb_k` for one problem."""
+    p = 4
+    if variant == "textbook":
+        d = np.sqrt(np.diag(N))
+        d = np.where(d > 0, d, 1.0)
+        N = N / np.outer(d, d)
+        g = g / d
+    beta, singular = spd_solve(N, g)
+    if singular:
+        return 0.0
+    rss = max(float(dPhi @ dPhi) - float(g @ beta), 0.0)
+    dof = dPhi.size - p
+    s2 = rss / dof if dof > 0 else 0.0
+    denom = float(beta @ beta) if variant == "textbook" else float(beta @ N @ beta)
+    k = p * s2 / denom if denom != 0 else math.inf
+    return k if math.isfinite(k) else 0.0
+
+
+def normalized_one(fr: Frames, X0, init_status, tol_m, max_iterations, k=None, hkb=None):
+    """`least_squares.normalized_fusion` for one problem: X, it, status, cond, extras {k, augmented}."""
+    def step(X):
+        T, dPhi = normalized_system_one(fr, X)
+        TT = T.T
+        N, g = TT @ T, TT @ dPhi
+        if hkb is None:
+            kk = 0.0 if k is None else float(k)
+            beta, singular = _solve_augmented_one(N, g, kk)
+        else:
+            kk = _hkb_one(N, g, dPhi, hkb)
+            if hkb == "textbook":
+                d = np.sqrt(np.diag(N))
+                d = np.where(d > 0, d, 1.0)
+                gamma, singular = _solve_augmented_one(N / np.outer(d, d), g / d, kk)
+                beta = None if singular else gamma / d
+            else:
+                beta, singular = _solve_augmented_one(N, g, kk)
+        if singular:
+            return None, True, {"k": kk, "augmented": math.nan}
+        return beta[:3], False, {"k": kk, "augmented": float(beta[3])}
+
+    X, it, status, extras = _iterate_one(X0, init_status, step, tol_m, max_iterations, fr.bound(X0), fr.centre)
+    if _finite(X):
+        T, _ = normalized_system_one(fr, X)
+        N = T.T @ T
+        J, _ = fr.both(X)
+        Ng = J.T @ J
+    else:
+        N, Ng = np.full((4, 4), np.nan), np.full((3, 3), np.nan)
+    X, status, cond = _finish_one(X, status, N, Ng)
+    return X, it, status, cond, extras
+
+
+# ---- mle ------------------------------------------------------------------------------------------------------
+
+def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
+            max_iterations: int, init_status):
+    """`mle.mle` for one problem. Returns X (3,), iterations, status, cond, covariance (3,3), extras dict of
+    floats (the keys of `mle.mle`) and the final residuals (pixels u v interleaved, then ranges)."""
+    st = fr.st
+    npix = fr.npix
+    status = Status.MAX_ITERATIONS
+    X = np.array(X0, dtype=np.float64)
+    bad = (init_status is not None and init_status in (Status.DIVERGED, Status.DEGENERATE)) or not _finite(X)
+    if bad:
+        status = Status.DIVERGED if init_status == Status.DIVERGED else Status.DEGENERATE
+        X = np.zeros(3)
+    var_all = base_variances(st, X[None], sigma)[0]
+    var0 = np.concatenate((var_all[:2 * st.n].reshape(-1, 2)[fr.pix_f].ravel(), var_all[2 * st.n:][fr.rng_f]))
+    vf = [1.0, 1.0]
+    m = var0.size
+
+    def var_of(vf):
+        v = var0.copy()
+        v[:npix] *= vf[0]
+        v[npix:] *= vf[1]
+        return v
+
+    var = var_of(vf)
+    J, r = fr.both(X)
+    bound = fr.bound(X0)
+    centre = fr.centre
+    rho, _ = _rho_and_weight(r / np.sqrt(var), robust)
+    cost = float(rho.sum())
+    iterations = 0
+    lam = 0.0
+    vce_rounds = 0
+    newton_ok = True
+    for _ in range(0 if bad else max_iterations):
+        e = r / np.sqrt(var)
+        _, wr = _rho_and_weight(e, robust)
+        JW = J.T * (wr / var)
+        N = JW @ J
+        g = JW @ r
+        if robust is not None and newton_ok:
+            N = (J.T * (_curvature(e, robust) / var)) @ J
+        dX, singular = spd_solve(N + lam * np.diag(np.diag(N)) if lam else N, g)
+        iterations += 1
+        Xn = X if singular else X + dX
+        if _finite(Xn):
+            diff = Xn - centre
+            exploded = math.sqrt(float(diff @ diff)) > bound
+        else:
+            exploded = True
+        if exploded:
+            Xn = X
+        Jn, rn = fr.both(Xn)
+        rho_n, _ = _rho_and_weight(rn / np.sqrt(var), robust)
+        cost_n = float(rho_n.sum())
+        accept = not singular and not exploded and cost_n <= cost * (1 + 1e-12) + 1e-300
+        step_norm = math.inf if singular else math.sqrt(float(dX @ dX))
+        if accept:
+            X, J, r, cost = Xn, Jn, rn, cost_n
+            lam = 0.0 if lam / 10 < 1e-9 else lam / 10
+            newton_ok = True
+        elif robust is not None and newton_ok:
+            newton_ok = False  # retry as the IRLS step before damping
+        else:
+            lam = 1e-4 if lam == 0 else lam * 10
+        small = step_norm <= tol_m
+        if singular and not small:
+            status = Status.DEGENERATE
+            break
+        if exploded and not singular:
+            status = Status.DIVERGED
+            break
+        inner_done = small or (not accept and lam > 1e12)
+        if vce and inner_done:
+            factors, usable = _vce_factors(J, r, var, npix, robust)
+            more = [usable[k] and abs(factors[k] - 1) > VCE_TOL for k in (0, 1)]
+            if any(more) and vce_rounds < VCE_MAX_ROUNDS:
+                vf = [vf[k] * factors[k] if usable[k] else vf[k] for k in (0, 1)]
+                vce_rounds += 1
+                var = var_of(vf)
+                rho, _ = _rho_and_weight(r / np.sqrt(var), robust)
+                cost = float(rho.sum())
+                lam = 0.0
+                continue
+        if inner_done:
+            status = Status.CONVERGED
+            break
+    failed = status in (Status.DIVERGED, Status.DEGENERATE)
+    _, wr = _rho_and_weight(r / np.sqrt(var), robust)
+    w = wr / var
+    N = (J.T * w) @ J
+    cov, singular = inv3(N)
+    cond = condition(N)
+    if singular and not failed:
+        status = Status.DEGENERATE
+    failed = status in (Status.DIVERGED, Status.DEGENERATE)
+    if failed:
+        X = np.full(3, np.nan)
+        cov = np.full((3, 3), np.nan)
+        if not singular:
+            cond = math.nan
+    sigma0_sq = float((w * r * r).sum() / (m - 3)) if m > 3 else math.nan
+    extras = {"variance_factor_pixel": vf[0], "variance_factor_range": vf[1], "sigma0_sq": sigma0_sq,
+              "vce_rounds": vce_rounds}
+    return X, iterations, status, cond, 0.5 * (cov + cov.T), extras, r
+
+
+def _vce_factors(J, r, var, npix, robust):
+    _, wr = _rho_and_weight(r / np.sqrt(var), robust)
+    w = wr / var
+    Ninv, _ = inv3((J.T * w) @ J)
+    lev = w * ((J @ Ninv) * J).sum(axis=1)
+    q = w * r * r
+    out, usable = [1.0, 1.0], [False, False]
+    for k, sl in ((0, slice(0, npix)), (1, slice(npix, None))):
+        red = float((1.0 - lev[sl]).sum())
+        if red >= 0.5:
+            f = float(q[sl].sum()) / red
+            if math.isfinite(f) and f > 0:
+                out[k], usable[k] = f, True
+    return out, usable

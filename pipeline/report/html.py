@@ -84,7 +84,8 @@ def _summary_table(results: Sequence[GroupResult]) -> str:
         cells = []
         for r in results:
             if m not in r.estimates:
-                cells.append('<td class="na">no estimate</td>')
+                why = (r.settings.get("solve_failures") or {}).get(m, "the estimator gave no answer")
+                cells.append(f'<td class="na" title="{escape(str(why))}">no estimate</td>')
                 continue
             e = errors[r.name][m]
             if r.truth_m is None:
@@ -143,6 +144,14 @@ def _group_section(r: GroupResult, figures: Mapping[str, bytes]) -> str:
             f"<figure>{_img(figures[k], f'{r.name} {k}')}<figcaption>{cap}</figcaption></figure>" for k, cap in pair)
             + "</div>")
     parts.append("<h3>Estimates</h3>" + _estimates_table(r))
+    failed = r.settings.get("solve_failures") or {}
+    if isinstance(failed, dict) and failed:
+        parts.append('<p class="note">Estimators that gave no answer: ' + "; ".join(
+            f"<b>{escape(method_label(m))}</b>: {escape(str(msg))}" for m, msg in failed.items()) + "</p>")
+    notes = r.settings.get("notes") or []
+    if isinstance(notes, list) and notes:
+        parts.append("<h3>Notes</h3><ul class=\"note\">" + "".join(f"<li>{escape(str(n))}</li>" for n in notes)
+                     + "</ul>")
     if r.timings_s:
         parts.append("<h3>Stage timings</h3>" + _kv_table({f"{k} /s": float(v) for k, v in r.timings_s.items()}, 3))
     if r.settings:

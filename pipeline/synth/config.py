@@ -154,13 +154,15 @@ class LaserConfig:
     aim: "target" = a shot measures the distance to the target (the tracker holds the laser spot on it, as the
         paper's model assumes); "beam" = to where the optical axis meets the ground plane.
     outlier_observations: observation indices whose shot is an outlier (valid flag set, range off by
-        outlier_offset_m, signs alternating), e.g. the beam catching a nearer obstacle."""
+        outlier_offset_m, signs alternating), e.g. the beam catching a nearer obstacle.
+    dropped_observations: observation indices whose shot is missing from the log (no return)."""
 
     min_range_m: float = 50.0
     max_range_m: float = 12000.0
     aim: Literal["target", "beam"] = "target"
     outlier_observations: tuple[int, ...] = ()
     outlier_offset_m: tuple[float, ...] = (-420.0, 310.0, -650.0)
+    dropped_observations: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -320,6 +322,7 @@ def _check(c: SynthConfig) -> None:
     if not 0 <= c.noise.laser_dropout < 1:
         raise ConfigError(f"'noise.laser_dropout' must be in [0, 1), got {c.noise.laser_dropout}")
     for name, idx in (("laser.outlier_observations", c.laser.outlier_observations),
+                      ("laser.dropped_observations", c.laser.dropped_observations),
                       ("lost_target.occluded_observations", c.lost_target.occluded_observations),
                       ("lost_target.slipped_observations", c.lost_target.slipped_observations)):
         bad = [i for i in idx if not 0 <= i < o.count]

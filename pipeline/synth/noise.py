@@ -17,6 +17,20 @@ def gauss_markov(rng: np.random.Generator, n: int, dims: int, sigma: float, tau_
     return sigma * lfilter([1.0], [1.0, -a], w, axis=0)
 
 
+def smooth_gauss_markov(rng: np.random.Generator, n: int, dims: int, sigma: float, tau_s: float, smooth_s: float,
+                        dt_s: float) -> np.ndarray:
+    """(n, dims) a Gauss-Markov process (time constant tau_s) low-passed once more (time constant smooth_s) and
+    rescaled to stationary std `sigma`: a smooth signal, like a tracker's pointing error, that sensors sampled at
+    25 Hz describe well."""
+    x = gauss_markov(rng, n, dims, 1.0, tau_s, dt_s)
+    b = math.exp(-dt_s / smooth_s)
+    y = lfilter([1.0 - b], [1.0, -b], x, axis=0, zi=np.outer([b], x[0]))[0]
+    # stationary variance of the cascade of two first-order filters, a = exp(-dt/tau)
+    a = math.exp(-dt_s / tau_s)
+    var = (1.0 - b) ** 2 * (1.0 + a * b) / ((1.0 - a * b) * (1.0 - b * b))
+    return sigma * y / math.sqrt(var)
+
+
 def sample_process(grid_s: np.ndarray, values: np.ndarray, t_s: np.ndarray) -> np.ndarray:
     """(n, dims) a process drawn on `grid_s` (m,) with values (m, dims), linearly interpolated at t_s (n,)."""
     return np.stack([np.interp(t_s, grid_s, values[:, i]) for i in range(values.shape[1])], axis=-1)

@@ -104,7 +104,7 @@ def make_telemetry(cfg: SynthConfig, tl: Timeline, flight: Flight, rngs: dict) -
     gim_yaw = R_gim.as_euler("ZYX")[:, 0]
     delta_yaw = np.angle(np.exp(1j * (gim_yaw - veh_yaw)))
     if cfg.gimbal.yaw_in_vehicle_frame:
-        R_gim = Rotation.from_euler("Z", veh_yaw).inv() * R_gim
+        R_gim = Rotation.from_euler("Z", veh_yaw[:, None]).inv() * R_gim
 
     # laser: shots on video frames
     las_t = tl.frame_time_ns(tl.laser_frames)
@@ -122,6 +122,7 @@ def make_telemetry(cfg: SynthConfig, tl: Timeline, flight: Flight, rngs: dict) -
     drop = rngs["laser"].random(len(las_t)) < nz.laser_dropout
     if not nz.laser_dropout_at_observations:
         drop &= ~obs_shot
+    drop |= np.isin(tl.laser_frames, tl.obs_frames[list(cfg.laser.dropped_observations)])
     logged = ~drop
     valid = np.isfinite(meas) & (meas >= cfg.laser.min_range_m) & (meas <= cfg.laser.max_range_m)
 

@@ -20,7 +20,7 @@ from scipy.spatial.transform import Rotation
 from pipeline.errors import ConfigError
 from pipeline.geometry.camera import look_at_rotation
 from pipeline.synth.config import SynthConfig
-from pipeline.synth.noise import gauss_markov
+from pipeline.synth.noise import smooth_gauss_markov
 
 R_OPTICAL_FROM_GIMBAL = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
 R_ENU_FROM_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -128,9 +128,9 @@ class Flight:
         self.grid_s = np.arange(0.0, dur_s + 1.0, 1.0 / MASTER_RATE_HZ)
         dt = 1.0 / MASTER_RATE_HZ
         nz, g = cfg.noise, cfg.gimbal
-        self.wobble_rad = gauss_markov(rng_wobble, len(self.grid_s), 3, math.radians(nz.vehicle_wobble_deg),
-                                       nz.vehicle_wobble_tau_s, dt)
-        jit = gauss_markov(rng_jitter, len(self.grid_s), 2, g.jitter_px, g.jitter_tau_s, dt)
+        self.wobble_rad = smooth_gauss_markov(rng_wobble, len(self.grid_s), 3, math.radians(nz.vehicle_wobble_deg),
+                                              nz.vehicle_wobble_tau_s, 0.3, dt)
+        jit = smooth_gauss_markov(rng_jitter, len(self.grid_s), 2, g.jitter_px, g.jitter_tau_s, 0.3, dt)
         slip = np.zeros(len(self.grid_s))
         for k in cfg.lost_target.slipped_observations:  # the gimbal loses lock for ~1.2 s around the observation
             slip[np.abs(self.grid_s - obs_s[k]) <= 0.6] = cfg.lost_target.slip_px

@@ -1,0 +1,77 @@
+#!/usr/bin/env python
+"""Regenerate sample_data/ deterministically from configs/synth/<group>.yaml.
+
+    python scripts/make_sample_data.py                 # all groups into sample_data/
+    python scripts/make_sample_data.py --only group6 -o /tmp/sd
+
+Writes sample_data/MANIFEST.json: per flight, the generation time and per file the size and sha256 of its
+bytes, and for each video the sha256 of its decoded frames (tests/test_synth_sample_data.py checks them).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from pipeline.synth.config import SynthConfig  # noqa: E402
+from pipeline.synth.flight import generate  # noqa: E402
+from pipeline.synth.writers.video import read_video_frames  # noqa: E402
+
+GROUPS = ("group1", "group2", "group3", "group4", "group5", "group6", "hard_outliers", "angle10")
+
+
+def decoded_video_sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    for img in read_video_frames(path):
+        h.update(img.tobytes())
+    return h.hexdigest()
+
+
+def file_manifest(folder: Path) -> dict:
+    out = {}
+    for p in sorted(q for q in folder.rglob("*") if q.is_file()):
+        rel = p.relative_to(folder).as_posix()
+        entry = {"bytes": p.stat().st_size, "sha256": hashlib.sha256(p.read_bytes()).hexdigest()}
+        if p.suffix == ".mp4":
+            entry["decoded_frames_sha256"] = decoded_video_sha256(p)
+        out[rel] = entry
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", action="append", choices=GROUPS, help="generate only this group (repeatable)")
+    ap.add_argument("-o", "--output", default=str(ROOT / "sample_data"), help="output folder (default sample_data/)")
+    args = ap.parse_args(argv)
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    manifest_path = out / "MANIFEST.json"
+    manifest = json.loads(manifest_path.read_text()) if manifest_path.exists() else {}
+    for group in args.only or GROUPS:
+        cfg = SynthConfig.load(ROOT / "configs" / "synth" / f"{group}.yaml")
+        t = time.perf_counter()
+        res = generate(cfg, out / group, overwrite=True)
+        dt = time.perf_counter() - t
+        files = file_manifest(out / group)
+        size = sum(f["bytes"] for f in files.values())
+        manifest[group] = {"format": cfg.format, "n_observations": res.n_observations,
+                           "intersection_angle_deg": round(res.intersection_angle_deg, 6), "frames": res.n_frames,
+                           "total_bytes": size, "files": files}
+        print(f"{group}: {cfg.format}, {res.n_observations} obs, {res.intersection_angle_deg:.4f} deg, "
+              f"{res.n_frames} frames, {size / 1e6:.2f} MB, {dt:.1f} s", flush=True)
+    manifest = dict(sorted(manifest.items()))
+    manifest_path.write_text(json.dumps(manifest, indent=1) + "\n")
+    total = sum(v["total_bytes"] for v in manifest.values())
+    print(f"total {total / 1e6:.2f} MB")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,52 @@
+"""Synthetic flight configs: typed loading, unknown keys and bad values rejected with the file named."""
+
+from pathlib import Path
+
+import pytest
+
+from pipeline.errors import ConfigError
+from pipeline.synth.config import SynthConfig
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_example_config_spells_out_the_defaults():
+    cfg = SynthConfig.load(ROOT / "configs" / "synth" / "example.yaml")
+    assert cfg == SynthConfig().replace(group="example", description=cfg.description)
+
+
+@pytest.mark.parametrize("name", ["group1", "group2", "group3", "group4", "group5", "group6", "hard_outliers",
+                                  "angle10"])
+def test_sample_configs_load(name):
+    cfg = SynthConfig.load(ROOT / "configs" / "synth" / f"{name}.yaml")
+    assert cfg.group == name
+
+
+def test_unknown_key_is_rejected_with_path(tmp_path):
+    p = tmp_path / "f.yaml"
+    p.write_text("path:\n  kind: arc\n  radius_m: 4000\n")
+    with pytest.raises(ConfigError, match=r"f\.yaml: unknown key\(s\) path\.radius_m"):
+        SynthConfig.load(p)
+
+
+@pytest.mark.parametrize("doc, message", [
+    ({"path": {"kind": "spiral"}}, "'path.kind' must be one of"),
+    ({"path": {"intersection_angle_deg": 140.0}}, "must be in \\(0, 132.8\\)"),
+    ({"observations": {"count": 1}}, "'observations.count' must be >= 2"),
+    ({"rates": {"laser_hz": 3.0}}, "must divide the frame rate"),
+    ({"laser": {"outlier_observations": [12]}}, "indices outside 0..9"),
+    ({"video": {"images_in_bag": True}}, "needs a bag format"),
+    ({"path": {"kind": "waypoints", "waypoints_enu_m": [[0, 0, 2000]]}}, "at least two"),
+    ({"start_time_utc": "yesterday"}, "ISO 8601"),
+    ({"noise": {"laser_m": "5 m"}}, "'noise.laser_m' must be a finite number"),
+])
+def test_bad_values_are_rejected(doc, message):
+    with pytest.raises(ConfigError, match=message):
+        SynthConfig.from_dict(doc)
+
+
+def test_cli_reports_a_missing_config(tmp_path, capsys):
+    from pipeline.cli import main
+    assert main(["synth", str(tmp_path / "nope.yaml"), "-o", str(tmp_path / "out")]) == 1
+    assert "config file not found" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()

@@ -3,6 +3,8 @@
     run_jobs(jobs, fn, workers=1, executor="local" | "dask", scheduler=None) -> (results, failures)
     report_stage("track")          called by a job function to show the stage it has entered
     discover_flights(path)         flight configs in a folder, or listed in a manifest
+    run_groups(jobs, process, outdir, digests=..., force=False, ...)
+                                   run_jobs + each group's output folder, finished groups reused on a re-run
 
 A job that raises (a RidgelocError, or any other exception: a bug, but one flight's bug) becomes a
 `GroupFailure` with a one-line message; the other jobs finish. Ctrl-C cancels the jobs not yet finished, stops
@@ -376,6 +378,76 @@ def summarize_failures(failures: Iterable[GroupFailure], total: int) -> str:
     lines = [f"{len(failures)} of {total} flight(s) failed (the others finished):"]
     lines += [f"  {f.name} ({f.source}): {f.message}" for f in failures]
     return "\n".join(lines)
+
+
+# ---- flight groups with their output folders -------------------------------------------------------------------
+
+class _GroupTask:
+    """Worker side of `run_groups`: process one group and write its folder (picklable when `process` is)."""
+
+    def __init__(self, process, outdir: str, extra_files, figures: bool):
+        self.process, self.outdir, self.extra_files, self.figures = process, outdir, extra_files, figures
+
+    def __call__(self, payload):
+        from pipeline.report.outputs import write_group_outputs
+
+        name, job_payload, digest = payload
+        result = self.process(job_payload)
+        if getattr(result, "name", None) != name:
+            raise ValueError(f"the job named {name!r} produced a group named {getattr(result, 'name', None)!r}")
+        report_stage("report")
+        extra = self.extra_files(result) if self.extra_files is not None else None
+        write_group_outputs(self.outdir, result, digest, extra_files=extra, figures=self.figures)
+        return result
+
+
+def job_digest(config, files: Iterable[str | PathLike] = ()) -> str:
+    """Hash of what a group's outputs depend on: its configuration (JSON-serialisable), the size and modification
+    time of its input files, and the ridgeloc version. Equal digests: the finished folder can be reused."""
+    from pipeline import __version__
+    from pipeline.atomic import config_hash
+
+    stats = []
+    for f in files:
+        try:
+            st = Path(f).stat()
+            stats.append([str(f), st.st_size, st.st_mtime_ns])
+        except OSError:
+            stats.append([str(f), None, None])
+    return config_hash({"config": config, "files": stats, "ridgeloc": __version__})
+
+
+def run_groups(jobs: Sequence[Job], process: Callable[[Any], Any], outdir: str | PathLike, *,
+               digests: dict[str, str] | None = None, force: bool = False,
+               extra_files: Callable[[Any], dict] | None = None, figures: bool = True, **run_jobs_options
+               ) -> tuple[list[Any], list[GroupFailure], list[str]]:
+    """Process flight groups into OUTDIR/<group>/ folders, reusing finished ones.
+
+    A job whose folder is finished for its digest (`digests[job.name]`, see `job_digest`; "" when not given) is not
+    run again unless `force`: its saved GroupResult is loaded. The others run through `run_jobs` (same options:
+    workers, executor, scheduler, progress, stages, on_done); each worker calls `process(job.payload)` and writes
+    the group's folder atomically with `extra_files(result)` (name -> content) beside the report's files.
+    `process` must return a GroupResult named `job.name`. Returns (results in job order, failures, names reused).
+    """
+    from pipeline.report.outputs import load_finished_group
+
+    digests = digests or {}
+    reused: dict[str, Any] = {}
+    if not force:
+        for job in jobs:
+            r = load_finished_group(outdir, job.name, digests.get(job.name, ""))
+            if r is not None:
+                reused[job.name] = r
+    todo = [Job(j.name, j.source, (j.name, j.payload, digests.get(j.name, ""))) for j in jobs
+            if j.name not in reused]
+    task = _GroupTask(process, str(outdir), extra_files, figures)
+    stages = run_jobs_options.pop("stages", None)
+    if stages is not None and "report" not in stages:
+        stages = (*stages, "report")
+    new, failures = run_jobs(todo, task, stages=stages, **run_jobs_options)
+    by_name = {**reused, **{r.name: r for r in new}}
+    results = [by_name[j.name] for j in jobs if j.name in by_name]
+    return results, failures, [j.name for j in jobs if j.name in reused]
 
 
 # ---- finding flights -------------------------------------------------------------------------------------------

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import multiprocessing
+import os
 import time
 from pathlib import Path
 
@@ -168,3 +169,44 @@ def test_discover_flights(tmp_path):
     bad.write_text("groups: []\n")
     with pytest.raises(ConfigError, match="non-empty list"):
         discover_flights(bad)
+
+
+CALLS: list[str] = []
+
+
+def counted_solve_flight(path: str) -> GroupResult:
+    CALLS.append(Path(path).stem)
+    return solve_flight(path)
+
+
+def test_run_groups_reuses_finished_folders(tmp_path):
+    from pipeline.batch import job_digest, run_groups
+
+    jobs = make_flights(tmp_path / "flights", 4, broken=(1, 99))
+    out = tmp_path / "out"
+    digests = {j.name: job_digest({"name": j.name}, [j.source]) for j in jobs}
+
+    def go(**kw):
+        CALLS.clear()
+        return run_groups(jobs, counted_solve_flight, out, digests=digests, figures=False, progress=False,
+                          extra_files=lambda r: {"note.txt": f"{r.name}\n"}, **kw)
+
+    results, failures, reused = go()
+    assert [r.name for r in results] == ["flight00", "flight02", "flight03"] and reused == []
+    assert [f.name for f in failures] == ["flight01"]
+    assert (out / "flight02" / "note.txt").read_text() == "flight02\n" and not (out / "flight01").exists()
+    first = {r.name: r.estimates["mle"].position_m for r in results}
+
+    results, failures, reused = go()  # a re-run: only the failed flight runs again
+    assert CALLS == ["flight01"] and reused == ["flight00", "flight02", "flight03"]
+    assert [r.name for r in results] == ["flight00", "flight02", "flight03"] and len(failures) == 1
+    for r in results:
+        np.testing.assert_array_equal(r.estimates["mle"].position_m, first[r.name])
+
+    st = Path(jobs[3].source).stat()  # an input changed: its digest changes, the flight runs again
+    os.utime(jobs[3].source, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
+    digests[jobs[3].name] = job_digest({"name": jobs[3].name}, [jobs[3].source])
+    go()
+    assert CALLS == ["flight01", "flight03"]
+    go(force=True)
+    assert CALLS == ["flight00", "flight01", "flight02", "flight03"]

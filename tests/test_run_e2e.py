@@ -22,12 +22,12 @@ from pipeline.cli import main as cli_main
 from pipeline.flight_config import load_flight_config
 from pipeline.run import process_group
 from pipeline.solve.observations import Observations
+from pipeline.synth import flight as synth
+from pipeline.synth.config import SynthConfig
 
 SIGMA_3D_M = math.sqrt(2 * (1.75**2 + 0.8**2) + 3 * 0.3**2 + 1.0**2)
 BOUND_M = 4 * SIGMA_3D_M
 
-synth = pytest.importorskip("pipeline.synth.flight")
-SynthConfig = pytest.importorskip("pipeline.synth.config").SynthConfig
 
 
 def _flight_config(folder, out_path):
@@ -112,3 +112,29 @@ def test_run_command_writes_the_report_and_skips_a_bad_group(tiny_flight, capsys
                                atol=1e-6)
     mle_err = float(rows[names.index("mle") + 1].split(",")[1])
     assert mle_err == pytest.approx(doc["estimates"]["mle"]["error_m"], abs=1e-3)
+
+
+def test_template_mark_and_a_bad_mark_frame(tiny_flight):
+    import cv2
+
+    from pipeline.errors import ConfigError
+    from pipeline.ingest import VideoFrames
+
+    root, cfg_path = tiny_flight
+    truth = json.loads((root / "flight" / "truth.json").read_text())
+    k, (u, v) = truth["target_mark"]["frame_index"], truth["target_mark"]["pixel"]
+    with VideoFrames(root / "flight" / "video.mp4") as video:
+        frame = video[k]
+    x0, y0 = round(u) - 100, round(v) - 80
+    cv2.imwrite(str(root / "template.png"), frame[y0:y0 + 161, x0:x0 + 201])
+    text = cfg_path.read_text()
+    mark_line = next(line for line in text.splitlines() if line.startswith("target:"))
+    (root / "template.yaml").write_text(text.replace(
+        mark_line, f"target: {{template: template.png, template_pixel: [{u - x0}, {v - y0}]}}"))
+    by_template = process_group(load_flight_config(root / "template.yaml"))
+    by_pixel = process_group(load_flight_config(cfg_path))
+    assert by_template.tracking["mark"]["frame_index"] == by_pixel.tracking["frame_index"][0]
+    np.testing.assert_allclose(by_template.observations.pixel, by_pixel.observations.pixel, atol=0.5)
+    (root / "badmark.yaml").write_text(text.replace(mark_line, "target: {frame_index: 99999, pixel: [300, 200]}"))
+    with pytest.raises(ConfigError, match=r"target\.frame_index 99999 is not a frame"):
+        process_group(load_flight_config(root / "badmark.yaml"))

@@ -212,11 +212,12 @@ class Target:
 
 @dataclass(frozen=True)
 class ObservationSelection:
-    mode: typing.Literal["range_times", "frames"] = "range_times"
+    mode: typing.Literal["range_times", "frames", "bursts"] = "range_times"
     frame_tolerance_s: float = 0.1
     max_range_gap_s: float = 0.1
     frame_indices: tuple[int, ...] = ()
     max_laser_offset_px: float | None = 50.0
+    burst_gap_s: float = 0.5
 
     def __post_init__(self):
         if self.frame_tolerance_s <= 0 or self.max_range_gap_s < 0:

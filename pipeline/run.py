@@ -139,7 +139,8 @@ def process_group(config: FlightConfig) -> GroupResult:
         c, sel = config.clock, config.observations
         plan = plan_observations(frames, log.range, mode=sel.mode, video_offset_ns=c.video_to_telemetry_offset_ns,
                                  range_offset_ns=c.range_offset_ns, frame_tolerance_s=sel.frame_tolerance_s,
-                                 max_range_gap_s=sel.max_range_gap_s, frame_indices=sel.frame_indices)
+                                 max_range_gap_s=sel.max_range_gap_s, frame_indices=sel.frame_indices,
+                                 burst_gap_s=sel.burst_gap_s)
         notes.extend(plan.notes)
         t1, c1 = time.perf_counter(), time.process_time()
         tracker = SiftTracker(config.tracking)

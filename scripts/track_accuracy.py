@@ -32,7 +32,8 @@ def track_group(cfg):
         c, sel = cfg.clock, cfg.observations
         plan = plan_observations(frames, log.range, mode=sel.mode, video_offset_ns=c.video_to_telemetry_offset_ns,
                                  range_offset_ns=c.range_offset_ns, frame_tolerance_s=sel.frame_tolerance_s,
-                                 max_range_gap_s=sel.max_range_gap_s, frame_indices=sel.frame_indices)
+                                 max_range_gap_s=sel.max_range_gap_s, frame_indices=sel.frame_indices,
+                                 burst_gap_s=sel.burst_gap_s)
         tracker = SiftTracker(cfg.tracking)
         res = tracker.track(decoder, cfg.target.frame_index, cfg.target.pixel, plan.frame_index.tolist(),
                             available=np.asarray(frames.index).tolist())

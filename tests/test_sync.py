@@ -127,3 +127,16 @@ def test_assembled_observation_projects_the_true_target_with_lens_and_lever_arms
     # the laser origin sits 0.1 m to the right of the camera, the camera 0.5 m ahead of the antenna
     np.testing.assert_allclose(np.linalg.norm(poses.laser_m - poses.camera_m, axis=1), 0.1, atol=1e-6)
     np.testing.assert_allclose(np.linalg.norm(poses.camera_m - poses.antenna_m, axis=1), np.hypot(0.5, 0.2), atol=1e-6)
+
+
+def test_plan_bursts_one_observation_per_burst_even_without_a_logged_shot():
+    burst = np.array([-80, -40, 0, 40, 80]) * 1_000_000
+    centres = T0 + np.array([0, 3, 6]) * 1_000_000_000
+    t_video = np.concatenate([c + burst for c in centres])
+    # a shot on the 2nd frame of burst 0, none logged for burst 1, an invalid one on burst 2's centre
+    ranges = RangeSeries(t_ns=np.array([centres[0] - 40_000_000, centres[2]]), range_m=np.array([900.0, 950.0]),
+                         valid=np.array([True, False]))
+    plan = plan_observations(_frames(t_video), ranges, mode="bursts", frame_tolerance_s=0.01,
+                             max_range_gap_s=0.05)
+    np.testing.assert_array_equal(plan.frame_index, [1, 7, 12])
+    np.testing.assert_allclose(plan.range_m, [900.0, np.nan, np.nan])

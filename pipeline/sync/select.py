@@ -3,7 +3,11 @@
 Mode `range_times` (default): every laser shot, valid or not, is an observation at the video frame nearest its
 time (within `frame_tolerance_s`); an invalid or out-of-range shot leaves the range NaN but keeps the frame.
 Mode `frames`: the listed frame indices are the observations; the nearest valid range within
-`max_range_gap_s` is attached, else NaN. All times are put on the telemetry clock first (config `clock`).
+`max_range_gap_s` is attached, else NaN. Mode `bursts`: for a camera triggered in bursts (frames separated by
+more than `burst_gap_s` start a new burst), one observation per burst, at the frame of the burst's laser shot
+when there is one within `frame_tolerance_s`, else the burst's middle frame, with the nearest valid range within
+`max_range_gap_s`; a burst whose shot was never logged still counts. All times are put on the telemetry clock
+first (config `clock`).
 """
 
 from __future__ import annotations
@@ -45,7 +49,7 @@ def usable_ranges(ranges: RangeSeries) -> np.ndarray:
 
 def plan_observations(frames: FrameSeries, ranges: RangeSeries | None, *, mode: str = "range_times",
                       video_offset_ns: int = 0, range_offset_ns: int = 0, frame_tolerance_s: float = 0.1,
-                      max_range_gap_s: float = 0.1, frame_indices=()) -> ObservationPlan:
+                      max_range_gap_s: float = 0.1, frame_indices=(), burst_gap_s: float = 0.5) -> ObservationPlan:
     """Choose the observation frames and attach ranges (see the module docstring)."""
     t_frames = np.asarray(frames.t_ns, dtype=np.int64) + int(video_offset_ns)
     notes: list[str] = []
@@ -69,14 +73,17 @@ def plan_observations(frames: FrameSeries, ranges: RangeSeries | None, *, mode: 
         frame_pos = pos[shots]
         range_m = np.where(ok[shots], np.asarray(ranges.range_m, dtype=np.float64)[shots], np.nan)
         range_t = np.where(ok[shots], t_rng[shots], -1)
-    elif mode == "frames":
-        wanted = np.asarray(frame_indices, dtype=np.int64)
-        lookup = {int(k): i for i, k in enumerate(np.asarray(frames.index))}
-        missing = [int(k) for k in wanted if int(k) not in lookup]
-        if missing:
-            raise InputError(f"observation frame(s) not in the video: {missing[:5]}")
-        frame_pos = np.array([lookup[int(k)] for k in wanted], dtype=np.int64)
-        frame_pos = np.unique(frame_pos)
+    elif mode in ("frames", "bursts"):
+        if mode == "frames":
+            wanted = np.asarray(frame_indices, dtype=np.int64)
+            lookup = {int(k): i for i, k in enumerate(np.asarray(frames.index))}
+            missing = [int(k) for k in wanted if int(k) not in lookup]
+            if missing:
+                raise InputError(f"observation frame(s) not in the video: {missing[:5]}")
+            frame_pos = np.unique(np.array([lookup[int(k)] for k in wanted], dtype=np.int64))
+        else:
+            frame_pos = _burst_frames(t_frames, t_rng if ranges is not None else np.zeros(0, np.int64),
+                                      int(burst_gap_s * NS_PER_S), int(frame_tolerance_s * NS_PER_S))
         range_m = np.full(frame_pos.size, np.nan)
         range_t = np.full(frame_pos.size, -1, dtype=np.int64)
         if ranges is not None and ok.any():
@@ -94,3 +101,17 @@ def plan_observations(frames: FrameSeries, ranges: RangeSeries | None, *, mode: 
                            frame_index=np.asarray(frames.index, dtype=np.int64)[frame_pos],
                            t_ns=t_frames[frame_pos], range_m=range_m.astype(np.float64),
                            range_t_ns=range_t.astype(np.int64), notes=notes)
+
+
+def _burst_frames(t_frames: np.ndarray, t_shots: np.ndarray, gap_ns: int, tolerance_ns: int) -> np.ndarray:
+    """Positions of one frame per burst: the frame of a laser shot inside the burst, else the middle frame."""
+    order = np.argsort(t_frames, kind="stable")
+    t = t_frames[order]
+    starts = np.flatnonzero(np.r_[True, np.diff(t) > gap_ns])
+    ends = np.r_[starts[1:], t.size]
+    shot_frame = nearest_within(t, t_shots, tolerance_ns)
+    out = []
+    for a, b in zip(starts, ends, strict=True):
+        inside = shot_frame[(shot_frame >= a) & (shot_frame < b)]
+        out.append(int(inside[0]) if inside.size else (a + b - 1) // 2)
+    return np.sort(order[np.array(out, dtype=np.int64)])

@@ -22,7 +22,8 @@ def geodetic_from_enu(enu_m: np.ndarray, origin_lla: tuple[float, float, float])
     """(..., 3) ENU metres -> (..., 3) (lat_deg, lon_deg, alt_m) on WGS84, alt above the ellipsoid."""
     enu = np.asarray(enu_m, dtype=np.float64)
     lat, lon, alt = pymap3d.enu2geodetic(enu[..., 0], enu[..., 1], enu[..., 2], *origin_lla)
-    return np.stack([np.asarray(lat), np.asarray(lon), np.asarray(alt)], axis=-1)
+    lon = (np.asarray(lon) + 180.0) % 360.0 - 180.0  # [-180, 180), as RFC 7946 and KML want
+    return np.stack([np.asarray(lat), lon, np.asarray(alt)], axis=-1)
 
 
 def camera_rays(obs: Observations) -> tuple[np.ndarray, np.ndarray]:

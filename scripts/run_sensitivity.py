@@ -48,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
                 "Produced by `python scripts/run_sensitivity.py" + (f" --trials {args.trials}" if args.trials else "")
                 + "`; each section's full outputs are in the folder named after it.", ""]
     overview = ["## Overview: median 3D error (m) at 10°, 40° and 80°, and ridge non-converged (%)", "",
-                "| run | " + " | ".join(f"{m} {a}°" for m in OVERVIEW_METHODS for a in OVERVIEW_ANGLES)
+                "| run | " + " | ".join(f"{m} {a:g}°" for m in OVERVIEW_METHODS for a in OVERVIEW_ANGLES)
                 + " | ridge n.c. 10° | ridge n.c. 80° |",
                 "|---|" + "---:|" * (len(OVERVIEW_METHODS) * len(OVERVIEW_ANGLES) + 2)]
     t_all = time.perf_counter()

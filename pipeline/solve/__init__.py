@@ -157,7 +157,7 @@ def _mle_start(st: Stacked, o: dict, fr: single.Frames | None = None):
         near = 1e-3 * (1.0 + st.range_m.max(axis=1, keepdims=True))
         if fr is not None:
             x0, init_status, _ = single.dlt_one(fr)
-            if not np.isfinite(x0).all() or ((st.depths(x0[None]) <= near) & st.has_pix).any():
+            if not np.isfinite(x0).all() or (fr.depths(x0) <= near[0, 0]).any():
                 x0, init_status, _, _ = single.los_one(fr)
         else:
             x0, init_status, _ = linear.dlt(st)
@@ -196,8 +196,8 @@ def _solve_one(method: str, st: Stacked, o: dict) -> BatchEstimate:
         x0, init_status, sigma, vce = _mle_start(st, o, fr)
         X, it, status, cond, cov, ex, resid = single.mle_one(fr, x0, sigma, o.get("robust", "huber"), vce, tol,
                                                              itmax, init_status)
+        extras = {**single.summaries_one(cov), **{k: np.array([v]) for k, v in ex.items()}, "residuals": resid}
         cov = cov[None]
-        extras = {**_mle_summaries(cov), **{k: np.array([v]) for k, v in ex.items()}, "residuals": resid}
     else:
         x0 = _initial(o, 1)
         init_status = None
@@ -220,7 +220,7 @@ def _solve_one(method: str, st: Stacked, o: dict) -> BatchEstimate:
             X, it, status, cond = single.gn_one(fr, model, x0, init_status, tol, itmax)
     X = np.asarray(X, dtype=np.float64)[None]
     if method in _USES_PIXELS:
-        behind = _behind_camera(st, X)
+        behind = np.array([bool(np.isfinite(X).all() and (fr.depths(X[0]) <= 0).any())])
         if behind[0]:
             status = Status.DEGENERATE
             X[:] = np.nan

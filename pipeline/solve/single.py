@@ -14,7 +14,17 @@ import numpy as np
 from pipeline.solve import iterate as _iterate
 from pipeline.solve.estimate import Status
 from pipeline.solve.least_squares import NORMALIZED_SINGULAR_DET
-from pipeline.solve.mle import VCE_MAX_ROUNDS, VCE_TOL, _curvature, _rho_and_weight, base_variances
+from pipeline.solve.mle import (
+    _Q_GRID,
+    CAUCHY_C,
+    HUBER_C,
+    VCE_MAX_ROUNDS,
+    VCE_TOL,
+    _cep_table,
+    _curvature,
+    _rho_and_weight,
+    base_variances,
+)
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import SINGULAR_DET, Stacked
 
@@ -26,6 +36,8 @@ def spd_solve(N: np.ndarray, g: np.ndarray, singular_below: float = SINGULAR_DET
     A = N.tolist()
     b = g.tolist()
     k = len(b)
+    if k == 3:
+        return _solve3(A, b, singular_below)
     d = []
     for i in range(k):
         a = A[i][i]
@@ -54,6 +66,21 @@ def spd_solve(N: np.ndarray, g: np.ndarray, singular_below: float = SINGULAR_DET
     for i in range(k - 1, -1, -1):
         x[i] = (y[i] - sum(L[m][i] * x[m] for m in range(i + 1, k))) / L[i][i]
     return np.array([x[i] / d[i] for i in range(k)]), False
+
+
+def _solve3(A, b, singular_below):
+    """Cramer's rule for symmetric 3x3 (nested lists); det / (a e i) is the Jacobi-scaled determinant."""
+    (a, bb, c), (_, e, f), (_, _, i) = A
+    if not (a > 0 and e > 0 and i > 0) or not all(map(math.isfinite, (a, bb, c, e, f, i))):
+        return None, True
+    A0, B0, C0 = e * i - f * f, c * f - bb * i, bb * f - c * e
+    det = a * A0 + bb * B0 + c * C0
+    if not det / (a * e * i) > singular_below:
+        return None, True
+    E0, F0, I0 = a * i - c * c, bb * c - a * f, a * e - bb * bb
+    g0, g1, g2 = b
+    return np.array([(A0 * g0 + B0 * g1 + C0 * g2) / det, (B0 * g0 + E0 * g1 + F0 * g2) / det,
+                     (C0 * g0 + F0 * g1 + I0 * g2) / det]), False
 
 
 def inv3(N: np.ndarray):
@@ -98,6 +125,14 @@ class Frames:
         self.d = st.range_m[0, self.rng_f]
         self.npix = 2 * self.pix_f.size
         self.centre = st.platform_m[0].mean(axis=0)
+        # signed metric depth of X in the cameras with a pixel = m3s X + p4s (`Stacked.depths`)
+        k = st.depth_sign()[0, self.pix_f] / np.sqrt(st._gram()[0, self.pix_f, 2, 2])
+        self.m3s = self.Mp[:, 2, :] * k[:, None]
+        self.p4s = self.p4[:, 2] * k
+
+    def depths(self, X: np.ndarray) -> np.ndarray:
+        """(k,) signed depth in metres of X in each camera with a pixel."""
+        return self.m3s @ X + self.p4s
 
     def pixel(self, X: np.ndarray):
         """J (2k,3), r (2k,) of the k frames with a pixel (rows u1 v1 u2 ...), as `stacked.pixel_model`."""
@@ -345,23 +380,23 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
         return v
 
     var = var_of(vf)
+    sd, ivar = np.sqrt(var), 1.0 / var
     J, r = fr.both(X)
     bound = fr.bound(X0)
     centre = fr.centre
-    rho, _ = _rho_and_weight(r / np.sqrt(var), robust)
-    cost = float(rho.sum())
+    cost = _cost(r / sd, robust)
     iterations = 0
     lam = 0.0
     vce_rounds = 0
     newton_ok = True
     for _ in range(0 if bad else max_iterations):
-        e = r / np.sqrt(var)
-        _, wr = _rho_and_weight(e, robust)
-        JW = J.T * (wr / var)
+        e = r / sd
+        w = ivar if robust is None else _weight(e, robust) * ivar
+        JW = J.T * w
         N = JW @ J
         g = JW @ r
         if robust is not None and newton_ok:
-            N = (J.T * (_curvature(e, robust) / var)) @ J
+            N = (J.T * (_curvature(e, robust) * ivar)) @ J
         dX, singular = spd_solve(N + lam * np.diag(np.diag(N)) if lam else N, g)
         iterations += 1
         Xn = X if singular else X + dX
@@ -373,8 +408,7 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
         if exploded:
             Xn = X
         Jn, rn = fr.both(Xn)
-        rho_n, _ = _rho_and_weight(rn / np.sqrt(var), robust)
-        cost_n = float(rho_n.sum())
+        cost_n = _cost(rn / sd, robust)
         accept = not singular and not exploded and cost_n <= cost * (1 + 1e-12) + 1e-300
         step_norm = math.inf if singular else math.sqrt(float(dX @ dX))
         if accept:
@@ -400,8 +434,8 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
                 vf = [vf[k] * factors[k] if usable[k] else vf[k] for k in (0, 1)]
                 vce_rounds += 1
                 var = var_of(vf)
-                rho, _ = _rho_and_weight(r / np.sqrt(var), robust)
-                cost = float(rho.sum())
+                sd, ivar = np.sqrt(var), 1.0 / var
+                cost = _cost(r / sd, robust)
                 lam = 0.0
                 continue
         if inner_done:
@@ -425,6 +459,39 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
     extras = {"variance_factor_pixel": vf[0], "variance_factor_range": vf[1], "sigma0_sq": sigma0_sq,
               "vce_rounds": vce_rounds}
     return X, iterations, status, cond, 0.5 * (cov + cov.T), extras, r
+
+
+def summaries_one(cov: np.ndarray) -> dict:
+    """`mle` accuracy summaries of one (3,3) covariance, as (1,...) arrays like the batch's."""
+    if not np.isfinite(cov).all():
+        nan = np.full(1, np.nan)
+        return {"cep50_m": nan, "cep90_m": nan.copy(), "ellipsoid_semi_axes_1sigma_m": np.full((1, 3), np.nan),
+                "ellipsoid_axes": np.full((1, 3, 3), np.nan)}
+    ev, vec = np.linalg.eigh(cov)
+    a, b, c = float(cov[0, 0]), float(cov[0, 1]), float(cov[1, 1])
+    half = math.sqrt(0.25 * (a - c) ** 2 + b * b)
+    s1 = math.sqrt(max(0.5 * (a + c) + half, 0.0))
+    s2 = math.sqrt(max(0.5 * (a + c) - half, 0.0))
+    ceps = [s1 * float(np.interp(s2 / s1, _Q_GRID, _cep_table(p))) if s1 > 0 else math.nan for p in (0.5, 0.9)]
+    return {"cep50_m": np.array([ceps[0]]), "cep90_m": np.array([ceps[1]]),
+            "ellipsoid_semi_axes_1sigma_m": np.sqrt(np.maximum(ev, 0.0))[None], "ellipsoid_axes": vec[None]}
+
+
+def _weight(e: np.ndarray, robust: str) -> np.ndarray:
+    """The IRLS weight of `mle._rho_and_weight` alone."""
+    if robust == "huber":
+        return np.minimum(1.0, HUBER_C / np.maximum(np.abs(e), 1e-300))
+    return 1.0 / (1.0 + (e / CAUCHY_C) ** 2)
+
+
+def _cost(e: np.ndarray, robust: str | None) -> float:
+    """sum of rho(e) of `mle._rho_and_weight`."""
+    if robust is None:
+        return 0.5 * float(e @ e)
+    if robust == "huber":
+        t = np.maximum(np.abs(e) - HUBER_C, 0.0)
+        return 0.5 * (float(e @ e) - float(t @ t))
+    return 0.5 * CAUCHY_C ** 2 * float(np.log1p((e / CAUCHY_C) ** 2).sum())
 
 
 def _vce_factors(J, r, var, npix, robust):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 HELP = "run the paper's simulation experiment (Table 2, Figs. 4-5) from a YAML config"
 
@@ -12,8 +13,9 @@ DEFAULT_OUT = "out/simulation"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("config", nargs="?", default=DEFAULT_CONFIG,
-                        help=f"simulation config (YAML, see docs/simulation.md; default {DEFAULT_CONFIG})")
+    parser.add_argument("config", nargs="?",
+                        help=f"simulation config (YAML, see docs/simulation.md; default {DEFAULT_CONFIG}, or the "
+                             "identical built-in defaults when run outside the repository)")
     parser.add_argument("--out", default=DEFAULT_OUT, metavar="DIR",
                         help=f"output folder for table2.csv/.md, fig4.png, fig5.png, summary.json "
                              f"(default {DEFAULT_OUT})")
@@ -28,7 +30,12 @@ def main(args: argparse.Namespace) -> int:
     from pipeline.simulate.report import markdown_table
 
     t0, cpu0 = time.perf_counter(), time.process_time()
-    cfg = SimulationConfig.load(args.config)
+    source = args.config
+    if source is None and not Path(DEFAULT_CONFIG).is_file():
+        cfg, source = SimulationConfig(), "built-in defaults (= configs/simulation_table2.yaml)"
+    else:
+        source = source or DEFAULT_CONFIG
+        cfg = SimulationConfig.load(source)
     changes = {k: getattr(args, k) for k in ("trials", "seed") if getattr(args, k) is not None}
     if changes:
         try:
@@ -36,7 +43,7 @@ def main(args: argparse.Namespace) -> int:
         except ConfigError as exc:
             raise ConfigError(f"command-line override: {exc}") from None
     say = (lambda _msg: None) if args.quiet else print
-    say(f"simulation '{cfg.name}' from {args.config}: {len(cfg.angles_deg)} angles x {cfg.trials} trials x "
+    say(f"simulation '{cfg.name}' from {source}: {len(cfg.angles_deg)} angles x {cfg.trials} trials x "
         f"{len(cfg.methods)} estimators")
     result = run_simulation(cfg, progress=say)
     written = write_outputs(result, args.out)

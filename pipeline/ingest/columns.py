@@ -13,10 +13,11 @@ class Columns:
 
     def __init__(self, **typecodes: str):
         self._cols = {name: array(code) for name, code in typecodes.items()}
+        self._appends = [(name, col.append) for name, col in self._cols.items()]
 
     def add(self, **values) -> None:
-        for name, col in self._cols.items():
-            col.append(values[name])
+        for name, append in self._appends:
+            append(values[name])
 
     def extend(self, name: str, values) -> None:
         self._cols[name].extend(values)
@@ -25,7 +26,9 @@ class Columns:
         return len(next(iter(self._cols.values()))) if self._cols else 0
 
     def arrays(self) -> dict[str, np.ndarray]:
-        return {name: np.frombuffer(col, dtype=col.typecode if col.typecode != "q" else np.int64).copy()
+        """Numpy views of the columns (no copy: the arrays keep the buffers alive; add() no longer allowed)."""
+        self._appends = []
+        return {name: np.frombuffer(col, dtype=np.int64 if col.typecode == "q" else col.typecode)
                 if len(col) else np.zeros(0, dtype=np.int64 if col.typecode == "q" else float)
                 for name, col in self._cols.items()}
 

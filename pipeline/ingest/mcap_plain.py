@@ -154,7 +154,7 @@ def read_mcap(path: str | Path, mapping: dict, ros_mapping: dict, scan_all: bool
         fh.seek(0)
         if topics:
             try:
-                it = make_reader(fh).iter_messages(topics=topics, log_time_order=False) if summary is not None \
+                it = make_reader(fh).iter_messages(topics=topics) if summary is not None \
                     else _linear_messages(fh, set(topics))
                 for schema, channel, message in it:
                     st = stats[channel.topic]

@@ -45,6 +45,7 @@ _MAX_LEN = {mid: cls.unpacker.size for mid, cls in mavlink.mavlink_map.items()}
 _V1_MAGIC, _V2_MAGIC = 0xFE, 0xFD
 _PLAUSIBLE_US = (946684800 * 10**6, 4102444800 * 10**6)  # 2000 .. 2100
 GIMBAL_FLAG_YAW_LOCK, GIMBAL_FLAG_YAW_IN_VEHICLE, GIMBAL_FLAG_YAW_IN_EARTH = 16, 32, 64
+_RELEASE_BYTES = 8 << 20
 
 
 def _record_length(mm, pos: int, size: int) -> tuple[int, int] | None:
@@ -209,6 +210,7 @@ def read_tlog(path: str | Path, mapping: dict) -> FlightLog:
         mm = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
         try:
             pos, last = 0, None
+            release_at = _RELEASE_BYTES
             while pos < size:
                 rec = _record_length(mm, pos, size)
                 ts_us = int.from_bytes(mm[pos:pos + 8], "big") if pos + 8 <= size else None
@@ -246,6 +248,10 @@ def read_tlog(path: str | Path, mapping: dict) -> FlightLog:
                 last_us[msgid] = ts_us
                 last = ts_us
                 pos = end
+                if pos >= release_at:  # drop mapped pages behind us: RSS stays flat on large files
+                    if hasattr(mmap, "MADV_DONTNEED"):
+                        mm.madvise(mmap.MADV_DONTNEED, 0, release_at)
+                    release_at += _RELEASE_BYTES
         finally:
             mm.close()
     n_read = sum(counts.values())

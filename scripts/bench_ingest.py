@@ -1,0 +1,280 @@
+"""Ingest throughput and peak memory per reader, next to the underlying library's raw iteration in the same run.
+
+    python scripts/bench_ingest.py [--messages 1200000] [--out bench_ingest.md]
+
+Generates (in a temp dir) a MAVLink 2 .tlog with >= 1 M messages (position 10 Hz, attitude 50 Hz, gimbal 50 Hz,
+laser 10 Hz, SYSTEM_TIME 1 Hz, and 16 other common message types that our reader only counts), a plain MCAP
+with JSON channels and a ROS 2 bag (MCAP storage) of the synthetic-flight layout, then times each in a fresh
+subprocess (peak RSS = VmHWM, reset through /proc/self/clear_refs after all imports, minus the RSS then) for:
+- ours:  pipeline.ingest.read_flight (full conversion into the model);
+- raw:   the library alone: pymavlink mavutil recv_msg() over every message, mcap iter_messages + json.loads,
+         rosbags AnyReader.messages + deserialize, DFReader recv_msg, pyulog ULog(...);
+and the same on every file in ../shared/logs. msgs/s = messages in the file / wall time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+LOGS = REPO / ".." / "shared" / "logs"
+T0_NS = 1_700_000_000 * 10**9
+
+
+def gen_tlog(path: Path, n_target: int) -> int:
+    """A tlog with about n_target messages at realistic relative rates. Each message type cycles through 500
+    distinct pre-packed packets (varying payload and sequence numbers), so writing stays fast."""
+    os.environ.setdefault("MAVLINK20", "1")
+    from pymavlink.dialects.v20 import ardupilotmega as ml
+
+    mav = ml.MAVLink(None, srcSystem=1, srcComponent=1)
+
+    def variants(make, k=500):
+        return [make(i).pack(mav) for i in range(k)]
+
+    nan = float("nan")
+    per_s = {  # rate Hz, packets
+        "pos": (10, variants(lambda i: ml.MAVLink_global_position_int_message(
+            i, 473977419 + i, 85455939 - i, 500000 + i, 100000, 1, 2, 3, 9000))),
+        "att": (50, variants(lambda i: ml.MAVLink_attitude_message(i, 0.01 * i, 0.02, 1.0 + 0.001 * i, 0, 0, 0))),
+        "gim": (50, variants(lambda i: ml.MAVLink_gimbal_device_attitude_status_message(
+            0, 0, i, 64, [math.cos(0.001 * i), 0.0, math.sin(0.001 * i), 0.0], nan, nan, nan, 0, 0.0, nan, 0))),
+        "rng": (10, variants(lambda i: ml.MAVLink_camera_tracking_geo_status_message(
+            1, 0, 0, nan, nan, nan, nan, nan, nan, nan, 1000.0 + i, nan, nan))),
+        "sys": (1, variants(lambda i: ml.MAVLink_system_time_message(T0_NS // 1000 + i * 10**6, i * 1000))),
+    }
+    others = [
+        lambda i: ml.MAVLink_vfr_hud_message(20.0, 20.0, 90, 50, 500.0, 0.1),
+        lambda i: ml.MAVLink_raw_imu_message(i, 1, 2, 3, 4, 5, 6, 7, 8, 9),
+        lambda i: ml.MAVLink_scaled_imu2_message(i, 1, 2, 3, 4, 5, 6, 7, 8, 9),
+        lambda i: ml.MAVLink_sys_status_message(1, 1, 1, 500, 12000, 100, 90, 0, 0, 0, 0, 0, 0),
+        lambda i: ml.MAVLink_gps_raw_int_message(i, 3, 473977419, 85455939, 500000, 100, 100, 10, 9000, 12),
+        lambda i: ml.MAVLink_local_position_ned_message(i, 1.0, 2.0, -3.0, 0.1, 0.2, 0.3),
+        lambda i: ml.MAVLink_servo_output_raw_message(i, 0, 1500, 1500, 1500, 1500, 1500, 1500, 1500, 1500),
+        lambda i: ml.MAVLink_rc_channels_message(i, 8, *([1500] * 18), 255),
+        lambda i: ml.MAVLink_nav_controller_output_message(0.1, 0.2, 90, 90, 100, 0.5, 0.1, 0.1),
+        lambda i: ml.MAVLink_scaled_pressure_message(i, 1013.0, 0.1, 2000),
+        lambda i: ml.MAVLink_ahrs2_message(0.1, 0.2, 0.3, 500.0, 473977419, 85455939),
+        lambda i: ml.MAVLink_vibration_message(i, 0.1, 0.1, 0.1, 0, 0, 0),
+        lambda i: ml.MAVLink_wind_message(90.0, 3.0, 0.1),
+        lambda i: ml.MAVLink_mission_current_message(3),
+        lambda i: ml.MAVLink_ekf_status_report_message(0, 0.1, 0.1, 0.1, 0.1, 0.1),
+        lambda i: ml.MAVLink_terrain_report_message(473977419, 85455939, 0, 100.0, 80.0, 0, 0),
+    ]
+    for k, make in enumerate(others):
+        per_s[f"o{k}"] = (20, variants(make, 50))
+    hz_total = sum(r for r, _ in per_s.values())
+    seconds = math.ceil(n_target / hz_total)
+    count = 0
+    pack_t = struct.Struct(">Q").pack
+    with open(path, "wb") as f:
+        buf = []
+        for s in range(seconds):
+            for _name, (rate, pkts) in per_s.items():
+                for j in range(rate):
+                    t_us = (T0_NS // 1000) + s * 10**6 + (j * 10**6) // rate
+                    buf.append(pack_t(t_us) + pkts[(s * rate + j) % len(pkts)])
+                    count += 1
+            if len(buf) > 50_000:
+                f.write(b"".join(buf))
+                buf.clear()
+        f.write(b"".join(buf))
+    return count
+
+
+def gen_mcap(path: Path, n_target: int) -> int:
+    """Plain MCAP, JSON channels /uav/gps 10 Hz, /uav/attitude 50 Hz, /uav/gimbal 50 Hz, /uav/laser 10 Hz."""
+    from mcap.writer import CompressionType, Writer
+
+    rates = {"/uav/gps": 10, "/uav/attitude": 50, "/uav/gimbal": 50, "/uav/laser": 10}
+    seconds = math.ceil(n_target / sum(rates.values()))
+    n = 0
+    with open(path, "wb") as f:
+        w = Writer(f, compression=CompressionType.ZSTD)
+        w.start()
+        ch = {}
+        for topic in rates:
+            sid = w.register_schema(name=topic, encoding="jsonschema", data=b'{"type": "object"}')
+            ch[topic] = w.register_channel(topic=topic, message_encoding="json", schema_id=sid)
+        for s in range(seconds):
+            for topic, rate in rates.items():
+                for j in range(rate):
+                    t = T0_NS + s * 10**9 + j * 10**9 // rate
+                    if topic == "/uav/gps":
+                        d = {"t_ns": t, "latitude_deg": 47.0 + s * 1e-6, "longitude_deg": 8.5, "altitude_m": 600.0,
+                             "altitude_datum": "ellipsoid"}
+                    elif topic == "/uav/laser":
+                        d = {"t_ns": t, "range_m": 1000.0 + j, "valid": True}
+                    else:
+                        d = {"t_ns": t, "q_wxyz": [1.0, 0.0, 0.0, 0.0],
+                             "frame": "body_frd_to_ned" if topic == "/uav/attitude" else "gimbal_frd_to_ned"}
+                    w.add_message(ch[topic], log_time=t, publish_time=t, data=json.dumps(d).encode())
+                    n += 1
+        w.finish()
+    return n
+
+
+def gen_ros2(path: Path, n_target: int) -> int:
+    """ROS 2 bag (MCAP storage): NavSatFix 10 Hz, Imu 50 Hz, QuaternionStamped 50 Hz, Range 10 Hz."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    sys.path.insert(0, str(REPO))
+    from pipeline.ingest.writers import ros_message
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    kinds = {"/uav/gps/fix": (10, "navsat"), "/uav/imu": (50, "imu"), "/uav/gimbal/attitude": (50, "quat"),
+             "/uav/laser/range": (10, "range")}
+    args = {"navsat": {"lat": 47.0, "lon": 8.5, "alt": 600.0}, "imu": {"q_xyzw": [0, 0, 0, 1]},
+            "quat": {"q_xyzw": [0, 0, 0, 1]}, "range": {"range": 1000.0}}
+    # serialize one message per topic and patch its stamp bytes (CDR: 4-byte header, then sec int32, nanosec
+    # uint32): the bag then holds distinct, valid messages without a million Python message constructions
+    templates = {}
+    for topic, (_, kind) in kinds.items():
+        ty, msg = ros_message(kind, T0_NS, **args[kind])
+        templates[topic] = (ty, bytearray(ts.serialize_cdr(msg, ty)))
+    seconds = math.ceil(n_target / sum(r for r, _ in kinds.values()))
+    n = 0
+    with Writer(path, version=8, storage_plugin=StoragePlugin.MCAP) as w:
+        conns = {topic: w.add_connection(topic, templates[topic][0], typestore=ts) for topic in kinds}
+        for s in range(seconds):
+            for topic, (rate, _) in kinds.items():
+                raw = templates[topic][1]
+                for j in range(rate):
+                    t = T0_NS + s * 10**9 + j * 10**9 // rate
+                    struct.pack_into("<iI", raw, 4, t // 10**9, t % 10**9)
+                    w.write(conns[topic], t, bytes(raw))
+                    n += 1
+    return n
+
+
+CHILD = r'''
+import json, sys, time
+sys.path.insert(0, {repo!r})
+kind, path = sys.argv[1], sys.argv[2]
+import pipeline.ingest, pymavlink.mavutil, pymavlink.DFReader, mcap.reader, rosbags.highlevel, pyulog, numpy, scipy
+import pipeline.ingest.tlog, pipeline.ingest.ulog, pipeline.ingest.dataflash, pipeline.ingest.rosbag
+import pipeline.ingest.mcap_plain, pipeline.ingest.srt, pipeline.ingest.video, mcap_ros2.decoder
+from rosbags.typesys import Stores, get_typestore
+for fmt in pipeline.ingest.mapping.FORMATS:
+    pipeline.ingest.mapping_for(fmt)  # imports and package data loaded before timing, for both sides
+
+def status_kib(key):
+    for line in open("/proc/self/status"):
+        if line.startswith(key):
+            return int(line.split()[1])
+
+with open("/proc/self/clear_refs", "w") as f:
+    f.write("5")  # reset the peak RSS (VmHWM) to the current RSS
+base = status_kib("VmRSS:")
+t = time.perf_counter()
+n = 0
+if kind == "ours":
+    log = pipeline.ingest.read_flight([path])
+elif kind == "raw-tlog":
+    m = pymavlink.mavutil.mavlink_connection(path, dialect="ardupilotmega")
+    while m.recv_msg() is not None:
+        n += 1
+elif kind == "raw-dataflash":
+    r = pymavlink.DFReader.DFReader_binary(path, zero_time_base=True)
+    while r.recv_msg() is not None:
+        n += 1
+elif kind == "raw-ulog":
+    pyulog.ULog(path)
+elif kind == "raw-mcap":
+    with open(path, "rb") as f:
+        for _s, _c, m in mcap.reader.make_reader(f).iter_messages():
+            json.loads(m.data)
+            n += 1
+elif kind == "raw-rosbags":
+    with rosbags.highlevel.AnyReader([__import__("pathlib").Path(path)],
+                                     default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as r:
+        for c, _t, raw in r.messages():
+            r.deserialize(raw, c.msgtype)
+            n += 1
+dt = time.perf_counter() - t
+peak = status_kib("VmHWM:")
+print(json.dumps({{"seconds": dt, "peak_mib": (peak - base) / 1024, "n": n}}))
+'''
+
+
+def run_child(kind: str, path: Path) -> dict:
+    code = CHILD.format(repo=str(REPO))
+    out = subprocess.run([sys.executable, "-c", code, kind, str(path)], capture_output=True, text=True, check=False)
+    if out.returncode != 0:
+        return {"error": out.stderr.strip().splitlines()[-1] if out.stderr.strip() else "failed"}
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def count_messages(path: Path) -> int:
+    """Messages in the file as `ridgeloc inspect` counts them (all streams)."""
+    sys.path.insert(0, str(REPO))
+    from pipeline.ingest import inspect_paths
+
+    (res,) = inspect_paths([path])
+    return sum(s.count for s in res.log.streams)
+
+
+RAW = {"tlog": "raw-tlog", "dataflash": "raw-dataflash", "ulog": "raw-ulog", "mcap": "raw-mcap",
+       "ros1": "raw-rosbags", "ros2": "raw-rosbags"}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--messages", type=int, default=1_200_000, help="messages in the generated tlog")
+    ap.add_argument("--mcap-messages", type=int, default=600_000)
+    ap.add_argument("--ros2-messages", type=int, default=300_000)
+    ap.add_argument("--out", type=Path, default=None, help="also write the table (markdown) here")
+    args = ap.parse_args()
+    sys.path.insert(0, str(REPO))
+    from pipeline.ingest import detect_format
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        t = time.perf_counter()
+        files = [(tmp / "large.tlog", gen_tlog(tmp / "large.tlog", args.messages))]
+        files.append((tmp / "large.mcap", gen_mcap(tmp / "large.mcap", args.mcap_messages)))
+        files.append((tmp / "large_ros2", gen_ros2(tmp / "large_ros2", args.ros2_messages)))
+        print(f"generated {', '.join(f'{p.name}: {n} msgs' for p, n in files)} in {time.perf_counter() - t:.1f} s",
+              file=sys.stderr)
+        for p in sorted(LOGS.iterdir()):
+            if p.name != "README.md":
+                files.append((p, count_messages(p)))
+        for path, n in files:
+            fmt = detect_format(path)
+            size_mib = (sum(f.stat().st_size for f in path.iterdir()) if path.is_dir() else path.stat().st_size) / 2**20
+            ours = run_child("ours", path)
+            raw = run_child(RAW[fmt], path)
+            rows.append((path.name, fmt, n, size_mib, ours, raw))
+            print(f"{path.name}: ours {ours} raw {raw}", file=sys.stderr)
+    head = ("| file | format | messages | MiB | ours s | ours msgs/s | ours peak MiB | raw library | raw s | "
+            "raw msgs/s | raw peak MiB | ours/raw time |")
+    lines = [head, "|" + "---|" * 12]
+    def cells(d, n):
+        if "error" in d:
+            return ["error", "-", "-"]
+        return [f"{d['seconds']:.3f}", f"{n / d['seconds']:,.0f}", f"{d['peak_mib']:.1f}"]
+
+    for name, fmt, n, mib, o, r in rows:
+        ratio = "-" if "error" in o or "error" in r else f"{o['seconds'] / r['seconds']:.2f}"
+        lines.append(f"| {name} | {fmt} | {n:,} | {mib:.1f} | " + " | ".join(cells(o, n)) + f" | {RAW[fmt]} | "
+                     + " | ".join(cells(r, n)) + f" | {ratio} |")
+    table = "\n".join(lines)
+    print(table)
+    if args.out:
+        args.out.write_text(table + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

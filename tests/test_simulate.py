@@ -94,3 +94,13 @@ def test_same_seed_same_numbers(tmp_path):
     assert a.rows == b.rows
     c = run_simulation(cfg.replace(seed=cfg.seed + 1))
     assert c.rows["mle"]["median_m"] != a.rows["mle"]["median_m"]
+
+
+def test_bad_config_is_a_clean_error_and_writes_nothing(tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("trials: 10\nnoise:\n  range: 2.5\n")
+    out = tmp_path / "out"
+    assert cli_main(["simulate", str(bad), "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("ridgeloc: error: ") and str(bad) in err and "noise.range" in err
+    assert not out.exists()

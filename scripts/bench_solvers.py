@@ -6,8 +6,8 @@ Reports, in one run:
   * scipy.optimize.least_squares on the same weighted problem as `mle` (robust off, and Huber), time and the
     largest difference from `mle`;
   * GTSAM (optional extra `gtsam`): a factor graph of projection factors from fixed cameras
-    (TriangulationFactorCal3_S2) and range factors (RangeFactor3 (Point3-Point3) to platform points pinned by tight priors),
-    Levenberg-Marquardt; time and the largest difference from `mle` without robust loss.
+    (TriangulationFactorCal3_S2) and range factors (RangeFactor3, Point3 to Point3, to platform points pinned
+    by tight priors), Levenberg-Marquardt; time and the largest difference from `mle` without robust loss.
 
     python scripts/bench_solvers.py [--problems 40] [--batch 8000] [--gamma 30]
 """
@@ -15,8 +15,10 @@ Reports, in one run:
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import time
+import timeit
 
 import numpy as np
 import scipy.linalg
@@ -29,17 +31,24 @@ from pipeline.solve.scenes import paper_batch, paper_problem
 from pipeline.solve.stacked import Stacked
 
 
-def _time_calls(fn, items, repeats: int) -> float:
-    """Median seconds per call of fn(item) over `repeats` passes through items (after one warm-up pass)."""
+def _time_calls(fn, items, repeats: int) -> tuple[float, float]:
+    """Median wall-clock and median CPU seconds per call of fn(item) over `repeats` passes through items
+    (after one warm-up pass). CPU time (time.process_time) is what the call cost this process; on a loaded
+    machine wall-clock time also counts waiting for a core."""
     for it in items:
         fn(it)
-    times = []
+    wall, cpu = [], []
     for _ in range(repeats):
         for it in items:
-            t = time.perf_counter()
+            c, t = time.process_time(), time.perf_counter()
             fn(it)
-            times.append(time.perf_counter() - t)
-    return statistics.median(times)
+            wall.append(time.perf_counter() - t)
+            cpu.append(time.process_time() - c)
+    return statistics.median(wall), statistics.median(cpu)
+
+
+def _fmt(pair) -> str:
+    return f"{pair[0] * 1e6:8.1f} us wall {pair[1] * 1e6:8.1f} us cpu"
 
 
 def _sigmas(obs, x0):
@@ -92,8 +101,8 @@ def _gtsam_solve(obs, setup):
     pin = gtsam.noiseModel.Isotropic.Sigma(3, 1e-6)
     for i in range(obs.n):
         if obs.has_pixel[i]:
-            graph.add(gtsam.TriangulationFactorCal3_S2(cams[i], obs.pixel[i], gtsam.noiseModel.Diagonal.Sigmas(sd_px[i]),
-                                                       X))
+            noise = gtsam.noiseModel.Diagonal.Sigmas(sd_px[i])
+            graph.add(gtsam.TriangulationFactorCal3_S2(cams[i], obs.pixel[i], noise, X))
         if obs.has_range[i]:
             key = 1 + i
             graph.add(gtsam.PriorFactorPoint3(key, obs.platform_m[i], pin))
@@ -107,6 +116,14 @@ def _gtsam_solve(obs, setup):
     return result.atPoint3(X)
 
 
+def _calibration_us() -> float:
+    """Microseconds of one trivial numpy call (a 30-element multiply): the per-call overhead every figure
+    here scales with (about 0.3 us on an idle desktop core)."""
+    a = np.ones(30)
+    best = min(timeit.repeat(lambda: a * 2.0, number=2000, repeat=5)) / 2000
+    return best * 1e6
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--problems", type=int, default=40, help="distinct problems for the single-solve timings")
@@ -115,24 +132,25 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     probs = [paper_problem(gamma_deg=args.gamma, seed=s) for s in range(args.problems)]
     print(f"geometry: 10 frames, 5 km slant range, 2 km height, intersection {args.gamma:g} deg, paper noise")
-    print("\nsingle problem, solve(): median microseconds per call (all of solve: checks, start value, result)")
+    print(f"machine: {os.cpu_count()} cpus, load average {os.getloadavg()[0]:.1f}, one trivial numpy call "
+          f"{_calibration_us():.2f} us")
+    print("\nsingle problem, solve(): median per call (all of solve: checks, start value, result)")
     for m in METHODS:
-        repeats = 2 if m in ("fusion", "ridge") else 5
-        us = _time_calls(lambda o, m=m: solve(m, o), probs, repeats) * 1e6
+        repeats = 1 if m in ("fusion", "ridge") else 3
+        pair = _time_calls(lambda o, m=m: solve(m, o), probs, repeats)
         it = np.median([solve(m, o).iterations for o in probs])
-        print(f"  {m:<11}{us:9.1f} us   (median iterations {it:g})")
+        print(f"  {m:<16}{_fmt(pair)}   (median iterations {it:g})")
     mle_plain = {id(o): solve("mle", o, robust=None).position_m for o in probs}
     mle_huber = {id(o): solve("mle", o).position_m for o in probs}
-    us = _time_calls(lambda o: solve("mle", o, robust=None), probs, 5) * 1e6
-    print(f"  {'mle robust=None':<11}{us:9.1f} us")
+    pair = _time_calls(lambda o: solve("mle", o, robust=None), probs, 3)
+    print(f"  {'mle robust=None':<16}{_fmt(pair)}")
 
-    print("\nscipy.optimize.least_squares on the same weighted problem (same DLT start)")
+    print("\nscipy.optimize.least_squares on the same weighted problem (same DLT start, same sigmas)")
     for robust in (False, True):
         ref = mle_huber if robust else mle_plain
         diff = max(np.abs(_scipy_mle(o, robust) - ref[id(o)]).max() for o in probs)
-        us = _time_calls(lambda o, r=robust: _scipy_mle(o, r), probs, 2) * 1e6
-        print(f"  {'huber' if robust else 'no robust loss':<15}{us:9.1f} us per solve, max |scipy - mle| "
-              f"{diff:.2e} m")
+        pair = _time_calls(lambda o, r=robust: _scipy_mle(o, r), probs, 1)
+        print(f"  {'huber' if robust else 'no robust loss':<16}{_fmt(pair)}   max |scipy - mle| {diff:.1e} m")
 
     try:
         import gtsam  # noqa: F401
@@ -141,20 +159,25 @@ def main(argv: list[str] | None = None) -> int:
     else:
         setups = {id(o): _gtsam_setup(o) for o in probs}
         diff = max(np.abs(_gtsam_solve(o, setups[id(o)]) - mle_plain[id(o)]).max() for o in probs)
-        us = _time_calls(lambda o: _gtsam_solve(o, setups[id(o)]), probs, 3) * 1e6
-        print(f"\nGTSAM factor graph (TriangulationFactorCal3_S2 + RangeFactor3, LM; graph built in the timed part, "
-              f"cameras not): {us:.1f} us per solve, max |gtsam - mle(robust=None)| {diff:.2e} m")
+        print("\nGTSAM factor graph: TriangulationFactorCal3_S2 (fixed cameras) + RangeFactor3 to pinned platform "
+              "points, Levenberg-Marquardt from the DLT start, same sigmas")
+        pair = _time_calls(lambda o: _gtsam_solve(o, setups[id(o)]), probs, 2)
+        print(f"  {'graph + LM':<16}{_fmt(pair)}   (cameras, sigmas, start prepared outside the timing)")
+        pair = _time_calls(lambda o: _gtsam_solve(o, _gtsam_setup(o)), probs, 1)
+        print(f"  {'everything':<16}{_fmt(pair)}   (cameras from P by RQ, DLT start, sigmas, graph, LM)")
+        print(f"  max |gtsam - mle(robust=None)| {diff:.1e} m")
 
-    print(f"\nbatched, solve_batch() on B = {args.batch} problems: problems per second (microseconds per problem)")
+    print(f"\nbatched, solve_batch() on B = {args.batch} problems (after a warm-up call)")
     batch = paper_batch(args.batch, gamma_deg=args.gamma, seed=123)
+    solve_batch("mle", paper_batch(8, gamma_deg=args.gamma, seed=1))
     for m in METHODS:
-        t = time.perf_counter()
+        c, t = time.process_time(), time.perf_counter()
         be = solve_batch(m, batch)
-        dt = time.perf_counter() - t
+        dt, dc = time.perf_counter() - t, time.process_time() - c
         err = np.nanmedian(be.errors_m(batch.truth_m))
         conv = be.converged.mean() * 100
-        print(f"  {m:<11}{args.batch / dt:11.0f} /s  ({dt / args.batch * 1e6:6.2f} us)   median error {err:7.2f} m, "
-              f"converged {conv:5.1f} %")
+        print(f"  {m:<11}{args.batch / dt:9.0f} /s wall {args.batch / dc:9.0f} /s cpu   median error {err:7.2f} m, "
+              f"converged {conv:5.1f} %, median iterations {np.median(be.iterations):g}")
     return 0
 
 

@@ -20,6 +20,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+import cv2  # noqa: E402
+
 from pipeline.synth.config import SynthConfig  # noqa: E402
 from pipeline.synth.flight import generate  # noqa: E402
 from pipeline.synth.writers.video import read_video_frames  # noqa: E402
@@ -45,10 +47,26 @@ def file_manifest(folder: Path) -> dict:
     return out
 
 
+def write_frame_png(flight: Path, png: Path) -> None:
+    """One observation frame of a sample video, with the target region magnified 5x in an inset."""
+    truth = json.loads((flight / "truth.json").read_text())
+    k = truth["target_mark"]["frame_index"]
+    img = read_video_frames(flight / "video.mp4")[k].copy()
+    u, v = (round(x) for x in truth["frames"][k]["true_target_pixel"])
+    crop = img[v - 15:v + 15, u - 20:u + 20].copy()
+    inset = cv2.resize(crop, (200, 150), interpolation=cv2.INTER_NEAREST)
+    cv2.rectangle(img, (u - 21, v - 16), (u + 20, v + 15), (255, 255, 255), 1)
+    w = img.shape[1]
+    img[8:162, w - 212:w - 8] = 255
+    img[10:160, w - 210:w - 10] = inset
+    cv2.imwrite(str(png), img)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", action="append", choices=GROUPS, help="generate only this group (repeatable)")
     ap.add_argument("-o", "--output", default=str(ROOT / "sample_data"), help="output folder (default sample_data/)")
+    ap.add_argument("--no-frame-png", action="store_true", help="do not write docs/sample_frame.png")
     args = ap.parse_args(argv)
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
@@ -70,6 +88,8 @@ def main(argv=None) -> int:
     manifest_path.write_text(json.dumps(manifest, indent=1) + "\n")
     total = sum(v["total_bytes"] for v in manifest.values())
     print(f"total {total / 1e6:.2f} MB")
+    if not args.no_frame_png and (out / "group1" / "video.mp4").exists() and (not args.only or "group1" in args.only):
+        write_frame_png(out / "group1", ROOT / "docs" / "sample_frame.png")
     return 0
 
 

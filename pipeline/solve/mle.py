@@ -292,7 +292,7 @@ def cep_m(cov_xy: np.ndarray, p: float) -> np.ndarray:
     (B,2,2) covariances of a zero-mean 2D Gaussian.
 
     With principal standard deviations s1 >= s2 (closed-form 2x2 eigenvalues) the radius is s1 rho_p(s2/s1);
-    rho_p is tabulated once per p on 1025 ratios (exact integral `_prob_within`, bisection) and interpolated
+    rho_p is tabulated once per p on 257 ratios (exact integral `_prob_within`, bisection) and interpolated
     linearly (relative error < 1e-5 against a 1025-point table).
     """
     a, b, c = cov_xy[:, 0, 0], cov_xy[:, 0, 1], cov_xy[:, 1, 1]

@@ -21,9 +21,7 @@ from pipeline.solve.mle import (
     VCE_MAX_ROUNDS,
     VCE_TOL,
     _cep_table,
-    _curvature,
     _rho_and_weight,
-    base_variances,
 )
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import SINGULAR_DET, Stacked
@@ -120,6 +118,8 @@ class Frames:
         self.Mp = st.M[0, self.pix_f]
         self.M12, self.M3 = self.Mp[:, :2, :], self.Mp[:, 2:3, :]
         self.p4 = st.p4[0, self.pix_f]
+        self._M2d = self.Mp.reshape(-1, 3)  # rows m1 m2 m3 of every frame: q = M2d X + p4 in one gemv
+        self._p4f = self.p4.ravel()
         self.pix = st.pix[0, self.pix_f]
         self.S = st.platform_m[0, self.rng_f]
         self.d = st.range_m[0, self.rng_f]
@@ -136,7 +136,7 @@ class Frames:
 
     def pixel(self, X: np.ndarray):
         """J (2k,3), r (2k,) of the k frames with a pixel (rows u1 v1 u2 ...), as `stacked.pixel_model`."""
-        q = self.Mp @ X + self.p4
+        q = (self._M2d @ X + self._p4f).reshape(-1, 3)
         w = q[:, 2:3]
         uv = q[:, :2] / w
         return ((self.M12 - uv[..., None] * self.M3) / w[..., None]).reshape(-1, 3), (self.pix - uv).ravel()
@@ -360,7 +360,6 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
             max_iterations: int, init_status):
     """`mle.mle` for one problem. Returns X (3,), iterations, status, cond, covariance (3,3), extras dict of
     floats (the keys of `mle.mle`) and the final residuals (pixels u v interleaved, then ranges)."""
-    st = fr.st
     npix = fr.npix
     status = Status.MAX_ITERATIONS
     X = np.array(X0, dtype=np.float64)
@@ -368,8 +367,7 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
     if bad:
         status = Status.DIVERGED if init_status == Status.DIVERGED else Status.DEGENERATE
         X = np.zeros(3)
-    var_all = base_variances(st, X[None], sigma)[0]
-    var0 = np.concatenate((var_all[:2 * st.n].reshape(-1, 2)[fr.pix_f].ravel(), var_all[2 * st.n:][fr.rng_f]))
+    var0 = _base_variances_one(fr, X, sigma)
     vf = [1.0, 1.0]
     m = var0.size
 
@@ -390,13 +388,14 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
     vce_rounds = 0
     newton_ok = True
     for _ in range(0 if bad else max_iterations):
-        e = r / sd
-        w = ivar if robust is None else _weight(e, robust) * ivar
-        JW = J.T * w
-        N = JW @ J
+        if robust is None:
+            JW = J.T * ivar
+            N = JW @ J
+        else:
+            wr, curv = _weight_curvature(r / sd, robust)
+            JW = J.T * (wr * ivar)
+            N = (J.T * (curv * ivar)) @ J if newton_ok else JW @ J
         g = JW @ r
-        if robust is not None and newton_ok:
-            N = (J.T * (_curvature(e, robust) * ivar)) @ J
         dX, singular = spd_solve(N + lam * np.diag(np.diag(N)) if lam else N, g)
         iterations += 1
         Xn = X if singular else X + dX
@@ -461,6 +460,24 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
     return X, iterations, status, cond, 0.5 * (cov + cov.T), extras, r
 
 
+def _base_variances_one(fr: Frames, X0: np.ndarray, sigma: Sigma) -> np.ndarray:
+    """`mle.base_variances` of the rows in use (pixels u v interleaved, then ranges), one problem."""
+    s_px = 1.0 if sigma.pixel_px is None else sigma.pixel_px
+    s_r = 1.0 if sigma.range_m is None else sigma.range_m
+    s_pos = 0.0 if sigma.position_m is None else sigma.position_m
+    s_att = 0.0 if sigma.attitude_deg is None else math.radians(sigma.attitude_deg)
+    g = fr.st._gram()[0, fr.pix_f]
+    g33 = g[:, 2, 2]
+    fxy = np.sqrt(np.maximum(g[:, (0, 1), (0, 1)] * g33[:, None] - g[:, (0, 1), (2, 2)] ** 2, 0.0)) / g33[:, None]
+    ang2 = s_att ** 2
+    if s_pos > 0:
+        diff = X0 - fr.st.platform_m[0, fr.pix_f]
+        D2 = (diff * diff).sum(axis=1)
+        ang2 = ang2 + np.where(np.isfinite(D2) & (D2 > 0), s_pos ** 2 / np.where(D2 > 0, D2, 1.0), 0.0)[:, None]
+    var = np.concatenate(((s_px ** 2 + fxy ** 2 * ang2).ravel(), np.full(fr.rng_f.size, s_r ** 2 + s_pos ** 2)))
+    return np.where(var > 0, var, 1.0)
+
+
 def summaries_one(cov: np.ndarray) -> dict:
     """`mle` accuracy summaries of one (3,3) covariance, as (1,...) arrays like the batch's."""
     if not np.isfinite(cov).all():
@@ -477,11 +494,15 @@ def summaries_one(cov: np.ndarray) -> dict:
             "ellipsoid_semi_axes_1sigma_m": np.sqrt(np.maximum(ev, 0.0))[None], "ellipsoid_axes": vec[None]}
 
 
-def _weight(e: np.ndarray, robust: str) -> np.ndarray:
-    """The IRLS weight of `mle._rho_and_weight` alone."""
+def _weight_curvature(e: np.ndarray, robust: str):
+    """The IRLS weight of `mle._rho_and_weight` and the Newton weight of `mle._curvature`."""
     if robust == "huber":
-        return np.minimum(1.0, HUBER_C / np.maximum(np.abs(e), 1e-300))
-    return 1.0 / (1.0 + (e / CAUCHY_C) ** 2)
+        a = np.abs(e)
+        w = np.minimum(1.0, HUBER_C / np.maximum(a, 1e-300))
+        return w, np.where(a <= HUBER_C, 1.0, 0.001 * w)
+    z = (e / CAUCHY_C) ** 2
+    w = 1.0 / (1.0 + z)
+    return w, np.maximum((1.0 - z) * w * w, 0.001 * w)
 
 
 def _cost(e: np.ndarray, robust: str | None) -> float:

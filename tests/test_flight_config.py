@@ -108,3 +108,18 @@ def test_truth_from_file(flight_dir):
     doc["truth_file"] = "truth.json"
     cfg = flight_config_from_dict(doc, flight_dir / "x.yaml")
     assert cfg.truth_lla() == (1.5, 2.5, 3.5)
+
+
+def test_the_bundled_sample_configs_load():
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    if not (root / "sample_data" / "group1").is_dir():
+        pytest.skip("sample_data/ is not present")
+    entries = load_run_config(root / "configs" / "sample.yaml")
+    assert [e.error for e in entries] == [None] * len(entries)
+    names = [e.config.name for e in entries]
+    assert names == ["group1", "group2", "group3", "group4", "group5", "group6", "hard_outliers", "angle10"]
+    for e in entries:
+        assert Path(e.config.truth_file).parent.name == e.config.name
+        assert e.config.observations.mode == "bursts" and e.config.sigma.range_m == 5.0

@@ -28,7 +28,12 @@ def main(args) -> int:
     from pipeline.report.table4 import write_table4
     from pipeline.run import process_group, write_group_outputs
 
-    entries = load_run_config(args.config)
+    config = Path(args.config)
+    if args.config == str(DEFAULT_CONFIG) and not config.exists():
+        # The bundled sample config of this checkout, when ridgeloc runs from another folder.
+        bundled = Path(__file__).resolve().parents[2] / DEFAULT_CONFIG
+        config = bundled if bundled.exists() else config
+    entries = load_run_config(config)
     results, failures = [], []
     for entry in entries:
         name = entry.config.name if entry.config is not None else Path(entry.source).stem

@@ -20,7 +20,7 @@ def test_inspect_every_real_log(capsys):
     assert "iterated 0 of 20 messages" in out
     assert "truncated" in out  # the 64 KiB DataFlash log
     assert out.count("\n  missing for localization:") == len(REAL)
-    assert "all files together, missing for localization: gimbal, range" in out
+    assert "all files named together, missing for localization: gimbal, range" in out
 
 
 def test_inspect_json_and_bad_file(tmp_path, capsys):
@@ -37,3 +37,17 @@ def test_inspect_json_and_bad_file(tmp_path, capsys):
     assert "error" in doc["files"][1]
     errs = [ln for ln in cap.err.splitlines() if ln]
     assert len(errs) == 1 and "broken.tlog" in errs[0] and errs[0].startswith("ridgeloc: error:")
+
+
+def test_inspect_flight_folder(tmp_path, capsys):
+    import shutil
+
+    folder = tmp_path / "flight"
+    folder.mkdir()
+    shutil.copy(LOGS / "rviz_satellite_sample_gps.bag", folder / "gps.bag")
+    shutil.copy(LOGS / "ubiquity_fiducials_aruco_marker.bag", folder / "camera.bag")
+    (folder / "truth.json").write_text("{}")
+    assert main(["inspect", str(folder)]) == 0
+    out = capsys.readouterr().out
+    assert "gps.bag  [ros1]" in out and "camera.bag  [ros1]" in out and "truth.json" not in out
+    assert f"all files of {folder} together, missing for localization: attitude, gimbal, range" in out

@@ -11,7 +11,8 @@ HELP = "summarise flight logs, bags and videos: streams, counts, rates, spans, a
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("logs", nargs="+", metavar="LOG",
-                        help="telemetry logs (.tlog .bin .ulg .bag .mcap .SRT), ROS 2 bag folders, videos")
+                        help="telemetry logs (.tlog .bin .ulg .bag .mcap .SRT), ROS 2 bag folders, videos, or a flight "
+                             "folder (all of those in it)")
     parser.add_argument("--json", action="store_true", help="print one JSON document instead of tables")
 
 
@@ -20,19 +21,17 @@ def main(args) -> int:
 
     results = inspect_paths(args.logs)
     if args.json:
-        doc = {"files": [result_as_dict(r) for r in results]}
-        both = combined_missing(results)
-        if both is not None:
-            doc["missing_for_localization_all_files"] = both
+        doc = {"files": [result_as_dict(r) for r in results],
+               "missing_for_localization_together": combined_missing(results)}
         print(json.dumps(doc, indent=2))
     else:
         for r in results:
             if r.log is not None:
                 print(format_result(r))
                 print()
-        both = combined_missing(results)
-        if both is not None:
-            print("all files together, missing for localization: " + (", ".join(both) if both else "nothing"))
+        for group, missing in combined_missing(results).items():
+            what = f"files of {group}" if group else "files named"
+            print(f"all {what} together, missing for localization: " + (", ".join(missing) if missing else "nothing"))
     failed = [r for r in results if r.error is not None]
     for r in failed:
         print(f"ridgeloc: error: {r.error}", file=sys.stderr)

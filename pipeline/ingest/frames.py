@@ -69,5 +69,5 @@ def gimbal_to_earth(gimbal, attitude):
         t_rel, ref = (t_att - t_att[0]).astype(float), t_att[0]
         yaw = Slerp(t_rel, rots)((t - ref).astype(float)).as_euler("ZYX")[:, 0]
     q = gimbal.quat_wxyz.copy()
-    q[flag] = quat_wxyz_from_rotation(Rotation.from_euler("Z", yaw) * rotation_from_quat_wxyz(q[flag]))
+    q[flag] = quat_wxyz_from_rotation(Rotation.from_euler("Z", yaw[:, None]) * rotation_from_quat_wxyz(q[flag]))
     return GimbalSeries(gimbal.t_ns, q, np.zeros_like(flag), source=gimbal.source, clock=gimbal.clock)

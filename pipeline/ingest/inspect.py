@@ -3,7 +3,8 @@ and what is missing for localization."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from pathlib import Path
 
 from pipeline.errors import RidgelocError
 from pipeline.ingest.dispatch import detect_format, merge_logs, read_file
@@ -14,24 +15,43 @@ QUANTITY_ATTRS = ("position", "attitude", "gimbal", "range", "frames", "camera_e
 
 @dataclass
 class InspectResult:
-    """One input: its format and FlightLog, or the one-line error that made it unreadable."""
+    """One input: its format and FlightLog, or the one-line error that made it unreadable. `group`: the flight
+    folder it was found in ("" for a file named on the command line)."""
 
     path: str
     format: str | None = None
     log: FlightLog | None = None
     error: str | None = None
-    extra: dict = field(default_factory=dict)
+    group: str = ""
+
+
+def expand_flight_folders(paths) -> list[tuple[str, Path]]:
+    """(group, path) pairs: each flight folder (a folder that is not a ROS 2 bag) is replaced by the logs, bags
+    and videos in it, grouped under the folder (truth.json, frame CSVs and other companions are left out)."""
+    out: list[tuple[str, Path]] = []
+    for p in map(Path, paths):
+        if p.is_dir() and not (p / "metadata.yaml").is_file():
+            for child in sorted(p.iterdir()):
+                try:
+                    detect_format(child)
+                except RidgelocError:
+                    continue
+                out.append((str(p), child))
+        else:
+            out.append(("", p))
+    return out
 
 
 def inspect_paths(paths, mapping: dict | None = None) -> list[InspectResult]:
-    """Read each path on its own (every stream timed); unreadable inputs become results with `error` set."""
+    """Read each path on its own (every stream timed); unreadable inputs become results with `error` set. A flight
+    folder stands for the readable files in it."""
     out = []
-    for p in paths:
+    for group, p in expand_flight_folders(paths):
         try:
             fmt = detect_format(p)
-            out.append(InspectResult(str(p), fmt, read_file(p, mapping, scan_all=True)))
+            out.append(InspectResult(str(p), fmt, read_file(p, mapping, scan_all=True), group=group))
         except RidgelocError as exc:
-            out.append(InspectResult(str(p), error=str(exc)))
+            out.append(InspectResult(str(p), error=str(exc), group=group))
     return out
 
 
@@ -101,12 +121,14 @@ def result_as_dict(r: InspectResult) -> dict:
             "missing_for_localization": log.missing_for_localization(), "warnings": list(log.warnings)}
 
 
-def combined_missing(results: list[InspectResult]) -> list[str] | None:
-    """What all readable inputs together still lack (None when fewer than two were read)."""
-    logs = [r.log for r in results if r.log is not None]
-    if len(logs) < 2:
-        return None
-    return merge_logs(logs).missing_for_localization()
+def combined_missing(results: list[InspectResult]) -> dict[str, list[str]]:
+    """What the readable inputs of each group (a flight folder, or "" for the files named on their own) lack
+    together, for groups of two or more files."""
+    groups: dict[str, list[FlightLog]] = {}
+    for r in results:
+        if r.log is not None:
+            groups.setdefault(r.group, []).append(r.log)
+    return {g: merge_logs(logs).missing_for_localization() for g, logs in groups.items() if len(logs) > 1}
 
 
 __all__ = ["InspectResult", "combined_missing", "format_result", "inspect_paths", "result_as_dict"]

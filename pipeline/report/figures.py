@@ -182,6 +182,41 @@ def view3d_figure(r: GroupResult) -> Figure:
     return fig
 
 
+def _robust_limit(values: list[np.ndarray], floor: float) -> float:
+    """An axis limit holding the bulk of |values| but not gross outliers (beyond 6x the median)."""
+    v = np.abs(np.concatenate(values)) if values else np.zeros(0)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return floor
+    inliers = v[v <= 6.0 * max(np.median(v), floor / 6.0)]
+    return 1.2 * max(float(inliers.max()) if inliers.size else floor, floor)
+
+
+def _mark_off_scale(ax, t_s: np.ndarray, series: list[tuple[str, np.ndarray, dict]], scale_methods, lim: float,
+                    lower: float, unit: str) -> str:
+    """Off-scale points of the scale-setting methods as triangles at the edge; returns a note for the title
+    (how many, the largest, and which other methods run off scale: their RMS is in the legend)."""
+    n, worst, others = 0, 0.0, []
+    for m, r, style in series:
+        hi, lo = r > lim, r < lower
+        if m not in scale_methods:
+            if np.mean((hi | lo)[np.isfinite(r)]) > 0.3:
+                others.append(method_label(m))
+            continue
+        for mask, y, marker in ((hi, lim, "^"), (lo, lower, "v")):
+            if mask.any():
+                ax.plot(t_s[mask], np.full(mask.sum(), y), ls="none", marker=marker, color=style["color"],
+                        markersize=9, markeredgecolor="k", clip_on=False, zorder=6)
+                n += int(mask.sum())
+                worst = max(worst, float(np.abs(r[mask]).max()))
+    notes = []
+    if n:
+        notes.append(f"{n} off scale (▲▼), largest {worst:,.0f} {unit}")
+    if others:
+        notes.append(f"off scale: {', '.join(others)}")
+    return "; ".join(notes)
+
+
 def residuals_figure(r: GroupResult) -> Figure:
     """Per-frame residuals of the main estimates: pixel reprojection error (px) and range residual (m)."""
     obs = r.observations
@@ -190,7 +225,7 @@ def residuals_figure(r: GroupResult) -> Figure:
     ax0, ax1 = fig.subplots(2, 1, sharex=True)
     methods = [m for m in ordered_methods(r.estimates) if m in RESIDUAL_METHODS and m in _finite_estimates(r)]
     methods = sorted(methods, key=lambda m: m != "mle")  # the MLE first: it sets the scales
-    scale_px, scale_m, handles, labels = [], [], [], []
+    px_series, m_series, handles, labels = [], [], [], []
     for m in methods:
         px, rg = frame_residuals(obs, r.estimates[m].position_m)
         style = {"marker": METHOD_MARKERS.get(m, "o"), "color": METHOD_COLORS.get(m, "k"),
@@ -199,27 +234,29 @@ def residuals_figure(r: GroupResult) -> Figure:
         if np.isfinite(px).any():
             ax0.plot(t_s, px, **style)
             rms.append(f"{np.sqrt(np.nanmean(px ** 2)):.2f} px")
-            if m in ("mle", "ridge"):
-                scale_px.append(np.nanmax(px))
+            px_series.append((m, px, style))
         if np.isfinite(rg).any():
             ax1.plot(t_s, rg, **style)
             rms.append(f"{np.sqrt(np.nanmean(rg ** 2)):.1f} m")
-            if m in ("mle", "ridge"):
-                scale_m.append(np.nanmax(np.abs(rg)))
+            m_series.append((m, rg, style))
         handles.append(Line2D([], [], **style))
         labels.append(f"{method_label(m)} (RMS {', '.join(rms)})")
-    # the well-fitting estimates set the scale; a badly fitting one runs off the plot (its RMS is in the legend)
-    if scale_px:
-        ax0.set_ylim(0, 3.0 * max(max(scale_px), 0.5))
-    if scale_m:
-        lim = 3.0 * max(max(scale_m), 1.0)
-        ax1.set_ylim(-lim, lim)
+    # the well-fitting estimates (MLE, ridge) set the scale, robustly: gross outliers and badly fitting
+    # estimates are marked at the edge instead of squashing everything else
+    scale = ("mle", "ridge")
+    lim_px = _robust_limit([v for m, v, _ in px_series if m in scale] or [v for _, v, _ in px_series], 0.5)
+    lim_m = _robust_limit([v for m, v, _ in m_series if m in scale] or [v for _, v, _ in m_series], 1.0)
+    ax0.set_ylim(0, lim_px)
+    ax1.set_ylim(-lim_m, lim_m)
+    shown = {m for m, _, _ in px_series + m_series if m in scale} or {m for m, _, _ in px_series + m_series}
+    note_px = _mark_off_scale(ax0, t_s, px_series, shown, lim_px, -np.inf, "px")
+    note_m = _mark_off_scale(ax1, t_s, m_series, shown, lim_m, -lim_m, "m")
     ax1.axhline(0, color="k", lw=0.8)
     ax0.set_ylabel("Reprojection error (px)")
     ax1.set_ylabel("Range residual |X − s| − d (m)")
     ax1.set_xlabel("Time since first frame (s)")
-    ax0.set_title("Pixel residuals")
-    ax1.set_title("Range residuals")
+    ax0.set_title("Pixel residuals" + (f" ({note_px})" if note_px else ""), fontsize=11)
+    ax1.set_title("Range residuals" + (f" ({note_m})" if note_m else ""), fontsize=11)
     for ax in (ax0, ax1):
         ax.grid(True, alpha=0.3)
         if not ax.lines:

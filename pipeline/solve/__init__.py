@@ -85,7 +85,7 @@ def _vision_init(st: Stacked, o: dict):
     x0 = _initial(o, st.size)
     if x0 is not None:
         return x0, None
-    X, status, _ = linear.dlt(st)
+    X, status, _ = linear.dlt(st, with_condition=False)
     X, _, status, _ = least_squares.vision(st, X, o["tol_m"], o["max_iterations"], status)
     # a vision result that hit the iteration limit is still a usable initial value
     return X, status
@@ -108,7 +108,7 @@ def _solve_stacked(method: str, st: Stacked, o: dict) -> BatchEstimate:
         x0 = _initial(o, B)
         init_status = None
         if x0 is None:
-            x0, init_status, _ = linear.dlt(st)
+            x0, init_status, _ = linear.dlt(st, with_condition=False)
         X, it, status, cond = least_squares.vision(st, x0, tol, itmax, init_status)
     elif method in ("range", "fusion-raw"):
         x0, init_status = _vision_init(st, o)
@@ -160,7 +160,7 @@ def _mle_start(st: Stacked, o: dict, fr: single.Frames | None = None):
             if not np.isfinite(x0).all() or (fr.depths(x0) <= near[0, 0]).any():
                 x0, init_status, _, _ = single.los_one(fr)
         else:
-            x0, init_status, _ = linear.dlt(st)
+            x0, init_status, _ = linear.dlt(st, with_condition=False)
             need = ~np.isfinite(x0).all(axis=1)
             need |= ((st.depths(np.where(need[:, None], 0.0, x0)) <= near) & st.has_pix).any(axis=1)
             if need.any():
@@ -187,7 +187,7 @@ def _solve_one(method: str, st: Stacked, o: dict) -> BatchEstimate:
     cov = None
     it = 0
     if method == "dlt":
-        X, status, cond = single.dlt_one(fr)
+        X, status, cond = single.dlt_one(fr, with_condition=True)
     elif method == "los":
         X, status, pts, oracle = single.los_one(fr)
         cond = math.nan

@@ -52,8 +52,12 @@ def iterate(st: Stacked, X0: np.ndarray, step: StepFn, tol_m: float, max_iterati
         idx = np.flatnonzero(active)
         if idx.size == 0:
             break
-        sub = st if idx.size == B else st.take(idx)
-        dX, singular, ex = step(sub, X[idx])
+        if 2 * idx.size >= B:  # copying most of the batch costs more than computing the finished ones again
+            dX, singular, ex = step(st, X)
+            if idx.size < B:
+                dX, singular, ex = dX[idx], singular[idx], {k: v[idx] for k, v in ex.items()}
+        else:
+            dX, singular, ex = step(st.take(idx), X[idx])
         for name, v in ex.items():
             extras[name][idx] = v
         iterations[idx] += 1

@@ -81,10 +81,14 @@ def normalized_system(st: Stacked, X: np.ndarray):
     Jr, rr, okr = range_model(st, X)
     Lo, Sp = _minmax(rp, okp)
     lo, sp = _minmax(rr, okr)
-    Tp = np.concatenate([Jp, np.broadcast_to((-Lo)[:, None, None], (*rp.shape, 1))], axis=2) / Sp[:, None, None]
-    Tr = np.concatenate([Jr, np.broadcast_to((-lo)[:, None, None], (*rr.shape, 1))], axis=2) / sp[:, None, None]
-    T = np.concatenate([Tp * okp[..., None], Tr * okr[..., None]], axis=1)
-    dPhi = np.concatenate([(rp - Lo[:, None]) / Sp[:, None] * okp, (rr - lo[:, None]) / sp[:, None] * okr], axis=1)
+    m = rp.shape[1]
+    T = np.empty((X.shape[0], m + rr.shape[1], 4))
+    T[:, :m, :3] = Jp * (1.0 / Sp)[:, None, None]  # Jp, Jr are zero on unused rows
+    T[:, m:, :3] = Jr * (1.0 / sp)[:, None, None]
+    T[:, :m, 3] = (-Lo / Sp)[:, None] * okp
+    T[:, m:, 3] = (-lo / sp)[:, None] * okr
+    dPhi = np.concatenate([(rp - Lo[:, None]) * (okp / Sp[:, None]), (rr - lo[:, None]) * (okr / sp[:, None])],
+                          axis=1)
     rows = okp.sum(axis=1) + okr.sum(axis=1)
     return T, dPhi, rows
 

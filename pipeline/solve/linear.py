@@ -8,41 +8,60 @@ from pipeline.solve.estimate import Status
 from pipeline.solve.stacked import Stacked
 
 
-def dlt(st: Stacked):
+def smallest_eigenvector(N: np.ndarray) -> np.ndarray:
+    """(B,4) unit eigenvectors of the smallest eigenvalue of symmetric positive semi-definite N (B,4,4), by two
+    steps of inverse iteration from e4 with a shift of 1e-12 trace(N) (so an exact null vector, a noise-free
+    intersection, is no singular matrix). The smallest eigenvalue of the DLT normal matrix is the algebraic
+    residual, far below the next one, so each step gains that ratio: two reach rounding level."""
+    shift = 1e-12 * np.einsum("bii->b", N)
+    Ns = N + shift[:, None, None] * np.eye(4)
+    v = np.zeros((*N.shape[:-1], 1))
+    v[:, 3] = 1.0
+    for _ in range(2):
+        v = np.linalg.solve(Ns, v)
+        v /= np.sqrt((v * v).sum(axis=1, keepdims=True))
+    return v[..., 0]
+
+
+def dlt(st: Stacked, with_condition: bool = True):
     """Homogeneous linear triangulation from every frame with a pixel.
 
     Each pixel gives two rows u p3 - p1, v p3 - p2 (p_k rows of P) of A [X; 1] = 0. The world is first shifted
     to the platforms' centroid and scaled by their spread, and each row is scaled to unit length, so the
-    algebraic error is well conditioned; the solution is the eigenvector of A^T A with the smallest eigenvalue.
+    algebraic error is well conditioned; the solution is the eigenvector of A^T A with the smallest eigenvalue
+    (`smallest_eigenvector`).
 
     Returns X (B,3) (NaN when fewer than two pixels or the rays are parallel: status DEGENERATE),
     status (B,) int8, and cond (B,) = sigma_1 / sigma_3 of the normalised A (its 4th singular value is the
-    algebraic residual, ~0).
+    algebraic residual, ~0); NaN unless with_condition.
     """
     c = st.platform_m.mean(axis=1)  # (B,3)
     spread = np.sqrt(((st.platform_m - c[:, None, :]) ** 2).sum(-1).mean(-1))
     sc = np.where(spread > 1.0, spread, 1.0)
     # P' = P [[sc I, c], [0, 1]]
     Mp = st.M * sc[:, None, None, None]
-    p4p = np.einsum("bnij,bj->bni", st.M, c) + st.p4
+    p4p = (st.M @ c[:, None, :, None])[..., 0] + st.p4
     Pp = np.concatenate([Mp, p4p[..., None]], axis=-1)  # (B,n,3,4)
     rows = st.pix[..., :, None] * Pp[..., 2:3, :] - Pp[..., :2, :]  # (B,n,2,4)
-    norm = np.linalg.norm(rows, axis=-1, keepdims=True)
+    norm = np.sqrt((rows * rows).sum(axis=-1, keepdims=True))
     ok = st.has_pix[..., None, None] & (norm > 0)
     A = np.where(ok, rows / np.where(ok, norm, 1.0), 0.0).reshape(st.size, -1, 4)
     N = np.swapaxes(A, 1, 2) @ A
-    evals, evecs = np.linalg.eigh(N)
-    x = evecs[..., 0]  # (B,4)
     enough = st.has_pix.sum(axis=1) >= 2
+    x = smallest_eigenvector(np.where(enough[:, None, None], N, np.eye(4)))
     w = x[:, 3]
-    at_infinity = np.abs(w) <= 1e-12 * np.linalg.norm(x[:, :3], axis=1)
+    at_infinity = np.abs(w) <= 1e-12 * np.sqrt((x[:, :3] ** 2).sum(axis=1))
     good = enough & ~at_infinity
     with np.errstate(divide="ignore", invalid="ignore"):
         X = c + sc[:, None] * x[:, :3] / w[:, None]
-        cond = np.sqrt(np.maximum(evals[:, 3], 0) / np.maximum(evals[:, 1], 0))
     X[~good] = np.nan
-    cond = np.where(np.isfinite(cond), cond, np.inf)
     status = np.where(good, Status.CLOSED_FORM, Status.DEGENERATE).astype(np.int8)
+    cond = np.full(st.size, np.nan)
+    if with_condition:
+        evals = np.linalg.eigvalsh(N)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cond = np.sqrt(np.maximum(evals[:, 3], 0) / np.maximum(evals[:, 1], 0))
+        cond = np.where(np.isfinite(cond), cond, np.inf)
     return X, status, cond
 
 

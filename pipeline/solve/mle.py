@@ -12,7 +12,15 @@ from pipeline.solve import iterate as _iterate
 from pipeline.solve.estimate import Status
 from pipeline.solve.iterate import problem_scale_m
 from pipeline.solve.observations import Sigma
-from pipeline.solve.stacked import Stacked, condition_numbers, normal_equations, pixel_model, range_model, solve_spd
+from pipeline.solve.stacked import (
+    Stacked,
+    condition_numbers,
+    inverse3,
+    normal_equations,
+    pixel_model,
+    range_model,
+    solve_spd,
+)
 
 ROBUST_LOSSES = (None, "huber", "cauchy")
 #: tuning constants in units of the standardized residual (95 % efficiency under Gaussian noise)
@@ -219,11 +227,8 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
 
 
 def _inverse_spd(N: np.ndarray):
-    k = N.shape[-1]
-    eye = np.broadcast_to(np.eye(k), N.shape)
-    cols = [solve_spd(N, eye[..., j]) for j in range(k)]
-    inv = np.stack([c[0] for c in cols], axis=-1)
-    return 0.5 * (inv + np.swapaxes(inv, 1, 2)), cols[0][1]
+    inv, singular = inverse3(N)
+    return 0.5 * (inv + np.swapaxes(inv, 1, 2)), singular
 
 
 def _vce_factors(st: Stacked, J, r, okf, var, group, robust):

@@ -14,6 +14,7 @@ import numpy as np
 from pipeline.solve import iterate as _iterate
 from pipeline.solve.estimate import Status
 from pipeline.solve.least_squares import NORMALIZED_SINGULAR_DET
+from pipeline.solve.linear import smallest_eigenvector
 from pipeline.solve.mle import (
     _Q_GRID,
     CAUCHY_C,
@@ -161,8 +162,8 @@ class Frames:
 
 # ---- closed forms ---------------------------------------------------------------------------------------------
 
-def dlt_one(fr: Frames):
-    """`linear.dlt` for one problem: X (3,), status, cond."""
+def dlt_one(fr: Frames, with_condition: bool = False):
+    """`linear.dlt` for one problem: X (3,), status, cond (NaN unless with_condition)."""
     st = fr.st
     if fr.pix_f.size < 2:
         return np.full(3, np.nan), Status.DEGENERATE, math.inf
@@ -174,9 +175,12 @@ def dlt_one(fr: Frames):
     A = (fr.pix[:, :, None] * Pp[:, 2:3, :] - Pp[:, :2, :]).reshape(-1, 4)
     norm = np.sqrt((A * A).sum(axis=1))
     A = A / np.where(norm > 0, norm, 1.0)[:, None]
-    evals, evecs = np.linalg.eigh(A.T @ A)
-    x = evecs[:, 0]
-    cond = math.sqrt(evals[3] / evals[1]) if evals[1] > 0 else math.inf
+    N = A.T @ A
+    x = smallest_eigenvector(N[None])[0]
+    cond = math.nan
+    if with_condition:
+        evals = np.linalg.eigvalsh(N)
+        cond = math.sqrt(evals[3] / evals[1]) if evals[1] > 0 else math.inf
     if not abs(x[3]) > 1e-12 * math.sqrt(float(x[:3] @ x[:3])):
         return np.full(3, np.nan), Status.DEGENERATE, cond
     return c + sc * x[:3] / x[3], Status.CLOSED_FORM, cond

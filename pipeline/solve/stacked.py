@@ -70,6 +70,23 @@ class Stacked:
             g = self.__dict__["_gram_cache"] = self.M @ np.swapaxes(self.M, -1, -2)
         return g
 
+    def planes(self):
+        """Mc (3,3,B,n), p4c (3,B,n), pixc (2,B,n): every entry of M, p4 and the pixels as a contiguous
+        (B,n) plane, computed once."""
+        cache = self.__dict__.get("_planes_cache")
+        if cache is None:
+            cache = self.__dict__["_planes_cache"] = (np.ascontiguousarray(self.M.transpose(2, 3, 0, 1)),
+                                                      np.ascontiguousarray(self.p4.transpose(2, 0, 1)),
+                                                      np.ascontiguousarray(self.pix.transpose(2, 0, 1)))
+        return cache
+
+    def planes_platform(self) -> np.ndarray:
+        """(3,B,n) platform coordinates as contiguous planes, computed once."""
+        cache = self.__dict__.get("_platform_planes")
+        if cache is None:
+            cache = self.__dict__["_platform_planes"] = np.ascontiguousarray(self.platform_m.transpose(2, 0, 1))
+        return cache
+
     def det_M(self) -> np.ndarray:
         """(B,n) det of the left 3x3 block of each P, computed once."""
         det = self.__dict__.get("_det_cache")
@@ -114,30 +131,40 @@ def pixel_model(st: Stacked, X: np.ndarray):
     Returns J (B,2n,3) d(u,v)/dX, r (B,2n) observed - predicted (px), mask (B,2n) bool. Rows are u_1, v_1,
     u_2, ... With q = M X + p4: u = q1/q3, du/dX = (m1 - u m3)/q3 and dv/dX = (m2 - v m3)/q3 (m_k rows of M).
     Rows with a missing pixel or a camera with q3 = 0 are masked (zero Jacobian and residual).
+    Computed on (B,n) planes of each matrix entry (`Stacked.planes`): numpy is slow on tiny trailing axes.
     """
     B, n = st.has_pix.shape
-    q = np.einsum("bnij,bj->bni", st.M, X) + st.p4
-    w = q[..., 2]
-    ok = st.has_pix & (w != 0)
-    w = np.where(ok, w, 1.0)
-    uv = q[..., :2] / w[..., None]  # (B,n,2)
-    J = (st.M[..., :2, :] - uv[..., None] * st.M[..., 2:3, :]) / w[..., None, None]  # (B,n,2,3)
-    r = st.pix - uv
-    okk = np.repeat(ok, 2, axis=1)
-    J = np.where(ok[..., None, None], J, 0.0).reshape(B, 2 * n, 3)
-    r = np.where(ok[..., None], r, 0.0).reshape(B, 2 * n)
-    return J, r, okk
+    Mc, p4c, pixc = st.planes()
+    x0, x1, x2 = X[:, 0, None], X[:, 1, None], X[:, 2, None]
+    q0 = Mc[0, 0] * x0 + Mc[0, 1] * x1 + Mc[0, 2] * x2 + p4c[0]
+    q1 = Mc[1, 0] * x0 + Mc[1, 1] * x1 + Mc[1, 2] * x2 + p4c[1]
+    q2 = Mc[2, 0] * x0 + Mc[2, 1] * x1 + Mc[2, 2] * x2 + p4c[2]
+    ok = st.has_pix & (q2 != 0)
+    iw = ok / np.where(ok, q2, 1.0)  # 1/q3, 0 on masked rows
+    u, v = q0 * iw, q1 * iw
+    J = np.empty((B, n, 2, 3))
+    for c in range(3):
+        J[:, :, 0, c] = (Mc[0, c] - u * Mc[2, c]) * iw
+        J[:, :, 1, c] = (Mc[1, c] - v * Mc[2, c]) * iw
+    r = np.empty((B, n, 2))
+    r[:, :, 0] = (pixc[0] - u) * ok
+    r[:, :, 1] = (pixc[1] - v) * ok
+    return J.reshape(B, 2 * n, 3), r.reshape(B, 2 * n), np.repeat(ok, 2, axis=1)
 
 
 def range_model(st: Stacked, X: np.ndarray):
     """Range residuals and Jacobian at X (B,3): J (B,n,3) = (X - s_i)/|X - s_i|, r (B,n) = d_i - |X - s_i| (m),
     mask (B,n) bool (a missing range, or X on a platform position, is masked)."""
-    diff = X[:, None, :] - st.platform_m
-    dist = np.sqrt(np.einsum("bni,bni->bn", diff, diff))
+    B, n = st.has_range.shape
+    sc = st.planes_platform()
+    d = [X[:, c, None] - sc[c] for c in range(3)]
+    dist = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
     ok = st.has_range & (dist > 0)
-    dist_safe = np.where(ok, dist, 1.0)
-    J = np.where(ok[..., None], diff / dist_safe[..., None], 0.0)
-    r = np.where(ok, st.range_m - dist, 0.0)
+    inv = ok / np.where(ok, dist, 1.0)
+    J = np.empty((B, n, 3))
+    for c in range(3):
+        J[:, :, c] = d[c] * inv
+    r = (st.range_m - dist) * ok
     return J, r, ok
 
 
@@ -160,6 +187,11 @@ def solve_spd(N: np.ndarray, g: np.ndarray, singular_below: float = SINGULAR_DET
     Returns x (B,k) and a (B,) bool 'singular' flag (`SINGULAR_DET`). Singular problems get x = NaN instead of
     a numpy LinAlgError for the whole batch.
     """
+    if N.shape[-1] == 3:
+        inv, singular = inverse3(N, singular_below)
+        x = (inv @ g[..., None])[..., 0]
+        x[singular] = np.nan
+        return x, singular
     d = np.sqrt(np.abs(np.einsum("bii->bi", N)))
     bad_d = ~(d > 0) | ~np.isfinite(d)
     d = np.where(bad_d, 1.0, d)
@@ -174,8 +206,25 @@ def solve_spd(N: np.ndarray, g: np.ndarray, singular_below: float = SINGULAR_DET
     return x, singular
 
 
+def inverse3(N: np.ndarray, singular_below: float = SINGULAR_DET):
+    """Inverses (B,3,3) of symmetric 3x3 N by cofactors, and the `solve_spd` singular flag (B,): the
+    Jacobi-scaled determinant det / (N00 N11 N22). Singular ones are NaN."""
+    a, b, c = N[:, 0, 0], N[:, 0, 1], N[:, 0, 2]
+    e, f, i = N[:, 1, 1], N[:, 1, 2], N[:, 2, 2]
+    A0, B0, C0 = e * i - f * f, c * f - b * i, b * f - c * e
+    det = a * A0 + b * B0 + c * C0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        singular = ~((a > 0) & (e > 0) & (i > 0) & (det / (a * e * i) > singular_below))
+        E0, F0, I0 = a * i - c * c, b * c - a * f, a * e - b * b
+        inv = np.stack([A0, B0, C0, B0, E0, F0, C0, F0, I0], axis=-1).reshape(-1, 3, 3) / det[:, None, None]
+    inv[singular] = np.nan
+    return inv, singular
+
+
 def is_singular(N: np.ndarray) -> np.ndarray:
     """(B,) the `solve_spd` criterion alone, for normal matrices N (B,k,k)."""
+    if N.shape[-1] == 3:
+        return inverse3(N)[1]
     d = np.sqrt(np.abs(np.einsum("bii->bi", N)))
     ok = (d > 0).all(axis=1) & np.isfinite(N).all(axis=(1, 2))
     d = np.where(d > 0, d, 1.0)

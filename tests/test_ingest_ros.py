@@ -168,15 +168,22 @@ def test_bad_bags(tmp_path):
     with Writer(md) as w:
         c = w.add_connection("/uav/gps/fix", ty, msgdef="", md5sum="0" * 32)
         w.write(c, T0, ts.serialize_ros1(msg, ty))
-    with pytest.raises(LogReadError, match=r"nodef\.bag: cannot open bag: .*NavSatFix"):
+    with pytest.raises(LogReadError, match=r"nodef\.bag: cannot decode /uav/gps/fix .*message definition missing"):
         read_flight([md])
-    # a truncated ROS 1 bag: cut in the middle of the data
+    # a ROS 1 bag cut off while recording (no index): read by scanning, with a warning saying how much
     full = tmp_path / "full.bag"
     write_ros_bag(full, _rows(40), "ros1")
     cut = tmp_path / "cut.bag"
     cut.write_bytes(full.read_bytes()[: full.stat().st_size // 2])
-    with pytest.raises(LogReadError, match=r"cut\.bag: "):
-        read_flight([cut])
+    log = read_flight([cut])
+    assert any("rosbags cannot open it (Bag index looks damaged" in w and "file ends inside a record" in w
+               and "covering" in w for w in log.warnings)
+    assert 10 < log.position.t_ns.size < 40 and log.position.lat_deg[0] == pytest.approx(47.00001)
+    assert log.attitude.t_ns.size >= log.position.t_ns.size - 1
+    tiny = tmp_path / "tiny.bag"
+    tiny.write_bytes(full.read_bytes()[:40])
+    with pytest.raises(LogReadError, match=r"tiny\.bag: cannot open bag"):
+        read_flight([tiny])
     folder = tmp_path / "empty_folder"
     folder.mkdir()
     with pytest.raises(LogReadError, match="not a ROS 2 bag"):
@@ -191,3 +198,16 @@ def test_no_fix_at_all(tmp_path):
     log = read_flight([path])
     assert log.position is None
     assert any("no GPS fix in 3 /uav/gps/fix messages" in w for w in log.warnings)
+
+
+def test_ros2_mcap_bag_cut_off(tmp_path):
+    path = tmp_path / "cut_ros2"
+    write_ros_bag(path, _rows(200), "mcap")
+    (f,) = path.glob("*.mcap")
+    data = f.read_bytes()
+    f.write_bytes(data[: int(len(data) * 0.6)])
+    log = read_flight([path])
+    assert log.warnings[0].startswith(f"{path}: rosbags cannot open it")
+    assert any("reading stopped after" in w for w in log.warnings)
+    assert 20 < log.position.t_ns.size < 199 and log.position.t_ns[0] == T0 + 100_000_000
+    np.testing.assert_allclose(log.attitude.quat_wxyz[0], [1, 0, 0, 0], atol=1e-12)

@@ -98,7 +98,12 @@ def read_rosbag(path: str | Path, mapping: dict, scan_all: bool = False) -> Flig
     path = Path(path)
     fmt = "ros2" if path.is_dir() else "ros1"
     warnings: list[str] = []
-    reader = _open_reader(path)
+    try:
+        reader = _open_reader(path)
+    except LogReadError as exc:
+        if fmt == "ros1":
+            return _read_ros1_scan(path, mapping, scan_all, exc)
+        return _read_ros2_mcap_direct(path, mapping, scan_all, exc)
     try:
         topic_types = {c.topic: c.msgtype for c in reader.connections}
         chosen = resolve_topics(mapping, topic_types, warnings, str(path))
@@ -155,6 +160,78 @@ def read_rosbag(path: str | Path, mapping: dict, scan_all: bool = False) -> Flig
         reader.close()
     log = FlightLog(path=str(path), streams=streams, warnings=warnings, formats=[fmt])
     _fill(log, accs, warnings, path)
+    return log
+
+
+def _read_ros1_scan(path: Path, mapping: dict, scan_all: bool, open_error: LogReadError) -> FlightLog:
+    """A ROS 1 bag rosbags cannot open (index missing: cut off while recording), read by a linear scan;
+    raises the original error when the scan finds nothing either."""
+    from pipeline.ingest.rosbag1_scan import UnindexedBag1
+
+    try:
+        bag = UnindexedBag1(path)
+    except Exception:
+        raise open_error from None
+    if not bag.connections:
+        raise open_error
+    warnings: list[str] = []
+    topic_types = {t: ty for t, ty, _ in bag.connections.values()}
+    chosen = resolve_topics(mapping, topic_types, warnings, str(path))
+    accs = {q: RosAccumulator(q, t, topic_types[t], mapping[q], mapping["stamp"],
+                              f"{path}:{t}" if q == "images" else f"{path.name}:{t}") for q, t in chosen.items()}
+    by_topic: dict[str, list[RosAccumulator]] = {}
+    for acc in accs.values():
+        by_topic.setdefault(acc.topic, []).append(acc)
+    stats = {t: [0, None, None] for t in topic_types}
+    n = 0
+    for topic, msgtype, t_rec, raw in bag.messages(None if scan_all else set(by_topic)):
+        n += 1
+        st = stats[topic]
+        st[0] += 1
+        st[1] = t_rec if st[1] is None else min(st[1], t_rec)
+        st[2] = t_rec if st[2] is None else max(st[2], t_rec)
+        if topic in by_topic:
+            try:
+                msg = bag.deserialize(raw, msgtype)
+            except Exception as exc:
+                raise LogReadError(f"cannot decode {topic} ({msgtype}): message definition missing or broken "
+                                   f"({exc})", path=path) from None
+            for acc in by_topic[topic]:
+                acc.add(msg, t_rec)
+    if n == 0 and chosen:
+        raise open_error
+    t0 = min((s[1] for s in stats.values() if s[1] is not None), default=None)
+    t1 = max((s[2] for s in stats.values() if s[2] is not None), default=None)
+    span = (t1 - t0) / 1e9 if t0 is not None else 0.0
+    why = str(open_error).split(": cannot open bag: ", 1)[-1].split(" (a bag cut off")[0]
+    state = "file ends inside a record, " if not bag.complete else ""
+    warnings.insert(0, f"{path}: rosbags cannot open it ({why}; {state}recording cut off?); read {n} messages "
+                       f"covering {span:.1f} s by scanning the records")
+    streams = [StreamInfo(t, ty, int(stats[t][0]), stats[t][1], stats[t][2], supplies_of(ty))
+               for t, ty in topic_types.items()]
+    log = FlightLog(path=str(path), streams=streams, warnings=warnings, formats=["ros1"])
+    _fill(log, accs, warnings, path)
+    return log
+
+
+def _read_ros2_mcap_direct(path: Path, mapping: dict, scan_all: bool, open_error: LogReadError) -> FlightLog:
+    """A ROS 2 bag with MCAP storage that rosbags cannot open (e.g. cut off: no summary), read file by file with
+    the plain-MCAP reader (linear scan, CDR channels by the ros mapping); else the original error."""
+    from pipeline.ingest.dispatch import merge_logs
+    from pipeline.ingest.mapping import mapping_for
+    from pipeline.ingest.mcap_plain import read_mcap
+
+    try:
+        files = _McapDirect(path).files
+    except Exception:
+        raise open_error from None
+    if not files or not all(f.suffix == ".mcap" and f.is_file() for f in files):
+        raise open_error
+    logs = [read_mcap(f, mapping_for("mcap"), mapping, scan_all=scan_all) for f in files]
+    log = merge_logs(logs)
+    why = str(open_error).split(": cannot open bag: ", 1)[-1]
+    log.warnings.insert(0, f"{path}: rosbags cannot open it ({why}); read its MCAP file(s) directly")
+    log.path, log.formats = str(path), ["ros2"]
     return log
 
 

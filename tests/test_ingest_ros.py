@@ -202,7 +202,10 @@ def test_no_fix_at_all(tmp_path):
 
 def test_ros2_mcap_bag_cut_off(tmp_path):
     path = tmp_path / "cut_ros2"
-    write_ros_bag(path, _rows(200), "mcap")
+    blob = np.random.default_rng(5).integers(0, 255, 40_000, dtype=np.uint8).tobytes()
+    images = [("/uav/camera/image/compressed", T0 + i * 10**8 + 60, *ros_message("compressed", T0 + i * 10**8,
+                                                                                data=blob)) for i in range(200)]
+    write_ros_bag(path, _rows(200) + images, "mcap")  # 8 MB: several MCAP chunks
     (f,) = path.glob("*.mcap")
     data = f.read_bytes()
     f.write_bytes(data[: int(len(data) * 0.6)])

@@ -82,7 +82,9 @@ def test_summary_highlights_the_smallest_error(run):
     cells = re.findall(r'<td class="best">([0-9.,]+)', table)
     assert cells == [f"{errors[best]:,.2f}"]  # one group with a truth, one highlighted cell
     assert table.count("no truth") == len(results[1].estimates)
-    assert "Intersection angle" in table and "<td>14</td>" in table  # Table 3 rows
+    assert "Intersection angle" in table and "<td>14<" in table  # Table 3 rows
+    # beside ours, the paper's values for a group of the same name (group1: Table 3 and the ridge row of Table 4)
+    assert '<div class="paper">paper 16</div>' in table and '<div class="paper">paper 8.68</div>' in table
 
 
 def test_finished_group_is_reused_only_for_the_same_config(tmp_path):

@@ -34,11 +34,13 @@ h3 { font-size: 16px; margin: 20px 0 8px; }
 .pill { display: inline-block; padding: 2px 10px; border-radius: 12px; font-size: 13px; margin-right: 6px; }
 .ok { background: #e3f4ea; color: #1e6b3a; } .bad { background: #fde8e8; color: #9b1c1c; }
 table { border-collapse: collapse; margin: 8px 0 14px; font-size: 14px; background: white; }
-th, td { border: 1px solid #d9d9d9; padding: 5px 10px; text-align: right; white-space: nowrap; }
+th, td { border: 1px solid #d9d9d9; padding: 4px 8px; text-align: right; white-space: nowrap; }
+.scroll { overflow-x: auto; max-width: 100%; }
 th { background: #f0f0f3; font-weight: 600; }
 td.l, th.l { text-align: left; }
 td.best { background: #d9f2e1; font-weight: 700; }
 td.na { color: #999; }
+.paper { color: #8a8a8a; font-size: 11px; font-weight: 400; }
 .swatch { display: inline-block; width: 11px; height: 11px; border-radius: 2px; margin-right: 6px;
           vertical-align: -1px; border: 1px solid #0003; }
 img { max-width: 100%; height: auto; background: white; border: 1px solid #e2e2e2; border-radius: 4px; }
@@ -66,14 +68,28 @@ def _img(png: bytes, alt: str) -> str:
     return f'<img src="data:image/png;base64,{data}" alt="{escape(alt)}">'
 
 
+def _paper(group: str, table: dict, key: str, decimals: int = 2) -> str:
+    """The paper's value for a group of the same name (group1..group6), as a grey second line."""
+    from pipeline.report.table4 import PAPER_GROUPS
+
+    if group not in PAPER_GROUPS or key not in table:
+        return ""
+    v = table[key][PAPER_GROUPS.index(group)]
+    return f'<div class="paper">paper {_fmt(float(v), decimals) if decimals else v}</div>'
+
+
 def _summary_table(results: Sequence[GroupResult]) -> str:
+    from pipeline.report.table4 import PAPER_TABLE3, PAPER_TABLE4_M
+
     methods = ordered_methods(dict.fromkeys(m for r in results for m in r.estimates))
     head = "".join(f'<th>{escape(r.name)}</th>' for r in results)
     rows = [f'<tr><th class="l">Group</th>{head}</tr>']
     rows.append('<tr><td class="l">Intersection angle /°</td>'
-                + "".join(f"<td>{_fmt(float(r.intersection_angle_deg))}</td>" for r in results) + "</tr>")
+                + "".join(f"<td>{_fmt(float(r.intersection_angle_deg))}"
+                          f"{_paper(r.name, PAPER_TABLE3, 'intersection_angle_deg')}</td>" for r in results) + "</tr>")
     rows.append('<tr><td class="l">Observations</td>'
-                + "".join(f"<td>{r.n_observations}</td>" for r in results) + "</tr>")
+                + "".join(f"<td>{r.n_observations}{_paper(r.name, PAPER_TABLE3, 'observations', 0)}</td>"
+                          for r in results) + "</tr>")
     errors = {r.name: r.errors_m() for r in results}
     best = {}
     for r in results:
@@ -95,19 +111,20 @@ def _summary_table(results: Sequence[GroupResult]) -> str:
             else:
                 flag = "" if r.estimates[m].converged else " †"
                 cls = ' class="best"' if best[r.name] == m else ""
-                cells.append(f"<td{cls}>{_fmt(e)}{flag}</td>")
+                cells.append(f"<td{cls}>{_fmt(e)}{flag}{_paper(r.name, PAPER_TABLE4_M, m)}</td>")
         rows.append(f'<tr><td class="l"><span class="swatch" style="background:{color}"></span>'
                     f'{escape(method_label(m))} /m</td>{"".join(cells)}</tr>')
     return ("<table>" + "".join(rows) + "</table>"
             '<p class="note">3D localization error against the known target position (m); the lowest per group is '
-            "highlighted. † the estimator stopped without converging (iteration limit or divergence).</p>")
+            "highlighted. † the estimator stopped without converging (iteration limit or divergence). In grey, the "
+            "paper's value for the group of the same name (its Tables 3 and 4), where there is one.</p>")
 
 
 def _estimates_table(r: GroupResult) -> str:
     cols = (("Method", "method_label", "l"), ("Latitude /°", "lat_deg", ""), ("Longitude /°", "lon_deg", ""),
             ("Height /m", "alt_m", ""), ("E /m", "e_m", ""), ("N /m", "n_m", ""), ("U /m", "u_m", ""),
             ("Error /m", "error_m", ""), ("CEP50 /m", "cep50_m", ""), ("CEP90 /m", "cep90_m", ""),
-            ("σ up /m", "sigma_up_m", ""), ("Status", "status", "l"), ("Iterations", "iterations", ""))
+            ("σ up /m", "sigma_up_m", ""), ("Status", "status", "l"))
     head = "".join(f'<th class="{c}">{escape(t)}</th>' for t, _, c in cols)
     body = []
     for row in target_rows([r]):
@@ -117,7 +134,7 @@ def _estimates_table(r: GroupResult) -> str:
             text = _fmt(v, 7) if key in ("lat_deg", "lon_deg") else _fmt(v)
             cells.append(f'<td class="{c}">{text}</td>')
         body.append("<tr>" + "".join(cells) + "</tr>")
-    return (f"<table><tr>{head}</tr>{''.join(body)}</table>"
+    return (f"<div class=\"scroll\"><table style=\"font-size: 13px\"><tr>{head}</tr>{''.join(body)}</table></div>"
             f'<p class="note">Heights: {escape(ALT_DATUM)}. E, N, U: metres in the local frame at '
             f"{_fmt(r.origin_lla[0], 7)}°, {_fmt(r.origin_lla[1], 7)}°, {_fmt(r.origin_lla[2])} m.</p>")
 

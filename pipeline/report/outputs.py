@@ -92,8 +92,7 @@ def write_run_outputs(outdir: str | PathLike, results: Sequence[GroupResult], fa
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(outdir)
-    results = sorted(results, key=lambda r: r.name)
-    failures = sorted(failures, key=lambda f: f.name)
+    results, failures = list(results), list(failures)  # in the run's order (the run config's)
     pngs = {}
     for r in results:
         if not is_done(group_dir(outdir, r.name)):

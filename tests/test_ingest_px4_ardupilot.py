@@ -97,3 +97,40 @@ def test_dataflash_garbage(tmp_path):
     g.write_bytes(b"\xa3\x95" + bytes(range(256)) * 4)
     with pytest.raises(LogReadError, match=r"g\.bin: "):
         read_flight([g])
+
+
+def test_ulog_gimbal_flags_distance_sensor_units():
+    """PX4 topics the real logs lack, as pyulog hands them over (columns of instance 0)."""
+    from pipeline.ingest.mapping import mapping_for
+    from pipeline.ingest.model import FlightLog
+    from pipeline.ingest.ulog import fill_from_topics
+
+    ts = np.array([1_000_000, 2_000_000, 3_000_000, 4_000_000], np.uint64)
+    c, s = math.cos(math.radians(10)), math.sin(math.radians(10))  # pitch -20 deg about y: (cos -10, 0, sin -10, 0)
+    data = {
+        "gimbal_device_attitude_status": {
+            "timestamp": ts, "device_flags": np.array([32, 64, 16, 0], np.uint16),
+            "q[0]": np.full(4, c), "q[1]": np.zeros(4), "q[2]": np.full(4, -s), "q[3]": np.zeros(4)},
+        "distance_sensor": {
+            "timestamp": ts, "current_distance": np.array([12.5, 0.05, 70.0, 12.5], np.float32),
+            "min_distance": np.full(4, 0.1, np.float32), "max_distance": np.full(4, 50.0, np.float32),
+            "signal_quality": np.array([-1, 100, 100, 0], np.int8)},
+        "vehicle_gps_position": {  # boot 1..4 s <-> UTC 1700000000..3 s
+            "timestamp": ts, "time_utc_usec": (np.arange(4, dtype=np.uint64) + 1_700_000_000) * 1_000_000,
+            "lat": np.full(4, 473977419, np.int32), "lon": np.full(4, 85455939, np.int32),
+            "alt": np.full(4, 488000, np.int32), "alt_ellipsoid": np.full(4, 536000, np.int32),
+            "fix_type": np.array([2, 3, 3, 3], np.uint8)},
+    }
+    log = FlightLog(path="x.ulg")
+    fill_from_topics(log, data, mapping_for("ulog"), Path("x.ulg"))
+    # flags: 32 vehicle, 64 earth, 16 (YAW_LOCK) earth, none: vehicle
+    assert log.gimbal.yaw_in_vehicle_frame.tolist() == [True, False, False, True]
+    ypr = Rotation.from_quat(log.gimbal.quat_wxyz[0], scalar_first=True).as_euler("ZYX", degrees=True)
+    np.testing.assert_allclose(ypr, [0, -20, 0], atol=1e-9)
+    # distance_sensor in metres; below min, above max, signal_quality 0 invalid (-1 = unknown is fine)
+    np.testing.assert_allclose(log.range.range_m, [12.5, 0.05, 70.0, 12.5], rtol=1e-6)
+    assert log.range.valid.tolist() == [True, False, False, False]
+    # boot -> UNIX through time_utc_usec; fix_type 2 dropped; ellipsoid height by default
+    assert log.range.clock == "unix" and log.range.t_ns[0] == 1_700_000_000 * 10**9
+    assert log.position.t_ns.tolist() == [(1_700_000_000 + k) * 10**9 for k in (1, 2, 3)]
+    assert log.position.alt_m[0] == pytest.approx(536.0) and log.position.alt_datum == "ellipsoid"

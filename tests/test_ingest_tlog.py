@@ -159,3 +159,28 @@ def test_real_ardupilot_tlog_against_raw_pymavlink():
     assert down[2] == pytest.approx(math.cos(r) * math.cos(p_), abs=1e-7)
     assert log.gimbal is None and log.range is None
     assert sum(s.count for s in log.streams) == 23894
+
+
+def test_mount_status_rangefinder_camera_feedback_and_system_choice(tmp_path):
+    p = tmp_path / "m.tlog"
+    with TlogWriter(p) as w:
+        for i in range(6):
+            t = T0_US + i * 200_000
+            w.write(t, ml.MAVLink_mount_status_message(0, 0, -4500, 150, 9000, 2))  # pitch -45, roll 1.5, yaw 90
+            w.write(t + 1, ml.MAVLink_rangefinder_message(812.5 if i else float("nan"), 0.0))
+            w.write(t + 2, ml.MAVLink_camera_feedback_message(t, 1, 0, i, 0, 0, 0.0, 0.0, 0, 0, 0, 0, 0, 0))
+            w.write(t + 3, ml.MAVLink_global_position_int_message(i, 100000000, 200000000, 1000, 0, 0, 0, 0, 0))
+            if i < 2:  # a second vehicle (or a GCS echo) on system 7
+                w.write(t + 4, ml.MAVLink_global_position_int_message(i, 1, 1, 1, 0, 0, 0, 0, 0), src_system=7)
+                w.mav.srcSystem = 1
+    mapping = {"tlog": {"range": {"messages": ["RANGEFINDER"]}}}
+    log = read_flight([p], mapping=mapping)
+    ypr = Rotation.from_quat(log.gimbal.quat_wxyz[0], scalar_first=True).as_euler("ZYX", degrees=True)
+    np.testing.assert_allclose(ypr, [90, -45, 1.5], atol=1e-9)
+    assert log.gimbal.yaw_in_vehicle_frame.all()  # ArduPilot MOUNT_STATUS yaw is relative to the vehicle
+    assert log.range.valid.tolist() == [False, True, True, True, True, True] and log.range.range_m[1] == 812.5
+    assert log.camera_events.index.tolist() == list(range(6))
+    assert log.position.t_ns.size == 6 and (log.position.lat_deg == 10.0).all()
+    assert any("systems [1, 7]; using system 1" in w for w in log.warnings)
+    log7 = read_flight([p], mapping={"tlog": {"system_id": 7}})
+    assert log7.position.t_ns.size == 2

@@ -107,8 +107,31 @@ def read_ulog(path: str | Path, mapping: dict, scan_all: bool = False) -> Flight
         elif d.multi_id > 0 and d.name in topics:
             warnings.append(f"{path}: {d.name} has several instances; using instance 0")
     log = FlightLog(path=str(path), warnings=warnings, formats=["ulog"])
-    src = path.name
 
+    fill_from_topics(log, data, mapping, path)
+    link = log.clock_links[0] if log.clock_links else None
+    to_clock = (lambda t: int(series_to_clock_scalar(t, link))) if link else (lambda t: int(t))
+    for d in ulog.data_list:
+        ts = d.data["timestamp"]
+        name = d.name if d.multi_id == 0 else f"{d.name}[{d.multi_id}]"
+        first = to_clock(int(ts[0]) * 1000) if len(ts) else None
+        last = to_clock(int(ts[-1]) * 1000) if len(ts) else None
+        log.streams.append(StreamInfo(name, d.name, len(ts), first, last,
+                                      (SUPPLIES[d.name],) if d.name in SUPPLIES else ()))
+    log.streams.sort(key=lambda s: (-s.count, s.name))
+    return log
+
+
+def series_to_clock_scalar(t_ns: int, link: ClockLink) -> int:
+    from pipeline.ingest.clocks import map_clock
+    return int(map_clock(np.array([t_ns], np.int64), link)[0])
+
+
+def fill_from_topics(log: FlightLog, data: dict[str, dict], mapping: dict, path: Path) -> None:
+    """Fill `log` from topic name -> {field: numpy column} (pyulog's `ULog.Data.data` of instance 0), and put
+    the series on the UNIX clock when GPS UTC time links it to boot time."""
+    warnings = log.warnings
+    src = Path(path).name
     for name in mapping["clock"]["topics"]:
         d = data.get(name)
         if d is not None and "time_utc_usec" in d:
@@ -169,19 +192,3 @@ def read_ulog(path: str | Path, mapping: dict, scan_all: bool = False) -> Flight
             setattr(log, q, series_to_clock(getattr(log, q), log.clock_links, "unix"))
     elif any(getattr(log, q) is not None for q in ("position", "attitude", "gimbal", "range")):
         warnings.append(f"{path}: no GPS UTC time in the log; series stay on the boot clock")
-    link = log.clock_links[0] if log.clock_links else None
-    to_clock = (lambda t: int(series_to_clock_scalar(t, link))) if link else (lambda t: int(t))
-    for d in ulog.data_list:
-        ts = d.data["timestamp"]
-        name = d.name if d.multi_id == 0 else f"{d.name}[{d.multi_id}]"
-        first = to_clock(int(ts[0]) * 1000) if len(ts) else None
-        last = to_clock(int(ts[-1]) * 1000) if len(ts) else None
-        log.streams.append(StreamInfo(name, d.name, len(ts), first, last,
-                                      (SUPPLIES[d.name],) if d.name in SUPPLIES else ()))
-    log.streams.sort(key=lambda s: (-s.count, s.name))
-    return log
-
-
-def series_to_clock_scalar(t_ns: int, link: ClockLink) -> int:
-    from pipeline.ingest.clocks import map_clock
-    return int(map_clock(np.array([t_ns], np.int64), link)[0])

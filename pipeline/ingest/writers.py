@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import struct
 from pathlib import Path
+from typing import ClassVar
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -129,3 +130,42 @@ def write_ros_bag(path, messages: list[tuple[str, int, str, object]], storage: s
             if topic not in conns:
                 conns[topic] = writer.add_connection(topic, msgtype, typestore=ts, **open_kw)
             writer.write(conns[topic], int(t_ns), ser(msg, msgtype))
+
+
+class DataFlashWriter:
+    """Minimal ArduPilot DataFlash (.bin) writer: FMT records then data records (`fmt()` then `write()`), with
+    the firmware's format characters (e.g. L = int32 degE7, C = uint16 * 0.01), so DFReader's scaling applies."""
+
+    _STRUCT: ClassVar[dict[str, str]] = {
+        "B": "B", "b": "b", "H": "H", "h": "h", "I": "I", "i": "i", "f": "f", "d": "d", "Q": "Q", "q": "q",
+        "n": "4s", "N": "16s", "Z": "64s", "c": "h", "C": "H", "e": "i", "E": "I", "L": "i", "M": "b"}
+
+    def __init__(self, path):
+        self.f = open(Path(path), "wb")
+        self.formats: dict[str, tuple[int, str]] = {}
+        self._write_fmt(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns")
+
+    def _struct(self, fmt: str) -> str:
+        return "<" + "".join(self._STRUCT[c] for c in fmt)
+
+    def _write_fmt(self, type_id: int, name: str, fmt: str, columns: str) -> None:
+        length = 3 + struct.calcsize(self._struct(fmt))
+        body = struct.pack("<BB4s16s64s", type_id, length, name.encode(), fmt.encode(), columns.encode())
+        self.f.write(b"\xa3\x95\x80" + body)
+        self.formats[name] = (type_id, fmt)
+
+    def fmt(self, name: str, fmt: str, columns: str) -> None:
+        self._write_fmt(129 + len(self.formats) - 1, name, fmt, columns)
+
+    def write(self, name: str, *values) -> None:
+        type_id, fmt = self.formats[name]
+        self.f.write(bytes([0xA3, 0x95, type_id]) + struct.pack(self._struct(fmt), *values))
+
+    def close(self) -> None:
+        self.f.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

@@ -1,0 +1,80 @@
+"""DataFlash units and frames on small logs written with the firmware's format characters (FMT records)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from pipeline.ingest import read_flight
+from pipeline.ingest.writers import DataFlashWriter
+
+WEEK, MS0 = 2300, 100_000_000  # GPS week 2300, 100000 s into the week
+
+
+def _write(path, n=10, with_mnt=True, with_rfnd=True):
+    with DataFlashWriter(path) as w:
+        w.fmt("GPS", "QBIHLLe", "TimeUS,Status,GMS,GWk,Lat,Lng,Alt")
+        w.fmt("ATT", "QccC", "TimeUS,Roll,Pitch,Yaw")
+        if with_mnt:
+            w.fmt("MNT", "Qfffff", "TimeUS,Roll,Pitch,YawB,YawE,Dist")
+        if with_rfnd:
+            w.fmt("RFND", "QBCBB", "TimeUS,Instance,Dist,Stat,Orient")
+        for i in range(n):
+            t_us = 60_000_000 + i * 200_000
+            w.write("GPS", t_us, 1 if i == 0 else 3, MS0 + i * 200, WEEK, 473977419, 85455939, 48812)
+            w.write("ATT", t_us + 10, 500, -250, 27000)  # roll 5, pitch -2.5, yaw 270 deg
+            if with_mnt:
+                w.write("MNT", t_us + 20, 0.0, -30.0, 15.0, 285.0, 1234.5 if i % 2 else 0.0)
+            if with_rfnd:
+                w.write("RFND", t_us + 30, 0, 1234 + i, 4 if i % 3 else 2, 25)
+
+
+def test_dataflash_units_frames_clock(tmp_path):
+    p = tmp_path / "f.bin"
+    _write(p)
+    log = read_flight([p])
+    pos = log.position
+    assert pos.t_ns.size == 9  # Status 1 (no fix) dropped
+    assert pos.lat_deg[0] == pytest.approx(47.3977419) and pos.lon_deg[0] == pytest.approx(8.5455939)
+    assert pos.alt_m[0] == pytest.approx(488.12) and pos.alt_datum == "amsl"  # 'e': int32 * 0.01 m
+    # GPS time -> UNIX: 315964800 + 2300 weeks + 100000.2 s - 18 s; the GPS record is logged at that instant
+    assert pos.clock == "unix"
+    assert pos.t_ns[0] == (315964800 + WEEK * 604800 - 18) * 10**9 + (MS0 + 200) * 10**6
+    # ATT: roll 5, pitch -2.5, yaw 270 deg (west)
+    fwd = Rotation.from_quat(log.attitude.quat_wxyz[0], scalar_first=True).apply([1, 0, 0])
+    p_ = math.radians(-2.5)
+    np.testing.assert_allclose(fwd, [0, -math.cos(p_), -math.sin(p_)], atol=1e-9)
+    # MNT: earth yaw YawE = 285 deg preferred over YawB, pitch -30 deg
+    g = Rotation.from_quat(log.gimbal.quat_wxyz[0], scalar_first=True).as_euler("ZYX", degrees=True)
+    np.testing.assert_allclose(g, [285 - 360, -30, 0], atol=1e-9)
+    assert not log.gimbal.yaw_in_vehicle_frame.any()
+    # RFND: C = uint16 cm * 0.01 -> m; Stat 4 = Good only
+    np.testing.assert_allclose(log.range.range_m[:3], [12.34, 12.35, 12.36])
+    assert log.range.valid[:4].tolist() == [False, True, True, False]
+
+
+def test_dataflash_mnt_dist_and_body_yaw(tmp_path):
+    p = tmp_path / "m.bin"
+    _write(p, with_rfnd=False)
+    mapping = {"dataflash": {"range": {"message": "MNT"},
+                             "gimbal": {"fields": {"yaw_earth_deg": ["NoSuchField"]}}}}
+    log = read_flight([p], mapping=mapping)
+    np.testing.assert_allclose(log.range.range_m[:2], [0.0, 1234.5])
+    assert log.range.valid[:2].tolist() == [False, True]  # MNT.Dist 0: no reading
+    assert log.gimbal.yaw_in_vehicle_frame.all()  # YawB: relative to the vehicle
+    g = Rotation.from_quat(log.gimbal.quat_wxyz[0], scalar_first=True).as_euler("ZYX", degrees=True)
+    assert g[0] == pytest.approx(15.0)
+
+
+def test_dataflash_cut_mid_record(tmp_path):
+    p = tmp_path / "f.bin"
+    _write(p, n=50)
+    data = p.read_bytes()
+    cut = tmp_path / "cut.bin"
+    cut.write_bytes(data[: len(data) // 2 + 5])
+    log = read_flight([cut])
+    assert any("truncated" in w and "records" in w for w in log.warnings)
+    assert 15 < log.attitude.t_ns.size < 50

@@ -254,6 +254,7 @@ class SiftTracker:
         `decode(indices)` returns {index: image} (BGR or gray) for frame numbers; `available` lists every frame
         number that could be decoded, from which stepping stones are taken when a wanted frame cannot be matched
         directly. Returns the wanted frames' tracks in the order of `wanted`."""
+        cv2.setRNGSeed(0x5EED)  # FLANN's randomised trees draw from OpenCV's RNG: same input, same answer
         wanted = [int(i) for i in wanted]
         mark_index = int(mark_index)
         p0 = np.asarray(mark_px, dtype=np.float64)
@@ -333,6 +334,7 @@ class SiftTracker:
         """Find a template image (a view of the target area; the target at `template_px`, default its centre)
         in the first of `candidates` frames where it matches: returns (frame index, image pixel) to use as the
         mark. Raises InputError when no candidate frame matches."""
+        cv2.setRNGSeed(0x5EED)
         tview = self.view(-1, template)
         hgt, wid = tview.image.shape[:2]
         tp = np.asarray(template_px if template_px is not None else ((wid - 1) / 2, (hgt - 1) / 2), dtype=np.float64)

@@ -145,3 +145,19 @@ def test_driver_flags_exploding_and_non_finite_steps(obs):
 
     _, it, status, _ = iterate(st, np.array([[1.0, 1.0, 1.0]]), nan_step, 1e-4, 50)
     assert status[0] == Status.DIVERGED and it[0] == 1
+
+
+def test_batch_survives_broken_frames_and_problems(obs):
+    P = obs.P.copy()
+    P[2] = 0.0  # not a camera at all
+    pixel = obs.pixel.copy()
+    pixel[2] = np.nan
+    broken = dataclasses.replace(obs, P=P, pixel=pixel)
+    from pipeline.solve import solve_batch
+    from pipeline.solve.observations import ObservationBatch
+    batch = ObservationBatch.stack([obs, broken])
+    los = solve_batch("los", batch)
+    assert np.isnan(los.extras["points_m"][1, 2]).all() and np.isfinite(los.position_m).all()
+    for method in METHODS:
+        be = solve_batch(method, batch)
+        assert np.isfinite(be.position_m[0]).all()

@@ -241,7 +241,9 @@ def solve_batch(method: str, batch: ObservationBatch, **options) -> BatchEstimat
     o = _check_options(method, options)
     if not isinstance(batch, ObservationBatch):
         raise TypeError(f"solve_batch wants an ObservationBatch, got {type(batch).__name__}")
-    return _solve_stacked(method, Stacked.from_batch(batch), o)
+    # degenerate problems produce inf/NaN on the way to their status: expected, not worth a warning
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        return _solve_stacked(method, Stacked.from_batch(batch), o)
 
 
 # ---- single problem: clear errors for unusable input --------------------------------------------------------
@@ -256,7 +258,7 @@ def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
     nrng = int(has_rng.sum())
     nboth = int((has_pix & has_rng).sum())
     has_init = o.get("initial_m") is not None
-    if method != "range":
+    if method != "range" or not has_init:  # range starts from vision, which projects through P
         # |det M| against |M|^3 (the rows' lengths, from the Gram matrix M M^T)
         g = st._gram()[0]
         scale = np.sqrt(g[:, 0, 0] * g[:, 1, 1] * g[:, 2, 2])
@@ -315,7 +317,8 @@ def solve(method: str, obs: Observations, **options) -> Estimate:
         raise TypeError(f"solve wants an Observations, got {type(obs).__name__}")
     st = Stacked.from_observations(obs)
     _check_inputs(method, obs, st, o)
-    be = _solve_one(method, st, o)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        be = _solve_one(method, st, o)
     status = Status(int(be.status[0]))
     cond = float(be.condition_number[0])
     if status == Status.DEGENERATE:

@@ -73,7 +73,9 @@ def los_points(st: Stacked):
     which may differ from C by a lever arm, so the point is C + t a with |C + t a - s| = d (the far root
     of the quadratic); with C = s this is simply C + d a.
     """
-    Minv = np.linalg.inv(st.M)
+    g = st._gram()
+    finite_camera = np.abs(st.det_M()) > 1e-12 * np.sqrt(g[..., 0, 0] * g[..., 1, 1] * g[..., 2, 2])
+    Minv = np.linalg.inv(np.where(finite_camera[..., None, None], st.M, np.eye(3)))
     C = -np.einsum("bnij,bnj->bni", Minv, st.p4)
     xh = np.concatenate([st.pix, np.ones((*st.pix.shape[:-1], 1))], axis=-1)
     a = np.einsum("bnij,bnj->bni", Minv, xh) * st.depth_sign()[..., None]
@@ -83,7 +85,7 @@ def los_points(st: Stacked):
     disc = b * b - (np.einsum("bni,bni->bn", cs, cs) - st.range_m ** 2)
     t = -b + np.sqrt(np.maximum(disc, 0.0))
     pts = C + t[..., None] * a
-    valid = st.has_pix & st.has_range
+    valid = st.has_pix & st.has_range & finite_camera
     pts[~valid] = np.nan
     return pts, valid
 

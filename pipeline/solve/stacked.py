@@ -122,7 +122,8 @@ class Stacked:
         q3 / |m3| with q = M X + p4, since m3 = lambda r3 for P = lambda K [R | t]."""
         m3 = self.M[..., 2, :]
         q2 = (m3 @ X[:, :, None])[..., 0] + self.p4[..., 2]
-        return q2 * self.depth_sign() / np.sqrt(self._gram()[..., 2, 2])
+        n3 = np.sqrt(self._gram()[..., 2, 2])
+        return q2 * self.depth_sign() / np.where(n3 > 0, n3, np.inf)
 
 
 def pixel_model(st: Stacked, X: np.ndarray):

@@ -8,10 +8,10 @@ import pytest
 import pipeline.solve.iterate as iterate_mod
 from pipeline.errors import GeometryError, ObservationError, SolverError
 from pipeline.geometry.camera import intrinsics_matrix, look_at_rotation, project, projection_matrix
-from pipeline.solve import METHODS, solve
+from pipeline.solve import METHODS, solve, solve_batch
 from pipeline.solve.estimate import Status
 from pipeline.solve.iterate import iterate
-from pipeline.solve.observations import Observations
+from pipeline.solve.observations import ObservationBatch, Observations
 from pipeline.solve.scenes import paper_problem
 from pipeline.solve.stacked import Stacked
 
@@ -153,8 +153,6 @@ def test_batch_survives_broken_frames_and_problems(obs):
     pixel = obs.pixel.copy()
     pixel[2] = np.nan
     broken = dataclasses.replace(obs, P=P, pixel=pixel)
-    from pipeline.solve import solve_batch
-    from pipeline.solve.observations import ObservationBatch
     batch = ObservationBatch.stack([obs, broken])
     los = solve_batch("los", batch)
     assert np.isnan(los.extras["points_m"][1, 2]).all() and np.isfinite(los.position_m).all()

@@ -93,8 +93,37 @@ def normalized_system(st: Stacked, X: np.ndarray):
     return T, dPhi, rows
 
 
-def hkb_k(N, g, dPhi, rows, variant: str = "paper"):
-    """Hoerl-Kennard-Baldwin ridge parameter (B,) for the system T beta = dPhi with N = T^T T, g = T^T dPhi.
+def normalized_normal_equations(st: Stacked, X: np.ndarray):
+    """N = T^T T (B,4,4), g = T^T dPhi (B,4), dd = dPhi^T dPhi (B,) and the rows in use (B,) of eqs. (36)-(38)
+    at X, without forming T: each block (pixels, ranges) contributes through the Gram matrix of [J | r | 1]
+    over its rows, since its rows of T are [J, -L]/S and of dPhi (r - L)/S (L = Min or min, S = Max - Min or
+    max - min)."""
+    Jp, rp, okp = pixel_model(st, X)
+    Jr, rr, okr = range_model(st, X)
+    B = X.shape[0]
+    N = np.zeros((B, 4, 4))
+    g = np.zeros((B, 4))
+    dd = np.zeros(B)
+    for J, r, ok in ((Jp, rp, okp), (Jr, rr, okr)):
+        L, S = _minmax(r, ok)
+        A = np.concatenate([J, r[..., None], ok[..., None].astype(np.float64)], axis=2)  # (B,m,5)
+        G = np.swapaxes(A, 1, 2) @ A
+        s2 = 1.0 / (S * S)
+        J1, cnt, r1 = G[:, :3, 4], G[:, 4, 4], G[:, 3, 4]
+        N[:, :3, :3] += G[:, :3, :3] * s2[:, None, None]
+        col = -L[:, None] * J1 * s2[:, None]
+        N[:, :3, 3] += col
+        N[:, 3, :3] += col
+        N[:, 3, 3] += L * L * cnt * s2
+        g[:, :3] += (G[:, :3, 3] - L[:, None] * J1) * s2[:, None]
+        g[:, 3] += -L * (r1 - L * cnt) * s2
+        dd += (G[:, 3, 3] - 2 * L * r1 + L * L * cnt) * s2
+    return N, g, dd, okp.sum(axis=1) + okr.sum(axis=1)
+
+
+def hkb_k(N, g, dd, rows, variant: str = "paper"):
+    """Hoerl-Kennard-Baldwin ridge parameter (B,) for the system T beta = dPhi with N = T^T T, g = T^T dPhi,
+    dd = dPhi^T dPhi.
 
     paper (eqs. 44-45 as implemented): beta_hat = N^-1 g, the least-squares solution [dX; 1]-vector of the
     current iteration; t = 4 = rank(T); delta0^2 = dPhi^T (I - T N^-1 T^T) dPhi / (m - t) with Phi read as the
@@ -110,7 +139,7 @@ def hkb_k(N, g, dPhi, rows, variant: str = "paper"):
         N = N / (d[:, :, None] * d[:, None, :])
         g = g / d
     beta, singular = solve_spd(N, g)
-    rss = np.maximum(np.einsum("bi,bi->b", dPhi, dPhi) - np.einsum("bi,bi->b", g, beta), 0.0)
+    rss = np.maximum(dd - np.einsum("bi,bi->b", g, beta), 0.0)
     dof = rows - p
     s2 = np.where(dof > 0, rss / np.where(dof > 0, dof, 1), 0.0)
     if variant == "textbook":
@@ -139,14 +168,13 @@ def _solve_augmented(N, g, k):
 
 def _normalized_step(k_fixed: float | None, hkb: str | None):
     def step(sub: Stacked, X: np.ndarray):
-        T, dPhi, rows = normalized_system(sub, X)
-        N, g = normal_equations(T, dPhi, np.ones(dPhi.shape))
+        N, g, dd, rows = normalized_normal_equations(sub, X)
         B = N.shape[0]
         if hkb is None:
             k = np.zeros(B) if k_fixed is None else np.full(B, float(k_fixed))
             beta, singular = _solve_augmented(N, g, k)
         else:
-            k = hkb_k(N, g, dPhi, rows, hkb)
+            k = hkb_k(N, g, dd, rows, hkb)
             if hkb == "textbook":
                 d = np.sqrt(np.einsum("bii->bi", N))
                 d = np.where(d > 0, d, 1.0)
@@ -170,8 +198,7 @@ def normalized_fusion(st: Stacked, X0, tol_m, max_iterations, init_status=None, 
     X, it, status, extras = iterate(st, X0, _normalized_step(k, hkb), tol_m, max_iterations, init_status,
                                     extra_names=("k", "augmented"))
     Xf = np.where(np.isfinite(X), X, 0.0)
-    T, dPhi, _ = normalized_system(st, Xf)
-    N, _ = normal_equations(T, dPhi, np.ones(dPhi.shape))
+    N, _, _, _ = normalized_normal_equations(st, Xf)
     J, r, ok = _fused_model(st, Xf)
     Ng, _ = normal_equations(J, r, ok.astype(np.float64))
     cond = finish(X, status, N, Ng)

@@ -193,6 +193,8 @@ def solve_spd(N: np.ndarray, g: np.ndarray, singular_below: float = SINGULAR_DET
         x = (inv @ g[..., None])[..., 0]
         x[singular] = np.nan
         return x, singular
+    if N.shape[-1] <= 6:
+        return _cholesky_solve(N, g, singular_below)
     d = np.sqrt(np.abs(np.einsum("bii->bi", N)))
     bad_d = ~(d > 0) | ~np.isfinite(d)
     d = np.where(bad_d, 1.0, d)
@@ -205,6 +207,47 @@ def solve_spd(N: np.ndarray, g: np.ndarray, singular_below: float = SINGULAR_DET
     x = np.linalg.solve(Ns, (g / d)[..., None])[..., 0] / d
     x[singular] = np.nan
     return x, singular
+
+
+def _cholesky_solve(N: np.ndarray, g: np.ndarray, singular_below: float):
+    """`solve_spd` for small k by a Cholesky factorization written out over (B,) arrays (LAPACK's per-matrix
+    overhead dominates at k = 4): Jacobi scaling, pivots, the scaled determinant as their product."""
+    k = N.shape[-1]
+    diag = np.einsum("bii->bi", N)
+    ok = (diag > 0).all(axis=1) & np.isfinite(N).all(axis=(1, 2))
+    d = np.sqrt(np.where(diag > 0, diag, 1.0))
+    L = [[None] * k for _ in range(k)]
+    det = np.ones(N.shape[0])
+    for j in range(k):
+        s = N[:, j, j] / (d[:, j] * d[:, j])
+        for m in range(j):
+            s = s - L[j][m] * L[j][m]
+        ok &= s > 0
+        s = np.where(s > 0, s, 1.0)
+        det *= s
+        L[j][j] = ljj = np.sqrt(s)
+        for i in range(j + 1, k):
+            t = N[:, i, j] / (d[:, i] * d[:, j])
+            for m in range(j):
+                t = t - L[i][m] * L[j][m]
+            L[i][j] = t / ljj
+    singular = ~(ok & (det > singular_below))
+    b = g / d
+    y = [None] * k
+    for i in range(k):
+        t = b[:, i]
+        for m in range(i):
+            t = t - L[i][m] * y[m]
+        y[i] = t / L[i][i]
+    x = [None] * k
+    for i in range(k - 1, -1, -1):
+        t = y[i]
+        for m in range(i + 1, k):
+            t = t - L[m][i] * x[m]
+        x[i] = t / L[i][i]
+    out = np.stack(x, axis=1) / d
+    out[singular] = np.nan
+    return out, singular
 
 
 def inverse3(N: np.ndarray, singular_below: float = SINGULAR_DET):

@@ -246,7 +246,8 @@ def test_noisy_telemetry_has_the_stated_errors(tmp_path):
 def test_rendered_target_and_sift(tmp_path):
     """The cross target appears where truth.json says; frames have SIFT features that match between bursts."""
     cfg = SynthConfig.from_dict({"group": "r", "seed": 3, "observations": {"count": 3},
-                                 "path": {"intersection_angle_deg": 6.0}, "video": {"burst_frames": 2}})
+                                 "path": {"intersection_angle_deg": 6.0}, "video": {"burst_frames": 2},
+                                 "scene": {"texture_px": 2048, "texture_res_m": 3.0}})
     folder = generate(cfg, tmp_path / "r").out_dir
     truth = json.loads((folder / "truth.json").read_text())
     cap = cv2.VideoCapture(str(folder / "video.mp4"))

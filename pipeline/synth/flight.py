@@ -122,7 +122,7 @@ def _write_files(cfg: SynthConfig, tl: Timeline, tel, frames: FrameSource, folde
             t_img = tl.frame_time_ns(tl.written_frames[:frames.n])
             images = ((int(t), encode_jpeg(img, cfg.video.jpeg_quality)) for t, img in zip(t_img, frames, strict=True))
         gps_sigma = float(np.hypot(cfg.noise.gnss_drift_m, cfg.noise.gnss_white_m))
-        write_bag(folder / name, cfg.format, tel, camera, gps_sigma,
+        write_bag(folder / name, cfg.format, tel, camera, gps_sigma, float(np.radians(cfg.noise.attitude_deg)),
                   (cfg.laser.min_range_m, cfg.laser.max_range_m), images)
         files["telemetry"] = name
         if images is not None:

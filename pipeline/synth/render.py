@@ -11,15 +11,48 @@ high-resolution pattern composited the same way, so it stays sharp however coars
 from __future__ import annotations
 
 import functools
+import os
+from pathlib import Path
 
 import cv2
 import numpy as np
 
 TARGET_PATTERN_PX = 64  # target pattern resolution (pixels across the square), pre-filtered
+TEXTURE_VERSION = 1  # bump when make_ground_texture changes, so cached textures are not reused
+
+
+def _cache_dir() -> Path | None:
+    d = os.environ.get("RIDGELOC_CACHE_DIR")
+    if d == "":
+        return None  # caching disabled
+    return Path(d) if d else Path.home() / ".cache" / "ridgeloc"
 
 
 @functools.lru_cache(maxsize=2)
 def ground_texture(seed: int, size_px: int, res_m: float) -> np.ndarray:
+    """(size_px, size_px, 3) uint8 BGR texture of res_m metres per pixel (see make_ground_texture), kept in
+    memory and in a lossless PNG under ~/.cache/ridgeloc (or $RIDGELOC_CACHE_DIR; empty disables) because it
+    takes seconds to make and every flight of a scene shares it. The cache holds exactly what
+    make_ground_texture returns, so it never changes a result."""
+    cache = _cache_dir()
+    path = None if cache is None else cache / f"ground_texture_v{TEXTURE_VERSION}_{seed}_{size_px}_{res_m:g}.png"
+    if path is not None and path.is_file():
+        img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if img is not None and img.shape == (size_px, size_px, 3):
+            return img
+    img = make_ground_texture(seed, size_px, res_m)
+    if path is not None:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_name(f".tmp-{os.getpid()}-{path.name}")
+            if cv2.imwrite(str(tmp), img):
+                os.replace(tmp, path)
+        except OSError:
+            pass  # a read-only home is fine: the texture is just made again next time
+    return img
+
+
+def make_ground_texture(seed: int, size_px: int, res_m: float) -> np.ndarray:
     """(size_px, size_px, 3) uint8 BGR texture of res_m metres per pixel, centred on the target, row 0 north.
 
     Farmland parcels (crop rows, mottled soil) in blocks of different orientation, hedges along parcel edges,
@@ -32,24 +65,26 @@ def ground_texture(seed: int, size_px: int, res_m: float) -> np.ndarray:
         g = rng.random((cells + 1, cells + 1), dtype=np.float32)
         return cv2.resize(g, (n, n), interpolation=cv2.INTER_CUBIC)
 
-    # blocks of parcels: nearest of a few seeds (computed coarse, then upsampled without blending)
+    # blocks of parcels: the Voronoi cells of a few seeds (labels of the nearest seed pixel, OpenCV)
     n_blocks = max(8, int((n * res_m / 900.0) ** 2))
-    seeds = rng.random((n_blocks, 2)) * n
-    block = np.empty((n, n), np.uint8)
-    xs = np.arange(n, dtype=np.float32)
-    for r0 in range(0, n, 256):  # nearest seed, in row chunks to bound memory
-        ys = np.arange(r0, min(n, r0 + 256), dtype=np.float32)
-        d2 = (xs[None, :, None] - seeds[:, 0]) ** 2 + (ys[:, None, None] - seeds[:, 1]) ** 2
-        block[r0:r0 + len(ys)] = np.argmin(d2, axis=-1)
+    seeds = np.minimum((rng.random((n_blocks, 2)) * n).astype(np.int64), n - 1)
+    mask = np.ones((n, n), np.uint8)
+    mask[seeds[:, 1], seeds[:, 0]] = 0
+    _, labels = cv2.distanceTransformWithLabels(mask, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL)
+    lut = np.zeros(labels.max() + 1, np.uint8)
+    lut[labels[seeds[:, 1], seeds[:, 0]]] = np.arange(n_blocks) % 256
+    block = lut[labels]
+    del labels, mask
     theta = rng.uniform(0, np.pi, n_blocks).astype(np.float32)
     width_u = (rng.uniform(60, 220, n_blocks) / res_m).astype(np.float32)
     width_v = (rng.uniform(120, 400, n_blocks) / res_m).astype(np.float32)
 
-    yy, xx = np.mgrid[0:n, 0:n].astype(np.float32)
+    xx = np.arange(n, dtype=np.float32)[None, :]
+    yy = np.arange(n, dtype=np.float32)[:, None]
     c, s = np.cos(theta)[block], np.sin(theta)[block]
     u = xx * c + yy * s
     v = -xx * s + yy * c
-    del xx, yy, c, s
+    del c, s
     fu = u / width_u[block]
     fv = v / width_v[block]
     iu, iv = np.floor(fu).astype(np.int64), np.floor(fv).astype(np.int64)
@@ -61,14 +96,15 @@ def ground_texture(seed: int, size_px: int, res_m: float) -> np.ndarray:
     palette = np.array([[70, 125, 80], [55, 140, 95], [90, 160, 150], [80, 170, 195], [75, 115, 140],
                         [100, 135, 160], [60, 105, 70], [120, 150, 170], [50, 95, 60]], dtype=np.float32)
     n_parcels = 4093
-    colour = palette[rng.integers(0, len(palette), n_parcels)] * rng.uniform(0.8, 1.2, (n_parcels, 1))
+    colour = (palette[rng.integers(0, len(palette), n_parcels)]
+              * rng.uniform(0.8, 1.2, (n_parcels, 1))).astype(np.float32)
     period = (rng.uniform(4.0, 12.0, n_parcels) / res_m).astype(np.float32)
     row_amp = np.where(rng.random(n_parcels) < 0.55, rng.uniform(0.08, 0.22, n_parcels), 0.0).astype(np.float32)
     along_u = rng.random(n_parcels) < 0.5
     coord = np.where(along_u[parcel], u, v)
     shade = 1.0 + row_amp[parcel] * np.sin(2 * np.pi * coord / period[parcel])
     del coord, u, v
-    img = colour[parcel].astype(np.float32) * shade[..., None]
+    img = colour[parcel] * shade[..., None]
     del shade
     # hedges (dark) or field tracks (light) along parcel edges
     line = np.clip(1.6 - edge, 0, 1)[..., None]
@@ -227,10 +263,13 @@ class Renderer:
 
 
 def _cloud(img: np.ndarray, at_px: tuple[float, float], rng: np.random.Generator) -> np.ndarray:
-    """A soft white cloud patch (radius ~70 px) centred near `at_px`, hiding the target."""
+    """A ragged cloud patch (~90 px across) centred near `at_px`, hiding the target."""
     h, w = img.shape[:2]
-    noise = cv2.resize(rng.random((8, 12)).astype(np.float32), (w, h), interpolation=cv2.INTER_CUBIC)
+    noise = sum(a * cv2.resize(rng.random((c, int(c * w / h))).astype(np.float32), (w, h),
+                               interpolation=cv2.INTER_CUBIC) for c, a in ((6, 0.6), (20, 0.3), (60, 0.1)))
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
-    r = np.hypot(xx - at_px[0], yy - at_px[1]) / 70.0
-    alpha = (np.clip(1.6 - r * (1.0 + 0.6 * noise), 0, 1) * 0.97)[..., None]
-    return img * (1 - alpha) + alpha * np.array([238, 236, 232], np.float32)
+    r = np.hypot(xx - at_px[0], yy - at_px[1]) / 90.0
+    alpha = np.clip(2.2 * (1.0 - r) + 1.5 * (noise - 0.5), 0, 0.96)[..., None]
+    alpha = cv2.GaussianBlur(alpha, (0, 0), 2.0)[..., None]
+    shade = (215 + 30 * noise)[..., None]
+    return img * (1 - alpha) + alpha * shade * np.array([1.0, 0.99, 0.97], np.float32)

@@ -60,7 +60,8 @@ class _Msgs:
         return self.ts.serialize_ros1(msg, msgtype) if self.ros1 else self.ts.serialize_cdr(msg, msgtype)
 
 
-def _streams(m: _Msgs, tel: Telemetry, camera: dict, gps_sigma_m: float, laser_limits: tuple[float, float],
+def _streams(m: _Msgs, tel: Telemetry, camera: dict, gps_sigma_m: float, att_sigma_rad: float,
+             laser_limits: tuple[float, float],
              images: Iterator[tuple[int, bytes]] | None) -> list[Iterator[tuple[int, str, Callable]]]:
     T = m.T
     Vec3, Quat = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
@@ -76,7 +77,7 @@ def _streams(m: _Msgs, tel: Telemetry, camera: dict, gps_sigma_m: float, laser_l
     def imu():
         q = enu_flu_quat_xyzw(tel.att_quat_wxyz)
         w_flu = tel.att_rates_frd * np.array([1.0, -1.0, -1.0])
-        ocov = np.diag([np.radians(0.2) ** 2] * 3).ravel()
+        ocov = np.diag([att_sigma_rad ** 2] * 3).ravel()
         acov = np.zeros(9)
         acov[0] = -1.0  # no linear acceleration
         for t, qi, wi in zip(tel.att_t_ns, q, w_flu, strict=True):
@@ -121,13 +122,14 @@ def _streams(m: _Msgs, tel: Telemetry, camera: dict, gps_sigma_m: float, laser_l
     return streams
 
 
-def write_bag(path: Path, kind: str, tel: Telemetry, camera: dict, gps_sigma_m: float,
+def write_bag(path: Path, kind: str, tel: Telemetry, camera: dict, gps_sigma_m: float, att_sigma_rad: float,
               laser_limits: tuple[float, float], images: Iterator[tuple[int, bytes]] | None = None) -> dict[str, int]:
     """kind: "ros1" (path = .bag file), "ros2-sqlite3" or "ros2-mcap" (path = bag folder). `images` yields
-    (t_ns, jpeg bytes) in time order. Returns message counts per topic."""
+    (t_ns, jpeg bytes) in time order. gps_sigma_m, att_sigma_rad: the stated accuracies (covariances).
+    Returns message counts per topic."""
     ros1 = kind == "ros1"
     m = _Msgs(ros1)
-    streams = _streams(m, tel, camera, gps_sigma_m, laser_limits, images)
+    streams = _streams(m, tel, camera, gps_sigma_m, att_sigma_rad, laser_limits, images)
     if ros1:
         writer = Writer1(path)
     else:

@@ -42,10 +42,20 @@ class _TimedDecoder:
         self.seconds = 0.0
         self.cpu_seconds = 0.0
         self.decoded = 0
+        self.failed: list[int] = []
 
     def __call__(self, indices: Sequence[int]) -> dict[int, np.ndarray]:
         t, c = time.perf_counter(), time.process_time()
-        images = self._read(sorted(set(int(i) for i in indices)))
+        wanted = sorted(set(int(i) for i in indices))
+        try:
+            images = self._read(wanted)
+        except RidgelocError:  # a truncated or damaged stream: keep the frames that decode, the others are lost
+            images = {}
+            for i in wanted:
+                try:
+                    images.update(self._read([i]))
+                except RidgelocError:
+                    self.failed.append(i)
         out = {i: (img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)) for i, img in images.items()}
         self.seconds += time.perf_counter() - t
         self.cpu_seconds += time.process_time() - c
@@ -164,6 +174,8 @@ def process_group(config: FlightConfig) -> GroupResult:
         close = getattr(closable, "close", None)
         if close is not None:
             close()
+    if decoder.failed:
+        notes.append(f"{len(decoder.failed)} frame(s) could not be decoded (damaged or truncated stream)")
     if track.lost.any():
         notes.append(f"target lost in {int(track.lost.sum())} of {plan.n} observation frames (pixel not used)")
     range_m = plan.range_m.copy()

@@ -141,6 +141,27 @@ def test_dlt_is_the_algebraic_least_squares_of_the_normalised_rows():
     assert 0 < np.linalg.norm(est.position_m - vis.position_m) < 50
 
 
+@pytest.mark.parametrize("gamma_deg", [1.0, 30.0])
+def test_dlt_is_the_smallest_singular_vector_of_the_normalised_system(gamma_deg):
+    # an independent construction (SVD of A, not eigh of A^T A), at a small angle where the two smallest
+    # singular values are close
+    batch = paper_batch(5, gamma_deg=gamma_deg, seed=9)
+    be = solve_batch("dlt", batch)
+    for b in range(5):
+        obs = batch.problem(b)
+        c = obs.platform_m.mean(axis=0)
+        sc = max(np.sqrt(((obs.platform_m - c) ** 2).sum(axis=1).mean()), 1.0)
+        T = np.block([[sc * np.eye(3), c[:, None]], [np.zeros((1, 3)), np.ones((1, 1))]])
+        rows = []
+        for P, (u, v) in zip(obs.P @ T, obs.pixel, strict=True):
+            rows += [u * P[2] - P[0], v * P[2] - P[1]]
+        A = np.array(rows)
+        A /= np.linalg.norm(A, axis=1, keepdims=True)
+        x = np.linalg.svd(A)[2][-1]
+        np.testing.assert_allclose(be.position_m[b], c + sc * x[:3] / x[3], rtol=0, atol=1e-6)
+        np.testing.assert_allclose(solve("dlt", obs).position_m, be.position_m[b], rtol=0, atol=1e-8)
+
+
 def test_los_with_lever_arm_uses_camera_centre_and_range_sphere():
     obs = paper_problem(gamma_deg=30.0, sigma=NOISE_FREE)
     # laser 3 m to the side of the camera: ranges measured from the laser position

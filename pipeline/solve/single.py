@@ -14,7 +14,6 @@ import numpy as np
 from pipeline.solve import iterate as _iterate
 from pipeline.solve.estimate import Status
 from pipeline.solve.least_squares import NORMALIZED_SINGULAR_DET
-from pipeline.solve.linear import smallest_eigenvector
 from pipeline.solve.mle import (
     _Q_GRID,
     CAUCHY_C,
@@ -175,11 +174,10 @@ def dlt_one(fr: Frames, with_condition: bool = False):
     A = (fr.pix[:, :, None] * Pp[:, 2:3, :] - Pp[:, :2, :]).reshape(-1, 4)
     norm = np.sqrt((A * A).sum(axis=1))
     A = A / np.where(norm > 0, norm, 1.0)[:, None]
-    N = A.T @ A
-    x = smallest_eigenvector(N[None])[0]
+    evals, evecs = np.linalg.eigh(A.T @ A)  # one LAPACK call; the batch's inverse iteration finds the same vector
+    x = evecs[:, 0]
     cond = math.nan
     if with_condition:
-        evals = np.linalg.eigvalsh(N)
         cond = math.sqrt(evals[3] / evals[1]) if evals[1] > 0 else math.inf
     if not abs(x[3]) > 1e-12 * math.sqrt(float(x[:3] @ x[:3])):
         return np.full(3, np.nan), Status.DEGENERATE, cond

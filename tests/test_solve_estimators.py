@@ -9,10 +9,10 @@ from scipy.optimize import least_squares
 from pipeline.geometry.camera import project
 from pipeline.solve import METHODS, solve, solve_batch
 from pipeline.solve.estimate import BatchEstimate, Status
-from pipeline.solve.least_squares import normalized_system
+from pipeline.solve.least_squares import normalized_normal_equations, normalized_system
 from pipeline.solve.observations import ObservationBatch, Observations, Sigma
 from pipeline.solve.scenes import PAPER_SIGMA, paper_batch, paper_problem
-from pipeline.solve.stacked import Stacked, pixel_model, range_model
+from pipeline.solve.stacked import Stacked, pixel_model, range_model, solve_spd
 
 NOISE_FREE = Sigma(0.0, 0.0, 0.0, 0.0)
 
@@ -275,3 +275,31 @@ def test_batch_flags_degenerate_problems_without_raising():
     be = solve_batch("range", batch, initial_m=np.array([[1.0, 2.0, 3.0], [1.0, 2.0, 3.0]]))
     assert be.status[0] == Status.CONVERGED and be.status[1] == Status.DEGENERATE
     assert np.isnan(be.position_m[1]).all() and np.isfinite(be.position_m[0]).all()
+
+
+def test_small_dense_solvers_match_lapack():
+    rng = np.random.default_rng(3)
+    for k in (3, 4):
+        A = rng.normal(size=(50, 8, k))
+        N = np.swapaxes(A, 1, 2) @ A
+        g = rng.normal(size=(50, k))
+        x, singular = solve_spd(N, g)
+        assert not singular.any()
+        np.testing.assert_allclose(x, np.linalg.solve(N, g[..., None])[..., 0], rtol=1e-9, atol=1e-12)
+    N[0, :, 0] = N[0, 0, :] = 0.0  # a dependent column
+    assert solve_spd(N, g)[1][0] and not solve_spd(N, g)[1][1:].any()
+
+
+def test_normalized_normal_equations_equal_t_transpose_t():
+    batch = paper_batch(4, gamma_deg=20.0, seed=2)
+    pixel = batch.pixel.copy()
+    pixel[0, 3] = np.nan
+    batch = dataclasses.replace(batch, pixel=pixel)
+    st = Stacked.from_batch(batch)
+    X = batch.truth_m + np.array([3.0, -2.0, 1.0])
+    T, dPhi, rows = normalized_system(st, X)
+    N, g, dd, rows2 = normalized_normal_equations(st, X)
+    np.testing.assert_allclose(N, np.swapaxes(T, 1, 2) @ T, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(g, (np.swapaxes(T, 1, 2) @ dPhi[..., None])[..., 0], rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(dd, (dPhi * dPhi).sum(axis=1), rtol=1e-10)
+    np.testing.assert_array_equal(rows, rows2)

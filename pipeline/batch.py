@@ -188,7 +188,7 @@ class _Progress:
 def _to_result(job: Job, out: _Outcome):
     if out.ok:
         return out.value, None
-    return None, GroupFailure(name=job.name, source=job.source, message=out.message)
+    return None, GroupFailure(name=job.name, source=job.source, message=out.message, detail=out.detail)
 
 
 def _run_inline(jobs, fn, progress: _Progress, on_done):

@@ -48,8 +48,9 @@ class GroupResult:
 @dataclass
 class GroupFailure:
     """A flight group that could not be processed: its name, the source (config or folder) and the one-line
-    error message."""
+    error message; `detail` holds the traceback when the cause was a bug (not a RidgelocError), else ""."""
 
     name: str
     source: str
     message: str
+    detail: str = ""

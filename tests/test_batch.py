@@ -72,6 +72,7 @@ def test_twenty_flights_two_broken(tmp_path):
     assert f4.source.endswith("flight04.json") and "not valid JSON" in f4.message and "flight04.json" in f4.message
     assert "observations[3].platform_m must be [x, y, z]" in f13.message
     assert all("\n" not in f.message for f in failures)
+    assert f4.detail == "" and f13.detail == ""  # input errors, not bugs: no traceback
     summary = summarize_failures(failures, len(jobs))
     assert summary.splitlines()[0] == "2 of 20 flight(s) failed (the others finished):"
     assert "flight04" in summary and "flight13" in summary
@@ -132,6 +133,19 @@ def test_ctrl_c_stops_the_workers():
     while multiprocessing.active_children() and time.time() < deadline:
         time.sleep(0.05)
     assert multiprocessing.active_children() == []
+
+
+def _buggy(x):
+    return {}["missing key"]
+
+
+def test_a_bug_in_one_job_keeps_its_traceback():
+    results, failures = run_jobs([Job("ok", "-", 0.0), Job("bug", "bug.yaml", "x")],
+                                 lambda p: _sleepy(p) if p == 0.0 else _buggy(p), progress=False)
+    assert results == [0.0] and len(failures) == 1
+    f = failures[0]
+    assert f.message == "internal error (KeyError): 'missing key'"
+    assert "Traceback" in f.detail and "_buggy" in f.detail
 
 
 def test_bad_arguments_are_clear():

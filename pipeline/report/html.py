@@ -177,6 +177,14 @@ def _group_section(r: GroupResult, figures: Mapping[str, bytes]) -> str:
     return "\n".join(parts)
 
 
+def _traceback(f: GroupFailure) -> str:
+    detail = getattr(f, "detail", "")
+    if not detail:
+        return ""
+    return ("<details><summary>traceback (a bug in ridgeloc: please report it)</summary>"
+            f"<pre>{escape(detail)}</pre></details>")
+
+
 def report_html(results: Sequence[GroupResult], failures: Sequence[GroupFailure], settings: Mapping,
                 figures: Mapping[str, Mapping[str, bytes]] | None = None, title: str = "ridgeloc run report") -> str:
     """The report page as a string. `figures`: group name -> {"map"|"view3d"|"residuals": PNG bytes}; groups
@@ -199,7 +207,7 @@ def report_html(results: Sequence[GroupResult], failures: Sequence[GroupFailure]
         out.append("<h2>Localization error per group (as the paper's Table 4)</h2>" + _summary_table(results))
     if failures:
         rows = "".join(f'<tr><td class="l">{escape(f.name)}</td><td class="l">{escape(f.source)}</td>'
-                       f'<td class="l">{escape(f.message)}</td></tr>' for f in failures)
+                       f'<td class="l">{escape(f.message)}{_traceback(f)}</td></tr>' for f in failures)
         out.append(f"<h2>Failed groups ({len(failures)})</h2><p class=\"note\">These groups were skipped; the other "
                    'groups are complete.</p><table class="fail"><tr><th class="l">Group</th><th class="l">Source</th>'
                    f'<th class="l">Error</th></tr>{rows}</table>')

@@ -108,7 +108,8 @@ def write_run_outputs(outdir: str | PathLike, results: Sequence[GroupResult], fa
                       {k: v for k, v in pngs.items() if v or not figures})
     atomic_write_text(paths["run"], json.dumps({
         "groups": [r.name for r in results],
-        "failures": [{"name": f.name, "source": f.source, "message": f.message} for f in failures],
+        "failures": [{"name": f.name, "source": f.source, "message": f.message,
+                      **({"traceback": f.detail} if getattr(f, "detail", "") else {})} for f in failures],
         "settings": dict(settings),
         "software": software_versions(),
     }, indent=1, default=str) + "\n")

@@ -159,3 +159,25 @@ def test_batch_survives_broken_frames_and_problems(obs):
     for method in METHODS:
         be = solve_batch(method, batch)
         assert np.isfinite(be.position_m[0]).all()
+
+
+def test_range_only_on_a_noisy_straight_line_is_degenerate():
+    # positions on a straight line plus their 5 m noise: collinear within the noise -> flagged, not answered
+    rng = np.random.default_rng(5)
+    base = paper_problem(gamma_deg=30.0, seed=1)
+    n = base.n
+    line = np.stack([np.linspace(-1500, 1500, n), np.full(n, -4583.0), np.full(n, 2000.0)], axis=1)
+    problems = []
+    for _ in range(40):
+        meas = line + rng.normal(0.0, 5.0, line.shape)
+        rng_m = np.linalg.norm(line, axis=1) + rng.normal(0.0, 2.5, n)
+        problems.append(dataclasses.replace(base, platform_m=meas, range_m=rng_m))
+    be = solve_batch("range", ObservationBatch.stack(problems), initial_m=np.zeros(3))
+    assert be.extras["collinear_platforms"].mean() > 0.8
+    assert (be.status[be.extras["collinear_platforms"]] == Status.DEGENERATE).all()
+    flagged = int(np.flatnonzero(be.extras["collinear_platforms"])[0])
+    with pytest.raises(GeometryError, match="straight line within their position noise"):
+        solve("range", problems[flagged], initial_m=np.zeros(3))
+    # a 30 deg arc is not collinear within the noise
+    arc = solve_batch("range", ObservationBatch.stack([paper_problem(gamma_deg=30.0, seed=s) for s in range(20)]))
+    assert not arc.extras["collinear_platforms"].any()

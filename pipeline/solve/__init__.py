@@ -110,10 +110,13 @@ def _solve_stacked(method: str, st: Stacked, o: dict) -> BatchEstimate:
         if x0 is None:
             x0, init_status, _ = linear.dlt(st, with_condition=False)
         X, it, status, cond = least_squares.vision(st, x0, tol, itmax, init_status)
-    elif method in ("range", "fusion-raw"):
+    elif method == "range":
         x0, init_status = _vision_init(st, o)
-        fn = least_squares.range_only if method == "range" else least_squares.fusion_raw
-        X, it, status, cond = fn(st, x0, tol, itmax, init_status)
+        X, it, status, cond, flat = least_squares.range_only(st, x0, tol, itmax, init_status)
+        extras = {"collinear_platforms": flat}
+    elif method == "fusion-raw":
+        x0, init_status = _vision_init(st, o)
+        X, it, status, cond = least_squares.fusion_raw(st, x0, tol, itmax, init_status)
     elif method in ("fusion", "ridge"):
         x0, init_status = _vision_init(st, o)
         if method == "fusion":
@@ -218,6 +221,11 @@ def _solve_one(method: str, st: Stacked, o: dict) -> BatchEstimate:
         else:
             model = {"vision": fr.pixel, "range": fr.range, "fusion-raw": fr.both}[method]
             X, it, status, cond = single.gn_one(fr, model, x0, init_status, tol, itmax)
+            if method == "range":
+                flat = least_squares.collinear_platforms(st.platform_m, st.has_range, st.sigma.position_m)
+                if flat[0]:
+                    status, X = Status.DEGENERATE, np.full(3, np.nan)
+                extras = {"collinear_platforms": flat}
     X = np.asarray(X, dtype=np.float64)[None]
     if method in _USES_PIXELS:
         behind = np.array([bool(np.isfinite(X).all() and (fr.depths(X[0]) <= 0).any())])
@@ -325,6 +333,10 @@ def solve(method: str, obs: Observations, **options) -> Estimate:
         if method in _USES_PIXELS and bool(be.extras["behind_camera"][0]):
             raise GeometryError(f"{method}: the estimate lies behind the camera of a frame with a target "
                                 "pixel (check the pixels and the sign convention of P)")
+        if method == "range" and bool(be.extras["collinear_platforms"][0]):
+            raise GeometryError("range: the ranged platform positions lie on a straight line within their position "
+                                f"noise (sigma {obs.sigma.position_m or 0:g} m, chi-square test at 95 %): ranges "
+                                "cannot fix the rotation of the target about that line")
         raise GeometryError(f"{method}: the geometry does not determine the target (design matrix rank "
                             f"deficient, condition number {cond:.3g}); more baseline or other observations "
                             "are needed")

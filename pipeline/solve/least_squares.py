@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.solve.estimate import Status
 from pipeline.solve.iterate import finish, iterate
 from pipeline.solve.stacked import Stacked, normal_equations, pixel_model, range_model, solve_spd
 
@@ -48,9 +49,36 @@ def vision(st: Stacked, X0, tol_m, max_iterations, init_status=None):
     return _run(st, X0, pixel_model, tol_m, max_iterations, init_status)
 
 
+def collinear_platforms(platform_m: np.ndarray, used: np.ndarray, sigma_position_m: float | None) -> np.ndarray:
+    """(B,) True where the used platform positions (B,n,3) lie on one straight line: exactly (second singular
+    value of the centred positions below 1e-9 of the first), or, with a known position sigma, within their
+    noise: the squared distances from the best-fitting line, sum s2^2 + s3^2 of the two smaller singular
+    values, below the 95 % quantile of sigma^2 chi-square with 2(k - 2) degrees of freedom (k positions, a
+    line in 3D has 4 parameters). Ranges from such positions cannot fix the rotation of the target about the
+    line: the answer would be set by the noise."""
+    from scipy.stats import chi2
+
+    w = used.astype(np.float64)
+    k = w.sum(axis=1)
+    mean = (platform_m * w[..., None]).sum(axis=1) / np.maximum(k, 1.0)[:, None]
+    sv = np.linalg.svd((platform_m - mean[:, None, :]) * w[..., None], compute_uv=False)
+    flat = sv[:, 1] <= 1e-9 * sv[:, 0]
+    if sigma_position_m:
+        dof = 2 * (k - 2)
+        limit = chi2.ppf(0.95, np.maximum(dof, 1)) * sigma_position_m ** 2
+        flat |= (dof > 0) & (sv[:, 1] ** 2 + sv[:, 2] ** 2 < limit)
+    return flat
+
+
 def range_only(st: Stacked, X0, tol_m, max_iterations, init_status=None):
-    """Gauss-Newton on laser ranges (eqs. 16-27); cond is that of h (n x 3)."""
-    return _run(st, X0, range_model, tol_m, max_iterations, init_status)
+    """Gauss-Newton on laser ranges (eqs. 16-27); cond is that of h (n x 3). Problems whose ranged platform
+    positions are collinear (`collinear_platforms`, with the batch's position sigma) are DEGENERATE; returns
+    that flag (B,) as well."""
+    X, it, status, cond = _run(st, X0, range_model, tol_m, max_iterations, init_status)
+    flat = collinear_platforms(st.platform_m, st.has_range, st.sigma.position_m)
+    status[flat] = Status.DEGENERATE
+    X[flat] = np.nan
+    return X, it, status, cond, flat
 
 
 def fusion_raw(st: Stacked, X0, tol_m, max_iterations, init_status=None):

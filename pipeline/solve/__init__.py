@@ -3,8 +3,9 @@
     solve(method, obs, **options) -> Estimate              one problem; raises a clear error when it cannot
     solve_batch(method, batch, **options) -> BatchEstimate  B problems at once; failures are statuses
 
-Methods (docs/solvers.md): dlt, vision, range, los, fusion-raw, fusion, ridge, mle. Both entry points run
-the same batched kernels (a single problem is a batch of one), so they give the same numbers.
+Methods (docs/solvers.md): dlt, vision, range, los, fusion-raw, fusion, ridge, mle. `solve_batch` runs the
+vectorised kernels (linear.py, least_squares.py, mle.py); `solve` runs the same algorithms written for one
+problem (single.py), and tests check that both give the same numbers.
 
 Options: tol_m (1e-4, the paper's threshold on ||dX||), max_iterations (50), initial_m ((3,) or (B,3));
 ridge: hkb ("paper" | "textbook"), k (a fixed ridge parameter; k=0 is `fusion`); mle: robust ("huber" |

@@ -113,8 +113,12 @@ class Frames:
 
     def __init__(self, st: Stacked):
         self.st = st
-        self.pix_f = np.flatnonzero(st.has_pix[0])
-        self.rng_f = np.flatnonzero(st.has_range[0])
+        hp, hr = st.has_pix[0], st.has_range[0]
+        n = hp.size
+        # frames in use: a slice (views, no copies) when all of them are, else their indices
+        self.n_pix, self.n_rng = int(hp.sum()), int(hr.sum())
+        self.pix_f = slice(None) if self.n_pix == n else np.flatnonzero(hp)
+        self.rng_f = slice(None) if self.n_rng == n else np.flatnonzero(hr)
         self.Mp = st.M[0, self.pix_f]
         self.M12, self.M3 = self.Mp[:, :2, :], self.Mp[:, 2:3, :]
         self.p4 = st.p4[0, self.pix_f]
@@ -123,7 +127,7 @@ class Frames:
         self.pix = st.pix[0, self.pix_f]
         self.S = st.platform_m[0, self.rng_f]
         self.d = st.range_m[0, self.rng_f]
-        self.npix = 2 * self.pix_f.size
+        self.npix = 2 * self.n_pix
         self.centre = st.platform_m[0].mean(axis=0)
         # signed metric depth of X in the cameras with a pixel = m3s X + p4s (`Stacked.depths`)
         k = st.depth_sign()[0, self.pix_f] / np.sqrt(st._gram()[0, self.pix_f, 2, 2])
@@ -164,7 +168,7 @@ class Frames:
 def dlt_one(fr: Frames, with_condition: bool = False):
     """`linear.dlt` for one problem: X (3,), status, cond (NaN unless with_condition)."""
     st = fr.st
-    if fr.pix_f.size < 2:
+    if fr.n_pix < 2:
         return np.full(3, np.nan), Status.DEGENERATE, math.inf
     c = fr.centre
     dev = st.platform_m[0] - c
@@ -476,7 +480,7 @@ def _base_variances_one(fr: Frames, X0: np.ndarray, sigma: Sigma) -> np.ndarray:
         diff = X0 - fr.st.platform_m[0, fr.pix_f]
         D2 = (diff * diff).sum(axis=1)
         ang2 = ang2 + np.where(np.isfinite(D2) & (D2 > 0), s_pos ** 2 / np.where(D2 > 0, D2, 1.0), 0.0)[:, None]
-    var = np.concatenate(((s_px ** 2 + fxy ** 2 * ang2).ravel(), np.full(fr.rng_f.size, s_r ** 2 + s_pos ** 2)))
+    var = np.concatenate(((s_px ** 2 + fxy ** 2 * ang2).ravel(), np.full(fr.n_rng, s_r ** 2 + s_pos ** 2)))
     return np.where(var > 0, var, 1.0)
 
 

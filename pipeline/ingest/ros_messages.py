@@ -6,6 +6,8 @@ Works on any decoded message object with ROS 2 attribute names (rosbags gives RO
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from pipeline.errors import ConfigError
@@ -90,44 +92,81 @@ class RosAccumulator:
         else:
             self.cols = Columns(t="q", i="q")
         self.n = 0
+        self._header_stamp = stamp_mode == "header"
+        if stamp_mode not in ("header", "record"):
+            raise ConfigError(f"ros mapping: stamp must be 'header' or 'record', not {stamp_mode!r}")
+        kind = "orientation" if quantity in ("attitude", "gimbal") else quantity
+        self.add = getattr(self, "_add_" + kind)  # one specialised method per message kind: no per-message branching
+        self._append = self.cols.appenders()
 
-    def add(self, msg, record_ns: int) -> None:
-        t = stamp_ns(msg, record_ns, self.stamp_mode)
-        q = self.quantity
-        i = self.n
+    def _t(self, msg, record_ns: int) -> int:
+        if self._header_stamp:
+            try:
+                st = msg.header.stamp
+                ns = st.sec * 1_000_000_000 + st.nanosec
+                return ns if ns > 0 else record_ns
+            except AttributeError:
+                return stamp_ns(msg, record_ns, "header")
+        return record_ns
+
+    def _add_position(self, msg, record_ns: int) -> None:
         self.n += 1
-        if q == "position":
-            if msg.status.status < 0 or not (np.isfinite(msg.latitude) and np.isfinite(msg.longitude)):
-                self.dropped += 1  # STATUS_NO_FIX
-                return
-            self.cols.add(t=t, lat=msg.latitude, lon=msg.longitude, alt=msg.altitude)
-        elif q in ("attitude", "gimbal"):
-            o = _orientation(msg, self.msgtype)
-            if o is None:
-                self.dropped += 1
-                return
-            self.cols.add(t=t, w=o[0], x=o[1], y=o[2], z=o[3])
-        elif q == "range":
-            self.cols.add(t=t, r=msg.range, lo=msg.min_range, hi=msg.max_range)
-        elif q == "images":
-            if self.size == (0, 0):
-                if hasattr(msg, "width"):
-                    self.size = (int(msg.width), int(msg.height))
-                else:  # CompressedImage: the size is only known by decoding one
-                    try:
-                        img = decode_image(msg, self.msgtype)
-                        self.size = (img.shape[1], img.shape[0])
-                    except ValueError:
-                        pass
-            self.cols.add(t=t, i=i)
-        elif q == "camera_info" and self.info is None:
-            def get(*names):
-                for n in names:
-                    if hasattr(msg, n):
-                        return np.asarray(getattr(msg, n), float)
-                return np.zeros(0)
-            self.info = CameraInfo(int(msg.width), int(msg.height), get("k", "K").reshape(3, 3), get("d", "D"),
-                                   get("p", "P").reshape(3, 4), str(msg.distortion_model), source=self.source)
+        lat, lon = msg.latitude, msg.longitude
+        if msg.status.status < 0 or not (math.isfinite(lat) and math.isfinite(lon)):
+            self.dropped += 1  # STATUS_NO_FIX
+            return
+        at, alat, alon, aalt = self._append
+        at(self._t(msg, record_ns))
+        alat(lat)
+        alon(lon)
+        aalt(msg.altitude)
+
+    def _add_orientation(self, msg, record_ns: int) -> None:
+        self.n += 1
+        o = _orientation(msg, self.msgtype)
+        if o is None:
+            self.dropped += 1
+            return
+        at, aw, ax, ay, az = self._append
+        at(self._t(msg, record_ns))
+        aw(o[0])
+        ax(o[1])
+        ay(o[2])
+        az(o[3])
+
+    def _add_range(self, msg, record_ns: int) -> None:
+        self.n += 1
+        at, ar, alo, ahi = self._append
+        at(self._t(msg, record_ns))
+        ar(msg.range)
+        alo(msg.min_range)
+        ahi(msg.max_range)
+
+    def _add_images(self, msg, record_ns: int) -> None:
+        if self.size == (0, 0):
+            if hasattr(msg, "width"):
+                self.size = (int(msg.width), int(msg.height))
+            else:  # CompressedImage: the size is only known by decoding one
+                try:
+                    img = decode_image(msg, self.msgtype)
+                    self.size = (img.shape[1], img.shape[0])
+                except ValueError:
+                    pass
+        self.cols.add(t=self._t(msg, record_ns), i=self.n)
+        self.n += 1
+
+    def _add_camera_info(self, msg, record_ns: int) -> None:
+        self.n += 1
+        if self.info is not None:
+            return
+
+        def get(*names):
+            for n in names:
+                if hasattr(msg, n):
+                    return np.asarray(getattr(msg, n), float)
+            return np.zeros(0)
+        self.info = CameraInfo(int(msg.width), int(msg.height), get("k", "K").reshape(3, 3), get("d", "D"),
+                               get("p", "P").reshape(3, 4), str(msg.distortion_model), source=self.source)
 
     def series(self):
         a = self.cols.arrays()

@@ -310,7 +310,6 @@ def _assemble(path: Path, coll: _Collector, mapping: dict, streams, warnings) ->
         a = st.arrays()
         link = ClockLink("boot", "unix", a["boot_ns"], a["unix_ns"])
         log.clock_links.append(link)
-        log.clock_links.append(ClockLink("boot", "unix_record", a["boot_ns"], a["rec_ns"]))
 
     got = _pick(coll, mapping["position"]["messages"], mapping, "position", warnings, path)
     if got is None:

@@ -364,31 +364,48 @@ class GroupEntry:
 
 
 def load_run_config(path: str | PathLike) -> list[GroupEntry]:
-    """The flight groups of a run config (`groups: [flight config paths]`), or of a single flight config.
+    """The flight groups of a run config (`groups: [flight config paths]`), a manifest (a YAML list of flight config
+    paths), a folder (every `flight.yaml` in it or below), or a single flight config.
 
     A group whose flight config does not load is returned with its error (the others still run); a run config
     that is itself malformed raises ConfigError."""
     path = Path(path)
-    doc = _read_yaml(path)
-    if "groups" not in doc:
-        return [GroupEntry(str(path), load_flight_config(path))]
-    unknown = sorted(set(doc) - {"groups", "description"})
-    if unknown:
-        raise ConfigError(f"{unknown[0]}: unknown key in a run config (known: groups, description)", path)
-    groups = doc["groups"]
+    if path.is_dir():
+        from pipeline.batch import discover_flights
+
+        return _load_groups(discover_flights(path), path)
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError("config file not found", path) from None
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        doc = None  # _read_yaml below reports it
+    if isinstance(doc, list):  # a manifest: a plain list of flight config paths
+        groups = doc
+    else:
+        doc = _read_yaml(path)
+        if "groups" not in doc:
+            return [GroupEntry(str(path), load_flight_config(path))]
+        unknown = sorted(set(doc) - {"groups", "description"})
+        if unknown:
+            raise ConfigError(f"{unknown[0]}: unknown key in a run config (known: groups, description)", path)
+        groups = doc["groups"]
     if not isinstance(groups, list) or not groups or not all(isinstance(g, str) for g in groups):
         raise ConfigError("'groups' must be a non-empty list of flight config paths", path)
+    return _load_groups([(path.resolve().parent / g).resolve() for g in groups], path)
+
+
+def _load_groups(paths: list[Path], source: Path) -> list[GroupEntry]:
     entries = []
     names: set[str] = set()
-    for g in groups:
-        gpath = (path.resolve().parent / g).resolve()
+    for gpath in paths:
         try:
             cfg = load_flight_config(gpath)
         except ConfigError as exc:
             entries.append(GroupEntry(str(gpath), error=str(exc)))
             continue
         if cfg.name in names:
-            raise ConfigError(f"two groups are named {cfg.name!r}", path)
+            raise ConfigError(f"two groups are named {cfg.name!r}", source)
         names.add(cfg.name)
         entries.append(GroupEntry(str(gpath), cfg))
     return entries

@@ -22,6 +22,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from pipeline.batch import report_stage
 from pipeline.errors import ConfigError, InputError, RidgelocError
 from pipeline.flight_config import FlightConfig
 from pipeline.geometry.frames import ellipsoid_from_amsl_m, enu_from_lla
@@ -131,6 +132,7 @@ def process_group(config: FlightConfig) -> GroupResult:
     """Ingest, track, synchronize and solve one flight group (see the module docstring)."""
     from pipeline.ingest import read_flight
 
+    report_stage("ingest")
     timings: dict[str, float] = {}
     notes: list[str] = []
     cpu: dict[str, float] = {}  # process CPU seconds per stage (all threads): the wall times' counterpart under load
@@ -152,6 +154,7 @@ def process_group(config: FlightConfig) -> GroupResult:
                                  max_range_gap_s=sel.max_range_gap_s, frame_indices=sel.frame_indices,
                                  burst_gap_s=sel.burst_gap_s)
         notes.extend(plan.notes)
+        report_stage("track")
         t1, c1 = time.perf_counter(), time.process_time()
         tracker = SiftTracker(config.tracking)
         if config.target.template is not None:
@@ -189,6 +192,7 @@ def process_group(config: FlightConfig) -> GroupResult:
             notes.append(f"{int(off_target.sum())} range(s) not used: the target was more than "
                          f"{sel.max_laser_offset_px:g} px from the image centre, off the laser's axis")
 
+    report_stage("sync")
     t2, c2 = time.perf_counter(), time.process_time()
     origin = _origin(config, log)
     states = frame_states(log, plan.t_ns, position_offset_ns=c.position_offset_ns,
@@ -215,6 +219,7 @@ def process_group(config: FlightConfig) -> GroupResult:
     timings["sync"] = time.perf_counter() - t2
     cpu["sync"] = time.process_time() - c2
 
+    report_stage("solve")
     t3, c3 = time.perf_counter(), time.process_time()
     estimates, failures = solve_all(obs, _methods(config), config.solve.options)
     timings["solve"] = time.perf_counter() - t3

@@ -1,4 +1,4 @@
-"""`ridgeloc run [CONFIG] [-o OUTDIR]`: process flight groups end to end into a Table-4-like report."""
+"""`ridgeloc run [CONFIG] [-o OUTDIR]`: process flight groups end to end into reports and GIS exports."""
 
 from __future__ import annotations
 
@@ -6,55 +6,87 @@ import argparse
 import sys
 from pathlib import Path
 
-import cv2
-
-from pipeline.errors import RidgelocError
-from pipeline.flight_config import load_run_config
+from pipeline.flight_config import FlightConfig, load_run_config
 from pipeline.results import GroupFailure
 
-HELP = "process flights (video, telemetry, ranges) into target positions and a Table-4-like report"
+HELP = "process flights (video, telemetry, ranges) into target positions, a Table-4-like report and GIS exports"
 DEFAULT_CONFIG = Path("configs/sample.yaml")
+STAGES = ("ingest", "track", "sync", "solve")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("config", nargs="?", default=str(DEFAULT_CONFIG),
-                        help="run config listing flight configs under `groups:`, or one flight config "
+                        help="a run config listing flight configs under `groups:`, a manifest (YAML list of flight "
+                             "configs), a folder of flights (every flight.yaml below it), or one flight config "
                              f"(default: {DEFAULT_CONFIG}, the bundled sample flights)")
     parser.add_argument("-o", "--outdir", default="out", help="output folder (default: out)")
-    parser.add_argument("-q", "--quiet", action="store_true", help="print only errors")
+    parser.add_argument("--workers", type=int, default=1, help="flights processed at once (default: 1)")
+    parser.add_argument("--executor", choices=("local", "dask"), default="local",
+                        help="local processes, or a Dask distributed cluster (needs the `dask` extra)")
+    parser.add_argument("--scheduler", default=None,
+                        help="Dask scheduler address, e.g. tcp://host:8786 (default: a local Dask cluster)")
+    parser.add_argument("--force", action="store_true", help="redo flights whose outputs are already finished")
+    parser.add_argument("--no-figures", action="store_true", help="skip the per-group figures (faster)")
+    parser.add_argument("-q", "--quiet", action="store_true", help="print only the summary and errors")
 
 
-def main(args) -> int:
-    from pipeline.report.table4 import write_table4
-    from pipeline.run import process_group, write_group_outputs
-
-    config = Path(args.config)
-    if args.config == str(DEFAULT_CONFIG) and not config.exists():
+def _resolve_config(arg: str) -> Path:
+    config = Path(arg)
+    if arg == str(DEFAULT_CONFIG) and not config.exists():
         # The bundled sample config of this checkout, when ridgeloc runs from another folder.
         bundled = Path(__file__).resolve().parents[2] / DEFAULT_CONFIG
         config = bundled if bundled.exists() else config
+    return config
+
+
+def _input_files(cfg: FlightConfig) -> list[Path]:
+    """The files a flight's outputs depend on (for re-run skipping); folders (ROS 2 bags) contribute their files."""
+    listed = [*cfg.files.telemetry, cfg.files.video, cfg.files.frames_csv, cfg.truth_file, cfg.target.template]
+    files: list[Path] = []
+    for f in listed:
+        if f is None:
+            continue
+        p = Path(f)
+        files.extend(sorted(q for q in p.rglob("*") if q.is_file()) if p.is_dir() else [p])
+    return files
+
+
+def main(args) -> int:
+    from pipeline import __version__
+    from pipeline.batch import Job, job_digest, run_groups, summarize_failures
+    from pipeline.report.outputs import write_run_outputs
+    from pipeline.report.table4 import write_table4
+    from pipeline.run import group_files, process_group
+
+    config = _resolve_config(args.config)
     entries = load_run_config(config)
-    results, failures = [], []
+    config_failures: list[GroupFailure] = []
+    loaded: list[tuple[str, FlightConfig]] = []
     for entry in entries:
-        name = entry.config.name if entry.config is not None else Path(entry.source).stem
         if entry.config is None:
-            failures.append(GroupFailure(name, entry.source, entry.error))
-            print(f"ridgeloc: {name}: skipped: {entry.error}", file=sys.stderr)
-            continue
-        try:
-            result = process_group(entry.config)
-            write_group_outputs(args.outdir, result)
-        except (RidgelocError, OSError, cv2.error) as exc:  # one bad flight must not stop the others
-            failures.append(GroupFailure(name, entry.source, str(exc)))
-            print(f"ridgeloc: {name}: failed: {exc}", file=sys.stderr)
-            continue
-        results.append(result)
-        if not args.quiet:
-            errs = result.errors_m()
-            shown = ", ".join(f"{m} {errs[m]:.2f} m" for m in ("ridge", "mle") if errs.get(m) is not None)
-            print(f"{name}: {result.n_observations} observations, {sum(result.timings_s.values()):.2f} s"
-                  + (f", error {shown}" if shown else ""))
+            config_failures.append(GroupFailure(Path(entry.source).stem, entry.source, entry.error))
+        else:
+            loaded.append((entry.source, entry.config))
+    jobs = [Job(cfg.name, source, cfg) for source, cfg in loaded]
+    digests = {cfg.name: job_digest(cfg.to_dict(), _input_files(cfg)) for _, cfg in loaded}
+    results, failed, reused = run_groups(
+        jobs, process_group, args.outdir, digests=digests, force=args.force, extra_files=group_files,
+        figures=not args.no_figures, workers=args.workers, executor=args.executor, scheduler=args.scheduler,
+        progress=not args.quiet and sys.stderr.isatty(), stages=STAGES)
+    failures = config_failures + failed
+    settings = {"config": str(config), "outdir": str(args.outdir), "workers": args.workers,
+                "executor": args.executor, "ridgeloc": __version__, "reused": reused}
+    write_run_outputs(args.outdir, results, failures, settings, figures=not args.no_figures)
     md, tab = write_table4(args.outdir, results, failures)
+    for r in results:
+        errs = r.errors_m()
+        shown = ", ".join(f"{m} {errs[m]:.2f} m" for m in ("ridge", "mle") if errs.get(m) is not None)
+        state = "reused" if r.name in reused else f"{sum(r.timings_s.values()):.2f} s"
+        if not args.quiet:
+            print(f"{r.name}: {r.n_observations} observations, {state}" + (f", error {shown}" if shown else ""))
+    for f in failures:
+        print(f"ridgeloc: {f.name}: failed: {f.message}", file=sys.stderr)
     if not args.quiet:
-        print(f"wrote {md} and {tab}" + (f"; {len(failures)} group(s) failed" if failures else ""))
+        print(f"wrote {md}, {tab}, {Path(args.outdir) / 'report.html'} and targets.csv/.geojson/.kml")
+    print(summarize_failures(failures, len(entries)), file=sys.stderr if failures else sys.stdout)
     return 1 if failures else 0

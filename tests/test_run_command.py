@@ -1,0 +1,92 @@
+"""`ridgeloc run` as a user runs it: a batch of 20 flights, 2 of them broken, through the real command."""
+
+import json
+from pathlib import Path
+
+import yaml
+
+from pipeline.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+SAMPLE = REPO / "configs" / "flights" / "group6.yaml"
+
+
+def _flight_config(name: str, **changes) -> dict:
+    doc = yaml.safe_load(SAMPLE.read_text())
+    base = SAMPLE.parent
+    files = doc["files"]
+    files["telemetry"] = [str((base / t).resolve()) for t in files["telemetry"]]
+    for key in ("video", "frames_csv"):
+        files[key] = str((base / files[key]).resolve())
+    doc["truth_file"] = str((base / doc["truth_file"]).resolve())
+    doc["name"] = name
+    doc.update(changes)
+    return doc
+
+
+def test_twenty_flights_two_broken_give_eighteen_reports_and_a_summary(tmp_path, capsys):
+    flights = []
+    for i in range(18):
+        flights.append(_flight_config(f"flight{i:02d}"))
+    missing = _flight_config("missing_log")
+    missing["files"]["telemetry"] = [str(tmp_path / "nowhere.tlog")]
+    garbage = tmp_path / "garbage.tlog"
+    garbage.write_bytes(b"\x00\x01 this is not a tlog " * 200)
+    broken = _flight_config("garbage_log")
+    broken["files"]["telemetry"] = [str(garbage)]
+    flights[5:5] = [missing]
+    flights[12:12] = [broken]
+    paths = []
+    for doc in flights:
+        p = tmp_path / "flights" / f"{doc['name']}.yaml"
+        p.parent.mkdir(exist_ok=True)
+        p.write_text(yaml.safe_dump(doc))
+        paths.append(str(p))
+    manifest = tmp_path / "manifest.yaml"
+    manifest.write_text(yaml.safe_dump(paths))
+    out = tmp_path / "out"
+
+    rc = main(["run", str(manifest), "-o", str(out), "--no-figures", "-q", "--workers", "2"])
+    captured = capsys.readouterr()
+    assert rc == 1
+    finished = sorted(p.parent.name for p in out.glob("*/estimates.json"))
+    assert finished == [f"flight{i:02d}" for i in range(18)]
+    assert not (out / "missing_log").exists() and not (out / "garbage_log").exists()
+    assert "2 of 20 flight(s) failed" in captured.err
+    summary = [line for line in captured.err.splitlines() if line.startswith("  ")]
+    assert len(summary) == 2
+    assert any("missing_log" in line and "nowhere.tlog" in line for line in summary)
+    assert any("garbage_log" in line and "garbage.tlog" in line for line in summary)
+    assert "Traceback" not in captured.err
+    run = json.loads((out / "run.json").read_text())
+    assert sorted(f["name"] for f in run["failures"]) == ["garbage_log", "missing_log"]
+    assert len(run["groups"]) == 18
+    table = (out / "table4.csv").read_text().splitlines()
+    assert table[0].split(",")[1:] == [f"flight{i:02d}" for i in range(18)]
+    for name in ("report.html", "report.md", "targets.csv", "targets.geojson", "targets.kml"):
+        assert (out / name).is_file()
+
+    # A re-run reuses the 18 finished flights and still reports the 2 failures.
+    mtime = (out / "flight00" / "estimates.json").stat().st_mtime_ns
+    rc = main(["run", str(manifest), "-o", str(out), "--no-figures", "-q"])
+    assert rc == 1
+    assert (out / "flight00" / "estimates.json").stat().st_mtime_ns == mtime
+    assert "2 of 20 flight(s) failed" in capsys.readouterr().err
+
+
+def test_a_folder_of_flights_runs_each_flight_yaml(tmp_path, capsys):
+    for name in ("a", "b"):
+        d = tmp_path / "flights" / name
+        d.mkdir(parents=True)
+        (d / "flight.yaml").write_text(yaml.safe_dump(_flight_config(f"folder_{name}")))
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "flights"), "-o", str(out), "--no-figures", "-q"]) == 0
+    assert (out / "folder_a" / "estimates.json").is_file() and (out / "folder_b" / "estimates.json").is_file()
+    assert "all 2 flight(s) finished" in capsys.readouterr().out
+
+
+def test_missing_run_config_is_one_line_error(tmp_path, capsys):
+    assert main(["run", str(tmp_path / "nope.yaml"), "-o", str(tmp_path / "out")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "nope.yaml" in err[0] and "not found" in err[0]
+    assert not (tmp_path / "out").exists()

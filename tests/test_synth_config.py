@@ -1,5 +1,6 @@
 """Synthetic flight configs: typed loading, unknown keys and bad values rejected with the file named."""
 
+import json
 from pathlib import Path
 
 import pytest
@@ -16,7 +17,7 @@ def test_example_config_spells_out_the_defaults():
 
 
 @pytest.mark.parametrize("name", ["group1", "group2", "group3", "group4", "group5", "group6", "hard_outliers",
-                                  "angle10"])
+                                  "angle10", "example_waypoints"])
 def test_sample_configs_load(name):
     cfg = SynthConfig.load(ROOT / "configs" / "synth" / f"{name}.yaml")
     assert cfg.group == name
@@ -50,3 +51,20 @@ def test_cli_reports_a_missing_config(tmp_path, capsys):
     assert main(["synth", str(tmp_path / "nope.yaml"), "-o", str(tmp_path / "out")]) == 1
     assert "config file not found" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_cli_writes_a_flight(tmp_path, capsys):
+    from pipeline.cli import main
+    cfg = tmp_path / "tiny.yaml"
+    cfg.write_text("group: tiny\nobservations:\n  count: 2\npath:\n  intersection_angle_deg: 2.0\n"
+                   "video:\n  burst_frames: 1\nscene:\n  texture_px: 512\n  texture_res_m: 12.0\n")
+    out = tmp_path / "flight"
+    assert main(["synth", str(cfg), "-o", str(out), "--format", "mcap", "--seed", "9"]) == 0
+    assert "tiny: 2 observations, intersection angle 2.00 deg, 2 frames, mcap" in capsys.readouterr().out
+    assert sorted(p.name for p in out.iterdir()) == ["flight.mcap", "truth.json", "video.frames.csv", "video.mp4"]
+    truth = json.loads((out / "truth.json").read_text())
+    assert truth["seed"] == 9 and truth["config"]["format"] == "mcap"
+    # an existing folder is refused unless --overwrite, and nothing is left behind
+    assert main(["synth", str(cfg), "-o", str(out)]) == 1
+    assert "already exists" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["flight", "tiny.yaml"]

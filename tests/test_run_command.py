@@ -52,9 +52,9 @@ def test_twenty_flights_two_broken_give_eighteen_reports_and_a_summary(tmp_path,
     finished = sorted(p.parent.name for p in out.glob("*/estimates.json"))
     assert finished == [f"flight{i:02d}" for i in range(18)]
     assert not (out / "missing_log").exists() and not (out / "garbage_log").exists()
-    assert "2 of 20 flight(s) failed" in captured.err
-    summary = [line for line in captured.err.splitlines() if line.startswith("  ")]
-    assert len(summary) == 2
+    assert "2 of 20 flight(s) failed" in captured.out
+    summary = captured.err.strip().splitlines()
+    assert len(summary) == 2 and all(line.startswith("ridgeloc: ") for line in summary)
     assert any("missing_log" in line and "nowhere.tlog" in line for line in summary)
     assert any("garbage_log" in line and "garbage.tlog" in line for line in summary)
     assert "Traceback" not in captured.err
@@ -71,7 +71,7 @@ def test_twenty_flights_two_broken_give_eighteen_reports_and_a_summary(tmp_path,
     rc = main(["run", str(manifest), "-o", str(out), "--no-figures", "-q"])
     assert rc == 1
     assert (out / "flight00" / "estimates.json").stat().st_mtime_ns == mtime
-    assert "2 of 20 flight(s) failed" in capsys.readouterr().err
+    assert "2 of 20 flight(s) failed" in capsys.readouterr().out
 
 
 def test_a_folder_of_flights_runs_each_flight_yaml(tmp_path, capsys):

@@ -84,9 +84,9 @@ def main(args) -> int:
         state = "reused" if r.name in reused else f"{sum(r.timings_s.values()):.2f} s"
         if not args.quiet:
             print(f"{r.name}: {r.n_observations} observations, {state}" + (f", error {shown}" if shown else ""))
-    for f in failures:
+    for f in failures:  # one line each on stderr; the count goes to stdout with the rest of the summary
         print(f"ridgeloc: {f.name}: failed: {f.message}", file=sys.stderr)
     if not args.quiet:
         print(f"wrote {md}, {tab}, {Path(args.outdir) / 'report.html'} and targets.csv/.geojson/.kml")
-    print(summarize_failures(failures, len(entries)), file=sys.stderr if failures else sys.stdout)
+    print(summarize_failures(failures, len(entries)).splitlines()[0])
     return 1 if failures else 0

@@ -48,14 +48,13 @@ def camera_matrix(cfg: SynthConfig) -> np.ndarray:
 class FrameSource:
     """Renders the written frames in order from the true camera poses (lazily: video can be long)."""
 
-    def __init__(self, cfg: SynthConfig, tl: Timeline, flight: Flight, states: TrueState, truth_frames: list[dict],
-                 frame_limit: int | None = None):
+    def __init__(self, cfg: SynthConfig, tl: Timeline, states: TrueState, truth_frames: list[dict]):
         self.cfg, self.tl, self.states, self.truth_frames = cfg, tl, states, truth_frames
         tex = ground_texture(cfg.scene.seed, cfg.scene.texture_px, cfg.scene.texture_res_m)
         self.renderer = Renderer(camera_matrix(cfg), cfg.camera.dist, (cfg.camera.width_px, cfg.camera.height_px),
                                  tex, cfg.scene.texture_res_m, cfg.site.target_size_m, cfg.scene.supersample,
                                  cfg.scene.haze_km)
-        self.n = len(tl.written_frames) if frame_limit is None else min(frame_limit, len(tl.written_frames))
+        self.n = len(tl.written_frames)
 
     def __iter__(self) -> Iterator[np.ndarray]:
         cfg = self.cfg
@@ -68,10 +67,8 @@ class FrameSource:
                                        cloud)
 
 
-def generate(cfg: SynthConfig, out_dir: str | Path, frame_limit: int | None = None, overwrite: bool = False,
-             progress: bool = False) -> SynthResult:
-    """Write the flight `cfg` into `out_dir` (created; must not exist unless overwrite). frame_limit: render only
-    the first frames (tests); truth.json still describes every frame of the schedule."""
+def generate(cfg: SynthConfig, out_dir: str | Path, overwrite: bool = False) -> SynthResult:
+    """Write the flight `cfg` into `out_dir` (created; must not exist unless overwrite) and return a summary."""
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     if out_dir.exists() and not overwrite:
@@ -84,7 +81,7 @@ def generate(cfg: SynthConfig, out_dir: str | Path, frame_limit: int | None = No
     frame_t = tl.frame_time_ns(tl.written_frames)
     states = flight.state(frame_t)
     truth_frames = frame_truth(cfg, tl, flight, states, camera_matrix(cfg))
-    frames = FrameSource(cfg, tl, flight, states, truth_frames, frame_limit)
+    frames = FrameSource(cfg, tl, states, truth_frames)
 
     tmp = out_dir.with_name(f".tmp-{out_dir.name}")
     if tmp.exists():
@@ -119,7 +116,7 @@ def _write_files(cfg: SynthConfig, tl: Timeline, tel, frames: FrameSource, folde
                   "height": cfg.camera.height_px}
         images = None
         if cfg.video.images_in_bag:
-            t_img = tl.frame_time_ns(tl.written_frames[:frames.n])
+            t_img = tl.frame_time_ns(tl.written_frames)
             images = ((int(t), encode_jpeg(img, cfg.video.jpeg_quality)) for t, img in zip(t_img, frames, strict=True))
         gps_sigma = float(np.hypot(cfg.noise.gnss_drift_m, cfg.noise.gnss_white_m))
         write_bag(folder / name, cfg.format, tel, camera, gps_sigma, float(np.radians(cfg.noise.attitude_deg)),
@@ -128,7 +125,7 @@ def _write_files(cfg: SynthConfig, tl: Timeline, tel, frames: FrameSource, folde
         if images is not None:
             files["frames"] = f"{name}:/uav/camera/image/compressed"
     if "frames" not in files:
-        pts = tl.frame_pts_ns(tl.written_frames[:frames.n])
+        pts = tl.frame_pts_ns(tl.written_frames)
         write_video(folder / "video.mp4", frames, pts, cfg.camera.fps, (cfg.camera.width_px, cfg.camera.height_px))
         files["video"] = "video.mp4"
         files["frames_csv"] = "video.frames.csv"

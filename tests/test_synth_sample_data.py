@@ -80,28 +80,30 @@ def test_manifest_matches_committed_files():
 
 @pytest.mark.parametrize("group", list(ALL))
 def test_committed_files_open_in_standard_libraries(group):
+    """Each telemetry file opens with its standard library; its laser shots are those truth.json says were
+    logged, and every observation with a valid range has its shot at the observation's time."""
     truth = _truth(group)
     files = truth["metadata"]["files"]
     tel = SAMPLE / group / files["telemetry"]
-    n_laser = sum(truth["laser_shots"]["logged"])
     if tel.suffix == ".tlog":
         conn = mavutil.mavlink_connection(str(tel), dialect="ardupilotmega")
-        n = 0
-        while conn.recv_match(type="CAMERA_TRACKING_GEO_STATUS") is not None:
-            n += 1
+        shots = []
+        while (m := conn.recv_match(type="CAMERA_TRACKING_GEO_STATUS")) is not None:
+            shots.append(round(m._timestamp * 1e6) * 1000)
         conn.close()
     elif tel.suffix == ".mcap":
         with open(tel, "rb") as f:
-            summary = make_reader(f).get_summary()
-        by_topic = {summary.channels[c].topic: k for c, k in summary.statistics.channel_message_counts.items()}
-        n = by_topic["/uav/laser"]
+            shots = [m.log_time for _, _, m in make_reader(f).iter_messages(topics=["/uav/laser"])]
     else:
         with AnyReader([tel]) as r:
             counts = {c.topic: c.msgcount for c in r.connections}
-        n = counts["/uav/laser/range"]
+            laser = [c for c in r.connections if c.topic == "/uav/laser/range"]
+            shots = [t for _, t, _ in r.messages(connections=laser)]
         if "frames" in files:
             assert counts["/uav/camera/image/compressed"] == len(truth["frames"])
-    assert n == n_laser
+    logged = [t for t, ok in zip(truth["laser_shots"]["t_ns"], truth["laser_shots"]["logged"], strict=True) if ok]
+    assert shots == logged
+    assert {o["t_ns"] for o in truth["observations"] if o["range_valid"]} <= set(shots)
     if "video" in files:
         cap = cv2.VideoCapture(str(SAMPLE / group / files["video"]))
         assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == len(truth["frames"])

@@ -252,6 +252,8 @@ class SigmaPriors:
     range_m: float | None = None
     position_m: float | None = None
     attitude_deg: float | None = None
+    attitude_tau_s: float | None = None  # correlation times of the attitude and position errors (None: white)
+    position_tau_s: float | None = None
 
 
 @dataclass(frozen=True)

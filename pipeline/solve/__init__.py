@@ -130,6 +130,9 @@ def _solve_stacked(method: str, st: Stacked, o: dict) -> BatchEstimate:
         if method == "ridge":
             extras["k"] = ex["k"]
     elif method == "mle":
+        if (o.get("sigma") or st.sigma).correlated:
+            raise ValueError("mle with time-correlated errors (sigma attitude_tau_s / position_tau_s) needs the "
+                             "frames' timestamps: use solve() per problem; solve_batch() has no t_ns")
         x0, init_status, sigma, vce = _mle_start(st, o)
         X, it, status, cond, cov, ex = _mle.mle(st, x0, sigma, o.get("robust", "huber"), vce, tol, itmax,
                                                 init_status)

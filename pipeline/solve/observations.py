@@ -23,12 +23,21 @@ from pipeline.errors import ObservationError
 
 @dataclass(frozen=True)
 class Sigma:
-    """A priori standard deviations of the sensors (None = unknown, to be estimated from the data)."""
+    """A priori standard deviations of the sensors (None = unknown, to be estimated from the data), and the
+    correlation times of the attitude and platform position errors (first-order Gauss-Markov: correlation
+    exp(-|t_i - t_j| / tau) between frames; None or 0 = independent from frame to frame)."""
 
     pixel_px: float | None = None
     range_m: float | None = None
     position_m: float | None = None
     attitude_deg: float | None = None
+    attitude_tau_s: float | None = None
+    position_tau_s: float | None = None
+
+    @property
+    def correlated(self) -> bool:
+        """True when an attitude or position error with a sigma > 0 has a correlation time > 0."""
+        return bool((self.attitude_tau_s and self.attitude_deg) or (self.position_tau_s and self.position_m))
 
     @classmethod
     def from_dict(cls, d: dict | None, source: str = "sigma") -> Sigma:

@@ -62,3 +62,44 @@ def paper_problem(n: int = 10, gamma_deg: float = 30.0, sigma: Sigma | None = PA
     obs = b.problem(0)
     return Observations(P=obs.P, pixel=obs.pixel, platform_m=obs.platform_m, range_m=obs.range_m,
                         t_ns=np.arange(n, dtype=np.int64) * 1_000_000_000, sigma=b.sigma, truth_m=obs.truth_m)
+
+
+def gauss_markov(rng: np.random.Generator, shape: tuple, t_s: np.ndarray, sigma: float, tau_s: float | None):
+    """First-order Gauss-Markov samples (*shape, n) at times t_s (n,), stationary with standard deviation sigma
+    and correlation exp(-|dt| / tau_s) (exact discretization x_k = a x_(k-1) + sqrt(1 - a^2) sigma w_k,
+    a = exp(-dt / tau)); white noise when tau_s is None."""
+    w = rng.normal(0.0, sigma, (*shape, t_s.size))
+    if not tau_s:
+        return w
+    x = np.empty_like(w)
+    x[..., 0] = w[..., 0]
+    for k in range(1, t_s.size):
+        a = np.exp(-(t_s[k] - t_s[k - 1]) / tau_s)
+        x[..., k] = a * x[..., k - 1] + np.sqrt(1.0 - a * a) * w[..., k]
+    return x
+
+
+def correlated_problems(B: int, n: int = 10, gamma_deg: float = 30.0, sigma: Sigma = PAPER_SIGMA,
+                        dt_s: float = 1.0, attitude_tau_s: float | None = 20.0,
+                        position_tau_s: float | None = 60.0, seed: int = 0, K: np.ndarray = PAPER_K,
+                        ) -> list[Observations]:
+    """B problems on the arc geometry of `paper_batch` whose attitude (rotation vector, per axis) and platform
+    position (per axis) errors are Gauss-Markov processes over the frames' times (dt_s apart) with the given
+    correlation times, like real telemetry; pixel and range noise white. The problems' sigma is `sigma`
+    without correlation times (add them to model the correlation); t_ns is set."""
+    rng = np.random.default_rng(seed)
+    t_s = np.arange(n) * dt_s
+    target = np.zeros(3)
+    true_pos = np.broadcast_to(arc_platforms_m(n, gamma_deg, target_m=target), (B, n, 3))
+    R_true = look_at_rotation(true_pos, target)
+    P_true = projection_matrix(K, R_true, true_pos)
+    pixel = project(P_true, np.broadcast_to(target, (B, n, 3))) + rng.normal(0.0, sigma.pixel_px or 0.0, (B, n, 2))
+    pos_err = gauss_markov(rng, (B, 3), t_s, sigma.position_m or 0.0, position_tau_s).transpose(0, 2, 1)
+    rotvec = gauss_markov(rng, (B, 3), t_s, np.deg2rad(sigma.attitude_deg or 0.0), attitude_tau_s)
+    R_err = Rotation.from_rotvec(rotvec.transpose(0, 2, 1).reshape(-1, 3)).as_matrix().reshape(B, n, 3, 3)
+    meas_pos = true_pos + pos_err
+    P = projection_matrix(K, R_err @ R_true, meas_pos)
+    rng_m = np.linalg.norm(true_pos - target, axis=-1) + rng.normal(0.0, sigma.range_m or 0.0, (B, n))
+    t_ns = np.round(t_s * 1e9).astype(np.int64)
+    return [Observations(P=P[b], pixel=pixel[b], platform_m=meas_pos[b], range_m=rng_m[b], t_ns=t_ns, sigma=sigma,
+                         truth_m=target) for b in range(B)]

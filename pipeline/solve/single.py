@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from pipeline.solve import correlated as _correlated
 from pipeline.solve import iterate as _iterate
 from pipeline.solve.estimate import Status
 from pipeline.solve.least_squares import NORMALIZED_SINGULAR_DET
@@ -373,7 +374,16 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
     if bad:
         status = Status.DIVERGED if init_status == Status.DIVERGED else Status.DEGENERATE
         X = np.zeros(3)
-    var0 = _base_variances_one(fr, X, sigma)
+    W = _whitening_one(fr, X, sigma) if sigma.correlated else None
+    if W is None:
+        var0 = _base_variances_one(fr, X, sigma)
+        model = fr.both
+    else:  # generalized least squares: whitened rows have unit variance (`correlated`)
+        var0 = np.ones(W.shape[0])
+
+        def model(X):
+            J, r = fr.both(X)
+            return W @ J, W @ r
     vf = [1.0, 1.0]
     m = var0.size
 
@@ -385,7 +395,7 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
 
     var = var_of(vf)
     sd, ivar = np.sqrt(var), 1.0 / var
-    J, r = fr.both(X)
+    J, r = model(X)
     bound = fr.bound(X0)
     centre = fr.centre
     cost = _cost(r / sd, robust)
@@ -412,7 +422,7 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
             exploded = True
         if exploded:
             Xn = X
-        Jn, rn = fr.both(Xn)
+        Jn, rn = model(Xn)
         cost_n = _cost(rn / sd, robust)
         accept = not singular and not exploded and cost_n <= cost * (1 + 1e-12) + 1e-300
         step_norm = math.inf if singular else math.sqrt(float(dX @ dX))
@@ -450,6 +460,8 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
     _, wr = _rho_and_weight(r / np.sqrt(var), robust)
     w = wr / var
     N = (J.T * w) @ J
+    # the reported residuals are observed - predicted, not whitened
+    resid = r if W is None else fr.both(X)[1]
     cov, singular = inv3(N)
     cond = condition(N)
     if singular and not failed:
@@ -463,7 +475,22 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
     sigma0_sq = float((w * r * r).sum() / (m - 3)) if m > 3 else math.nan
     extras = {"variance_factor_pixel": vf[0], "variance_factor_range": vf[1], "sigma0_sq": sigma0_sq,
               "vce_rounds": vce_rounds}
-    return X, iterations, status, cond, 0.5 * (cov + cov.T), extras, r
+    return X, iterations, status, cond, 0.5 * (cov + cov.T), extras, resid
+
+
+def _whitening_one(fr: Frames, X0: np.ndarray, sigma: Sigma) -> np.ndarray:
+    """`correlated.whitening_matrix` of the rows in use, with the focal lengths and distances (at X0) of
+    `_base_variances_one` and the frames' times in seconds."""
+    st = fr.st
+    n = st.n
+    t_ns = st.t_ns[0] if st.t_ns is not None else np.arange(n, dtype=np.int64) * 1_000_000_000
+    t_s = (t_ns - t_ns.min()).astype(np.float64) * 1e-9  # differences of int64 first: no rounding of epochs
+    g = st._gram()[0, fr.pix_f]
+    g33 = g[:, 2, 2]
+    fxy = np.sqrt(np.maximum(g[:, (0, 1), (0, 1)] * g33[:, None] - g[:, (0, 1), (2, 2)] ** 2, 0.0)) / g33[:, None]
+    diff = X0 - st.platform_m[0, fr.pix_f]
+    D = np.sqrt((diff * diff).sum(axis=1))
+    return _correlated.whitening_matrix(t_s[fr.pix_f], t_s[fr.rng_f], fxy[:, 0], fxy[:, 1], D, sigma)
 
 
 def _base_variances_one(fr: Frames, X0: np.ndarray, sigma: Sigma) -> np.ndarray:

@@ -17,7 +17,7 @@ from pipeline.solve.observations import ObservationBatch, Observations, Sigma
 class Stacked:
     """B problems of n frames. Shapes: M (B,n,3,3) = P[..., :3], p4 (B,n,3) = P[..., 3], pix (B,n,2) px
     (0 where missing), has_pix (B,n) bool, platform_m (B,n,3), range_m (B,n) (0 where missing),
-    has_range (B,n) bool, truth_m (B,3) or None."""
+    has_range (B,n) bool, truth_m (B,3) or None, t_ns (B,n) int64 timestamps or None (a batch has none)."""
 
     M: np.ndarray
     p4: np.ndarray
@@ -28,6 +28,7 @@ class Stacked:
     has_range: np.ndarray
     sigma: Sigma
     truth_m: np.ndarray | None = None
+    t_ns: np.ndarray | None = None
 
     @classmethod
     def from_batch(cls, batch: ObservationBatch) -> Stacked:
@@ -35,8 +36,10 @@ class Stacked:
 
     @classmethod
     def from_observations(cls, obs: Observations) -> Stacked:
-        return cls._build(obs.P[None], obs.pixel[None], obs.platform_m[None], obs.range_m[None], obs.sigma,
-                          None if obs.truth_m is None else obs.truth_m[None])
+        st = cls._build(obs.P[None], obs.pixel[None], obs.platform_m[None], obs.range_m[None], obs.sigma,
+                        None if obs.truth_m is None else obs.truth_m[None])
+        st.t_ns = obs.t_ns[None]
+        return st
 
     @classmethod
     def _build(cls, P, pixel, platform, rng, sigma, truth) -> Stacked:
@@ -59,7 +62,8 @@ class Stacked:
         """The problems at integer indices idx, as a new Stacked."""
         return Stacked(M=self.M[idx], p4=self.p4[idx], pix=self.pix[idx], has_pix=self.has_pix[idx],
                        platform_m=self.platform_m[idx], range_m=self.range_m[idx], has_range=self.has_range[idx],
-                       sigma=self.sigma, truth_m=None if self.truth_m is None else self.truth_m[idx])
+                       sigma=self.sigma, truth_m=None if self.truth_m is None else self.truth_m[idx],
+                       t_ns=None if self.t_ns is None else self.t_ns[idx])
 
     # ---- derived camera quantities ---------------------------------------------------------------------
 

@@ -291,13 +291,15 @@ def _pick(coll: _Collector, names: list[str], mapping: dict, what: str, warnings
     return None
 
 
-def _times(a: dict, mapping: dict, link: ClockLink | None) -> tuple[np.ndarray, str]:
+def _times(a: dict, mapping: dict, link: ClockLink | None, name: str = "", warnings: list | None = None):
+    """(t_ns on the UNIX clock, "unix"): the record time, or with `time: boot` time_boot_ms mapped through
+    SYSTEM_TIME (messages without time_boot_ms, or a log without SYSTEM_TIME, keep the record time)."""
     if mapping["time"] == "boot":
         if link is not None and (a["boot_ns"] >= 0).all():
             return map_clock(a["boot_ns"], link), "unix"
-    elif mapping["time"] != "record":
-        from pipeline.errors import ConfigError
-        raise ConfigError(f"tlog mapping: time must be 'record' or 'boot', not {mapping['time']!r}")
+        if warnings is not None:
+            why = "no SYSTEM_TIME with UNIX time" if link is None else "no time_boot_ms in the message"
+            warnings.append(f"{name}: record time used ({why})")
     return a["rec_ns"], "unix"
 
 
@@ -305,6 +307,9 @@ def _assemble(path: Path, coll: _Collector, mapping: dict, streams, warnings) ->
     log = FlightLog(path=str(path), streams=streams, warnings=warnings, formats=["tlog"])
     src = path.name
     link = None
+    if mapping["time"] not in ("record", "boot"):
+        from pipeline.errors import ConfigError
+        raise ConfigError(f"tlog mapping: time must be 'record' or 'boot', not {mapping['time']!r}")
     st = coll.cols.get("SYSTEM_TIME")
     if st is not None and len(st):
         a = st.arrays()
@@ -318,7 +323,7 @@ def _assemble(path: Path, coll: _Collector, mapping: dict, streams, warnings) ->
             warnings.append(f"{path}: no GPS fix in {n_pos} position messages; no position read")
     else:
         name, a = got
-        t, clock = _times(a, mapping, link)
+        t, clock = _times(a, mapping, link, f"{path}: {name}", warnings)
         if name == "GPS_RAW_INT" and (a["alt_ell"] != 0).all():
             alt, datum = a["alt_ell"], "ellipsoid"
         else:
@@ -329,7 +334,7 @@ def _assemble(path: Path, coll: _Collector, mapping: dict, streams, warnings) ->
     got = _pick(coll, mapping["attitude"]["messages"], mapping, "attitude", warnings, path)
     if got is not None:
         name, a = got
-        t, clock = _times(a, mapping, link)
+        t, clock = _times(a, mapping, link, f"{path}: {name}", warnings)
         if name == "ATTITUDE":
             q = quat_ned_from_frd_euler(a["roll"], a["pitch"], a["yaw"])
         else:
@@ -340,7 +345,7 @@ def _assemble(path: Path, coll: _Collector, mapping: dict, streams, warnings) ->
     got = _pick(coll, mapping["gimbal"]["messages"], mapping, "gimbal", warnings, path)
     if got is not None:
         name, a = got
-        t, clock = _times(a, mapping, link)
+        t, clock = _times(a, mapping, link, f"{path}: {name}", warnings)
         if name == "GIMBAL_DEVICE_ATTITUDE_STATUS":
             q = np.column_stack([a["w"], a["x"], a["y"], a["z"]])
             ok = np.isfinite(q).all(axis=1) & (np.linalg.norm(q, axis=1) > 0.5)
@@ -359,7 +364,7 @@ def _assemble(path: Path, coll: _Collector, mapping: dict, streams, warnings) ->
     got = _pick(coll, mapping["range"]["messages"], mapping, "range", warnings, path)
     if got is not None:
         name, a = got
-        t, clock = _times(a, mapping, link)
+        t, clock = _times(a, mapping, link, f"{path}: {name}", warnings)
         r = a["r"]
         lo = np.maximum(a["lo"], float(mapping["range"]["min_m"]))
         hi = np.minimum(a["hi"], float(mapping["range"]["max_m"]))
@@ -372,7 +377,7 @@ def _assemble(path: Path, coll: _Collector, mapping: dict, streams, warnings) ->
     got = _pick(coll, mapping["camera"]["messages"], mapping, "camera", warnings, path)
     if got is not None:
         name, a = got
-        t, clock = _times(a, mapping, link)
+        t, clock = _times(a, mapping, link, f"{path}: {name}", warnings)
         t, idx = sort_by_time(t, a["idx"])
         log.camera_events = CameraEventSeries(t, idx, source=f"{src}:{name}", clock=clock)
     return log

@@ -1,7 +1,7 @@
 """The true flight: the camera's path around the target, the vehicle's attitude, and the gimbal's pointing.
 
 Working frame: ENU metres at the target (`enu` below, z up; the ground is its z = 0 plane, the plane tangent to
-the ellipsoid at the target, which departs from the ellipsoid by < 0.3 m within 2 km, the visible footprint).
+the ellipsoid at the target, which departs from the ellipsoid by at most 0.31 m within 2 km, the visible footprint).
 Attitudes are built in the vehicle's own local level frame (NED at its position) as an autopilot has them and
 carried into the target ENU frame through ECEF, so the logged attitudes are correct relative to the local level
 at the vehicle (the two frames differ by ~0.8 mrad at 5 km).

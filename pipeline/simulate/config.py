@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import types
-import typing
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
@@ -18,6 +16,7 @@ from typing import Literal
 
 import yaml
 
+from pipeline.config_schema import load_dataclass
 from pipeline.errors import ConfigError
 
 ALL_METHODS = ("dlt", "vision", "range", "los", "fusion-raw", "fusion", "ridge", "mle")
@@ -116,10 +115,7 @@ class SimulationConfig:
         doc = {} if doc is None else doc
         if isinstance(doc, dict) and "name" not in doc and path is not None:
             doc = {**doc, "name": Path(path).stem.removeprefix("simulation_")}
-        try:
-            return _build(cls, doc, "")
-        except ConfigError as exc:
-            raise ConfigError(str(exc), path) from None
+        return load_dataclass(cls, doc, source=path, style="quoted")
 
     @classmethod
     def load(cls, path: str | PathLike) -> SimulationConfig:
@@ -196,63 +192,3 @@ def max_intersection_angle_deg(g: GeometryConfig) -> float:
         return 180.0
     r2 = g.slant_distance_m ** 2 - g.height_m ** 2
     return math.degrees(math.acos((g.height_m ** 2 - r2) / g.slant_distance_m ** 2))
-
-
-# ---- a small typed loader over the dataclasses above --------------------------------------------------------
-
-def _type_name(tp) -> str:
-    origin = typing.get_origin(tp)
-    if origin is Literal:
-        return " | ".join(repr(a) for a in typing.get_args(tp))
-    if origin is tuple:
-        return f"list of {_type_name(typing.get_args(tp)[0])}"
-    return getattr(tp, "__name__", str(tp))
-
-
-def _convert(tp, value, where: str):
-    origin = typing.get_origin(tp)
-    if dataclasses.is_dataclass(tp):
-        if not isinstance(value, dict):
-            raise ConfigError(f"'{where}' must be a mapping of keys, got {type(value).__name__}")
-        return _build(tp, value, where + ".")
-    if origin is Literal:
-        if value not in typing.get_args(tp):
-            raise ConfigError(f"'{where}' must be one of {_type_name(tp)}, got {value!r}")
-        return value
-    if origin is tuple:
-        if not isinstance(value, list):
-            raise ConfigError(f"'{where}' must be a {_type_name(tp)}, got {type(value).__name__} {value!r}")
-        item = typing.get_args(tp)[0]
-        return tuple(_convert(item, v, f"{where}[{i}]") for i, v in enumerate(value))
-    if origin in (typing.Union, types.UnionType):
-        raise TypeError(f"unsupported config type {tp}")  # not used by the dataclasses above
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"'{where}' must be true or false, got {value!r}")
-        return value
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"'{where}' must be an integer, got {type(value).__name__} {value!r}")
-        return value
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise ConfigError(f"'{where}' must be a finite number, got {type(value).__name__} {value!r}")
-        return float(value)
-    if tp is str:
-        if not isinstance(value, str):
-            raise ConfigError(f"'{where}' must be a string, got {type(value).__name__} {value!r}")
-        return value
-    raise TypeError(f"unsupported config type {tp}")
-
-
-def _build(cls, doc: dict, prefix: str):
-    if not isinstance(doc, dict):
-        raise ConfigError(f"the top level must be a mapping of keys, got {type(doc).__name__}")
-    hints = typing.get_type_hints(cls)
-    names = [f.name for f in dataclasses.fields(cls)]
-    unknown = sorted(set(doc) - set(names))
-    if unknown:
-        raise ConfigError(f"unknown key(s) {', '.join(prefix + k for k in unknown)} "
-                          f"(known in {prefix.rstrip('.') or 'the top level'}: {', '.join(names)})")
-    values = {k: _convert(hints[k], v, prefix + k) for k, v in doc.items()}
-    return cls(**values)

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import typing
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from os import PathLike
@@ -18,6 +17,7 @@ from typing import Literal
 
 import yaml
 
+from pipeline.config_schema import load_dataclass
 from pipeline.errors import ConfigError
 
 FORMATS = ("tlog", "ros1", "ros2-sqlite3", "ros2-mcap", "mcap")
@@ -243,10 +243,7 @@ class SynthConfig:
         doc = {} if doc is None else doc
         if isinstance(doc, dict) and "group" not in doc and path is not None:
             doc = {**doc, "group": Path(path).stem}
-        try:
-            return _build(cls, doc, "")
-        except ConfigError as exc:
-            raise ConfigError(str(exc), path) from None
+        return load_dataclass(cls, doc, source=path, style="quoted")
 
     @classmethod
     def load(cls, path: str | PathLike) -> SynthConfig:
@@ -339,50 +336,3 @@ def _check(c: SynthConfig) -> None:
     s = c.scene
     if s.texture_px < 256 or s.texture_res_m <= 0 or s.supersample < 1:
         raise ConfigError("'scene' needs texture_px >= 256, texture_res_m > 0, supersample >= 1")
-
-
-# ---- a small typed loader over the dataclasses above --------------------------------------------------------
-
-def _convert(tp, value, where: str):
-    origin = typing.get_origin(tp)
-    if dataclasses.is_dataclass(tp):
-        if not isinstance(value, dict):
-            raise ConfigError(f"'{where}' must be a mapping of keys, got {type(value).__name__}")
-        return _build(tp, value, where + ".")
-    if origin is Literal:
-        if value not in typing.get_args(tp):
-            raise ConfigError(f"'{where}' must be one of {', '.join(map(repr, typing.get_args(tp)))}, got {value!r}")
-        return value
-    if origin is tuple:
-        if not isinstance(value, (list, tuple)):
-            raise ConfigError(f"'{where}' must be a list, got {type(value).__name__} {value!r}")
-        item = typing.get_args(tp)[0]
-        return tuple(_convert(item, v, f"{where}[{i}]") for i, v in enumerate(value))
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"'{where}' must be true or false, got {value!r}")
-        return value
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"'{where}' must be an integer, got {type(value).__name__} {value!r}")
-        return value
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise ConfigError(f"'{where}' must be a finite number, got {type(value).__name__} {value!r}")
-        return float(value)
-    if tp is str:
-        if not isinstance(value, str):
-            raise ConfigError(f"'{where}' must be a string, got {type(value).__name__} {value!r}")
-        return value
-    raise TypeError(f"unsupported config type {tp}")
-
-
-def _build(cls, doc: dict, prefix: str):
-    if not isinstance(doc, dict):
-        raise ConfigError(f"the top level must be a mapping of keys, got {type(doc).__name__}")
-    hints = typing.get_type_hints(cls)
-    names = [f.name for f in dataclasses.fields(cls)]
-    unknown = sorted(set(doc) - set(names))
-    if unknown:
-        raise ConfigError(f"unknown key(s) {', '.join(prefix + k for k in unknown)} (known: {', '.join(names)})")
-    return cls(**{k: _convert(hints[k], v, prefix + k) for k, v in doc.items()})

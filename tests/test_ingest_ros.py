@@ -151,7 +151,8 @@ def test_real_ros2_talker_qos_mismatch_is_reported():
     (res,) = inspect_paths([path])
     counts = {s.name: s.count for s in res.log.streams}
     assert counts == {"/topic": 10, "/rosout": 10, "/parameter_events": 0}
-    assert any("iterated 0 of 20 messages" in w for w in res.log.warnings)
+    assert any("iterated 0 of 20 messages that metadata.yaml lists on /rosout, /topic" in w
+               for w in res.log.warnings)
     assert res.log.missing_for_localization() == ["position", "attitude", "gimbal", "range", "frames"]
 
 

@@ -80,6 +80,11 @@ def test_boot_time_through_system_time(tmp_path):
     # SYSTEM_TIME: unix = T0 - 4 s - 250 us + (boot - 5000 ms)
     assert log.position.t_ns[0] == (T0_US - 4_000_000 - 250) * 1000
     assert log.clock_links[0].a == "boot" and log.clock_links[0].b == "unix"
+    # CAMERA_TRACKING_GEO_STATUS has no time_boot_ms: record time, said in a warning
+    assert log.range.t_ns[0] == (T0_US + 6) * 1000
+    assert any("CAMERA_TRACKING_GEO_STATUS: record time used (no time_boot_ms" in w for w in log.warnings)
+    with pytest.raises(ConfigError, match="time must be 'record' or 'boot'"):
+        read_flight([p], mapping={"tlog": {"time": "gps"}})
 
 
 def test_unknown_mapping_key_rejected(tmp_path):

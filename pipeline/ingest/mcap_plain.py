@@ -79,6 +79,7 @@ class _JsonAcc:
         if len(self.cols) == 0:
             return None
         a = self.cols.arrays()
+        self.cols = None  # the buffers now live only as long as the views that still need them
         if self.q == "position":
             if len(self.datums) != 1 or next(iter(self.datums)) not in ALT_DATUMS:
                 raise LogReadError(f"{self.source}: altitude datum {sorted(self.datums)} (expected one of "

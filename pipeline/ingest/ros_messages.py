@@ -170,10 +170,11 @@ class RosAccumulator:
 
     def series(self):
         a = self.cols.arrays()
+        self.cols = None  # the buffers now live only as long as the views that still need them
         q, src = self.quantity, self.source
         if q == "camera_info":
             return self.info
-        if len(self.cols) == 0:
+        if a["t"].size == 0:
             return None
         if q == "position":
             t, lat, lon, alt = sort_by_time(a["t"], a["lat"], a["lon"], a["alt"])

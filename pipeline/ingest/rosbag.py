@@ -107,7 +107,7 @@ def read_rosbag(path: str | Path, mapping: dict, scan_all: bool = False) -> Flig
     try:
         topic_types = {c.topic: c.msgtype for c in reader.connections}
         chosen = resolve_topics(mapping, topic_types, warnings, str(path))
-        # frames name the full path: BagImages(path, topic) / pipeline.ingest.frame_decoder reopen it
+        # frames name the full path: BagImages(path, topic) reopens it
         accs = {q: RosAccumulator(q, t, topic_types[t], mapping[q], mapping["stamp"],
                                   f"{path}:{t}" if q == "images" else f"{path.name}:{t}")
                 for q, t in chosen.items()}
@@ -116,11 +116,9 @@ def read_rosbag(path: str | Path, mapping: dict, scan_all: bool = False) -> Flig
             by_topic.setdefault(acc.topic, []).append(acc)
         stats = {c.topic: [0, None, None] for c in reader.connections}
         conns = list(reader.connections) if scan_all else [c for c in reader.connections if c.topic in by_topic]
-        n_iter = 0
         if conns:
             try:
                 for conn, t_rec, raw in reader.messages(connections=conns):
-                    n_iter += 1
                     st = stats[conn.topic]
                     st[0] += 1
                     st[1] = t_rec if st[1] is None else st[1]
@@ -129,8 +127,6 @@ def read_rosbag(path: str | Path, mapping: dict, scan_all: bool = False) -> Flig
                         msg = reader.deserialize(raw, conn.msgtype)
                         for acc in by_topic[conn.topic]:
                             acc.add(msg, t_rec)
-            except LogReadError:
-                raise
             except Exception as exc:
                 read = sum(s[0] for s in stats.values())
                 msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
@@ -138,12 +134,15 @@ def read_rosbag(path: str | Path, mapping: dict, scan_all: bool = False) -> Flig
                     raise LogReadError(f"cannot read messages: {msg}", path=path) from None
                 warnings.append(f"{path}: reading stopped after {read} messages: {msg} (truncated or corrupt)")
         meta_counts = _metadata_counts(path) if fmt == "ros2" else {}
-        expected = sum(meta_counts.get(c.topic, 0) for c in conns)
-        if fmt == "ros2" and n_iter == 0 and expected > 0:
-            warnings.append(f"{path}: rosbags iterated 0 of {expected} messages that metadata.yaml lists (QoS "
-                            "mismatch between metadata.yaml and the storage file?); read the MCAP file directly")
-            if reader.connections and all(str(f).endswith(".mcap") for f in _McapDirect(path).files):
-                for topic, _schema, t_rec, msg in _McapDirect(path).messages({c.topic for c in conns}):
+        silent = sorted({c.topic for c in conns if stats[c.topic][0] == 0 and meta_counts.get(c.topic, 0) > 0})
+        if silent:
+            expected = sum(meta_counts[t] for t in silent)
+            direct = all(str(f).endswith(".mcap") for f in _McapDirect(path).files)
+            warnings.append(f"{path}: rosbags iterated 0 of {expected} messages that metadata.yaml lists on "
+                            f"{', '.join(silent)} (QoS mismatch between metadata.yaml and the storage file?)"
+                            + ("; read them from the MCAP file directly" if direct else ""))
+            if direct:
+                for topic, _schema, t_rec, msg in _McapDirect(path).messages(set(silent)):
                     st = stats[topic]
                     st[0] += 1
                     st[1] = t_rec if st[1] is None else st[1]

@@ -29,6 +29,18 @@ from pipeline.solve.stacked import SINGULAR_DET, Stacked
 
 # ---- small dense algebra on Python floats (the sizes are 3 and 4) --------------------------------------------
 
+try:  # numpy.linalg.eigh/eigvalsh without their per-call wrapping (type checks, errstate): the same LAPACK call
+    from numpy.linalg import _umath_linalg
+
+    def _eigh(a: np.ndarray):
+        return _umath_linalg.eigh_lo(a, signature="d->dd")
+
+    def _eigvalsh(a: np.ndarray):
+        return _umath_linalg.eigvalsh_lo(a, signature="d->d")
+except (ImportError, AttributeError):  # pragma: no cover - other numpy layouts
+    _eigh, _eigvalsh = np.linalg.eigh, np.linalg.eigvalsh
+
+
 def spd_solve(N: np.ndarray, g: np.ndarray, singular_below: float = SINGULAR_DET):
     """(x (k,), singular) for symmetric N (k,k): Jacobi scaling, Cholesky, and the criterion of
     `stacked.solve_spd` (the scaled determinant, the product of the squared Cholesky pivots)."""
@@ -99,7 +111,7 @@ def condition(N: np.ndarray) -> float:
     """cond of the design matrix from its normal matrix, as `stacked.condition_numbers`."""
     if not np.isfinite(N).all():
         return math.nan
-    ev = np.linalg.eigvalsh(N)
+    ev = _eigvalsh(N).tolist()
     return math.sqrt(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
 
 
@@ -153,9 +165,40 @@ class Frames:
         return diff / dist[:, None], self.d - dist
 
     def both(self, X: np.ndarray):
-        Jp, rp = self.pixel(X)
-        Jr, rr = self.range(X)
-        return np.concatenate((Jp, Jr)), np.concatenate((rp, rr))
+        """J (2k+l,3), r (2k+l,): `pixel` rows then `range` rows (views of `both4`)."""
+        A = self.both4(X)
+        return A[:, :3], A[:, 3]
+
+    def both4(self, X: np.ndarray) -> np.ndarray:
+        """[J | r] (2k+l, 4) of `pixel` rows then `range` rows, written into one array (the same arithmetic as
+        `pixel` and `range`, without concatenation)."""
+        npix, k = self.npix, self.n_pix
+        A = np.empty((npix + self.n_rng, 4))
+        q = (self._M2d @ X + self._p4f).reshape(-1, 3)
+        w = q[:, 2:3]
+        uv = q[:, :2] / w
+        Ap = A[:npix].reshape(k, 2, 4)
+        Jp = Ap[..., :3]
+        np.multiply(uv[..., None], self.M3, out=Jp)
+        np.subtract(self.M12, Jp, out=Jp)
+        np.divide(Jp, w[..., None], out=Jp)
+        np.subtract(self.pix, uv, out=Ap[..., 3])
+        diff = np.subtract(X, self.S, out=A[npix:, :3])
+        dist = np.sqrt((diff * diff).sum(axis=1))
+        np.divide(diff, dist[:, None], out=diff)
+        np.subtract(self.d, dist, out=A[npix:, 3])
+        return A
+
+    @property
+    def focal_px(self) -> np.ndarray:
+        """(k,2) focal lengths fx, fy of the frames with a pixel (`Stacked.focal_px`)."""
+        f = self.__dict__.get("_focal")
+        if f is None:
+            g = self.st._gram()[0, self.pix_f]
+            g33 = g[:, 2, 2]
+            f = self.__dict__["_focal"] = np.sqrt(np.maximum(
+                g[:, (0, 1), (0, 1)] * g33[:, None] - g[:, (0, 1), (2, 2)] ** 2, 0.0)) / g33[:, None]
+        return f
 
     def bound(self, X0: np.ndarray) -> float:
         """The divergence bound of `iterate.iterate` for the start X0."""
@@ -179,7 +222,7 @@ def dlt_one(fr: Frames, with_condition: bool = False):
     A = (fr.pix[:, :, None] * Pp[:, 2:3, :] - Pp[:, :2, :]).reshape(-1, 4)
     norm = np.sqrt((A * A).sum(axis=1))
     A = A / np.where(norm > 0, norm, 1.0)[:, None]
-    evals, evecs = np.linalg.eigh(A.T @ A)  # one LAPACK call; the batch's inverse iteration finds the same vector
+    evals, evecs = _eigh(A.T @ A)  # one LAPACK call; the batch's inverse iteration finds the same vector
     x = evecs[:, 0]
     cond = math.nan
     if with_condition:
@@ -366,7 +409,12 @@ def normalized_one(fr: Frames, X0, init_status, tol_m, max_iterations, k=None, h
 def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
             max_iterations: int, init_status):
     """`mle.mle` for one problem. Returns X (3,), iterations, status, cond, covariance (3,3), extras dict of
-    floats (the keys of `mle.mle`) and the final residuals (pixels u v interleaved, then ranges)."""
+    floats (the keys of `mle.mle`) and the final residuals (pixels u v interleaved, then ranges).
+
+    Works on the standardized rows Aw = [J | r] / sd (whitened with correlation times): their weighted Gram
+    matrix holds the normal matrix, the gradient and the cost in one product; the 3x3 steps are solved in
+    closed form on Python floats.
+    """
     npix = fr.npix
     status = Status.MAX_ITERATIONS
     X = np.array(X0, dtype=np.float64)
@@ -377,91 +425,110 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
     W = _whitening_one(fr, X, sigma) if sigma.correlated else None
     if W is None:
         var0 = _base_variances_one(fr, X, sigma)
-        model = fr.both
+        model = fr.both4
     else:  # generalized least squares: whitened rows have unit variance (`correlated`)
         var0 = np.ones(W.shape[0])
 
         def model(X):
-            J, r = fr.both(X)
-            return W @ J, W @ r
+            return W @ fr.both4(X)
+    huber = robust == "huber"
+
+    def evaluate(X, isd):
+        """Aw (m,4), the cost, the IRLS Gram matrix [N g; g^T e'We] as nested lists, |e| (Huber) at X."""
+        Aw = model(X) * isd[:, None]
+        if robust is None:
+            G = (Aw.T @ Aw).tolist()
+            return Aw, 0.5 * G[3][3], G, None
+        if huber:  # cost 0.5 sum(w e^2) + 0.5 c sum(max(|e| - c, 0)), w = c / max(|e|, c) (`mle._rho_and_weight`)
+            a = np.abs(Aw[:, 3])
+            mx = np.maximum(a, HUBER_C)
+            wr = HUBER_C / mx
+            G = (Aw.T @ (Aw * wr[:, None])).tolist()
+            return Aw, 0.5 * (G[3][3] + HUBER_C * float((mx - HUBER_C).sum())), G, (a, wr)
+        e = Aw[:, 3]
+        wr = _rho_and_weight(e, robust)[1]
+        G = (Aw.T @ (Aw * wr[:, None])).tolist()
+        return Aw, _cost(e, robust), G, (e, wr)
+
     vf = [1.0, 1.0]
     m = var0.size
-
-    def var_of(vf):
-        v = var0.copy()
-        v[:npix] *= vf[0]
-        v[npix:] *= vf[1]
-        return v
-
-    var = var_of(vf)
-    sd, ivar = np.sqrt(var), 1.0 / var
-    J, r = model(X)
+    var = var0
+    isd = 1.0 / np.sqrt(var)
+    Aw, cost, G, aux = evaluate(X, isd)
     bound = fr.bound(X0)
-    centre = fr.centre
-    cost = _cost(r / sd, robust)
+    c0, c1, c2 = fr.centre.tolist()
     iterations = 0
     lam = 0.0
     vce_rounds = 0
     newton_ok = True
     for _ in range(0 if bad else max_iterations):
-        if robust is None:
-            JW = J.T * ivar
-            N = JW @ J
+        g0, g1, g2 = G[0][3], G[1][3], G[2][3]
+        if robust is not None and newton_ok:  # Newton: the loss's curvature rho'' in the normal matrix
+            Jw = Aw[:, :3]
+            if huber:
+                a, wr = aux
+                curv = np.where(a <= HUBER_C, 1.0, 0.001 * wr)
+            else:
+                curv = _weight_curvature(aux[0], robust)[1]
+            (a, b, c), (_, d, f), (_, _, i) = ((Jw.T * curv) @ Jw).tolist()
         else:
-            wr, curv = _weight_curvature(r / sd, robust)
-            JW = J.T * (wr * ivar)
-            N = (J.T * (curv * ivar)) @ J if newton_ok else JW @ J
-        g = JW @ r
-        dX, singular = spd_solve(N + lam * np.diag(np.diag(N)) if lam else N, g)
+            (a, b, c, _), (_, d, f, _), (_, _, i, _), _ = G
         iterations += 1
-        Xn = X if singular else X + dX
-        if _finite(Xn):
-            diff = Xn - centre
-            exploded = math.sqrt(float(diff @ diff)) > bound
-        else:
-            exploded = True
-        if exploded:
-            Xn = X
-        Jn, rn = model(Xn)
-        cost_n = _cost(rn / sd, robust)
-        accept = not singular and not exploded and cost_n <= cost * (1 + 1e-12) + 1e-300
-        step_norm = math.inf if singular else math.sqrt(float(dX @ dX))
+        # N + lam diag(N), solved by Cramer's rule with the `stacked.solve_spd` criterion
+        if lam:
+            a, d, i = a + lam * a, d + lam * d, i + lam * i
+        singular = True
+        if a > 0 and d > 0 and i > 0 and math.isfinite(a + b + c + d + f + i):
+            A0, B0, C0 = d * i - f * f, c * f - b * i, b * f - c * d
+            det = a * A0 + b * B0 + c * C0
+            if det / (a * d * i) > SINGULAR_DET:
+                singular = False
+                D0, E0, F0 = a * i - c * c, b * c - a * f, a * d - b * b
+                dx0 = (A0 * g0 + B0 * g1 + C0 * g2) / det
+                dx1 = (B0 * g0 + D0 * g1 + E0 * g2) / det
+                dx2 = (C0 * g0 + E0 * g1 + F0 * g2) / det
+        if singular:  # never 'small' (an infinite step): the geometry does not determine the target
+            status = Status.DEGENERATE
+            break
+        x0, x1, x2 = X.tolist()
+        n0, n1, n2 = x0 + dx0, x1 + dx1, x2 + dx2
+        if not math.isfinite(n0 + n1 + n2) or math.sqrt((n0 - c0) ** 2 + (n1 - c1) ** 2 + (n2 - c2) ** 2) > bound:
+            status = Status.DIVERGED
+            break
+        Xn = np.array((n0, n1, n2))
+        trial = evaluate(Xn, isd)
+        accept = trial[1] <= cost * (1 + 1e-12) + 1e-300
         if accept:
-            X, J, r, cost = Xn, Jn, rn, cost_n
+            X = Xn
+            Aw, cost, G, aux = trial
             lam = 0.0 if lam / 10 < 1e-9 else lam / 10
             newton_ok = True
         elif robust is not None and newton_ok:
             newton_ok = False  # retry as the IRLS step before damping
         else:
             lam = 1e-4 if lam == 0 else lam * 10
-        small = step_norm <= tol_m
-        if singular and not small:
-            status = Status.DEGENERATE
-            break
-        if exploded and not singular:
-            status = Status.DIVERGED
-            break
-        inner_done = small or (not accept and lam > 1e12)
+        inner_done = math.sqrt(dx0 * dx0 + dx1 * dx1 + dx2 * dx2) <= tol_m or (not accept and lam > 1e12)
         if vce and inner_done:
-            factors, usable = _vce_factors(J, r, var, npix, robust)
+            factors, usable = _vce_factors(Aw[:, :3], Aw[:, 3], npix, robust)
             more = [usable[k] and abs(factors[k] - 1) > VCE_TOL for k in (0, 1)]
             if any(more) and vce_rounds < VCE_MAX_ROUNDS:
                 vf = [vf[k] * factors[k] if usable[k] else vf[k] for k in (0, 1)]
                 vce_rounds += 1
-                var = var_of(vf)
-                sd, ivar = np.sqrt(var), 1.0 / var
-                cost = _cost(r / sd, robust)
+                var = var0.copy()
+                var[:npix] *= vf[0]
+                var[npix:] *= vf[1]
+                isd = 1.0 / np.sqrt(var)
+                Aw, cost, G, aux = evaluate(X, isd)
                 lam = 0.0
                 continue
         if inner_done:
             status = Status.CONVERGED
             break
     failed = status in (Status.DIVERGED, Status.DEGENERATE)
-    _, wr = _rho_and_weight(r / np.sqrt(var), robust)
-    w = wr / var
-    N = (J.T * w) @ J
+    N = np.array(G)[:3, :3]  # the IRLS weights at the final iterate
+    e = Aw[:, 3]
     # the reported residuals are observed - predicted, not whitened
-    resid = r if W is None else fr.both(X)[1]
+    resid = e / isd if W is None else fr.both4(X)[:, 3]
     cov, singular = inv3(N)
     cond = condition(N)
     if singular and not failed:
@@ -472,7 +539,7 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
         cov = np.full((3, 3), np.nan)
         if not singular:
             cond = math.nan
-    sigma0_sq = float((w * r * r).sum() / (m - 3)) if m > 3 else math.nan
+    sigma0_sq = G[3][3] / (m - 3) if m > 3 else math.nan
     extras = {"variance_factor_pixel": vf[0], "variance_factor_range": vf[1], "sigma0_sq": sigma0_sq,
               "vce_rounds": vce_rounds}
     return X, iterations, status, cond, 0.5 * (cov + cov.T), extras, resid
@@ -485,9 +552,7 @@ def _whitening_one(fr: Frames, X0: np.ndarray, sigma: Sigma) -> np.ndarray:
     n = st.n
     t_ns = st.t_ns[0] if st.t_ns is not None else np.arange(n, dtype=np.int64) * 1_000_000_000
     t_s = (t_ns - t_ns.min()).astype(np.float64) * 1e-9  # differences of int64 first: no rounding of epochs
-    g = st._gram()[0, fr.pix_f]
-    g33 = g[:, 2, 2]
-    fxy = np.sqrt(np.maximum(g[:, (0, 1), (0, 1)] * g33[:, None] - g[:, (0, 1), (2, 2)] ** 2, 0.0)) / g33[:, None]
+    fxy = fr.focal_px
     diff = X0 - st.platform_m[0, fr.pix_f]
     D = np.sqrt((diff * diff).sum(axis=1))
     return _correlated.whitening_matrix(t_s[fr.pix_f], t_s[fr.rng_f], fxy[:, 0], fxy[:, 1], D, sigma)
@@ -499,15 +564,17 @@ def _base_variances_one(fr: Frames, X0: np.ndarray, sigma: Sigma) -> np.ndarray:
     s_r = 1.0 if sigma.range_m is None else sigma.range_m
     s_pos = 0.0 if sigma.position_m is None else sigma.position_m
     s_att = 0.0 if sigma.attitude_deg is None else math.radians(sigma.attitude_deg)
-    g = fr.st._gram()[0, fr.pix_f]
-    g33 = g[:, 2, 2]
-    fxy = np.sqrt(np.maximum(g[:, (0, 1), (0, 1)] * g33[:, None] - g[:, (0, 1), (2, 2)] ** 2, 0.0)) / g33[:, None]
-    ang2 = s_att ** 2
+    var = np.empty(fr.npix + fr.n_rng)
+    f2 = fr.focal_px ** 2
     if s_pos > 0:
         diff = X0 - fr.st.platform_m[0, fr.pix_f]
         D2 = (diff * diff).sum(axis=1)
-        ang2 = ang2 + np.where(np.isfinite(D2) & (D2 > 0), s_pos ** 2 / np.where(D2 > 0, D2, 1.0), 0.0)[:, None]
-    var = np.concatenate(((s_px ** 2 + fxy ** 2 * ang2).ravel(), np.full(fr.n_rng, s_r ** 2 + s_pos ** 2)))
+        ang2 = s_att ** 2 + np.where(np.isfinite(D2) & (D2 > 0), s_pos ** 2 / np.where(D2 > 0, D2, 1.0), 0.0)[:, None]
+        np.multiply(f2, ang2, out=var[:fr.npix].reshape(-1, 2))
+    else:
+        np.multiply(f2, s_att ** 2, out=var[:fr.npix].reshape(-1, 2))
+    var[:fr.npix] += s_px ** 2
+    var[fr.npix:] = s_r ** 2 + s_pos ** 2
     return np.where(var > 0, var, 1.0)
 
 
@@ -517,8 +584,8 @@ def summaries_one(cov: np.ndarray) -> dict:
         nan = np.full(1, np.nan)
         return {"cep50_m": nan, "cep90_m": nan.copy(), "ellipsoid_semi_axes_1sigma_m": np.full((1, 3), np.nan),
                 "ellipsoid_axes": np.full((1, 3, 3), np.nan)}
-    ev, vec = np.linalg.eigh(cov)
-    a, b, c = float(cov[0, 0]), float(cov[0, 1]), float(cov[1, 1])
+    ev, vec = _eigh(cov)
+    (a, b, _), (_, c, _), _ = cov.tolist()
     half = math.sqrt(0.25 * (a - c) ** 2 + b * b)
     s1 = math.sqrt(max(0.5 * (a + c) + half, 0.0))
     s2 = math.sqrt(max(0.5 * (a + c) - half, 0.0))
@@ -548,12 +615,12 @@ def _cost(e: np.ndarray, robust: str | None) -> float:
     return 0.5 * CAUCHY_C ** 2 * float(np.log1p((e / CAUCHY_C) ** 2).sum())
 
 
-def _vce_factors(J, r, var, npix, robust):
-    _, wr = _rho_and_weight(r / np.sqrt(var), robust)
-    w = wr / var
-    Ninv, _ = inv3((J.T * w) @ J)
-    lev = w * ((J @ Ninv) * J).sum(axis=1)
-    q = w * r * r
+def _vce_factors(Jw, e, npix, robust):
+    """`mle._vce_factors` on the standardized rows Jw = J / sd, e = r / sd."""
+    wr = _rho_and_weight(e, robust)[1]
+    Ninv, _ = inv3((Jw.T * wr) @ Jw)
+    lev = wr * ((Jw @ Ninv) * Jw).sum(axis=1)
+    q = wr * e * e
     out, usable = [1.0, 1.0], [False, False]
     for k, sl in ((0, slice(0, npix)), (1, slice(npix, None))):
         red = float((1.0 - lev[sl]).sum())

@@ -13,7 +13,6 @@ import copy
 import dataclasses
 import difflib
 import functools
-import reprlib
 import types
 import typing
 from os import PathLike
@@ -33,8 +32,6 @@ _NUMBER = {"int_type": "an integer", "int_parsing": "an integer", "int_from_floa
 _KIND = {"bool_type": "true or false", "bool_parsing": "true or false", "string_type": "a string",
          "tuple_type": "a list", "list_type": "a list", "dict_type": "a mapping",
          "dataclass_type": "a mapping of keys", "dataclass_args_type": "a mapping of keys"}
-_repr = reprlib.Repr()
-_repr.maxstring, _repr.maxother = 60, 60
 
 
 def load_dataclass(cls: type[T], doc, *, source: str | PathLike | None = None,
@@ -97,7 +94,7 @@ def format_error(exc: pydantic.ValidationError, doc, cls: type, *, style: str = 
     err = errors[0]
     keys = _key_path(err, doc)
     if err["loc"][-1:] == ("[key]",):  # a mapping's key, not its value
-        return _sentence(keys[:-1], f"has a key that is not a string: {_repr.repr(err['input'])}", style)
+        return _sentence(keys[:-1], f"has a key that is not a string: {_show(err['input'])}", style)
     if err["type"] in ("value_error", "assertion_error") and "error" in err.get("ctx", {}):
         return f"{_render(keys)}: {err['ctx']['error']}" if keys else str(err["ctx"]["error"])
     return _sentence(keys, _problem(err, errors, style), style)
@@ -120,6 +117,11 @@ def _key_path(err: dict, doc) -> list[str | int]:
     return keys
 
 
+def _show(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else f"{text[:57]}..."
+
+
 def _render(keys) -> str:
     return "".join(f"[{k}]" if isinstance(k, int) else f".{k}" for k in keys).lstrip(".")
 
@@ -132,15 +134,15 @@ def _sentence(keys, problem: str, style: str) -> str:
 
 def _problem(err: dict, errors: list[dict], style: str) -> str:
     kind, value = err["type"], err["input"]
-    got = f"got {'null' if value is None else type(value).__name__} {_repr.repr(value)}"
+    got = f"got {'null' if value is None else type(value).__name__} {_show(value)}"
     if kind in _NUMBER:
         if style == "path" and isinstance(value, str) and any(c.isalpha() for c in value):
-            return f"must be a plain number (the unit is in the key's name), got {_repr.repr(value)}"
+            return f"must be a plain number (the unit is in the key's name), got {_show(value)}"
         return f"must be {_NUMBER[kind]}, {got}"
     if kind in _KIND:
         return f"must be {_KIND[kind]}, {got}"
     if kind == "literal_error":
-        return f"must be one of {err['ctx']['expected']}, got {_repr.repr(value)}"
+        return f"must be one of {err['ctx']['expected']}, got {_show(value)}"
     if kind == "missing":
         if isinstance(value, (list, tuple)):  # a fixed-length list: pydantic names each missing item
             n_missing = sum(e["type"] == "missing" and e["loc"][:-1] == err["loc"][:-1] for e in errors)
@@ -153,15 +155,21 @@ def _problem(err: dict, errors: list[dict], style: str) -> str:
 
 
 def _unknown_keys(keys: list, known: list[str] | None, style: str) -> str:
-    names = [str(k[-1]) for k in keys]
     hint = ""
     if known is not None:
-        near = [f for f in known if f.startswith(f"{names[0]}_")] or difflib.get_close_matches(names[0], known, 1, 0.5)
-        hint = f" (did you mean '{near[0]}'?)" if len(names) == 1 and near else f" (known: {', '.join(known)})"
+        near = [_near(str(k[-1]), known) for k in keys]
+        hint = (f" (did you mean {', '.join(repr(n) for n in near)}?)" if all(near)
+                else f" (known: {', '.join(known)})")
     where = ", ".join(_render(k) for k in keys)
     if style == "quoted":
         return f"unknown key(s) {where}{hint}"
     return f"{where}: unknown key{'s' if len(keys) > 1 else ''}{hint}"
+
+
+def _near(name: str, known: list[str]) -> str | None:
+    """The known key `name` most likely means: the one that adds a unit (`fx` -> `fx_px`), else a close spelling."""
+    near = [k for k in known if k.startswith(f"{name}_")] or difflib.get_close_matches(name, known, 1, 0.5)
+    return near[0] if near else None
 
 
 def _field_names(cls: type, keys) -> list[str] | None:

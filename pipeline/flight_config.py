@@ -10,10 +10,7 @@ A run config (configs/sample.yaml) lists flight configs under `groups:`; `load_r
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import json
-import math
-import types
 import typing
 from dataclasses import dataclass, field
 from os import PathLike
@@ -22,108 +19,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from pipeline.config_schema import load_dataclass
 from pipeline.errors import ConfigError
 from pipeline.track.sift import TrackerSettings
-
-# ---- a small declarative validator over dataclasses ---------------------------------------------------------
-
-
-class _Invalid(Exception):
-    def __init__(self, where: str, message: str):
-        super().__init__(f"{where}: {message}" if where else message)
-
-
-def _type_name(v) -> str:
-    return "null" if v is None else type(v).__name__
-
-
-def _number(v, where: str, *, integer: bool = False) -> float | int:
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        if isinstance(v, str) and any(c.isalpha() for c in v):
-            raise _Invalid(where, f"must be a plain number (the unit is in the key's name), got {v!r}")
-        raise _Invalid(where, f"must be a number, got {_type_name(v)} {v!r}")
-    if integer:
-        if isinstance(v, float) and not v.is_integer():
-            raise _Invalid(where, f"must be an integer, got {v!r}")
-        return int(v)
-    if not math.isfinite(v):
-        raise _Invalid(where, f"must be finite, got {v!r}")
-    return float(v)
-
-
-def _coerce(value, tp, where: str):
-    origin = typing.get_origin(tp)
-    if origin in (typing.Union, types.UnionType):
-        args = typing.get_args(tp)
-        if value is None and type(None) in args:
-            return None
-        first: _Invalid | None = None
-        for arg in (a for a in args if a is not type(None)):
-            try:
-                return _coerce(value, arg, where)
-            except _Invalid as exc:
-                first = first or exc
-        raise first
-    if tp is typing.Any:
-        return value
-    if dataclasses.is_dataclass(tp):
-        return _build(tp, value, where)
-    if tp is float:
-        return _number(value, where)
-    if tp is int:
-        return _number(value, where, integer=True)
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise _Invalid(where, f"must be true or false, got {value!r}")
-        return value
-    if tp is str:
-        if not isinstance(value, str):
-            raise _Invalid(where, f"must be a string, got {_type_name(value)}")
-        return value
-    if origin is tuple:
-        args = typing.get_args(tp)
-        if not isinstance(value, (list, tuple)):
-            raise _Invalid(where, f"must be a list, got {_type_name(value)} {value!r}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_coerce(v, args[0], f"{where}[{i}]") for i, v in enumerate(value))
-        if len(value) != len(args):
-            raise _Invalid(where, f"must have {len(args)} elements, got {len(value)}")
-        return tuple(_coerce(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args, strict=True)))
-    if origin is dict:
-        if not isinstance(value, dict):
-            raise _Invalid(where, f"must be a mapping, got {_type_name(value)}")
-        return dict(value)
-    if typing.get_origin(tp) is typing.Literal:
-        if value not in typing.get_args(tp):
-            raise _Invalid(where, f"must be one of {list(typing.get_args(tp))}, got {value!r}")
-        return value
-    raise TypeError(f"unsupported config type {tp}")  # a bug in this module, not a user error
-
-
-def _build(cls, d, where: str):
-    if not isinstance(d, dict):
-        raise _Invalid(where, f"must be a mapping of keys, got {_type_name(d)} {d!r}")
-    hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
-    unknown = [k for k in d if k not in fields]
-    if unknown:
-        k = unknown[0]
-        with_unit = [f for f in fields if f.startswith(f"{k}_")]
-        near = with_unit or difflib.get_close_matches(str(k), list(fields), n=1, cutoff=0.5)
-        hint = f" (did you mean '{near[0]}'?)" if near else f" (known: {', '.join(fields)})"
-        raise _Invalid(f"{where}.{k}" if where else str(k), f"unknown key{hint}")
-    kwargs = {}
-    for name, f in fields.items():
-        sub = f"{where}.{name}" if where else name
-        if name in d:
-            kwargs[name] = _coerce(d[name], hints[name], sub)
-        elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-            raise _Invalid(sub, "is required")
-    try:
-        return cls(**kwargs)
-    except ValueError as exc:
-        raise _Invalid(where, str(exc)) from None
-
 
 # ---- the flight configuration ------------------------------------------------------------------------------
 
@@ -318,10 +216,7 @@ def flight_config_from_dict(doc: dict, path: str | PathLike | None = None) -> Fl
     base = where.resolve().parent if where is not None else Path.cwd()
     if isinstance(doc, dict) and "path" in doc:
         raise ConfigError("path: unknown key", where)
-    try:
-        cfg = _build(FlightConfig, doc, "")
-    except _Invalid as exc:
-        raise ConfigError(str(exc), where) from None
+    cfg = load_dataclass(FlightConfig, doc, source=where, integral_floats=True)
     files = dataclasses.replace(
         cfg.files,
         telemetry=tuple(_resolve(base, p, f"files.telemetry[{i}]", where) for i, p in enumerate(cfg.files.telemetry)),

@@ -1,10 +1,10 @@
 """Typed YAML -> frozen dataclass loading, validated by pydantic, errors as one-line `ConfigError`s.
 
-`load_dataclass(cls, doc, source=path)` builds `cls` (a stdlib dataclass, nested dataclasses allowed) from a
-parsed YAML document. YAML rules: scalars are strict (no "3" -> 3, no true -> 1, no 3 -> "3"; ints are accepted
-as floats and become floats; NaN/inf are rejected), mappings build dataclasses, lists build tuples, unknown keys
-are rejected. A mistake becomes one `ConfigError` naming the file and the key path, e.g.
-`configs/x.yaml: noise.laser_m: must be a finite number, got str 'abc'`.
+`read_yaml(path)` parses a config file; `load_dataclass(cls, doc, source=path)` builds `cls` (a stdlib dataclass,
+nested dataclasses allowed) from the parsed document. YAML rules: scalars are strict (no "3" -> 3, no true -> 1,
+no 3 -> "3"; ints are accepted as floats and become floats; NaN/inf are rejected), mappings build dataclasses,
+lists build tuples, unknown keys are rejected. A mistake becomes one `ConfigError` naming the file and the key path,
+e.g. `configs/x.yaml: noise.laser_m: must be a finite number, got str 'abc'`. `to_plain` is the way back.
 """
 
 from __future__ import annotations
@@ -16,9 +16,11 @@ import functools
 import types
 import typing
 from os import PathLike
+from pathlib import Path
 from typing import Literal, TypeVar
 
 import pydantic
+import yaml
 from pydantic_core import SchemaValidator, core_schema
 
 from pipeline.errors import ConfigError
@@ -32,6 +34,35 @@ _NUMBER = {"int_type": "an integer", "int_parsing": "an integer", "int_from_floa
 _KIND = {"bool_type": "true or false", "bool_parsing": "true or false", "string_type": "a string",
          "tuple_type": "a list", "list_type": "a list", "dict_type": "a mapping",
          "dataclass_type": "a mapping of keys", "dataclass_args_type": "a mapping of keys"}
+
+
+def read_yaml(path: str | PathLike):
+    """The YAML document in `path` (None if empty), or ConfigError naming the file (and the line of a syntax error)."""
+    path = Path(path)
+    try:
+        return yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError("config file not found", path) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"cannot read: {exc}", path) from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        at = f" at line {mark.line + 1} column {mark.column + 1}" if mark is not None else ""
+        problem = str(getattr(exc, "problem", None) or exc).replace("\n", " ")
+        raise ConfigError(f"not valid YAML{at}: {problem}", path) from None
+
+
+def to_plain(obj) -> dict:
+    """A dataclass as nested dicts, lists and scalars (tuples become lists), as `load_dataclass` reads it back."""
+    return _plain(dataclasses.asdict(obj))
+
+
+def _plain(value):
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
 
 
 def load_dataclass(cls: type[T], doc, *, source: str | PathLike | None = None,

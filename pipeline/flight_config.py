@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from pipeline.config_schema import load_dataclass
+from pipeline.config_schema import load_dataclass, read_yaml
 from pipeline.errors import ConfigError
 from pipeline.track.sift import TrackerSettings
 
@@ -231,16 +231,7 @@ def flight_config_from_dict(doc: dict, path: str | PathLike | None = None) -> Fl
 
 
 def _read_yaml(path: Path) -> dict:
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise ConfigError("config file not found", path) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read: {exc}", path) from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        at = f" at line {mark.line + 1} column {mark.column + 1}" if mark else ""
-        raise ConfigError(f"not valid YAML{at}: {getattr(exc, 'problem', exc)}", path) from None
+    doc = read_yaml(path)
     if not isinstance(doc, dict):
         raise ConfigError("the top level must be a mapping of keys", path)
     return doc

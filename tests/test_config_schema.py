@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from pipeline.config_schema import load_dataclass
+from pipeline.config_schema import load_dataclass, read_yaml, to_plain
 from pipeline.errors import ConfigError
 
 
@@ -124,3 +124,22 @@ def test_without_a_source_the_message_has_no_file():
     with pytest.raises(ConfigError, match=r"^lens\.count: must be an integer, got str '3'$") as info:
         load_dataclass(Rig, {"lens": {"count": "3"}})
     assert info.value.path is None
+
+
+def test_to_plain_reads_back():
+    rig = Rig(lens=Lens(coeffs=(1.0, 2.0)), lenses=(Lens(count=4),), site=Site(3.0, 4.0))
+    plain = to_plain(rig)
+    assert plain["lens"]["coeffs"] == [1.0, 2.0] and plain["lenses"][0]["count"] == 4
+    assert load_dataclass(Rig, plain) == rig
+
+
+def test_read_yaml_errors_are_one_line_naming_the_file(tmp_path):
+    with pytest.raises(ConfigError, match="config file not found"):
+        read_yaml(tmp_path / "none.yaml")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("a: 1\nb: [2,\n")
+    with pytest.raises(ConfigError, match=r"bad\.yaml: not valid YAML at line 3 column 1: ") as info:
+        read_yaml(bad)
+    assert "\n" not in str(info.value)
+    (tmp_path / "empty.yaml").write_text("")
+    assert read_yaml(tmp_path / "empty.yaml") is None

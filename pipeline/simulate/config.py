@@ -14,9 +14,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Literal
 
-import yaml
-
-from pipeline.config_schema import load_dataclass
+from pipeline.config_schema import load_dataclass, read_yaml, to_plain
 from pipeline.errors import ConfigError
 
 ALL_METHODS = ("dlt", "vision", "range", "los", "fusion-raw", "fusion", "ridge", "mle")
@@ -119,32 +117,13 @@ class SimulationConfig:
 
     @classmethod
     def load(cls, path: str | PathLike) -> SimulationConfig:
-        path = Path(path)
-        try:
-            doc = yaml.safe_load(path.read_text())
-        except FileNotFoundError:
-            raise ConfigError("config file not found", path) from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ConfigError(f"cannot read: {exc}", path) from None
-        except yaml.YAMLError as exc:
-            mark = getattr(exc, "problem_mark", None)
-            where = f" at line {mark.line + 1} column {mark.column + 1}" if mark is not None else ""
-            raise ConfigError(f"not valid YAML: {getattr(exc, 'problem', None) or exc}{where}", path) from None
-        return cls.from_dict(doc, path)
+        return cls.from_dict(read_yaml(path), path)
 
     def replace(self, **changes) -> SimulationConfig:
         return dataclasses.replace(self, **changes)
 
     def to_dict(self) -> dict:
-        return _to_plain(dataclasses.asdict(self))
-
-
-def _to_plain(value):
-    if isinstance(value, dict):
-        return {k: _to_plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_to_plain(v) for v in value]
-    return value
+        return to_plain(self)
 
 
 def _check_config(cfg: SimulationConfig) -> None:

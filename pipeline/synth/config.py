@@ -15,9 +15,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Literal
 
-import yaml
-
-from pipeline.config_schema import load_dataclass
+from pipeline.config_schema import load_dataclass, read_yaml, to_plain
 from pipeline.errors import ConfigError
 
 FORMATS = ("tlog", "ros1", "ros2-sqlite3", "ros2-mcap", "mcap")
@@ -247,30 +245,13 @@ class SynthConfig:
 
     @classmethod
     def load(cls, path: str | PathLike) -> SynthConfig:
-        path = Path(path)
-        try:
-            doc = yaml.safe_load(path.read_text())
-        except FileNotFoundError:
-            raise ConfigError("config file not found", path) from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ConfigError(f"cannot read: {exc}", path) from None
-        except yaml.YAMLError as exc:
-            raise ConfigError(f"not valid YAML: {exc}".replace("\n", " "), path) from None
-        return cls.from_dict(doc, path)
+        return cls.from_dict(read_yaml(path), path)
 
     def replace(self, **changes) -> SynthConfig:
         return dataclasses.replace(self, **changes)
 
     def to_dict(self) -> dict:
-        return _to_plain(dataclasses.asdict(self))
-
-
-def _to_plain(value):
-    if isinstance(value, dict):
-        return {k: _to_plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_to_plain(v) for v in value]
-    return value
+        return to_plain(self)
 
 
 def _check(c: SynthConfig) -> None:

@@ -215,3 +215,45 @@ def test_ros2_mcap_bag_cut_off(tmp_path):
     assert any("reading stopped after" in w for w in log.warnings)
     assert 20 < log.position.t_ns.size < 199 and log.position.t_ns[0] == T0 + 100_000_000
     np.testing.assert_allclose(log.attitude.quat_wxyz[0], [1, 0, 0, 0], atol=1e-12)
+
+
+def _image_rows(n=12):
+    rows = []
+    for i in range(n):
+        img = np.full((16, 24, 3), i * 20, np.uint8)
+        _, png = cv2.imencode(".png", img)
+        rows.append(("/uav/camera/image/compressed", T0 + i * 10**8 + 9,
+                     *ros_message("compressed", T0 + i * 10**8, data=png.tobytes(), format="png")))
+    return rows
+
+
+def test_bag_images_from_cut_ros1_bag_and_plain_mcap(tmp_path):
+    full = tmp_path / "img.bag"
+    write_ros_bag(full, _image_rows() + _rows(12), "ros1")
+    cut = tmp_path / "img_cut.bag"
+    cut.write_bytes(full.read_bytes()[: int(full.stat().st_size * 0.7)])
+    bag = BagImages(cut)
+    n = bag.frames.t_ns.size
+    assert 3 < n < 12 and bag.frames.t_ns[1] == T0 + 10**8
+    assert bag.read([n - 1])[n - 1][0, 0, 0] == (n - 1) * 20
+
+    from mcap_ros2.writer import Writer as Ros2Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    p = tmp_path / "images.mcap"
+    ty = "sensor_msgs/msg/CompressedImage"
+    with open(p, "wb") as f:
+        w = Ros2Writer(f)
+        schema = w.register_msgdef(ty, ts.generate_msgdef(ty, ros_version=2)[0])
+        for i in range(5):
+            _, png = cv2.imencode(".png", np.full((8, 10), 40 * i, np.uint8))
+            w.write_message("/cam/compressed", schema, {"header": {"stamp": {"sec": 1_700_000_000, "nanosec": i},
+                                                                   "frame_id": "cam"},
+                                                        "format": "png", "data": png.tobytes()},
+                            log_time=T0 + i, publish_time=T0 + i)
+        w.finish()
+    log = read_flight([p])
+    assert log.frames.t_ns.tolist() == [T0 + i for i in range(5)] and log.frames.width_px == 10
+    imgs = BagImages(p).read([4, 2])
+    assert imgs[4][0, 0] == 160 and imgs[2].shape == (8, 10)

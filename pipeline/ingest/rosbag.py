@@ -250,9 +250,101 @@ def _fill(log: FlightLog, accs: dict[str, RosAccumulator], warnings: list[str], 
             setattr(log, q, s)
 
 
+class _RosbagsSource:
+    """Image-topic access through rosbags (bags it can open)."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        reader = _open_reader(path)
+        self.topic_types = {c.topic: c.msgtype for c in reader.connections}
+        reader.close()
+
+    def messages(self, topic: str):
+        """(record time ns, decode()) per message of `topic`, in order; decode() deserializes that one only."""
+        reader = _open_reader(self.path)
+        try:
+            msgtype = self.topic_types[topic]
+            conns = [c for c in reader.connections if c.topic == topic]
+            for _conn, t_rec, raw in reader.messages(connections=conns):
+                yield t_rec, (lambda raw=raw: reader.deserialize(raw, msgtype))
+        finally:
+            reader.close()
+
+
+class _Ros1ScanSource:
+    """Image-topic access in a ROS 1 bag rosbags cannot open (no index), by scanning its records."""
+
+    def __init__(self, path: Path):
+        from pipeline.ingest.rosbag1_scan import UnindexedBag1
+
+        self.bag = UnindexedBag1(path)
+        self.topic_types = {t: ty for t, ty, _ in self.bag.connections.values()}
+
+    def messages(self, topic: str):
+        for _topic, msgtype, t_rec, raw in self.bag.messages({topic}):
+            yield t_rec, (lambda raw=raw, msgtype=msgtype: self.bag.deserialize(raw, msgtype))
+
+
+class _McapSource:
+    """Image-topic access in MCAP files (a plain .mcap, or the files of a ROS 2 bag rosbags cannot open); CDR
+    decoded by mcap_ros2; files without a summary are scanned linearly."""
+
+    def __init__(self, files: list[Path]):
+        from pipeline.ingest.mcap_plain import _scan_channels
+
+        self.files = files
+        self.topic_types: dict[str, str] = {}
+        for f in files:
+            with open(f, "rb") as fh:
+                channels, schemas = _scan_channels(fh, f)
+            for ch in channels.values():
+                if ch.message_encoding == "cdr" and ch.schema_id in schemas:
+                    self.topic_types[ch.topic] = normalize_type(schemas[ch.schema_id].name)
+
+    def messages(self, topic: str):
+        from mcap_ros2.decoder import DecoderFactory
+
+        from pipeline.ingest.mcap_plain import _errors, _linear_messages
+
+        factory = DecoderFactory()
+        for f in self.files:
+            with open(f, "rb") as fh:
+                decoders: dict[int, object] = {}
+                try:
+                    for schema, channel, message in _linear_messages(fh, {topic}):
+                        if channel.id not in decoders:
+                            decoders[channel.id] = factory.decoder_for(channel.message_encoding, schema)
+                        dec = decoders[channel.id]
+                        yield message.log_time, (lambda data=message.data, dec=dec: dec(data))
+                except _errors():
+                    return  # file cut off: the images before the cut are all there is
+
+
+def _image_source(path: Path):
+    """The first way of reading `path` that works: rosbags, then a record scan (ROS 1) or the MCAP library."""
+    if path.is_file() and path.suffix.lower() == ".mcap" and not (path.parent / "metadata.yaml").is_file():
+        return _McapSource([path])
+    try:
+        return _RosbagsSource(path)
+    except LogReadError as exc:
+        try:
+            if path.is_dir():
+                files = _McapDirect(path).files
+                if files and all(f.suffix == ".mcap" and f.is_file() for f in files):
+                    return _McapSource(files)
+            else:
+                src = _Ros1ScanSource(path)
+                if src.topic_types:
+                    return src
+        except Exception:
+            pass
+        raise exc from None
+
+
 class BagImages:
-    """The images of one topic of a bag (ROS 1 file or ROS 2 folder): `frames` (FrameSeries: header stamps on
-    the UNIX clock, index = message number on the topic) and `read(indices)` decoding only those messages."""
+    """The images of one topic of a bag (ROS 1 file, ROS 2 folder, or plain MCAP file with ROS 2 messages):
+    `frames` (FrameSeries: header stamps on the UNIX clock, index = message number on the topic) and
+    `read(indices)` decoding only those messages."""
 
     def __init__(self, path, topic: str | None = None, mapping: dict | None = None):
         from pipeline.ingest.mapping import mapping_for
@@ -261,25 +353,20 @@ class BagImages:
         cfg = mapping_for("ros", mapping)
         if topic is not None:
             cfg["images"]["topic"] = topic
-        reader = _open_reader(self.path)
-        try:
-            topic_types = {c.topic: c.msgtype for c in reader.connections}
-            warnings: list[str] = []
-            chosen = resolve_topics(cfg, topic_types, warnings, str(self.path))
-            if "images" not in chosen:
-                raise LogReadError(f"no image topic ({topic or cfg['images']['topic']}) in the bag", path=self.path)
-            self.topic = chosen["images"]
-            self.msgtype = topic_types[self.topic]
-            acc = RosAccumulator("images", self.topic, self.msgtype, cfg["images"], cfg["stamp"],
-                                 f"{self.path}:{self.topic}")
-            conns = [c for c in reader.connections if c.topic == self.topic]
-            first = None
-            for _conn, t_rec, raw in reader.messages(connections=conns):
-                msg = reader.deserialize(raw, self.msgtype)  # header stamp; pixels stay an undecoded byte array
-                first = msg if first is None else first
-                acc.add(msg, t_rec)
-        finally:
-            reader.close()
+        self._source = _image_source(self.path)
+        warnings: list[str] = []
+        chosen = resolve_topics(cfg, self._source.topic_types, warnings, str(self.path))
+        if "images" not in chosen:
+            raise LogReadError(f"no image topic ({topic or cfg['images']['topic']}) in the bag", path=self.path)
+        self.topic = chosen["images"]
+        self.msgtype = self._source.topic_types[self.topic]
+        acc = RosAccumulator("images", self.topic, self.msgtype, cfg["images"], cfg["stamp"],
+                             f"{self.path}:{self.topic}")
+        first = None
+        for t_rec, decode in self._source.messages(self.topic):
+            msg = decode()  # header stamp; pixels stay an undecoded byte array
+            first = msg if first is None else first
+            acc.add(msg, t_rec)
         frames = acc.series()
         if frames is None:
             raise LogReadError(f"image topic {self.topic} has no messages", path=self.path)
@@ -290,23 +377,20 @@ class BagImages:
 
     def read(self, indices) -> dict[int, np.ndarray]:
         """Decode the messages with these indices (message number on the topic) -> {index: image}."""
-        want = sorted(set(int(i) for i in indices))
+        wanted = set(int(i) for i in indices)
         out: dict[int, np.ndarray] = {}
-        if not want:
+        if not wanted:
             return out
-        reader = _open_reader(self.path)
+        it = self._source.messages(self.topic)
         try:
-            conns = [c for c in reader.connections if c.topic == self.topic]
-            wanted = set(want)
-            for i, (_conn, _t, raw) in enumerate(reader.messages(connections=conns)):
+            for i, (_t, decode) in enumerate(it):
                 if i in wanted:
-                    out[i] = decode_image(reader.deserialize(raw, self.msgtype), self.msgtype)
+                    out[i] = decode_image(decode(), self.msgtype)
                     if len(out) == len(wanted):
                         break
         finally:
-            reader.close()
-        missing = [i for i in want if i not in out]
+            it.close()
+        missing = sorted(wanted - set(out))
         if missing:
             raise LogReadError(f"image topic {self.topic} has no message {missing[0]}", path=self.path)
         return out
-

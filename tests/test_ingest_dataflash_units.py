@@ -78,3 +78,20 @@ def test_dataflash_cut_mid_record(tmp_path):
     log = read_flight([cut])
     assert any("truncated" in w and "records" in w for w in log.warnings)
     assert 15 < log.attitude.t_ns.size < 50
+
+
+def test_dataflash_old_firmware_fields(tmp_path):
+    """Older logs: GPS without week/ms (no UNIX link), `Lon` instead of `Lng`, MNT without Dist or YawE."""
+    p = tmp_path / "old.bin"
+    with DataFlashWriter(p) as w:
+        w.fmt("GPS", "QBLLe", "TimeUS,Status,Lat,Lon,Alt")
+        w.fmt("MNT", "Qfff", "TimeUS,Roll,Pitch,Yaw")
+        for i in range(4):
+            w.write("GPS", 1_000_000 + i * 200_000, 3, 473977419, 85455939, 48812)
+            w.write("MNT", 1_000_010 + i * 200_000, 0.0, -10.0, 5.0)
+    log = read_flight([p], mapping={"dataflash": {"range": {"message": "MNT"}}})
+    assert log.position.clock == "boot" and log.position.t_ns[0] == 1_000_000_000
+    assert log.position.lon_deg[0] == pytest.approx(8.5455939)
+    assert any("no GPS week/time in the log; series stay on the boot clock" in w for w in log.warnings)
+    assert log.range is None  # MNT has no Dist in this firmware
+    assert log.gimbal.yaw_in_vehicle_frame.all()  # old MNT Yaw: relative to the vehicle

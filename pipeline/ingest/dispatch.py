@@ -35,8 +35,11 @@ def detect_format(path: str | Path) -> str:
         return "video"
     if suffix == ".srt":
         return "srt"
-    with open(p, "rb") as f:
-        head = f.read(16)
+    try:
+        with open(p, "rb") as f:
+            head = f.read(16)
+    except OSError as exc:
+        raise LogReadError(f"cannot read: {exc.strerror}", path=p) from None
     for magic, fmt in MAGIC:
         if head.startswith(magic):
             if fmt in ("mcap", "ros2") and (p.parent / "metadata.yaml").is_file():

@@ -253,9 +253,35 @@ def solve_batch(method: str, batch: ObservationBatch, **options) -> BatchEstimat
     o = _check_options(method, options)
     if not isinstance(batch, ObservationBatch):
         raise TypeError(f"solve_batch wants an ObservationBatch, got {type(batch).__name__}")
+    x0 = _initial(o, batch.size)  # validated once; chunks get their rows
     # degenerate problems produce inf/NaN on the way to their status: expected, not worth a warning
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        return _solve_stacked(method, Stacked.from_batch(batch), o)
+        if batch.size <= CHUNK:
+            return _solve_stacked(method, Stacked.from_batch(batch), o)
+        parts = []
+        for lo in range(0, batch.size, CHUNK):
+            sl = slice(lo, lo + CHUNK)
+            sub = ObservationBatch(P=batch.P[sl], pixel=batch.pixel[sl], platform_m=batch.platform_m[sl],
+                                   range_m=batch.range_m[sl], sigma=batch.sigma,
+                                   truth_m=None if batch.truth_m is None else batch.truth_m[sl])
+            oc = o if x0 is None else {**o, "initial_m": x0[sl]}
+            parts.append(_solve_stacked(method, Stacked.from_batch(sub), oc))
+        return _concatenate(parts)
+
+
+#: problems solved together: the kernels' temporaries (a few per n x CHUNK plane) stay in the CPU caches and
+#: below the allocator's mmap threshold; problems are independent, so the answers do not depend on it
+CHUNK = 2048
+
+
+def _concatenate(parts: list[BatchEstimate]) -> BatchEstimate:
+    first = parts[0]
+    cat = np.concatenate
+    return BatchEstimate(method=first.method, position_m=cat([p.position_m for p in parts]),
+                         iterations=cat([p.iterations for p in parts]), status=cat([p.status for p in parts]),
+                         condition_number=cat([p.condition_number for p in parts]),
+                         covariance_m2=None if first.covariance_m2 is None else cat([p.covariance_m2 for p in parts]),
+                         extras={k: cat([p.extras[k] for p in parts]) for k in first.extras})
 
 
 # ---- single problem: clear errors for unusable input --------------------------------------------------------

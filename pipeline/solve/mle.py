@@ -12,15 +12,7 @@ from pipeline.solve import iterate as _iterate
 from pipeline.solve.estimate import Status
 from pipeline.solve.iterate import problem_scale_m
 from pipeline.solve.observations import Sigma
-from pipeline.solve.stacked import (
-    Stacked,
-    condition_numbers,
-    inverse3,
-    normal_equations,
-    pixel_model,
-    range_model,
-    solve_spd,
-)
+from pipeline.solve.stacked import SINGULAR_DET, Stacked, condition_numbers, inverse3
 
 ROBUST_LOSSES = (None, "huber", "cauchy")
 #: tuning constants in units of the standardized residual (95 % efficiency under Gaussian noise)
@@ -89,20 +81,128 @@ def base_variances(st: Stacked, X0: np.ndarray, sigma: Sigma):
     return var
 
 
-def _model(st: Stacked, X: np.ndarray):
-    Jp, rp, okp = pixel_model(st, X)
-    Jr, rr, okr = range_model(st, X)
-    return (np.concatenate([Jp, Jr], axis=1), np.concatenate([rp, rr], axis=1),
-            np.concatenate([okp, okr], axis=1))
+class _Planes:
+    """B problems as contiguous (n,b) planes for the batched kernel: M entries Mc (3,3,n,b), p4c (3,n,b), the
+    pixel planes (2,n,b), platform planes sc (3,n,b), ranges (n,b), the masks, and the inverse standard
+    deviations isd (3,n,b) of the u, v and range rows (1/sqrt of `base_variances` times the variance factors).
+    Numpy is slow on tiny trailing axes; with the problems on the last axis every operation, per-problem
+    values (b,) broadcast included, is one contiguous pass over n x b numbers."""
+
+    __slots__ = ("Mc", "has_pix", "has_range", "isd", "p4c", "pixc", "rng", "sc")
+
+    def __init__(self, Mc, p4c, pixc, sc, rng, has_pix, has_range, isd):
+        self.Mc, self.p4c, self.pixc, self.sc, self.rng = Mc, p4c, pixc, sc, rng
+        self.has_pix, self.has_range, self.isd = has_pix, has_range, isd
+
+    @classmethod
+    def from_stacked(cls, st: Stacked, var: np.ndarray) -> _Planes:
+        B, n = st.has_pix.shape
+        isd = np.empty((3, n, B))
+        np.divide(1.0, np.sqrt(var[:, :2 * n].reshape(B, n, 2).transpose(2, 1, 0)), out=isd[:2])
+        np.divide(1.0, np.sqrt(var[:, 2 * n:].T), out=isd[2])
+        c = np.ascontiguousarray
+        return cls(c(st.M.transpose(2, 3, 1, 0)), c(st.p4.transpose(2, 1, 0)), c(st.pix.transpose(2, 1, 0)),
+                   c(st.platform_m.transpose(2, 1, 0)), c(st.range_m.T), c(st.has_pix.T), c(st.has_range.T), isd)
+
+    def take(self, idx: np.ndarray) -> _Planes:
+        return _Planes(self.Mc[..., idx], self.p4c[..., idx], self.pixc[..., idx], self.sc[..., idx],
+                       self.rng[:, idx], self.has_pix[:, idx], self.has_range[:, idx], self.isd[..., idx])
+
+
+def _evaluate(pl: _Planes, X: np.ndarray):
+    """Standardized Jacobian J (3,3,n,b) (J[c, k] = d row / d X_c over the row's sigma, rows k = u, v, range of
+    each frame) and residuals E (3,n,b) at X (b,3); unusable rows (missing, q3 = 0, X on a platform) are zero;
+    and their mask ok (3,n,b). The arithmetic of `stacked.pixel_model` and `range_model`, on contiguous planes."""
+    n, b = pl.has_pix.shape
+    J = np.empty((3, 3, n, b))
+    E = np.empty((3, n, b))
+    ok = np.empty((3, n, b), dtype=bool)
+    Mc, p4c, isd = pl.Mc, pl.p4c, pl.isd
+    x0, x1, x2 = X[:, 0], X[:, 1], X[:, 2]
+    q0 = Mc[0, 0] * x0 + Mc[0, 1] * x1 + Mc[0, 2] * x2 + p4c[0]
+    q1 = Mc[1, 0] * x0 + Mc[1, 1] * x1 + Mc[1, 2] * x2 + p4c[1]
+    q2 = Mc[2, 0] * x0 + Mc[2, 1] * x1 + Mc[2, 2] * x2 + p4c[2]
+    okp = np.logical_and(pl.has_pix, q2 != 0, out=ok[0])
+    ok[1] = okp
+    iw = 1.0 / np.where(okp, q2, np.inf)  # 1/q3, 0 on unusable rows
+    u, v = q0 * iw, q1 * iw
+    su, sv = iw * isd[0], iw * isd[1]
+    for c in range(3):
+        m2 = Mc[2, c]
+        np.multiply(Mc[0, c] - u * m2, su, out=J[c, 0])
+        np.multiply(Mc[1, c] - v * m2, sv, out=J[c, 1])
+    np.multiply(pl.pixc[0] - u, np.where(okp, isd[0], 0.0), out=E[0])
+    np.multiply(pl.pixc[1] - v, np.where(okp, isd[1], 0.0), out=E[1])
+    sc = pl.sc
+    d0, d1, d2 = x0 - sc[0], x1 - sc[1], x2 - sc[2]
+    dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    okr = np.logical_and(pl.has_range, dist > 0, out=ok[2])
+    sr = isd[2] / np.where(okr, dist, np.inf)
+    np.multiply(d0, sr, out=J[0, 2])
+    np.multiply(d1, sr, out=J[1, 2])
+    np.multiply(d2, sr, out=J[2, 2])
+    np.multiply(pl.rng - dist, np.where(okr, isd[2], 0.0), out=E[2])
+    return J, E, ok
+
+
+def _sum_rows(A: np.ndarray) -> np.ndarray:
+    """(b,) sums over the rows (k, frame) of (3,n,b) planes."""
+    return A.reshape(-1, A.shape[-1]).sum(axis=0)
+
+
+def _dot_rows(A: np.ndarray, Bm: np.ndarray) -> np.ndarray:
+    """(b,) sum over the rows of A * B, (3,n,b) planes."""
+    return np.einsum("ij,ij->j", A.reshape(-1, A.shape[-1]), Bm.reshape(-1, Bm.shape[-1]))
+
+
+def _cost_weights(E: np.ndarray, robust: str | None):
+    """sum rho(e) (b,) and the IRLS weights rho'(e)/e (3,n,b) (None for the squared loss) of standardized E."""
+    if robust is None:
+        return 0.5 * _dot_rows(E, E), None
+    if robust == "huber":  # rho = 0.5 w e^2 + 0.5 c (|e| - c)^+ with w = c / max(|e|, c)
+        mx = np.maximum(np.abs(E), HUBER_C)
+        w = HUBER_C / mx
+        return 0.5 * (_dot_rows(w * E, E) + HUBER_C * _sum_rows(mx - HUBER_C)), w
+    rho, w = _rho_and_weight(E, robust)
+    return _sum_rows(rho), w
+
+
+def _normal(J: np.ndarray, E: np.ndarray, w, wn=None):
+    """The six entries N00 N01 N02 N11 N12 N22 (b,) of J^T diag(wn) J (wn defaults to w; None = 1) and the three
+    of g = J^T diag(w) E."""
+    WE = E if w is None else w * E
+    g = [_dot_rows(J[c], WE) for c in range(3)]
+    wn = w if wn is None else wn
+    CJ = J if wn is None else J * wn
+    N = [_dot_rows(CJ[c], J[d]) for c, d in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))]
+    return N, g
+
+
+def _solve3(N, g, lam=None):
+    """Closed-form solution (b,3) of (N + lam diag N) x = g from the six entries, the `stacked.solve_spd`
+    singular flag (b,) and the cofactors and determinant (for the inverse)."""
+    a, b, c, d, f, i = N
+    if lam is not None:
+        a, d, i = a + lam * a, d + lam * d, i + lam * i
+    A0, B0, C0 = d * i - f * f, c * f - b * i, b * f - c * d
+    det = a * A0 + b * B0 + c * C0
+    singular = ~((a > 0) & (d > 0) & (i > 0) & (det / (a * d * i) > SINGULAR_DET))
+    D0, E0, F0 = a * i - c * c, b * c - a * f, a * d - b * b
+    g0, g1, g2 = g
+    x = np.stack([(A0 * g0 + B0 * g1 + C0 * g2), (B0 * g0 + D0 * g1 + E0 * g2), (C0 * g0 + E0 * g1 + F0 * g2)],
+                 axis=1) / det[:, None]
+    return x, singular, (A0, B0, C0, D0, E0, F0), det
 
 
 def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
         max_iterations: int, init_status: np.ndarray | None = None):
     """Returns X (B,3), iterations (B,), status (B,) int8, cond (B,) of the weighted design W^1/2 J,
     covariance (B,3,3) m^2, and extras {variance_factor_pixel, variance_factor_range, sigma0_sq, vce_rounds}.
+
+    Works on planes (`_Planes`): the normal equations as six (B,) entries, the 3x3 steps in closed form.
+    Converged problems are frozen once fewer than all are active.
     """
     B = st.size
-    npix = 2 * st.n
     X = np.array(X0, dtype=np.float64, copy=True)
     finite0 = np.isfinite(X).all(axis=1)
     status = np.full(B, Status.MAX_ITERATIONS, dtype=np.int8)
@@ -113,12 +213,10 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
         bad = ~finite0
         status[bad] = Status.DEGENERATE
     X[bad] = 0.0
-    var0 = base_variances(st, X, sigma)
-    group = np.zeros(var0.shape[1], dtype=np.int64)
-    group[npix:] = 1
+    pl = _Planes.from_stacked(st, base_variances(st, X, sigma))
     vf = np.ones((B, 2))  # variance factors of the pixel and range groups
-    J, r, ok = _model(st, X)
-    okf = ok.astype(np.float64)
+    J, E, ok = _evaluate(pl, X)
+    cost, wr = _cost_weights(E, robust)
 
     iterations = np.zeros(B, dtype=np.int64)
     lam = np.zeros(B)
@@ -126,51 +224,46 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     vce_rounds = np.zeros(B, dtype=np.int64)
     centre = st.platform_m.mean(axis=1)
     bound = _iterate.DIVERGENCE_FACTOR * problem_scale_m(st, np.where(finite0[:, None], X0, centre))
-
-    def costs(var, vfac, rr, okk):
-        e = rr / np.sqrt(var * vfac[:, group])
-        rho, w = _rho_and_weight(e, robust)
-        return (rho * okk).sum(axis=1), w
-
-    cost, _ = costs(var0, vf, r, okf)
     active = ~bad
     for _ in range(max_iterations):
         idx = np.flatnonzero(active)
         if idx.size == 0:
             break
-        sub = st if idx.size == B else st.take(idx)
-        var_i = var0[idx] * vf[idx][:, group]
-        e = r[idx] / np.sqrt(var_i)
-        _, wr = _rho_and_weight(e, robust)
-        w = okf[idx] / var_i
-        N, g = normal_equations(J[idx], r[idx], w * wr)
-        if robust is not None:  # Newton: the loss's curvature in the normal matrix, unless it just failed
-            Nh, _ = normal_equations(J[idx], r[idx], w * _curvature(e, robust))
-            N = np.where(newton_ok[idx][:, None, None], Nh, N)
-        lam_i = lam[idx]
-        Nd = N + lam_i[:, None, None] * (np.einsum("bii->bi", N)[:, :, None] * np.eye(3))
-        dX, singular = solve_spd(Nd, g)
+        full = idx.size == B
+        Ji, Ei = (J, E) if full else (J[..., idx], E[..., idx])
+        wi = wr if (full or wr is None) else wr[..., idx]
+        if robust is None:
+            N, g = _normal(Ji, Ei, None)
+        else:  # Newton: the loss's curvature in the normal matrix, unless it just failed
+            curv = _curvature(Ei, robust)
+            nok = newton_ok if full else newton_ok[idx]
+            N, g = _normal(Ji, Ei, wi, np.where(nok, curv, wi))
+        lam_i = lam if full else lam[idx]
+        dX, singular, _, _ = _solve3(N, g, lam_i)
         iterations[idx] += 1
-        Xn = X[idx] + np.where(singular[:, None], 0.0, dX)
+        Xi = X if full else X[idx]
+        Xn = Xi + np.where(singular[:, None], 0.0, dX)
         finite = np.isfinite(Xn).all(axis=1)
-        exploded = ~finite | (np.linalg.norm(Xn - centre[idx], axis=1) > bound[idx])
-        Xn = np.where(exploded[:, None], X[idx], Xn)
-        Jn, rn, okn = _model(sub, Xn)
-        okn = okn.astype(np.float64)
-        cost_n, _ = costs(var0[idx], vf[idx], rn, okn)
+        cen = centre if full else centre[idx]
+        exploded = ~finite | (np.sqrt(((Xn - cen) ** 2).sum(axis=1)) > (bound if full else bound[idx]))
+        Xn = np.where(exploded[:, None], Xi, Xn)
+        Jn, En, okn = _evaluate(pl if full else pl.take(idx), Xn)
+        cost_n, wr_n = _cost_weights(En, robust)
         old = cost[idx]
         accept = ~singular & ~exploded & (cost_n <= old * (1 + 1e-12) + 1e-300)
-        step_norm = np.where(singular, np.inf, np.linalg.norm(dX, axis=1))
+        step_norm = np.where(singular, np.inf, np.sqrt((dX * dX).sum(axis=1)))
         # accept: move and relax damping; reject: stay and damp harder
         a_idx = idx[accept]
         X[a_idx] = Xn[accept]
-        J[a_idx], r[a_idx], okf[a_idx] = Jn[accept], rn[accept], okn[accept]
+        J[..., a_idx], E[..., a_idx], ok[..., a_idx] = Jn[..., accept], En[..., accept], okn[..., accept]
+        if wr is not None:
+            wr[..., a_idx] = wr_n[..., accept]
         cost[a_idx] = cost_n[accept]
         lam[a_idx] = np.where(lam[a_idx] / 10 < 1e-9, 0.0, lam[a_idx] / 10)
         rej = idx[~accept]
         # a rejected Newton step is retried as the IRLS step (a descent step) before damping
         fallback = rej[newton_ok[rej]] if robust is not None else rej[:0]
-        newton_ok[idx[accept]] = True
+        newton_ok[a_idx] = True
         newton_ok[fallback] = False
         rej = rej[~np.isin(rej, fallback)]
         lam[rej] = np.where(lam[rej] == 0, 1e-4, lam[rej] * 10)
@@ -186,15 +279,22 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
         still &= ~stuck
         if vce and inner_done.any():
             d_idx = idx[inner_done]
-            factors, usable = _vce_factors(st.take(d_idx), J[d_idx], r[d_idx], okf[d_idx], var0[d_idx] *
-                                           vf[d_idx][:, group], group, robust)
+            factors, usable = _vce_factors(J[..., d_idx], E[..., d_idx], ok[..., d_idx], robust)
             more = (np.abs(factors - 1) > VCE_TOL) & usable
             again = more.any(axis=1) & (vce_rounds[d_idx] < VCE_MAX_ROUNDS)
-            vf[d_idx] = np.where(usable & again[:, None], vf[d_idx] * factors, vf[d_idx])
+            change = np.where(usable & again[:, None], factors, 1.0)
+            vf[d_idx] *= change
             vce_rounds[d_idx] += again
             rd = d_idx[again]
-            if rd.size:
-                cost[rd], _ = costs(var0[rd], vf[rd], r[rd], okf[rd])
+            if rd.size:  # rescale the standardized rows: sigma_g -> sigma_g sqrt(factor_g)
+                s = 1.0 / np.sqrt(change[again])
+                rows = np.stack([s[:, 0], s[:, 0], s[:, 1]])[:, None, :]  # (3, 1, rd): u, v, range rows
+                J[..., rd] *= rows
+                E[..., rd] *= rows
+                pl.isd[..., rd] *= rows
+                cost[rd], w_rd = _cost_weights(E[..., rd], robust)
+                if wr is not None:
+                    wr[..., rd] = w_rd
                 lam[rd] = 0.0
             keep = np.zeros(idx.size, dtype=bool)
             keep[np.flatnonzero(inner_done)[again]] = True
@@ -205,11 +305,9 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
         active[idx] = still
     failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
     # covariance and condition number at the final iterate with the final weights
-    var_f = var0 * vf[:, group]
-    e = r / np.sqrt(var_f)
-    _, wr = _rho_and_weight(e, robust)
-    w = okf * wr / var_f
-    N, _ = normal_equations(J, r, w)
+    N6, _ = _normal(J, E, wr)
+    a, b, c, d, f, i = N6
+    N = np.stack([a, b, c, b, d, f, c, f, i], axis=1).reshape(B, 3, 3)
     cov, singular = _inverse_spd(N)
     cond = condition_numbers(N)
     bad_cond = singular  # the Jacobi-scaled criterion of the iteration: cond of the scaled design ~> 1e10
@@ -218,9 +316,10 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     X[failed] = np.nan
     cov[failed] = np.nan
     cond[failed & ~bad_cond] = np.nan
-    m = okf.sum(axis=1)
+    m = _sum_rows(ok)
+    WE = E if wr is None else wr * E
     with np.errstate(divide="ignore", invalid="ignore"):
-        sigma0_sq = np.where(m > 3, (w * r * r).sum(axis=1) / (m - 3), np.nan)
+        sigma0_sq = np.where(m > 3, _dot_rows(WE, E) / (m - 3), np.nan)
     extras = {"variance_factor_pixel": vf[:, 0], "variance_factor_range": vf[:, 1], "sigma0_sq": sigma0_sq,
               "vce_rounds": vce_rounds}
     return X, iterations, status, cond, cov, extras
@@ -231,24 +330,29 @@ def _inverse_spd(N: np.ndarray):
     return 0.5 * (inv + np.swapaxes(inv, 1, 2)), singular
 
 
-def _vce_factors(st: Stacked, J, r, okf, var, group, robust):
-    """Helmert/Foerstner variance component factors (b, 2) = (sum_g w r^2) / r_g with the redundancy numbers
-    r_g = sum_g (1 - w_i J_i N^-1 J_i^T), and a (b, 2) flag 'usable' (redundancy of the group >= 0.5)."""
-    e = r / np.sqrt(var)
-    _, wr = _rho_and_weight(e, robust)
-    w = okf * wr / var
-    N, _ = normal_equations(J, r, w)
-    Ninv, _ = _inverse_spd(N)
-    lev = w * np.einsum("bmi,bij,bmj->bm", J, Ninv, J)
-    out = np.ones((J.shape[0], 2))
-    usable = np.zeros((J.shape[0], 2), dtype=bool)
-    for g in (0, 1):
-        sel = (group == g)[None, :] & (okf > 0)
-        red = np.where(sel, 1.0 - lev, 0.0).sum(axis=1)
-        q = np.where(sel, w * r * r, 0.0).sum(axis=1)
+def _vce_factors(J, E, ok, robust):
+    """Helmert/Foerstner variance component factors (b, 2) = (sum_g w e^2) / r_g with the redundancy numbers
+    r_g = sum_g (1 - w_i J_i N^-1 J_i^T) over the usable rows of each group (pixels: the u and v rows, ranges),
+    from the standardized J (3,3,n,b), E (3,n,b); and a (b, 2) flag 'usable' (redundancy of the group >= 0.5)."""
+    _, w = _cost_weights(E, robust)
+    N, _ = _normal(J, E, w)
+    _, singular, (A0, B0, C0, D0, E0, F0), det = _solve3(N, [N[0]] * 3)
+    inv = [np.where(singular, np.nan, x / det) for x in (A0, B0, C0, D0, E0, F0)]
+    j0, j1, j2 = J
+    quad = (inv[0] * j0 * j0 + inv[3] * j1 * j1 + inv[5] * j2 * j2
+            + 2.0 * (inv[1] * j0 * j1 + inv[2] * j0 * j2 + inv[4] * j1 * j2))
+    lev = quad if w is None else w * quad
+    q = E * E if w is None else w * E * E
+    b = E.shape[-1]
+    out = np.ones((b, 2))
+    usable = np.zeros((b, 2), dtype=bool)
+    for g, rows in ((0, slice(0, 2)), (1, slice(2, 3))):
+        sel = ok[rows]
+        red = _sum_rows(np.where(sel, 1.0 - lev[rows], 0.0))
+        qs = _sum_rows(np.where(sel, q[rows], 0.0))
         usable[:, g] = red >= 0.5
         with np.errstate(divide="ignore", invalid="ignore"):
-            out[:, g] = np.where(usable[:, g], q / red, 1.0)
+            out[:, g] = np.where(usable[:, g], qs / red, 1.0)
         usable[:, g] &= np.isfinite(out[:, g]) & (out[:, g] > 0)
         out[:, g] = np.where(usable[:, g], out[:, g], 1.0)
     return out, usable

@@ -320,52 +320,156 @@ def gn_one(fr: Frames, model, X0, init_status, tol_m, max_iterations):
     return X, it, status, cond
 
 
-def _block(J, r):
-    """min-max normalization of one block: rows [J/span, -lo/span], (r - lo)/span (`least_squares._minmax`)."""
-    if r.size == 0:
-        return np.zeros((0, 4)), r
-    lo = float(r.min())
-    span = float(r.max()) - lo
-    if not (span > 0 and math.isfinite(span)):
-        span = 1.0
-    T = np.empty((r.size, 4))
-    T[:, :3] = J / span
-    T[:, 3] = -lo / span
-    return T, (r - lo) / span
+def _chol_solve(A: list, b: list, singular_below: float):
+    """`spd_solve` on nested lists of Python floats: x as a list, or None when singular."""
+    k = len(b)
+    if k == 4:
+        return _chol4(A, b, singular_below)
+    d = []
+    for i in range(k):
+        a = A[i][i]
+        if not (a > 0 and math.isfinite(a)):
+            return None
+        d.append(math.sqrt(a))
+    L = [[0.0] * k for _ in range(k)]
+    det = 1.0
+    for j in range(k):
+        Lj = L[j]
+        s = A[j][j] / (d[j] * d[j])
+        for m in range(j):
+            s -= Lj[m] * Lj[m]
+        if not s > 0:
+            return None
+        det *= s
+        Lj[j] = ljj = math.sqrt(s)
+        for i in range(j + 1, k):
+            Li = L[i]
+            t = A[i][j] / (d[i] * d[j])
+            for m in range(j):
+                t -= Li[m] * Lj[m]
+            Li[j] = t / ljj
+    if not det > singular_below:
+        return None
+    y = [0.0] * k
+    for i in range(k):
+        Li = L[i]
+        t = b[i] / d[i]
+        for m in range(i):
+            t -= Li[m] * y[m]
+        y[i] = t / Li[i]
+    x = [0.0] * k
+    for i in range(k - 1, -1, -1):
+        t = y[i]
+        for m in range(i + 1, k):
+            t -= L[m][i] * x[m]
+        x[i] = t / L[i][i]
+    return [x[i] / d[i] for i in range(k)]
 
 
-def normalized_system_one(fr: Frames, X):
-    Jp, rp = fr.pixel(X)
-    Jr, rr = fr.range(X)
-    Tp, dp = _block(Jp, rp)
-    Tr, dr = _block(Jr, rr)
-    return np.concatenate((Tp, Tr)), np.concatenate((dp, dr))
+def _chol4(A: list, b: list, singular_below: float):
+    """`_chol_solve` for 4x4, written out (upper triangle of the symmetric A read)."""
+    (a00, a01, a02, a03), (_, a11, a12, a13), (_, _, a22, a23), (_, _, _, a33) = A
+    if not (a00 > 0 and a11 > 0 and a22 > 0 and a33 > 0 and math.isfinite(a00 + a11 + a22 + a33)):
+        return None
+    d0, d1, d2, d3 = math.sqrt(a00), math.sqrt(a11), math.sqrt(a22), math.sqrt(a33)
+    s0 = a00 / (d0 * d0)
+    if not s0 > 0:
+        return None
+    l00 = math.sqrt(s0)
+    l10, l20, l30 = a01 / (d1 * d0) / l00, a02 / (d2 * d0) / l00, a03 / (d3 * d0) / l00
+    s1 = a11 / (d1 * d1) - l10 * l10
+    if not s1 > 0:
+        return None
+    l11 = math.sqrt(s1)
+    l21, l31 = (a12 / (d2 * d1) - l20 * l10) / l11, (a13 / (d3 * d1) - l30 * l10) / l11
+    s2 = a22 / (d2 * d2) - (l20 * l20 + l21 * l21)
+    if not s2 > 0:
+        return None
+    l22 = math.sqrt(s2)
+    l32 = (a23 / (d3 * d2) - (l30 * l20 + l31 * l21)) / l22
+    s3 = a33 / (d3 * d3) - (l30 * l30 + l31 * l31 + l32 * l32)
+    if not (s3 > 0 and s0 * s1 * s2 * s3 > singular_below):
+        return None
+    l33 = math.sqrt(s3)
+    b0, b1, b2, b3 = b
+    y0 = b0 / d0 / l00
+    y1 = (b1 / d1 - l10 * y0) / l11
+    y2 = (b2 / d2 - (l20 * y0 + l21 * y1)) / l22
+    y3 = (b3 / d3 - (l30 * y0 + l31 * y1 + l32 * y2)) / l33
+    x3 = y3 / l33
+    x2 = (y2 - l32 * x3) / l22
+    x1 = (y1 - (l21 * x2 + l31 * x3)) / l11
+    x0 = (y0 - (l10 * x1 + l20 * x2 + l30 * x3)) / l00
+    return [x0 / d0, x1 / d1, x2 / d2, x3 / d3]
+
+
+def normalized_normal_one(fr: Frames, X):
+    """`least_squares.normalized_normal_equations` for one problem, as Python floats: N = T^T T (4x4 nested
+    list), g = T^T dPhi, dd = dPhi^T dPhi and the rows in use, from the Gram matrix of each block's [J | r]
+    and its column sums (T's rows are [J, -L]/S and dPhi's (r - L)/S, L the block's minimum residual, S its
+    spread)."""
+    A = fr.both4(X)
+    N = [[0.0] * 4 for _ in range(4)]
+    g = [0.0] * 4
+    dd = 0.0
+    for blk in (A[:fr.npix], A[fr.npix:]):
+        cnt = blk.shape[0]
+        if cnt == 0:
+            continue
+        r = blk[:, 3]
+        lo = float(np.minimum.reduce(r))
+        span = float(np.maximum.reduce(r)) - lo
+        if not (span > 0 and math.isfinite(span)):
+            span = 1.0
+        s2 = 1.0 / (span * span)
+        G = (blk.T @ blk).tolist()
+        S = np.add.reduce(blk).tolist()
+        for i in range(3):
+            Gi, Ni = G[i], N[i]
+            for j in range(i, 3):
+                Ni[j] += Gi[j] * s2
+            Ni[3] += -lo * S[i] * s2
+            g[i] += (Gi[3] - lo * S[i]) * s2
+        N[3][3] += lo * lo * cnt * s2
+        g[3] += -lo * (S[3] - lo * cnt) * s2
+        dd += (G[3][3] - 2 * lo * S[3] + lo * lo * cnt) * s2
+    for i in range(4):
+        for j in range(i):
+            N[i][j] = N[j][i]
+    return N, g, dd, A.shape[0]
 
 
 def _solve_augmented_one(N, g, k):
-    beta, singular = spd_solve(N + k * np.eye(4) if k else N, g, NORMALIZED_SINGULAR_DET)
-    if singular:
-        dX, singular = spd_solve(N[:3, :3] + k * np.eye(3) if k else N[:3, :3], g[:3] - N[:3, 3],
-                                 NORMALIZED_SINGULAR_DET)
-        beta = None if singular else np.append(dX, 1.0)
-    return beta, singular
+    """`least_squares._solve_augmented` for one problem on nested lists: beta (list of 4) or None."""
+    Nk = [[N[i][j] + (k if i == j else 0.0) for j in range(4)] for i in range(4)] if k else N
+    beta = _chol_solve(Nk, g, NORMALIZED_SINGULAR_DET)
+    if beta is None:
+        dX = _chol_solve([row[:3] for row in Nk[:3]], [g[i] - N[i][3] for i in range(3)], NORMALIZED_SINGULAR_DET)
+        beta = None if dX is None else [*dX, 1.0]
+    return beta
 
 
-def _hkb_one(N, g, dPhi, variant):
-    """`least_squares.hkb_k` for one problem."""
+def _scaled(N, g):
+    """Columns scaled to unit length (the textbook HKB's standardized design): N / (d d^T), g / d, d."""
+    d = [math.sqrt(N[i][i]) if N[i][i] > 0 else 1.0 for i in range(4)]
+    return [[N[i][j] / (d[i] * d[j]) for j in range(4)] for i in range(4)], [g[i] / d[i] for i in range(4)], d
+
+
+def _hkb_one(N, g, dd, rows, variant):
+    """`least_squares.hkb_k` for one problem (nested lists)."""
     p = 4
     if variant == "textbook":
-        d = np.sqrt(np.diag(N))
-        d = np.where(d > 0, d, 1.0)
-        N = N / np.outer(d, d)
-        g = g / d
-    beta, singular = spd_solve(N, g)
-    if singular:
+        N, g, _ = _scaled(N, g)
+    beta = _chol_solve(N, g, SINGULAR_DET)
+    if beta is None:
         return 0.0
-    rss = max(float(dPhi @ dPhi) - float(g @ beta), 0.0)
-    dof = dPhi.size - p
+    rss = max(dd - sum(g[i] * beta[i] for i in range(4)), 0.0)
+    dof = rows - p
     s2 = rss / dof if dof > 0 else 0.0
-    denom = float(beta @ beta) if variant == "textbook" else float(beta @ N @ beta)
+    if variant == "textbook":
+        denom = sum(b * b for b in beta)
+    else:
+        denom = sum(beta[i] * N[i][j] * beta[j] for i in range(4) for j in range(4))
     k = p * s2 / denom if denom != 0 else math.inf
     return k if math.isfinite(k) else 0.0
 
@@ -373,29 +477,25 @@ def _hkb_one(N, g, dPhi, variant):
 def normalized_one(fr: Frames, X0, init_status, tol_m, max_iterations, k=None, hkb=None):
     """`least_squares.normalized_fusion` for one problem: X, it, status, cond, extras {k, augmented}."""
     def step(X):
-        T, dPhi = normalized_system_one(fr, X)
-        TT = T.T
-        N, g = TT @ T, TT @ dPhi
+        N, g, dd, rows = normalized_normal_one(fr, X)
         if hkb is None:
             kk = 0.0 if k is None else float(k)
-            beta, singular = _solve_augmented_one(N, g, kk)
+            beta = _solve_augmented_one(N, g, kk)
         else:
-            kk = _hkb_one(N, g, dPhi, hkb)
+            kk = _hkb_one(N, g, dd, rows, hkb)
             if hkb == "textbook":
-                d = np.sqrt(np.diag(N))
-                d = np.where(d > 0, d, 1.0)
-                gamma, singular = _solve_augmented_one(N / np.outer(d, d), g / d, kk)
-                beta = None if singular else gamma / d
+                Ns, gs, d = _scaled(N, g)
+                gamma = _solve_augmented_one(Ns, gs, kk)
+                beta = None if gamma is None else [gamma[i] / d[i] for i in range(4)]
             else:
-                beta, singular = _solve_augmented_one(N, g, kk)
-        if singular:
+                beta = _solve_augmented_one(N, g, kk)
+        if beta is None:
             return None, True, {"k": kk, "augmented": math.nan}
-        return beta[:3], False, {"k": kk, "augmented": float(beta[3])}
+        return np.array(beta[:3]), False, {"k": kk, "augmented": beta[3]}
 
     X, it, status, extras = _iterate_one(X0, init_status, step, tol_m, max_iterations, fr.bound(X0), fr.centre)
     if _finite(X):
-        T, _ = normalized_system_one(fr, X)
-        N = T.T @ T
+        N = np.array(normalized_normal_one(fr, X)[0])
         J, _ = fr.both(X)
         Ng = J.T @ J
     else:

@@ -188,7 +188,7 @@ def _mle_summaries(cov: np.ndarray) -> dict:
 
 def _solve_one(method: str, st: Stacked, o: dict) -> BatchEstimate:
     """A batch-of-one answer through `single` (the same algorithms without the batch bookkeeping)."""
-    fr = single.Frames(st)
+    fr = single.Frames.of(st)
     tol, itmax = o["tol_m"], o["max_iterations"]
     extras: dict = {}
     cov = None
@@ -410,7 +410,7 @@ def _residuals(method: str, st: Stacked, X: np.ndarray) -> np.ndarray:
     ranges (m)."""
     if not np.isfinite(X).all():
         return np.zeros(0)
-    fr = single.Frames(st)
+    fr = single.Frames.of(st)
     parts = []
     if method in _USES_PIXELS or method == "los":
         parts.append(fr.pixel(X)[1])

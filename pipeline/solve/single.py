@@ -129,7 +129,7 @@ class Frames:
         hp, hr = st.has_pix[0], st.has_range[0]
         n = hp.size
         # frames in use: a slice (views, no copies) when all of them are, else their indices
-        self.n_pix, self.n_rng = int(hp.sum()), int(hr.sum())
+        self.n_pix, self.n_rng = int(np.count_nonzero(hp)), int(np.count_nonzero(hr))
         self.pix_f = slice(None) if self.n_pix == n else np.flatnonzero(hp)
         self.rng_f = slice(None) if self.n_rng == n else np.flatnonzero(hr)
         self.Mp = st.M[0, self.pix_f]
@@ -141,11 +141,19 @@ class Frames:
         self.S = st.platform_m[0, self.rng_f]
         self.d = st.range_m[0, self.rng_f]
         self.npix = 2 * self.n_pix
-        self.centre = st.platform_m[0].mean(axis=0)
+        self.centre = np.add.reduce(st.platform_m[0], axis=0) / n  # = mean(axis=0), without its wrapper
         # signed metric depth of X in the cameras with a pixel = m3s X + p4s (`Stacked.depths`)
         k = st.depth_sign()[0, self.pix_f] / np.sqrt(st._gram()[0, self.pix_f, 2, 2])
         self.m3s = self.Mp[:, 2, :] * k[:, None]
         self.p4s = self.p4[:, 2] * k
+
+    @classmethod
+    def of(cls, st: Stacked) -> Frames:
+        """The Frames of a one-problem Stacked, made once and kept on it."""
+        fr = st.__dict__.get("_frames")
+        if fr is None:
+            fr = st.__dict__["_frames"] = cls(st)
+        return fr
 
     def depths(self, X: np.ndarray) -> np.ndarray:
         """(k,) signed depth in metres of X in each camera with a pixel."""
@@ -535,7 +543,7 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
 
     def evaluate(X, isd):
         """Aw (m,4), the cost, the IRLS Gram matrix [N g; g^T e'We] as nested lists, |e| (Huber) at X."""
-        Aw = model(X) * isd[:, None]
+        Aw = model(X) * isd
         if robust is None:
             G = (Aw.T @ Aw).tolist()
             return Aw, 0.5 * G[3][3], G, None
@@ -543,8 +551,12 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
             a = np.abs(Aw[:, 3])
             mx = np.maximum(a, HUBER_C)
             wr = HUBER_C / mx
-            G = (Aw.T @ (Aw * wr[:, None])).tolist()
-            return Aw, 0.5 * (G[3][3] + HUBER_C * float((mx - HUBER_C).sum())), G, (a, wr)
+            # one product for the Newton matrix (weights rho'' = w inside c, w/1000 outside: `mle._curvature`)
+            # and the IRLS gradient and cost (weights w): [N_newton g; . sum w e^2]
+            Y = Aw * wr[:, None]
+            Y[:, :3] *= np.where(a <= HUBER_C, 1.0, 0.001)[:, None]
+            G = (Aw.T @ Y).tolist()
+            return Aw, 0.5 * (G[3][3] + HUBER_C * float(np.add.reduce(mx - HUBER_C))), G, (a, wr)
         e = Aw[:, 3]
         wr = _rho_and_weight(e, robust)[1]
         G = (Aw.T @ (Aw * wr[:, None])).tolist()
@@ -553,7 +565,7 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
     vf = [1.0, 1.0]
     m = var0.size
     var = var0
-    isd = 1.0 / np.sqrt(var)
+    isd = (1.0 / np.sqrt(var))[:, None]
     Aw, cost, G, aux = evaluate(X, isd)
     bound = fr.bound(X0)
     c0, c1, c2 = fr.centre.tolist()
@@ -563,13 +575,14 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
     newton_ok = True
     for _ in range(0 if bad else max_iterations):
         g0, g1, g2 = G[0][3], G[1][3], G[2][3]
-        if robust is not None and newton_ok:  # Newton: the loss's curvature rho'' in the normal matrix
+        if huber and newton_ok:  # Newton: the loss's curvature rho'' in the normal matrix (in G already)
+            (a, b, c, _), (_, d, f, _), (_, _, i, _), _ = G
+        elif huber:  # the IRLS normal matrix
             Jw = Aw[:, :3]
-            if huber:
-                a, wr = aux
-                curv = np.where(a <= HUBER_C, 1.0, 0.001 * wr)
-            else:
-                curv = _weight_curvature(aux[0], robust)[1]
+            (a, b, c), (_, d, f), (_, _, i) = ((Jw.T * aux[1]) @ Jw).tolist()
+        elif robust is not None and newton_ok:
+            Jw = Aw[:, :3]
+            curv = _weight_curvature(aux[0], robust)[1]
             (a, b, c), (_, d, f), (_, _, i) = ((Jw.T * curv) @ Jw).tolist()
         else:
             (a, b, c, _), (_, d, f, _), (_, _, i, _), _ = G
@@ -617,7 +630,7 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
                 var = var0.copy()
                 var[:npix] *= vf[0]
                 var[npix:] *= vf[1]
-                isd = 1.0 / np.sqrt(var)
+                isd = (1.0 / np.sqrt(var))[:, None]
                 Aw, cost, G, aux = evaluate(X, isd)
                 lam = 0.0
                 continue
@@ -625,10 +638,11 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
             status = Status.CONVERGED
             break
     failed = status in (Status.DIVERGED, Status.DEGENERATE)
-    N = np.array(G)[:3, :3]  # the IRLS weights at the final iterate
+    # the IRLS weights at the final iterate (G holds the Newton matrix for Huber)
+    N = (Aw[:, :3].T * aux[1]) @ Aw[:, :3] if huber else np.array(G)[:3, :3]
     e = Aw[:, 3]
     # the reported residuals are observed - predicted, not whitened
-    resid = e / isd if W is None else fr.both4(X)[:, 3]
+    resid = e / isd[:, 0] if W is None else fr.both4(X)[:, 3]
     cov, singular = inv3(N)
     cond = condition(N)
     if singular and not failed:

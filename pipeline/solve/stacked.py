@@ -94,6 +94,8 @@ class Stacked:
     def det_M(self) -> np.ndarray:
         """(B,n) det of the left 3x3 block of each P, computed once."""
         det = self.__dict__.get("_det_cache")
+        if det is None and self.M.shape[0] * self.M.shape[1] <= 256:  # few matrices: one LAPACK call is cheaper
+            det = self.__dict__["_det_cache"] = np.linalg.det(self.M)
         if det is None:
             m = self.M
             a, b, c = m[..., 0, :], m[..., 1, :], m[..., 2, :]

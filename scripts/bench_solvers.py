@@ -15,6 +15,7 @@ Reports, in one run:
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import statistics
 import time
@@ -49,6 +50,11 @@ def _time_calls(fn, items, repeats: int) -> tuple[float, float]:
 
 def _fmt(pair) -> str:
     return f"{pair[0] * 1e6:8.1f} us wall {pair[1] * 1e6:8.1f} us cpu"
+
+
+def _ratio(ours, theirs) -> str:
+    """Ratios of CPU and of wall times (ours / theirs), measured in the same run."""
+    return f"{ours[1] / theirs[1]:.2f} cpu, {ours[0] / theirs[0]:.2f} wall"
 
 
 def _sigmas(obs, x0):
@@ -146,22 +152,28 @@ def main(argv: list[str] | None = None) -> int:
     print(f"machine: {os.cpu_count()} cpus, load average {os.getloadavg()[0]:.1f}, one trivial numpy call "
           f"{_calibration_us():.2f} us")
     print("\nsingle problem, solve(): median per call (all of solve: checks, start value, result)")
+    single_t = {}
     for m in METHODS:
         repeats = 1 if m in ("fusion", "ridge") else 3
-        pair = _time_calls(lambda o, m=m: solve(m, o), probs, repeats)
+        pair = single_t[m] = _time_calls(lambda o, m=m: solve(m, o), probs, repeats)
         it = np.median([solve(m, o).iterations for o in probs])
         print(f"  {m:<16}{_fmt(pair)}   (median iterations {it:g})")
     mle_plain = {id(o): solve("mle", o, robust=None).position_m for o in probs}
     mle_huber = {id(o): solve("mle", o).position_m for o in probs}
-    pair = _time_calls(lambda o: solve("mle", o, robust=None), probs, 3)
+    pair = single_t["mle robust=None"] = _time_calls(lambda o: solve("mle", o, robust=None), probs, 3)
     print(f"  {'mle robust=None':<16}{_fmt(pair)}")
+    corr = dataclasses.replace(probs[0].sigma, attitude_tau_s=20.0, position_tau_s=60.0)
+    pair = _time_calls(lambda o: solve("mle", o, sigma=corr), probs, 3)
+    print(f"  {'mle correlated':<16}{_fmt(pair)}   (attitude_tau_s 20, position_tau_s 60: generalized least squares)")
 
     print("\nscipy.optimize.least_squares on the same weighted problem (same DLT start, same sigmas)")
     for robust in (False, True):
         ref = mle_huber if robust else mle_plain
         diff = max(np.abs(_scipy_mle(o, robust) - ref[id(o)]).max() for o in probs)
         pair = _time_calls(lambda o, r=robust: _scipy_mle(o, r), probs, 1)
-        print(f"  {'huber' if robust else 'no robust loss':<16}{_fmt(pair)}   max |scipy - mle| {diff:.1e} m")
+        ours = single_t["mle" if robust else "mle robust=None"]
+        print(f"  {'huber' if robust else 'no robust loss':<16}{_fmt(pair)}   max |scipy - mle| {diff:.1e} m; "
+              f"solve('mle'{'' if robust else ', robust=None'}) / scipy: {_ratio(ours, pair)}")
 
     try:
         import gtsam  # noqa: F401
@@ -172,15 +184,19 @@ def main(argv: list[str] | None = None) -> int:
         diff = max(np.abs(_gtsam_solve(o, setups[id(o)]) - mle_plain[id(o)]).max() for o in probs)
         print("\nGTSAM factor graph: TriangulationFactorCal3_S2 (fixed cameras) + RangeFactor3 to pinned platform "
               "points, Levenberg-Marquardt from the DLT start, same sigmas")
-        pair = _time_calls(lambda o: _gtsam_solve(o, setups[id(o)]), probs, 2)
-        print(f"  {'graph + LM':<16}{_fmt(pair)}   (cameras, sigmas, start prepared outside the timing)")
+        graph = _time_calls(lambda o: _gtsam_solve(o, setups[id(o)]), probs, 2)
+        print(f"  {'graph + LM':<16}{_fmt(graph)}   (cameras, sigmas, start prepared outside the timing)")
         cores = {id(o): _mle_core_setup(o) for o in probs}
-        pair = _time_calls(lambda o: _mle_core(cores[id(o)]), probs, 2)
-        print(f"  {'mle core':<16}{_fmt(pair)}   (the same work in ridgeloc: single.mle_one from the DLT start, "
+        core = _time_calls(lambda o: _mle_core(cores[id(o)]), probs, 2)
+        print(f"  {'mle core':<16}{_fmt(core)}   (the same work in ridgeloc: single.mle_one from the DLT start, "
               "robust off, covariance included; checks and start outside the timing)")
-        pair = _time_calls(lambda o: _gtsam_solve(o, _gtsam_setup(o)), probs, 1)
-        print(f"  {'everything':<16}{_fmt(pair)}   (cameras from P by RQ, DLT start, sigmas, graph, LM)")
+        every = _time_calls(lambda o: _gtsam_solve(o, _gtsam_setup(o)), probs, 1)
+        print(f"  {'everything':<16}{_fmt(every)}   (cameras from P by RQ, DLT start, sigmas, graph, LM)")
         print(f"  max |gtsam - mle(robust=None)| {diff:.1e} m")
+        print(f"  ratios (< 1: ridgeloc faster): mle core / graph + LM {_ratio(core, graph)}; "
+              f"solve('mle', robust=None) / graph + LM {_ratio(single_t['mle robust=None'], graph)}; "
+              f"solve('mle') / graph + LM {_ratio(single_t['mle'], graph)}; "
+              f"solve('mle') / everything {_ratio(single_t['mle'], every)}")
 
     print(f"\nbatched, solve_batch() on B = {args.batch} problems (after a warm-up call)")
     batch = paper_batch(args.batch, gamma_deg=args.gamma, seed=123)
@@ -191,8 +207,9 @@ def main(argv: list[str] | None = None) -> int:
         dt, dc = time.perf_counter() - t, time.process_time() - c
         err = np.nanmedian(be.errors_m(batch.truth_m))
         conv = be.converged.mean() * 100
-        print(f"  {m:<11}{args.batch / dt:9.0f} /s wall {args.batch / dc:9.0f} /s cpu   median error {err:7.2f} m, "
-              f"converged {conv:5.1f} %, median iterations {np.median(be.iterations):g}")
+        print(f"  {m:<11}{args.batch / dt:9.0f} /s wall {args.batch / dc:9.0f} /s cpu ({dc / args.batch * 1e6:6.1f} us "
+              f"cpu per problem)   median error {err:7.2f} m, converged {conv:5.1f} %, median iterations "
+              f"{np.median(be.iterations):g}")
     return 0
 
 

@@ -14,7 +14,9 @@ frames with a pixel and over the frames with a range, is
 (likewise C_v with fy; a tau of None or 0 leaves that part on the diagonal, which is then exactly the
 independent model of `mle.base_variances`). u, v and range rows stay mutually uncorrelated, as in the
 independent model. The residuals and the Jacobian are whitened by W = L^-1, C = L L^T (Cholesky), after
-which the problem has unit variances and the estimator runs unchanged.
+which the problem has unit variances and the estimator runs unchanged; with a robust loss, rows down-weighted
+by it get an inflated independent variance C_ii / w_i before the whitening (`inflated_whitening`, used by
+`single._mle_correlated_robust`).
 """
 
 from __future__ import annotations
@@ -67,14 +69,21 @@ def covariance_blocks(t_pix_s, t_rng_s, fx, fy, D_pix_m, sigma: Sigma):
     return C_u, C_v, C_d
 
 
-def whitening_matrix(t_pix_s, t_rng_s, fx, fy, D_pix_m, sigma: Sigma) -> np.ndarray:
-    """W (m,m), m = 2k + l, acting on the residual rows [u_1, v_1, ..., u_k, v_k, d_1, ..., d_l] of `mle`:
-    W r has unit covariance. Block-structured: W_u on the u rows, W_v on the v rows, W_d on the ranges; row
-    i of a block depends on rows <= i (time order of the frames as given)."""
+def full_covariance(t_pix_s, t_rng_s, fx, fy, D_pix_m, sigma: Sigma) -> np.ndarray:
+    """C (m,m), m = 2k + l, of the residual rows [u_1, v_1, ..., u_k, v_k, d_1, ..., d_l] of `mle`."""
     C_u, C_v, C_d = covariance_blocks(t_pix_s, t_rng_s, fx, fy, D_pix_m, sigma)
     k, m = len(t_pix_s), 2 * len(t_pix_s) + len(t_rng_s)
-    W = np.zeros((m, m))
-    W[0:2 * k:2, 0:2 * k:2] = _inverse_cholesky(C_u)
-    W[1:2 * k:2, 1:2 * k:2] = _inverse_cholesky(C_v)
-    W[2 * k:, 2 * k:] = _inverse_cholesky(C_d)
-    return W
+    C = np.zeros((m, m))
+    C[0:2 * k:2, 0:2 * k:2] = C_u
+    C[1:2 * k:2, 1:2 * k:2] = C_v
+    C[2 * k:, 2 * k:] = C_d
+    return C
+
+
+def inflated_whitening(C: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """W = L^-1 of the robustly reweighted covariance C + diag(C_ii (1/w_i - 1)) (weights w in (0, 1]): a row
+    with weight w is treated as carrying an extra independent error that makes its variance C_ii / w (a gross
+    error in that one observation), its correlations with the others unchanged in covariance."""
+    d = np.diag(C)
+    Cw = C + np.diag(d * (1.0 / weights - 1.0))
+    return _inverse_cholesky(Cw)

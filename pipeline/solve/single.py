@@ -530,7 +530,12 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
     if bad:
         status = Status.DIVERGED if init_status == Status.DIVERGED else Status.DEGENERATE
         X = np.zeros(3)
-    W = _whitening_one(fr, X, sigma) if sigma.correlated else None
+    W = None
+    if sigma.correlated:
+        C = _covariance_one(fr, X, sigma)
+        if robust is not None and not bad and (C != np.diag(np.diag(C))).any():
+            return _mle_correlated_robust(fr, X, C, robust, vce, tol_m, max_iterations, init_status)
+        W = _correlated.inflated_whitening(C, np.ones(len(C)))
     if W is None:
         var0 = _base_variances_one(fr, X, sigma)
         model = fr.both4
@@ -659,9 +664,80 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
     return X, iterations, status, cond, 0.5 * (cov + cov.T), extras, resid
 
 
-def _whitening_one(fr: Frames, X0: np.ndarray, sigma: Sigma) -> np.ndarray:
-    """`correlated.whitening_matrix` of the rows in use, with the focal lengths and distances (at X0) of
-    `_base_variances_one` and the frames' times in seconds."""
+def _mle_correlated_robust(fr: Frames, X0, C, robust, vce, tol_m, max_iterations, init_status):
+    """Robust generalized least squares by iteratively reweighted least squares: every iteration takes the robust
+    weights w_i = rho'(z)/z of the rows' marginal standardized residuals z_i = r_i / sqrt(C_ii) (C_ii times the
+    variance factor of the row's group) at the current estimate, applies them as inflated variances C_ii / w_i
+    of an independent gross error (`correlated.inflated_whitening`), and takes the Gauss-Newton step of the
+    whitened problem. Stops when the step is below tol_m (then, with variance components, re-estimates them
+    and continues while they change). Weights on the whitened residuals instead would mix a gross error of
+    one frame into the rows of the next frames and let it drag the estimate."""
+    npix, m = fr.npix, len(C)
+    sd = np.sqrt(np.diag(C))
+    bound = fr.bound(X0)
+    centre = fr.centre
+    vf = [1.0, 1.0]
+    vce_rounds = 0
+
+    def rows_scale(vf):
+        return np.r_[np.full(npix, vf[0]), np.full(m - npix, vf[1])]
+
+    scale = rows_scale(vf)
+    X = np.array(X0, dtype=np.float64)
+    A = fr.both4(X)
+    status = Status.MAX_ITERATIONS
+    it = 0
+    for _ in range(max_iterations):
+        w = _rho_and_weight(A[:, 3] / (sd * np.sqrt(scale)), robust)[1]
+        Aw = (_correlated.inflated_whitening(C, w) @ A) / np.sqrt(scale)[:, None]
+        G = Aw.T @ Aw
+        dX, singular = spd_solve(G[:3, :3], G[:3, 3])
+        it += 1
+        if singular:
+            status = Status.DEGENERATE
+            break
+        Xn = X + dX
+        if not _finite(Xn) or math.sqrt(float((Xn - centre) @ (Xn - centre))) > bound:
+            status = Status.DIVERGED
+            break
+        X = Xn
+        A = fr.both4(X)
+        if math.sqrt(float(dX @ dX)) <= tol_m:
+            if vce:
+                w = _rho_and_weight(A[:, 3] / (sd * np.sqrt(scale)), robust)[1]
+                Aw = (_correlated.inflated_whitening(C, w) @ A) / np.sqrt(scale)[:, None]
+                factors, usable = _vce_factors(Aw[:, :3], Aw[:, 3], npix, None)
+                if any(usable[k] and abs(factors[k] - 1) > VCE_TOL for k in (0, 1)) and vce_rounds < VCE_MAX_ROUNDS:
+                    vf = [vf[k] * factors[k] if usable[k] else vf[k] for k in (0, 1)]
+                    vce_rounds += 1
+                    scale = rows_scale(vf)
+                    continue
+            status = Status.CONVERGED
+            break
+    # covariance with the weights at the final estimate
+    w = _rho_and_weight(A[:, 3] / (sd * np.sqrt(scale)), robust)[1]
+    Aw = (_correlated.inflated_whitening(C, w) @ A) / np.sqrt(scale)[:, None]
+    N = Aw[:, :3].T @ Aw[:, :3]
+    cov, singular = inv3(N)
+    cond = condition(N)
+    failed = status in (Status.DIVERGED, Status.DEGENERATE)
+    if singular and not failed:
+        status = Status.DEGENERATE
+    resid = A[:, 3].copy()
+    if status in (Status.DIVERGED, Status.DEGENERATE):
+        X = np.full(3, np.nan)
+        cov = np.full((3, 3), np.nan)
+        if not singular:
+            cond = math.nan
+    e = Aw[:, 3]
+    extras = {"variance_factor_pixel": vf[0], "variance_factor_range": vf[1],
+              "sigma0_sq": float(e @ e) / (m - 3) if m > 3 else math.nan, "vce_rounds": vce_rounds}
+    return X, it, status, cond, 0.5 * (cov + cov.T), extras, resid
+
+
+def _covariance_one(fr: Frames, X0: np.ndarray, sigma: Sigma) -> np.ndarray:
+    """`correlated.full_covariance` of the rows in use (interleaved), with the focal lengths and distances (at
+    X0) of `_base_variances_one` and the frames' times in seconds."""
     st = fr.st
     n = st.n
     t_ns = st.t_ns[0] if st.t_ns is not None else np.arange(n, dtype=np.int64) * 1_000_000_000
@@ -669,7 +745,7 @@ def _whitening_one(fr: Frames, X0: np.ndarray, sigma: Sigma) -> np.ndarray:
     fxy = fr.focal_px
     diff = X0 - st.platform_m[0, fr.pix_f]
     D = np.sqrt((diff * diff).sum(axis=1))
-    return _correlated.whitening_matrix(t_s[fr.pix_f], t_s[fr.rng_f], fxy[:, 0], fxy[:, 1], D, sigma)
+    return _correlated.full_covariance(t_s[fr.pix_f], t_s[fr.rng_f], fxy[:, 0], fxy[:, 1], D, sigma)
 
 
 def _base_variances_one(fr: Frames, X0: np.ndarray, sigma: Sigma) -> np.ndarray:

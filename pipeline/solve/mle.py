@@ -255,9 +255,16 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
         # accept: move and relax damping; reject: stay and damp harder
         a_idx = idx[accept]
         X[a_idx] = Xn[accept]
-        J[..., a_idx], E[..., a_idx], ok[..., a_idx] = Jn[..., accept], En[..., accept], okn[..., accept]
-        if wr is not None:
-            wr[..., a_idx] = wr_n[..., accept]
+        if full and a_idx.size == B:  # every problem moved: take the new arrays as they are
+            J, E, ok, wr = Jn, En, okn, wr_n
+        elif a_idx.size == idx.size:
+            J[..., a_idx], E[..., a_idx], ok[..., a_idx] = Jn, En, okn
+            if wr is not None:
+                wr[..., a_idx] = wr_n
+        else:
+            J[..., a_idx], E[..., a_idx], ok[..., a_idx] = Jn[..., accept], En[..., accept], okn[..., accept]
+            if wr is not None:
+                wr[..., a_idx] = wr_n[..., accept]
         cost[a_idx] = cost_n[accept]
         lam[a_idx] = np.where(lam[a_idx] / 10 < 1e-9, 0.0, lam[a_idx] / 10)
         rej = idx[~accept]

@@ -1,11 +1,16 @@
 #!/usr/bin/env python
-"""Regenerate sample_data/ deterministically from configs/synth/<group>.yaml.
+"""Regenerate sample_data/ deterministically from configs/synth/<group>.yaml, and configs/flights/<group>.yaml.
 
-    python scripts/make_sample_data.py                 # all groups into sample_data/
+    python scripts/make_sample_data.py                 # all groups into sample_data/, and their flight configs
     python scripts/make_sample_data.py --only group6 -o /tmp/sd
+    python scripts/make_sample_data.py --configs-only  # only configs/flights/*.yaml, from sample_data/*/truth.json
 
 Writes sample_data/MANIFEST.json: per flight, the generation time and per file the size and sha256 of its
 bytes, and for each video the sha256 of its decoded frames (tests/test_synth_sample_data.py checks them).
+The flight configs (what an operator knows: files, camera, lever arms, clock offset, mark, sensor specs) are
+written by pipeline/synth/flight_config.py from each flight's truth.json, with paths relative to configs/flights/
+(tests/test_synth_flight_config.py checks that the committed ones are what it writes). They are written only when
+the output folder is sample_data/ (the folder configs/sample.yaml points at).
 """
 
 from __future__ import annotations
@@ -24,8 +29,11 @@ import cv2  # noqa: E402
 
 from pipeline.synth.config import SynthConfig  # noqa: E402
 from pipeline.synth.flight import generate  # noqa: E402
+from pipeline.synth.flight_config import write_flight_config  # noqa: E402
 from pipeline.synth.writers.video import read_video_frames  # noqa: E402
 
+SAMPLE_DATA = ROOT / "sample_data"
+FLIGHT_CONFIGS = ROOT / "configs" / "flights"
 GROUPS = ("group1", "group2", "group3", "group4", "group5", "group6", "hard_outliers", "angle10")
 
 
@@ -62,13 +70,32 @@ def write_frame_png(flight: Path, png: Path) -> None:
     cv2.imwrite(str(png), img)
 
 
+def write_sample_flight_config(group: str, sample_data: Path = SAMPLE_DATA,
+                               configs: Path = FLIGHT_CONFIGS) -> Path:
+    """configs/<group>.yaml from sample_data/<group>/truth.json (paths relative to `configs`)."""
+    flight = sample_data / group
+    truth = json.loads((flight / "truth.json").read_text())
+    path = configs / f"{group}.yaml"
+    write_flight_config(path, truth, flight, f"Sample flight {group}")
+    return path
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", action="append", choices=GROUPS, help="generate only this group (repeatable)")
     ap.add_argument("-o", "--output", default=str(ROOT / "sample_data"), help="output folder (default sample_data/)")
     ap.add_argument("--no-frame-png", action="store_true", help="do not write docs/sample_frame.png")
+    ap.add_argument("--configs-only", action="store_true",
+                    help="only rewrite configs/flights/<group>.yaml from the existing sample_data/<group>/truth.json")
     args = ap.parse_args(argv)
     out = Path(args.output)
+    write_configs = out.resolve() == SAMPLE_DATA.resolve()
+    if args.configs_only:
+        if not write_configs:
+            ap.error("--configs-only rewrites configs/flights/ from sample_data/: do not combine it with -o")
+        for group in args.only or GROUPS:
+            print(f"wrote {write_sample_flight_config(group).relative_to(ROOT)}")
+        return 0
     out.mkdir(parents=True, exist_ok=True)
     manifest_path = out / "MANIFEST.json"
     manifest = json.loads(manifest_path.read_text()) if manifest_path.exists() else {}
@@ -84,6 +111,8 @@ def main(argv=None) -> int:
                            "total_bytes": size, "files": files}
         print(f"{group}: {cfg.format}, {res.n_observations} obs, {res.intersection_angle_deg:.4f} deg, "
               f"{res.n_frames} frames, {size / 1e6:.2f} MB, {dt:.1f} s", flush=True)
+        if write_configs:
+            write_sample_flight_config(group)
     manifest = dict(sorted(manifest.items()))
     manifest_path.write_text(json.dumps(manifest, indent=1) + "\n")
     total = sum(v["total_bytes"] for v in manifest.values())

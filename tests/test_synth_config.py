@@ -61,7 +61,8 @@ def test_cli_writes_a_flight(tmp_path, capsys):
     out = tmp_path / "flight"
     assert main(["synth", str(cfg), "-o", str(out), "--format", "mcap", "--seed", "9"]) == 0
     assert "tiny: 2 observations, intersection angle 2.00 deg, 2 frames, mcap" in capsys.readouterr().out
-    assert sorted(p.name for p in out.iterdir()) == ["flight.mcap", "truth.json", "video.frames.csv", "video.mp4"]
+    assert sorted(p.name for p in out.iterdir()) == ["flight.mcap", "flight.yaml", "truth.json", "video.frames.csv",
+                                                     "video.mp4"]
     truth = json.loads((out / "truth.json").read_text())
     assert truth["seed"] == 9 and truth["config"]["format"] == "mcap"
     # an existing folder is refused unless --overwrite, and nothing is left behind

@@ -1,5 +1,5 @@
 """`ridgeloc synth CONFIG -o DIR`: generate a synthetic flight (video, telemetry, laser, truth.json) from a YAML
-config (see configs/synth/ and docs/synth.md)."""
+config (see configs/synth/ and docs/synth.md), with DIR/flight.yaml, its flight config for `ridgeloc run`."""
 
 from __future__ import annotations
 
@@ -43,7 +43,11 @@ def main(args) -> int:
     out = Path(args.output)
     if out.exists() and not out.is_dir():
         raise InputError("output exists and is not a folder", out)
-    res = generate(cfg, out, overwrite=args.overwrite)
+    res = generate(cfg, out, overwrite=args.overwrite, write_flight_config=True)
     print(f"{cfg.group}: {res.n_observations} observations, intersection angle {res.intersection_angle_deg:.2f} deg, "
           f"{res.n_frames} frames, {cfg.format} -> {out} ({res.seconds:.1f} s)")
+    if res.flight_config is not None:
+        print(f"run it: ridgeloc run {res.flight_config} -o OUTDIR")
+    else:
+        print("no flight.yaml: the target is visible in no observation frame, so there is no mark to give")
     return 0

@@ -17,6 +17,7 @@ import numpy as np
 
 from pipeline.errors import InputError
 from pipeline.synth.config import SynthConfig
+from pipeline.synth.flight_config import write_flight_config as write_operator_config
 from pipeline.synth.render import Renderer, ground_texture
 from pipeline.synth.telemetry import make_telemetry
 from pipeline.synth.timeline import Timeline, build_timeline
@@ -27,6 +28,7 @@ from pipeline.synth.writers.rosbag import encode_jpeg, write_bag
 from pipeline.synth.writers.tlog import write_tlog
 from pipeline.synth.writers.video import write_video
 
+FLIGHT_CONFIG_NAME = "flight.yaml"  # the name `ridgeloc run FOLDER` discovers
 RNG_STREAMS = ("wobble", "jitter", "gnss", "attitude", "gimbal", "laser", "pixels")
 
 
@@ -38,6 +40,7 @@ class SynthResult:
     n_observations: int
     intersection_angle_deg: float
     seconds: float
+    flight_config: Path | None = None  # out_dir/flight.yaml when written (write_flight_config and a mark)
 
 
 def camera_matrix(cfg: SynthConfig) -> np.ndarray:
@@ -67,8 +70,13 @@ class FrameSource:
                                        cloud)
 
 
-def generate(cfg: SynthConfig, out_dir: str | Path, overwrite: bool = False) -> SynthResult:
-    """Write the flight `cfg` into `out_dir` (created; must not exist unless overwrite) and return a summary."""
+def generate(cfg: SynthConfig, out_dir: str | Path, overwrite: bool = False,
+             write_flight_config: bool = False) -> SynthResult:
+    """Write the flight `cfg` into `out_dir` (created; must not exist unless overwrite) and return a summary.
+
+    With write_flight_config, also out_dir/flight.yaml: the flight config an operator would write for it
+    (pipeline/synth/flight_config.py), so that `ridgeloc run out_dir/flight.yaml` processes it; not written when
+    the target is visible in no observation frame (no mark to give)."""
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     if out_dir.exists() and not overwrite:
@@ -91,6 +99,10 @@ def generate(cfg: SynthConfig, out_dir: str | Path, overwrite: bool = False) -> 
         files = _write_files(cfg, tl, tel, frames, tmp)
         truth = build_truth(cfg, tl, flight, laser_truth, truth_frames, files, spacing)
         (tmp / "truth.json").write_text(json.dumps(truth, indent=1) + "\n")
+        config_path = None
+        if write_flight_config and truth["target_mark"] is not None:
+            write_operator_config(tmp / FLIGHT_CONFIG_NAME, truth, tmp, f"Synthetic flight {cfg.group}")
+            config_path = out_dir / FLIGHT_CONFIG_NAME
         if out_dir.exists():
             shutil.rmtree(out_dir)
         tmp.rename(out_dir)
@@ -98,7 +110,8 @@ def generate(cfg: SynthConfig, out_dir: str | Path, overwrite: bool = False) -> 
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return SynthResult(out_dir=out_dir, files=files, n_frames=frames.n, n_observations=cfg.observations.count,
-                       intersection_angle_deg=truth["intersection_angle_deg"], seconds=time.perf_counter() - t_start)
+                       intersection_angle_deg=truth["intersection_angle_deg"], seconds=time.perf_counter() - t_start,
+                       flight_config=config_path)
 
 
 def _write_files(cfg: SynthConfig, tl: Timeline, tel, frames: FrameSource, folder: Path) -> dict[str, str]:

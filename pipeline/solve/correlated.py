@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg import cho_factor, solve_triangular
+from scipy.linalg.lapack import dpotrf, dtrtrs
 
 from pipeline.solve.observations import Sigma
 
@@ -36,17 +36,30 @@ def _kernel(t_s: np.ndarray, tau_s: float | None) -> np.ndarray:
     return np.exp(-np.abs(t_s[:, None] - t_s[None, :]) / tau_s)
 
 
+def _cholesky_lower(C: np.ndarray) -> np.ndarray:
+    """L (lower) with C = L L^T, by LAPACK directly (small matrices: the scipy wrappers' checks cost more than
+    the factorization); a tiny diagonal load when C is singular (frames at equal times with no white part)."""
+    L, info = dpotrf(C, lower=1, clean=1)
+    if info != 0:
+        L, info = dpotrf(C + 1e-12 * np.trace(C) / len(C) * np.eye(len(C)), lower=1, clean=1)
+        if info != 0:
+            raise np.linalg.LinAlgError("the residual covariance is not positive definite")
+    return L
+
+
+def _solve_lower(L: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """L^-1 B for lower-triangular L."""
+    X, info = dtrtrs(L, B, lower=1)
+    if info != 0:  # pragma: no cover - L from _cholesky_lower has a positive diagonal
+        raise np.linalg.LinAlgError("singular triangular factor")
+    return X
+
+
 def _inverse_cholesky(C: np.ndarray) -> np.ndarray:
-    """W = L^-1 for C = L L^T (lower); a tiny diagonal load when C is singular (frames at equal times with
-    no white part)."""
+    """W = L^-1 for C = L L^T (lower)."""
     if C.size == 0:
         return C
-    try:
-        L, _ = cho_factor(C, lower=True, check_finite=False)
-    except np.linalg.LinAlgError:
-        L, _ = cho_factor(C + 1e-12 * np.trace(C) / len(C) * np.eye(len(C)), lower=True, check_finite=False)
-    L = np.tril(L)
-    return solve_triangular(L, np.eye(len(C)), lower=True, check_finite=False)
+    return _solve_lower(_cholesky_lower(C), np.eye(len(C)))
 
 
 def covariance_blocks(t_pix_s, t_rng_s, fx, fy, D_pix_m, sigma: Sigma):
@@ -84,6 +97,16 @@ def inflated_whitening(C: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """W = L^-1 of the robustly reweighted covariance C + diag(C_ii (1/w_i - 1)) (weights w in (0, 1]): a row
     with weight w is treated as carrying an extra independent error that makes its variance C_ii / w (a gross
     error in that one observation), its correlations with the others unchanged in covariance."""
-    d = np.diag(C)
-    Cw = C + np.diag(d * (1.0 / weights - 1.0))
-    return _inverse_cholesky(Cw)
+    return _inverse_cholesky(_inflated(C, weights))
+
+
+def inflated_whiten(C: np.ndarray, weights: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """`inflated_whitening`(C, weights) @ A, by one triangular solve."""
+    return _solve_lower(_cholesky_lower(_inflated(C, weights)), A)
+
+
+def _inflated(C: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    Cw = C.copy()
+    d = np.einsum("ii->i", Cw)  # a view of the diagonal
+    d *= 1.0 / weights
+    return Cw

@@ -689,7 +689,7 @@ def _mle_correlated_robust(fr: Frames, X0, C, robust, vce, tol_m, max_iterations
     it = 0
     for _ in range(max_iterations):
         w = _rho_and_weight(A[:, 3] / (sd * np.sqrt(scale)), robust)[1]
-        Aw = (_correlated.inflated_whitening(C, w) @ A) / np.sqrt(scale)[:, None]
+        Aw = _correlated.inflated_whiten(C, w, A) / np.sqrt(scale)[:, None]
         G = Aw.T @ Aw
         dX, singular = spd_solve(G[:3, :3], G[:3, 3])
         it += 1
@@ -705,7 +705,7 @@ def _mle_correlated_robust(fr: Frames, X0, C, robust, vce, tol_m, max_iterations
         if math.sqrt(float(dX @ dX)) <= tol_m:
             if vce:
                 w = _rho_and_weight(A[:, 3] / (sd * np.sqrt(scale)), robust)[1]
-                Aw = (_correlated.inflated_whitening(C, w) @ A) / np.sqrt(scale)[:, None]
+                Aw = _correlated.inflated_whiten(C, w, A) / np.sqrt(scale)[:, None]
                 factors, usable = _vce_factors(Aw[:, :3], Aw[:, 3], npix, None)
                 if any(usable[k] and abs(factors[k] - 1) > VCE_TOL for k in (0, 1)) and vce_rounds < VCE_MAX_ROUNDS:
                     vf = [vf[k] * factors[k] if usable[k] else vf[k] for k in (0, 1)]
@@ -716,7 +716,7 @@ def _mle_correlated_robust(fr: Frames, X0, C, robust, vce, tol_m, max_iterations
             break
     # covariance with the weights at the final estimate
     w = _rho_and_weight(A[:, 3] / (sd * np.sqrt(scale)), robust)[1]
-    Aw = (_correlated.inflated_whitening(C, w) @ A) / np.sqrt(scale)[:, None]
+    Aw = _correlated.inflated_whiten(C, w, A) / np.sqrt(scale)[:, None]
     N = Aw[:, :3].T @ Aw[:, :3]
     cov, singular = inv3(N)
     cond = condition(N)

@@ -10,6 +10,7 @@ Reports, in one run:
     by tight priors), Levenberg-Marquardt; time and the largest difference from `mle` without robust loss.
 
     python scripts/bench_solvers.py [--problems 40] [--batch 8000] [--gamma 30]
+    python scripts/bench_solvers.py --against COMMIT     (before / after, interleaved in one process)
 """
 
 from __future__ import annotations
@@ -141,12 +142,103 @@ def _calibration_us() -> float:
     return best * 1e6
 
 
+def _import_baseline(commit: str, workdir: str):
+    """The solvers of another commit, importable next to this checkout's: `git archive` of its pipeline/ into
+    workdir, renamed to the package `baseline_pipeline` (its imports rewritten)."""
+    import importlib
+    import re
+    import subprocess
+    import sys
+    import tarfile
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    tar_path = Path(workdir) / "baseline.tar"
+    with open(tar_path, "wb") as fh:
+        subprocess.run(["git", "-C", str(repo), "archive", commit, "pipeline"], stdout=fh, check=True)
+    with tarfile.open(tar_path) as tar:
+        tar.extractall(workdir, filter="data")
+    src = Path(workdir) / "pipeline"
+    dst = src.rename(Path(workdir) / "baseline_pipeline")
+    for f in dst.rglob("*.py"):
+        text = f.read_text()
+        text = re.sub(r"\bfrom pipeline([. ])", r"from baseline_pipeline\1", text)
+        text = re.sub(r"\bimport pipeline\b", "import baseline_pipeline", text)
+        text = re.sub(r"\bpipeline\.([a-z_]+)", r"baseline_pipeline.\1", text)
+        f.write_text(text)
+    sys.path.insert(0, workdir)
+    return importlib.import_module("baseline_pipeline.solve"), importlib.import_module("baseline_pipeline.solve.scenes")
+
+
+def _compare(commit: str, problems: int, batch_size: int, gamma: float) -> None:
+    """Interleaved timing of this checkout against another commit in one process: every problem is solved by
+    the baseline, by this checkout and by GTSAM in turn, so that the machine's load affects all alike."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        old, old_scenes = _import_baseline(commit, tmp)
+        probs = [paper_problem(gamma_deg=gamma, seed=s) for s in range(problems)]
+        old_probs = [old_scenes.paper_problem(gamma_deg=gamma, seed=s) for s in range(problems)]
+        try:
+            import gtsam  # noqa: F401
+            setups = [_gtsam_setup(o) for o in probs]
+        except ImportError:
+            setups = None
+
+        def tm(fn):
+            c, t = time.process_time(), time.perf_counter()
+            fn()
+            return time.perf_counter() - t, time.process_time() - c
+
+        print(f"\nthis checkout against {commit}, interleaved in one process, solve() median per call "
+              "(CPU; wall in brackets)")
+        for m, kw in [(m, {}) for m in METHODS] + [("mle", {"robust": None})]:
+            for a, b in zip(old_probs, probs, strict=True):  # warm-up
+                old.solve(m, a, **kw)
+                solve(m, b, **kw)
+            t_old, t_new, t_g = [], [], []
+            for _ in range(1 if m in ("fusion", "ridge") else 3):
+                for i, (a, b) in enumerate(zip(old_probs, probs, strict=True)):
+                    t_old.append(tm(lambda a=a, m=m, kw=kw: old.solve(m, a, **kw)))
+                    t_new.append(tm(lambda b=b, m=m, kw=kw: solve(m, b, **kw)))
+                    if setups is not None:
+                        t_g.append(tm(lambda b=b, i=i: _gtsam_solve(b, setups[i])))
+
+            def med(ts, k):
+                return statistics.median(x[k] for x in ts) * 1e6
+            label = m + (" robust=None" if kw else "")
+            line = (f"  {label:<16} before {med(t_old, 1):7.1f} us ({med(t_old, 0):7.1f})   after {med(t_new, 1):7.1f} "
+                    f"us ({med(t_new, 0):7.1f})   {med(t_old, 1) / med(t_new, 1):4.2f}x")
+            if t_g:
+                line += (f"   GTSAM graph + LM {med(t_g, 1):6.1f} us, after / GTSAM {med(t_new, 1) / med(t_g, 1):4.2f} "
+                         f"({med(t_new, 0) / med(t_g, 0):4.2f})")
+            print(line)
+        print(f"\nbatched, B = {batch_size}: problems per second of CPU time, before -> after (alternating calls, "
+              "best of 2)")
+        new_b = paper_batch(batch_size, gamma_deg=gamma, seed=123)
+        old_b = old_scenes.paper_batch(batch_size, gamma_deg=gamma, seed=123)
+        for m in METHODS:
+            best_old = best_new = np.inf
+            for _ in range(2):
+                best_old = min(best_old, tm(lambda m=m: old.solve_batch(m, old_b))[1])
+                best_new = min(best_new, tm(lambda m=m: solve_batch(m, new_b))[1])
+            print(f"  {m:<11}{batch_size / best_old:9.0f} /s  ->  {batch_size / best_new:9.0f} /s   "
+                  f"{best_old / best_new:4.2f}x")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--problems", type=int, default=40, help="distinct problems for the single-solve timings")
     ap.add_argument("--batch", type=int, default=8000, help="problems per batched call")
     ap.add_argument("--gamma", type=float, default=30.0, help="intersection angle, degrees")
+    ap.add_argument("--against", metavar="COMMIT", help="instead: time this checkout against the solvers of "
+                    "another git commit, interleaved in one process (e.g. --against 146e541)")
     args = ap.parse_args(argv)
+    if args.against:
+        print(f"machine: {os.cpu_count()} cpus, load average {os.getloadavg()[0]:.1f}, one trivial numpy call "
+              f"{_calibration_us():.2f} us")
+        _compare(args.against, args.problems, args.batch, args.gamma)
+        return 0
     probs = [paper_problem(gamma_deg=args.gamma, seed=s) for s in range(args.problems)]
     print(f"geometry: 10 frames, 5 km slant range, 2 km height, intersection {args.gamma:g} deg, paper noise")
     print(f"machine: {os.cpu_count()} cpus, load average {os.getloadavg()[0]:.1f}, one trivial numpy call "

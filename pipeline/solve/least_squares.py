@@ -56,7 +56,7 @@ def collinear_platforms(platform_m: np.ndarray, used: np.ndarray, sigma_position
     values, below the 95 % quantile of sigma^2 chi-square with 2(k - 2) degrees of freedom (k positions, a
     line in 3D has 4 parameters). Ranges from such positions cannot fix the rotation of the target about the
     line: the answer would be set by the noise."""
-    from scipy.stats import chi2
+    from scipy.special import chdtri  # = scipy.stats.chi2.ppf(0.95, dof), bit for bit, without its ~40 us wrapper
 
     w = used.astype(np.float64)
     k = w.sum(axis=1)
@@ -65,7 +65,7 @@ def collinear_platforms(platform_m: np.ndarray, used: np.ndarray, sigma_position
     flat = sv[:, 1] <= 1e-9 * sv[:, 0]
     if sigma_position_m:
         dof = 2 * (k - 2)
-        limit = chi2.ppf(0.95, np.maximum(dof, 1)) * sigma_position_m ** 2
+        limit = chdtri(np.maximum(dof, 1), 1.0 - 0.95) * sigma_position_m ** 2
         flat |= (dof > 0) & (sv[:, 1] ** 2 + sv[:, 2] ** 2 < limit)
     return flat
 

@@ -165,3 +165,11 @@ def test_robust_gls_resists_a_gross_range_error():
     assert np.linalg.norm(plain.position_m - obs.truth_m) > 100.0
     assert np.median(errs) < 20.0
     assert np.mean(np.array(d2s) <= CHI2_3_95) >= 0.85
+
+
+def test_correlation_times_without_real_timestamps_is_an_error():
+    obs = paper_problem(seed=2)
+    obs = dataclasses.replace(obs, t_ns=np.arange(obs.n, dtype=np.int64))  # the default: frame numbers, in ns
+    with pytest.raises(ObservationError, match="real timestamps"):
+        solve("mle", obs, sigma=CORR)
+    solve("mle", obs)  # without correlation times the timestamps are not used

@@ -309,6 +309,12 @@ def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
             raise ObservationError("los needs at least one frame with both a target pixel and a range")
         return
     if method == "mle":
+        sigma = o.get("sigma") or obs.sigma
+        span_ns = int(obs.t_ns.max() - obs.t_ns.min())
+        if sigma.correlated and obs.n > 1 and span_ns < 1_000_000:
+            raise ObservationError(f"mle: the sigma gives correlation times (attitude_tau_s, position_tau_s) but "
+                                   f"the frames' t_ns span only {span_ns} ns: they need real timestamps (without "
+                                   "t_ns the frames are numbered 0, 1, 2, ... ns)")
         if not has_init and npix < 2 and nboth == 0:
             raise ObservationError(f"mle starts from the linear intersection (two or more pixels) or a line of "
                                    f"sight (a pixel and a range in one frame); there are {npix} pixel(s) and "

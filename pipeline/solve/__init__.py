@@ -292,9 +292,9 @@ def _spread_m(points: np.ndarray) -> float:
 
 def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
     has_pix, has_rng = st.has_pix[0], st.has_range[0]
-    npix = int(has_pix.sum())
-    nrng = int(has_rng.sum())
-    nboth = int((has_pix & has_rng).sum())
+    npix = int(np.count_nonzero(has_pix))
+    nrng = int(np.count_nonzero(has_rng))
+    nboth = int(np.count_nonzero(has_pix & has_rng))
     has_init = o.get("initial_m") is not None
     if method != "range" or not has_init:  # range starts from vision, which projects through P
         # |det M| against |M|^3 (the rows' lengths, from the Gram matrix M M^T)
@@ -310,8 +310,8 @@ def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
         return
     if method == "mle":
         sigma = o.get("sigma") or obs.sigma
-        span_ns = int(obs.t_ns.max() - obs.t_ns.min())
-        if sigma.correlated and obs.n > 1 and span_ns < 1_000_000:
+        span_ns = int(obs.t_ns.max() - obs.t_ns.min()) if sigma.correlated and obs.n > 1 else None
+        if span_ns is not None and span_ns < 1_000_000:
             raise ObservationError(f"mle: the sigma gives correlation times (attitude_tau_s, position_tau_s) but "
                                    f"the frames' t_ns span only {span_ns} ns: they need real timestamps (without "
                                    "t_ns the frames are numbered 0, 1, 2, ... ns)")

@@ -202,10 +202,12 @@ class Frames:
         """(k,2) focal lengths fx, fy of the frames with a pixel (`Stacked.focal_px`)."""
         f = self.__dict__.get("_focal")
         if f is None:
-            g = self.st._gram()[0, self.pix_f]
-            g33 = g[:, 2, 2]
-            f = self.__dict__["_focal"] = np.sqrt(np.maximum(
-                g[:, (0, 1), (0, 1)] * g33[:, None] - g[:, (0, 1), (2, 2)] ** 2, 0.0)) / g33[:, None]
+            g = self.st._gram()[0, self.pix_f].reshape(-1, 9)
+            g33 = g[:, 8:9]
+            # columns (g00, g11) and (g02, g12) as strided views: no fancy-index copies
+            f = np.multiply(g[:, 0:5:4], g33)
+            f -= g[:, 2:6:3] ** 2
+            f = self.__dict__["_focal"] = np.sqrt(np.maximum(f, 0.0, out=f), out=f) / g33
         return f
 
     def bound(self, X0: np.ndarray) -> float:
@@ -758,14 +760,36 @@ def _base_variances_one(fr: Frames, X0: np.ndarray, sigma: Sigma) -> np.ndarray:
     f2 = fr.focal_px ** 2
     if s_pos > 0:
         diff = X0 - fr.st.platform_m[0, fr.pix_f]
-        D2 = (diff * diff).sum(axis=1)
-        ang2 = s_att ** 2 + np.where(np.isfinite(D2) & (D2 > 0), s_pos ** 2 / np.where(D2 > 0, D2, 1.0), 0.0)[:, None]
-        np.multiply(f2, ang2, out=var[:fr.npix].reshape(-1, 2))
+        D2 = np.add.reduce(diff * diff, axis=1)
+        a2, p2 = s_att ** 2, s_pos ** 2
+        # a few floats: a list is cheaper than the masks (0 < D2 < inf, i.e. finite and positive)
+        ang2 = np.array([a2 + (p2 / v if 0.0 < v < math.inf else 0.0) for v in D2.tolist()])
+        np.multiply(f2, ang2[:, None], out=var[:fr.npix].reshape(-1, 2))
     else:
         np.multiply(f2, s_att ** 2, out=var[:fr.npix].reshape(-1, 2))
     var[:fr.npix] += s_px ** 2
     var[fr.npix:] = s_r ** 2 + s_pos ** 2
     return np.where(var > 0, var, 1.0)
+
+
+_CEP_LISTS: dict[float, list] = {}
+_Q_STEPS = _Q_GRID.size - 1
+
+
+def _interp_q(q: float, p: float) -> float:
+    """np.interp(q, _Q_GRID, _cep_table(p)) on Python floats (the grid is j / 256, exact in binary), with
+    numpy's formula slope * (q - x_j) + y_j, so bit-identical."""
+    y = _CEP_LISTS.get(p)
+    if y is None:
+        y = _CEP_LISTS[p] = _cep_table(p).tolist()
+    if not 0.0 <= q < 1.0:  # q = 1 (and the out-of-range and NaN cases): np.interp's own answer
+        return float(np.interp(q, _Q_GRID, _cep_table(p)))
+    j = int(q * _Q_STEPS)
+    xj = j / _Q_STEPS
+    if xj == q:
+        return y[j]
+    slope = (y[j + 1] - y[j]) / ((j + 1) / _Q_STEPS - xj)
+    return slope * (q - xj) + y[j]
 
 
 def summaries_one(cov: np.ndarray) -> dict:
@@ -779,7 +803,7 @@ def summaries_one(cov: np.ndarray) -> dict:
     half = math.sqrt(0.25 * (a - c) ** 2 + b * b)
     s1 = math.sqrt(max(0.5 * (a + c) + half, 0.0))
     s2 = math.sqrt(max(0.5 * (a + c) - half, 0.0))
-    ceps = [s1 * float(np.interp(s2 / s1, _Q_GRID, _cep_table(p))) if s1 > 0 else math.nan for p in (0.5, 0.9)]
+    ceps = [s1 * _interp_q(s2 / s1, p) if s1 > 0 else math.nan for p in (0.5, 0.9)]
     return {"cep50_m": np.array([ceps[0]]), "cep90_m": np.array([ceps[1]]),
             "ellipsoid_semi_axes_1sigma_m": np.sqrt(np.maximum(ev, 0.0))[None], "ellipsoid_axes": vec[None]}
 

@@ -287,7 +287,11 @@ def _concatenate(parts: list[BatchEstimate]) -> BatchEstimate:
 # ---- single problem: clear errors for unusable input --------------------------------------------------------
 
 def _spread_m(points: np.ndarray) -> float:
-    return float(np.linalg.norm(points - points.mean(axis=0), axis=1).max()) if len(points) else 0.0
+    """The largest distance (m) of (k,3) points from their mean (ufunc reductions: no wrappers)."""
+    if not len(points):
+        return 0.0
+    d = points - np.add.reduce(points, axis=0) / len(points)
+    return math.sqrt(float(np.maximum.reduce(np.add.reduce(d * d, axis=1))))
 
 
 def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
@@ -329,8 +333,8 @@ def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
         raise ObservationError(f"{what} needs at least two frames with a target pixel, got {npix}"
                                + ("" if method in ("dlt", "vision") else "; or pass initial_m"))
     if needs_pixels:
-        centres = np.linalg.solve(obs.P[has_pix, :, :3], -obs.P[has_pix, :, 3:])[..., 0]
-        if _spread_m(centres) <= 1e-6 * (1.0 + np.abs(centres).max()):
+        centres = single.camera_centres(st.M[0, has_pix], st.p4[0, has_pix])
+        if _spread_m(centres) <= 1e-6 * (1.0 + float(np.maximum.reduce(np.abs(centres), axis=None))):
             raise GeometryError("all frames with a target pixel share one camera position: no baseline to "
                                 "intersect the lines of sight")
     if method == "range":
@@ -417,6 +421,8 @@ def _residuals(method: str, st: Stacked, X: np.ndarray) -> np.ndarray:
     if not np.isfinite(X).all():
         return np.zeros(0)
     fr = single.Frames.of(st)
+    if method not in ("dlt", "vision", "range"):  # pixels then ranges: one evaluation
+        return fr.both4(X)[:, 3].copy()
     parts = []
     if method in _USES_PIXELS or method == "los":
         parts.append(fr.pixel(X)[1])

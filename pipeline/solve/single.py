@@ -37,8 +37,16 @@ try:  # numpy.linalg.eigh/eigvalsh without their per-call wrapping (type checks,
 
     def _eigvalsh(a: np.ndarray):
         return _umath_linalg.eigvalsh_lo(a, signature="d->d")
+
+    def _solve(a: np.ndarray, b: np.ndarray):
+        return _umath_linalg.solve(a, b, signature="dd->d")
 except (ImportError, AttributeError):  # pragma: no cover - other numpy layouts
-    _eigh, _eigvalsh = np.linalg.eigh, np.linalg.eigvalsh
+    _eigh, _eigvalsh, _solve = np.linalg.eigh, np.linalg.eigvalsh, np.linalg.solve
+
+
+def camera_centres(M: np.ndarray, p4: np.ndarray) -> np.ndarray:
+    """(k,3) camera centres C = -M^-1 p4 of (k,3,3) M and (k,3) p4 (one LAPACK call)."""
+    return -_solve(M, p4[:, :, None])[:, :, 0]
 
 
 def spd_solve(N: np.ndarray, g: np.ndarray, singular_below: float = SINGULAR_DET):

@@ -284,7 +284,10 @@ def _iterate_one(X0, init_status, step, tol_m, max_iterations, bound, centre):
     extras: dict = {}
     if (init_status is not None and init_status in (Status.DIVERGED, Status.DEGENERATE)) or not _finite(X0):
         return X0.copy(), 0, (Status.DIVERGED if init_status == Status.DIVERGED else Status.DEGENERATE), extras
+    # the iterate and the step as Python floats (the same additions as X + dX); an array only for the model
     X = X0.copy()
+    x0, x1, x2 = X0.tolist()
+    c0, c1, c2 = centre.tolist()
     status = Status.MAX_ITERATIONS
     it = 0
     for _ in range(max_iterations):
@@ -294,15 +297,16 @@ def _iterate_one(X0, init_status, step, tol_m, max_iterations, bound, centre):
         if singular:
             status = Status.DEGENERATE
             break
-        Xn = X + dX
-        finite = _finite(Xn)
+        d0, d1, d2 = dX
+        n0, n1, n2 = x0 + d0, x1 + d1, x2 + d2
+        finite = math.isfinite(n0) and math.isfinite(n1) and math.isfinite(n2)
         if finite:
-            X = Xn
-        diff = Xn - centre
-        if not finite or math.sqrt(float(diff @ diff)) > bound:
+            x0, x1, x2 = n0, n1, n2
+            X = np.array((n0, n1, n2))
+        if not finite or math.sqrt((n0 - c0) ** 2 + (n1 - c1) ** 2 + (n2 - c2) ** 2) > bound:
             status = Status.DIVERGED
             break
-        if math.sqrt(float(dX @ dX)) <= tol_m:
+        if math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) <= tol_m:
             status = Status.CONVERGED
             break
     return X, it, status, extras
@@ -326,7 +330,7 @@ def gn_one(fr: Frames, model, X0, init_status, tol_m, max_iterations):
         J, r = model(X)
         JT = J.T
         dX, singular = spd_solve(JT @ J, JT @ r)
-        return dX, singular, {}
+        return (None if singular else dX.tolist()), singular, {}
 
     X, it, status, _ = _iterate_one(X0, init_status, step, tol_m, max_iterations, fr.bound(X0), fr.centre)
     if _finite(X):
@@ -427,9 +431,10 @@ def normalized_normal_one(fr: Frames, X):
     and its column sums (T's rows are [J, -L]/S and dPhi's (r - L)/S, L the block's minimum residual, S its
     spread)."""
     A = fr.both4(X)
-    N = [[0.0] * 4 for _ in range(4)]
-    g = [0.0] * 4
-    dd = 0.0
+    # the sums of the two blocks' terms in the order of a loop over the blocks starting from zeros (written
+    # out: the same floating-point operations, without the loops)
+    n00 = n01 = n02 = n03 = n11 = n12 = n13 = n22 = n23 = n33 = 0.0
+    g0 = g1 = g2 = g3 = dd = 0.0
     for blk in (A[:fr.npix], A[fr.npix:]):
         cnt = blk.shape[0]
         if cnt == 0:
@@ -440,26 +445,36 @@ def normalized_normal_one(fr: Frames, X):
         if not (span > 0 and math.isfinite(span)):
             span = 1.0
         s2 = 1.0 / (span * span)
-        G = (blk.T @ blk).tolist()
-        S = np.add.reduce(blk).tolist()
-        for i in range(3):
-            Gi, Ni = G[i], N[i]
-            for j in range(i, 3):
-                Ni[j] += Gi[j] * s2
-            Ni[3] += -lo * S[i] * s2
-            g[i] += (Gi[3] - lo * S[i]) * s2
-        N[3][3] += lo * lo * cnt * s2
-        g[3] += -lo * (S[3] - lo * cnt) * s2
-        dd += (G[3][3] - 2 * lo * S[3] + lo * lo * cnt) * s2
-    for i in range(4):
-        for j in range(i):
-            N[i][j] = N[j][i]
-    return N, g, dd, A.shape[0]
+        (G00, G01, G02, G03), (_, G11, G12, G13), (_, _, G22, G23), (_, _, _, G33) = (blk.T @ blk).tolist()
+        S0, S1, S2, S3 = np.add.reduce(blk).tolist()
+        nlo = -lo
+        n00 += G00 * s2
+        n01 += G01 * s2
+        n02 += G02 * s2
+        n03 += nlo * S0 * s2
+        g0 += (G03 - lo * S0) * s2
+        n11 += G11 * s2
+        n12 += G12 * s2
+        n13 += nlo * S1 * s2
+        g1 += (G13 - lo * S1) * s2
+        n22 += G22 * s2
+        n23 += nlo * S2 * s2
+        g2 += (G23 - lo * S2) * s2
+        n33 += lo * lo * cnt * s2
+        g3 += nlo * (S3 - lo * cnt) * s2
+        dd += (G33 - 2 * lo * S3 + lo * lo * cnt) * s2
+    N = [[n00, n01, n02, n03], [n01, n11, n12, n13], [n02, n12, n22, n23], [n03, n13, n23, n33]]
+    return N, [g0, g1, g2, g3], dd, A.shape[0]
 
 
 def _solve_augmented_one(N, g, k):
     """`least_squares._solve_augmented` for one problem on nested lists: beta (list of 4) or None."""
-    Nk = [[N[i][j] + (k if i == j else 0.0) for j in range(4)] for i in range(4)] if k else N
+    if k:
+        (a00, a01, a02, a03), (a10, a11, a12, a13), (a20, a21, a22, a23), (a30, a31, a32, a33) = N
+        Nk = [[a00 + k, a01 + 0.0, a02 + 0.0, a03 + 0.0], [a10 + 0.0, a11 + k, a12 + 0.0, a13 + 0.0],
+              [a20 + 0.0, a21 + 0.0, a22 + k, a23 + 0.0], [a30 + 0.0, a31 + 0.0, a32 + 0.0, a33 + k]]
+    else:
+        Nk = N
     beta = _chol_solve(Nk, g, NORMALIZED_SINGULAR_DET)
     if beta is None:
         dX = _chol_solve([row[:3] for row in Nk[:3]], [g[i] - N[i][3] for i in range(3)], NORMALIZED_SINGULAR_DET)
@@ -481,13 +496,18 @@ def _hkb_one(N, g, dd, rows, variant):
     beta = _chol_solve(N, g, SINGULAR_DET)
     if beta is None:
         return 0.0
-    rss = max(dd - sum(g[i] * beta[i] for i in range(4)), 0.0)
+    b0, b1, b2, b3 = beta
+    rss = max(dd - (g[0] * b0 + g[1] * b1 + g[2] * b2 + g[3] * b3), 0.0)  # sum() from 0: the same additions
     dof = rows - p
     s2 = rss / dof if dof > 0 else 0.0
     if variant == "textbook":
-        denom = sum(b * b for b in beta)
+        denom = b0 * b0 + b1 * b1 + b2 * b2 + b3 * b3
     else:
-        denom = sum(beta[i] * N[i][j] * beta[j] for i in range(4) for j in range(4))
+        (a00, a01, a02, a03), (a10, a11, a12, a13), (a20, a21, a22, a23), (a30, a31, a32, a33) = N
+        denom = (b0 * a00 * b0 + b0 * a01 * b1 + b0 * a02 * b2 + b0 * a03 * b3
+                 + b1 * a10 * b0 + b1 * a11 * b1 + b1 * a12 * b2 + b1 * a13 * b3
+                 + b2 * a20 * b0 + b2 * a21 * b1 + b2 * a22 * b2 + b2 * a23 * b3
+                 + b3 * a30 * b0 + b3 * a31 * b1 + b3 * a32 * b2 + b3 * a33 * b3)
     k = p * s2 / denom if denom != 0 else math.inf
     return k if math.isfinite(k) else 0.0
 
@@ -509,7 +529,7 @@ def normalized_one(fr: Frames, X0, init_status, tol_m, max_iterations, k=None, h
                 beta = _solve_augmented_one(N, g, kk)
         if beta is None:
             return None, True, {"k": kk, "augmented": math.nan}
-        return np.array(beta[:3]), False, {"k": kk, "augmented": beta[3]}
+        return beta[:3], False, {"k": kk, "augmented": beta[3]}
 
     X, it, status, extras = _iterate_one(X0, init_status, step, tol_m, max_iterations, fr.bound(X0), fr.centre)
     if _finite(X):

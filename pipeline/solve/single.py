@@ -146,6 +146,7 @@ class Frames:
         self._M2d = self.Mp.reshape(-1, 3)  # rows m1 m2 m3 of every frame: q = M2d X + p4 in one gemv
         self._p4f = self.p4.ravel()
         self.pix = st.pix[0, self.pix_f]
+        self._AB0 = None  # `both4`'s constants, made at its first call
         self.S = st.platform_m[0, self.rng_f]
         self.d = st.range_m[0, self.rng_f]
         self.npix = 2 * self.n_pix
@@ -193,12 +194,14 @@ class Frames:
         q = (self._M2d @ X + self._p4f).reshape(-1, 3)
         w = q[:, 2:3]
         uv = q[:, :2] / w
+        AB0 = self._AB0
+        if AB0 is None:  # [m1 u; m2 v] and [m3 1] per frame: [m - u m3 | u_obs - u] of both rows in one broadcast
+            AB0 = self._AB0 = (np.concatenate((self.M12, self.pix[:, :, None]), axis=2),
+                               np.concatenate((self.M3, np.ones((k, 1, 1))), axis=2))
         Ap = A[:npix].reshape(k, 2, 4)
+        np.subtract(AB0[0], uv[..., None] * AB0[1], out=Ap)  # uv * 1 is uv: the residual is pix - uv exactly
         Jp = Ap[..., :3]
-        np.multiply(uv[..., None], self.M3, out=Jp)
-        np.subtract(self.M12, Jp, out=Jp)
         np.divide(Jp, w[..., None], out=Jp)
-        np.subtract(self.pix, uv, out=Ap[..., 3])
         diff = np.subtract(X, self.S, out=A[npix:, :3])
         dist = np.sqrt((diff * diff).sum(axis=1))
         np.divide(diff, dist[:, None], out=diff)
@@ -435,18 +438,30 @@ def normalized_normal_one(fr: Frames, X):
     # out: the same floating-point operations, without the loops)
     n00 = n01 = n02 = n03 = n11 = n12 = n13 = n22 = n23 = n33 = 0.0
     g0 = g1 = g2 = g3 = dd = 0.0
-    for blk in (A[:fr.npix], A[fr.npix:]):
+    npix = fr.npix
+    if 0 < npix < A.shape[0]:  # both blocks: their minima and maxima (exact) in one call each
+        cuts = (0, npix)
+        los = np.minimum.reduceat(A[:, 3], cuts).tolist()
+        his = np.maximum.reduceat(A[:, 3], cuts).tolist()
+    else:
+        los = his = None
+    for b, blk in enumerate((A[:npix], A[npix:])):
         cnt = blk.shape[0]
         if cnt == 0:
             continue
-        r = blk[:, 3]
-        lo = float(np.minimum.reduce(r))
-        span = float(np.maximum.reduce(r)) - lo
+        if los is None:
+            r = blk[:, 3]
+            lo = float(np.minimum.reduce(r))
+            span = float(np.maximum.reduce(r)) - lo
+        else:
+            lo = los[b]
+            span = his[b] - lo
+        # column sums by add.reduce per block (add.reduceat sums in another order)
+        S0, S1, S2, S3 = np.add.reduce(blk).tolist()
         if not (span > 0 and math.isfinite(span)):
             span = 1.0
         s2 = 1.0 / (span * span)
         (G00, G01, G02, G03), (_, G11, G12, G13), (_, _, G22, G23), (_, _, _, G33) = (blk.T @ blk).tolist()
-        S0, S1, S2, S3 = np.add.reduce(blk).tolist()
         nlo = -lo
         n00 += G00 * s2
         n01 += G01 * s2

@@ -161,12 +161,13 @@ def _mle_start(st: Stacked, o: dict, fr: single.Frames | None = None):
     if x0 is not None and fr is not None:
         x0 = x0[0]
     elif x0 is None:
-        near = 1e-3 * (1.0 + st.range_m.max(axis=1, keepdims=True))
         if fr is not None:
+            near = 1e-3 * (1.0 + float(np.maximum.reduce(st.range_m[0])))
             x0, init_status, _ = single.dlt_one(fr)
-            if not np.isfinite(x0).all() or (fr.depths(x0) <= near[0, 0]).any():
+            if not single._finite(x0) or (fr.depths(x0) <= near).any():
                 x0, init_status, _, _ = single.los_one(fr)
         else:
+            near = 1e-3 * (1.0 + st.range_m.max(axis=1, keepdims=True))
             x0, init_status, _ = linear.dlt(st, with_condition=False)
             need = ~np.isfinite(x0).all(axis=1)
             need |= ((st.depths(np.where(need[:, None], 0.0, x0)) <= near) & st.has_pix).any(axis=1)

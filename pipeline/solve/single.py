@@ -239,18 +239,25 @@ def dlt_one(fr: Frames, with_condition: bool = False):
     dev = st.platform_m[0] - c
     spread = math.sqrt(float((dev * dev).sum()) / st.n)
     sc = spread if spread > 1.0 else 1.0
-    Pp = np.concatenate((fr.Mp * sc, (fr.Mp @ c + fr.p4)[:, :, None]), axis=2)
+    Pp = np.empty((fr.n_pix, 3, 4))
+    np.multiply(fr.Mp, sc, out=Pp[:, :, :3])
+    np.add(fr.Mp @ c, fr.p4, out=Pp[:, :, 3])
     A = (fr.pix[:, :, None] * Pp[:, 2:3, :] - Pp[:, :2, :]).reshape(-1, 4)
-    norm = np.sqrt((A * A).sum(axis=1))
-    A = A / np.where(norm > 0, norm, 1.0)[:, None]
+    norm = np.sqrt(np.add.reduce(A * A, axis=1))
+    if float(np.minimum.reduce(norm)) > 0:
+        A /= norm[:, None]
+    else:
+        A = A / np.where(norm > 0, norm, 1.0)[:, None]
     evals, evecs = _eigh(A.T @ A)  # one LAPACK call; the batch's inverse iteration finds the same vector
-    x = evecs[:, 0]
+    x0, x1, x2, x3 = evecs[:, 0].tolist()
     cond = math.nan
     if with_condition:
-        cond = math.sqrt(evals[3] / evals[1]) if evals[1] > 0 else math.inf
-    if not abs(x[3]) > 1e-12 * math.sqrt(float(x[:3] @ x[:3])):
+        _, e1, _, e3 = evals.tolist()
+        cond = math.sqrt(e3 / e1) if e1 > 0 else math.inf
+    if not abs(x3) > 1e-12 * math.sqrt(x0 * x0 + x1 * x1 + x2 * x2):
         return np.full(3, np.nan), Status.DEGENERATE, cond
-    return c + sc * x[:3] / x[3], Status.CLOSED_FORM, cond
+    c0, c1, c2 = c.tolist()
+    return np.array((c0 + sc * x0 / x3, c1 + sc * x1 / x3, c2 + sc * x2 / x3)), Status.CLOSED_FORM, cond
 
 
 def los_one(fr: Frames):
@@ -706,7 +713,8 @@ def mle_one(fr: Frames, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: b
     sigma0_sq = G[3][3] / (m - 3) if m > 3 else math.nan
     extras = {"variance_factor_pixel": vf[0], "variance_factor_range": vf[1], "sigma0_sq": sigma0_sq,
               "vce_rounds": vce_rounds}
-    return X, iterations, status, cond, 0.5 * (cov + cov.T), extras, resid
+    # inv3's inverse is symmetric by construction: 0.5 (cov + cov^T) would return it unchanged
+    return X, iterations, status, cond, cov, extras, resid
 
 
 def _mle_correlated_robust(fr: Frames, X0, C, robust, vce, tol_m, max_iterations, init_status):
@@ -777,7 +785,7 @@ def _mle_correlated_robust(fr: Frames, X0, C, robust, vce, tol_m, max_iterations
     e = Aw[:, 3]
     extras = {"variance_factor_pixel": vf[0], "variance_factor_range": vf[1],
               "sigma0_sq": float(e @ e) / (m - 3) if m > 3 else math.nan, "vce_rounds": vce_rounds}
-    return X, it, status, cond, 0.5 * (cov + cov.T), extras, resid
+    return X, it, status, cond, cov, extras, resid
 
 
 def _covariance_one(fr: Frames, X0: np.ndarray, sigma: Sigma) -> np.ndarray:
@@ -837,12 +845,12 @@ def _interp_q(q: float, p: float) -> float:
 
 def summaries_one(cov: np.ndarray) -> dict:
     """`mle` accuracy summaries of one (3,3) covariance, as (1,...) arrays like the batch's."""
-    if not np.isfinite(cov).all():
+    (a, b, _), (_, c, _), _ = rows = cov.tolist()
+    if not all(map(math.isfinite, rows[0] + rows[1] + rows[2])):
         nan = np.full(1, np.nan)
         return {"cep50_m": nan, "cep90_m": nan.copy(), "ellipsoid_semi_axes_1sigma_m": np.full((1, 3), np.nan),
                 "ellipsoid_axes": np.full((1, 3, 3), np.nan)}
     ev, vec = _eigh(cov)
-    (a, b, _), (_, c, _), _ = cov.tolist()
     half = math.sqrt(0.25 * (a - c) ** 2 + b * b)
     s1 = math.sqrt(max(0.5 * (a + c) + half, 0.0))
     s2 = math.sqrt(max(0.5 * (a + c) - half, 0.0))

@@ -10,7 +10,7 @@ Reports, in one run:
     by tight priors), Levenberg-Marquardt; time and the largest difference from `mle` without robust loss.
 
     python scripts/bench_solvers.py [--problems 40] [--batch 8000] [--gamma 30]
-    python scripts/bench_solvers.py --against COMMIT     (before / after, interleaved in one process)
+    python scripts/bench_solvers.py --against COMMIT[,COMMIT...] [--batch 0]   (before / after, interleaved)
 """
 
 from __future__ import annotations
@@ -142,9 +142,9 @@ def _calibration_us() -> float:
     return best * 1e6
 
 
-def _import_baseline(commit: str, workdir: str):
+def _import_baseline(commit: str, workdir: str, name: str = "baseline_pipeline"):
     """The solvers of another commit, importable next to this checkout's: `git archive` of its pipeline/ into
-    workdir, renamed to the package `baseline_pipeline` (its imports rewritten)."""
+    workdir, renamed to the package `name` (its imports rewritten)."""
     import importlib
     import re
     import subprocess
@@ -153,33 +153,37 @@ def _import_baseline(commit: str, workdir: str):
     from pathlib import Path
 
     repo = Path(__file__).resolve().parents[1]
-    tar_path = Path(workdir) / "baseline.tar"
+    tar_path = Path(workdir) / f"{name}.tar"
     with open(tar_path, "wb") as fh:
         subprocess.run(["git", "-C", str(repo), "archive", commit, "pipeline"], stdout=fh, check=True)
     with tarfile.open(tar_path) as tar:
         tar.extractall(workdir, filter="data")
     src = Path(workdir) / "pipeline"
-    dst = src.rename(Path(workdir) / "baseline_pipeline")
+    dst = src.rename(Path(workdir) / name)
     for f in dst.rglob("*.py"):
         text = f.read_text()
-        text = re.sub(r"\bfrom pipeline([. ])", r"from baseline_pipeline\1", text)
-        text = re.sub(r"\bimport pipeline\b", "import baseline_pipeline", text)
-        text = re.sub(r"\bpipeline\.([a-z_]+)", r"baseline_pipeline.\1", text)
+        text = re.sub(r"\bfrom pipeline([. ])", rf"from {name}\1", text)
+        text = re.sub(r"\bimport pipeline\b", f"import {name}", text)
+        text = re.sub(r"\bpipeline\.([a-z_]+)", rf"{name}.\1", text)
         f.write_text(text)
-    sys.path.insert(0, workdir)
-    return importlib.import_module("baseline_pipeline.solve"), importlib.import_module("baseline_pipeline.solve.scenes")
+    if workdir not in sys.path:
+        sys.path.insert(0, workdir)
+    return importlib.import_module(f"{name}.solve"), importlib.import_module(f"{name}.solve.scenes")
 
 
-def _compare(commit: str, problems: int, batch_size: int, gamma: float) -> None:
-    """Interleaved timing of this checkout against another commit in one process: every problem is solved by
-    the baseline and by this checkout in turn (alternating which goes first), so that the machine's load
-    affects both alike; GTSAM is timed in a separate pass per method."""
+def _compare(commits: list[str], problems: int, batch_size: int, gamma: float) -> None:
+    """Interleaved timing of this checkout against other commits in one process: every problem is solved by
+    each baseline and by this checkout in turn (the order rotating from problem to problem: the first of a
+    round runs on colder caches), so that the machine's load affects all alike; GTSAM is timed in a separate
+    pass per method."""
     import tempfile
 
     with tempfile.TemporaryDirectory() as tmp:
-        old, old_scenes = _import_baseline(commit, tmp)
+        olds = [_import_baseline(c, tmp, f"baseline{k}_pipeline") for k, c in enumerate(commits)]
         probs = [paper_problem(gamma_deg=gamma, seed=s) for s in range(problems)]
-        old_probs = [old_scenes.paper_problem(gamma_deg=gamma, seed=s) for s in range(problems)]
+        # contestants: (solve function, its problems); this checkout last
+        runs = [(mod.solve, [scenes.paper_problem(gamma_deg=gamma, seed=s) for s in range(problems)])
+                for mod, scenes in olds] + [(solve, probs)]
         try:
             import gtsam  # noqa: F401
             setups = [_gtsam_setup(o) for o in probs]
@@ -191,46 +195,50 @@ def _compare(commit: str, problems: int, batch_size: int, gamma: float) -> None:
             fn()
             return time.perf_counter() - t, time.process_time() - c
 
-        print(f"\nthis checkout against {commit}, interleaved in one process, solve() median per call "
-              "(CPU; wall in brackets)")
+        def med(ts, k):
+            return statistics.median(x[k] for x in ts) * 1e6
+
+        print("\nsolve() median per call, CPU us (wall in brackets), interleaved in one process; speed-up = "
+              "before / now (CPU)")
+        print(f"  {'method':<16}" + "".join(f"{c[:12]:>24}" for c in commits) + f"{'now':>20}" +
+              "".join(f"  {'x vs ' + c[:8]:>14}" for c in commits) + "   now / GTSAM graph + LM (CPU)")
+        n_runs = len(runs)
         for m, kw in [(m, {}) for m in METHODS] + [("mle", {"robust": None})]:
-            for a, b in zip(old_probs, probs, strict=True):  # warm-up
-                old.solve(m, a, **kw)
-                solve(m, b, **kw)
-            t_old, t_new, t_g = [], [], []
+            for fn, ps in runs:  # warm-up
+                for p in ps:
+                    fn(m, p, **kw)
+            times: list[list] = [[] for _ in runs]
             for _ in range(1 if m in ("fusion", "ridge") else 3):
-                for i, (a, b) in enumerate(zip(old_probs, probs, strict=True)):
-                    # the order alternates: the first of a pair runs on colder caches
-                    if i % 2:
-                        t_new.append(tm(lambda b=b, m=m, kw=kw: solve(m, b, **kw)))
-                    t_old.append(tm(lambda a=a, m=m, kw=kw: old.solve(m, a, **kw)))
-                    if not i % 2:
-                        t_new.append(tm(lambda b=b, m=m, kw=kw: solve(m, b, **kw)))
+                for i in range(problems):
+                    for j in range(n_runs):
+                        k = (i + j) % n_runs
+                        fn, ps = runs[k]
+                        times[k].append(tm(lambda fn=fn, p=ps[i], m=m, kw=kw: fn(m, p, **kw)))
             # GTSAM in its own pass: its worker threads keep spinning for a while after a call, and their CPU
             # time (process_time counts every thread) would land on whichever solve() came next
-            for i, b in enumerate(probs if setups is not None else []):
-                t_g.append(tm(lambda b=b, i=i: _gtsam_solve(b, setups[i])))
-
-            def med(ts, k):
-                return statistics.median(x[k] for x in ts) * 1e6
+            t_g = [tm(lambda b=b, i=i: _gtsam_solve(b, setups[i])) for i, b in enumerate(probs)] if setups else []
             label = m + (" robust=None" if kw else "")
-            line = (f"  {label:<16} before {med(t_old, 1):7.1f} us ({med(t_old, 0):7.1f})   after {med(t_new, 1):7.1f} "
-                    f"us ({med(t_new, 0):7.1f})   {med(t_old, 1) / med(t_new, 1):4.2f}x")
+            cols = "".join(f"{med(t, 1):14.1f} ({med(t, 0):7.1f})" for t in times[:-1])
+            now = times[-1]
+            line = (f"  {label:<16}{cols}{med(now, 1):10.1f} ({med(now, 0):7.1f})" +
+                    "".join(f"{med(t, 1) / med(now, 1):15.2f}x" for t in times[:-1]))
             if t_g:
-                line += (f"   GTSAM graph + LM {med(t_g, 1):6.1f} us, after / GTSAM {med(t_new, 1) / med(t_g, 1):4.2f} "
-                         f"({med(t_new, 0) / med(t_g, 0):4.2f})")
+                line += f"   {med(now, 1) / med(t_g, 1):.2f} (GTSAM {med(t_g, 1):.1f} us)"
             print(line)
-        print(f"\nbatched, B = {batch_size}: problems per second of CPU time, before -> after (alternating calls, "
-              "best of 2)")
-        new_b = paper_batch(batch_size, gamma_deg=gamma, seed=123)
-        old_b = old_scenes.paper_batch(batch_size, gamma_deg=gamma, seed=123)
+        if batch_size <= 0:
+            return
+        print(f"\nbatched, B = {batch_size}: problems per second of CPU time (alternating calls, best of 2)")
+        batches = [scenes.paper_batch(batch_size, gamma_deg=gamma, seed=123) for _, scenes in olds]
+        batches.append(paper_batch(batch_size, gamma_deg=gamma, seed=123))
+        batch_fns = [mod.solve_batch for mod, _ in olds] + [solve_batch]
         for m in METHODS:
-            best_old = best_new = np.inf
+            best = [np.inf] * n_runs
             for _ in range(2):
-                best_old = min(best_old, tm(lambda m=m: old.solve_batch(m, old_b))[1])
-                best_new = min(best_new, tm(lambda m=m: solve_batch(m, new_b))[1])
-            print(f"  {m:<11}{batch_size / best_old:9.0f} /s  ->  {batch_size / best_new:9.0f} /s   "
-                  f"{best_old / best_new:4.2f}x")
+                for k in range(n_runs):
+                    best[k] = min(best[k], tm(lambda m=m, k=k: batch_fns[k](m, batches[k]))[1])
+            print(f"  {m:<11}" + "".join(f"{batch_size / b:9.0f} /s  ->  " for b in best[:-1]) +
+                  f"{batch_size / best[-1]:9.0f} /s   " +
+                  "".join(f"{b / best[-1]:4.2f}x " for b in best[:-1]))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -238,13 +246,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--problems", type=int, default=40, help="distinct problems for the single-solve timings")
     ap.add_argument("--batch", type=int, default=8000, help="problems per batched call")
     ap.add_argument("--gamma", type=float, default=30.0, help="intersection angle, degrees")
-    ap.add_argument("--against", metavar="COMMIT", help="instead: time this checkout against the solvers of "
-                    "another git commit, interleaved in one process (e.g. --against 146e541)")
+    ap.add_argument("--against", metavar="COMMIT[,COMMIT...]", help="instead: time this checkout against the "
+                    "solvers of other git commits, interleaved in one process (e.g. --against 146e541); "
+                    "--batch 0 skips the batched part")
     args = ap.parse_args(argv)
     if args.against:
         print(f"machine: {os.cpu_count()} cpus, load average {os.getloadavg()[0]:.1f}, one trivial numpy call "
               f"{_calibration_us():.2f} us")
-        _compare(args.against, args.problems, args.batch, args.gamma)
+        _compare(args.against.split(","), args.problems, args.batch, args.gamma)
         return 0
     probs = [paper_problem(gamma_deg=args.gamma, seed=s) for s in range(args.problems)]
     print(f"geometry: 10 frames, 5 km slant range, 2 km height, intersection {args.gamma:g} deg, paper noise")

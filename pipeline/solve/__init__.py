@@ -422,7 +422,7 @@ def _residuals(method: str, st: Stacked, X: np.ndarray) -> np.ndarray:
     if not np.isfinite(X).all():
         return np.zeros(0)
     fr = single.Frames.of(st)
-    if method not in ("dlt", "vision", "range"):  # pixels then ranges: one evaluation
+    if method in ("fusion-raw", "fusion", "ridge"):  # pixels then ranges: one evaluation (its constants made)
         return fr.both4(X)[:, 3].copy()
     parts = []
     if method in _USES_PIXELS or method == "los":

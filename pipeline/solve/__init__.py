@@ -187,11 +187,14 @@ def _mle_summaries(cov: np.ndarray) -> dict:
             "ellipsoid_semi_axes_1sigma_m": axes, "ellipsoid_axes": vecs}
 
 
-def _solve_one(method: str, st: Stacked, o: dict) -> BatchEstimate:
-    """A batch-of-one answer through `single` (the same algorithms without the batch bookkeeping)."""
+def _solve_one(method: str, st: Stacked, o: dict):
+    """One problem through `single` (the same algorithms without the batch bookkeeping). Returns X (3,), the
+    iterations, the Status, the condition number (float), the covariance (3,3) or None and a dict of the
+    method's other results as Python values (behind_camera, collinear_platforms, los points_m (n,3) and
+    oracle_error_m, augmented_component, k, mle summaries, extras and residuals)."""
     fr = single.Frames.of(st)
     tol, itmax = o["tol_m"], o["max_iterations"]
-    extras: dict = {}
+    info: dict = {}
     cov = None
     it = 0
     if method == "dlt":
@@ -199,13 +202,12 @@ def _solve_one(method: str, st: Stacked, o: dict) -> BatchEstimate:
     elif method == "los":
         X, status, pts, oracle = single.los_one(fr)
         cond = math.nan
-        extras = {"points_m": pts[None], "oracle_error_m": np.array([oracle])}
+        info = {"points_m": pts, "oracle_error_m": oracle}
     elif method == "mle":
         x0, init_status, sigma, vce = _mle_start(st, o, fr)
         X, it, status, cond, cov, ex, resid = single.mle_one(fr, x0, sigma, o.get("robust", "huber"), vce, tol,
                                                              itmax, init_status)
-        extras = {**single.summaries_one(cov), **{k: np.array([v]) for k, v in ex.items()}, "residuals": resid}
-        cov = cov[None]
+        info = {"summaries": single.summaries_one(cov), **ex, "residuals": resid}
     else:
         x0 = _initial(o, 1)
         init_status = None
@@ -220,26 +222,25 @@ def _solve_one(method: str, st: Stacked, o: dict) -> BatchEstimate:
             k = o.get("k") if method == "ridge" else None
             hkb = None if method == "fusion" or k is not None else o.get("hkb", "paper")
             X, it, status, cond, ex = single.normalized_one(fr, x0, init_status, tol, itmax, k=k, hkb=hkb)
-            extras = {"augmented_component": np.array([ex.get("augmented", math.nan)])}
+            info = {"augmented_component": float(ex.get("augmented", math.nan))}
             if method == "ridge":
-                extras["k"] = np.array([ex.get("k", math.nan)])
+                info["k"] = float(ex.get("k", math.nan))
         else:
             model = {"vision": fr.pixel, "range": fr.range, "fusion-raw": fr.both}[method]
             X, it, status, cond = single.gn_one(fr, model, x0, init_status, tol, itmax)
             if method == "range":
-                flat = least_squares.collinear_platforms(st.platform_m, st.has_range, st.sigma.position_m)
-                if flat[0]:
+                flat = bool(least_squares.collinear_platforms(st.platform_m, st.has_range, st.sigma.position_m)[0])
+                if flat:
                     status, X = Status.DEGENERATE, np.full(3, np.nan)
-                extras = {"collinear_platforms": flat}
-    X = np.asarray(X, dtype=np.float64)[None]
+                info = {"collinear_platforms": flat}
+    X = np.asarray(X, dtype=np.float64)
     if method in _USES_PIXELS:
-        behind = np.array([bool(np.isfinite(X).all() and (fr.depths(X[0]) <= 0).any())])
-        if behind[0]:
+        behind = bool(single._finite(X) and (fr.depths(X) <= 0).any())
+        if behind:
             status = Status.DEGENERATE
             X[:] = np.nan
-        extras["behind_camera"] = behind
-    return BatchEstimate(method=method, position_m=X, iterations=np.array([it]), status=np.array([status], np.int8),
-                         condition_number=np.array([cond], dtype=np.float64), covariance_m2=cov, extras=extras)
+        info["behind_camera"] = behind
+    return X, int(it), Status(int(status)), float(cond), cov, info
 
 
 def _behind_camera(st: Stacked, X: np.ndarray) -> np.ndarray:
@@ -367,14 +368,12 @@ def solve(method: str, obs: Observations, **options) -> Estimate:
     st = Stacked.from_observations(obs)
     _check_inputs(method, obs, st, o)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        be = _solve_one(method, st, o)
-    status = Status(int(be.status[0]))
-    cond = float(be.condition_number[0])
+        X, it, status, cond, cov, info = _solve_one(method, st, o)
     if status == Status.DEGENERATE:
-        if method in _USES_PIXELS and bool(be.extras["behind_camera"][0]):
+        if method in _USES_PIXELS and info["behind_camera"]:
             raise GeometryError(f"{method}: the estimate lies behind the camera of a frame with a target "
                                 "pixel (check the pixels and the sign convention of P)")
-        if method == "range" and bool(be.extras["collinear_platforms"][0]):
+        if method == "range" and info["collinear_platforms"]:
             raise GeometryError("range: the ranged platform positions lie on a straight line within their position "
                                 f"noise (sigma {obs.sigma.position_m or 0:g} m, chi-square test at 95 %): ranges "
                                 "cannot fix the rotation of the target about that line")
@@ -382,37 +381,33 @@ def solve(method: str, obs: Observations, **options) -> Estimate:
                             f"deficient, condition number {cond:.3g}); more baseline or other observations "
                             "are needed")
     if status == Status.DIVERGED:
-        raise SolverError(f"{method}: the iteration diverged after {int(be.iterations[0])} iterations "
+        raise SolverError(f"{method}: the iteration diverged after {it} iterations "
                           "(the estimate ran away or became non-finite)")
-    X = be.position_m[0]
     extras = {}
     if method == "los":
-        pts = be.extras["points_m"][0]
-        extras["points_m"] = [None if not np.isfinite(p).all() else p.tolist() for p in pts]
-        oracle = float(be.extras["oracle_error_m"][0])
+        extras["points_m"] = [None if not np.isfinite(p).all() else p.tolist() for p in info["points_m"]]
+        oracle = float(info["oracle_error_m"])
         if np.isfinite(oracle):
             extras["oracle_error_m"] = oracle
-    if "augmented_component" in be.extras:
-        extras["augmented_component"] = float(be.extras["augmented_component"][0])
-    if "k" in be.extras:
-        extras["k"] = float(be.extras["k"][0])
-    cov = None
+    if "augmented_component" in info:
+        extras["augmented_component"] = info["augmented_component"]
+    if "k" in info:
+        extras["k"] = info["k"]
     if method == "mle":
-        cov = be.covariance_m2[0]
-        ax = be.extras["ellipsoid_semi_axes_1sigma_m"][0]
+        cep50, cep90, ax, vec = info["summaries"]
+        s95 = math.sqrt(_mle.CHI2_3_95)
         extras.update({
-            "cep50_m": float(be.extras["cep50_m"][0]), "cep90_m": float(be.extras["cep90_m"][0]),
-            "ellipsoid": {"semi_axes_1sigma_m": ax.tolist(),
-                          "semi_axes_95pct_m": (ax * np.sqrt(_mle.CHI2_3_95)).tolist(),
-                          "axes": be.extras["ellipsoid_axes"][0].T.tolist()},
-            "variance_factors": {"pixel": float(be.extras["variance_factor_pixel"][0]),
-                                 "range": float(be.extras["variance_factor_range"][0])},
-            "sigma0_sq": float(be.extras["sigma0_sq"][0]),
-            "vce_rounds": int(be.extras["vce_rounds"][0]),
+            "cep50_m": cep50, "cep90_m": cep90,
+            "ellipsoid": {"semi_axes_1sigma_m": ax, "semi_axes_95pct_m": [v * s95 for v in ax],
+                          "axes": vec.T.tolist()},
+            "variance_factors": {"pixel": float(info["variance_factor_pixel"]),
+                                 "range": float(info["variance_factor_range"])},
+            "sigma0_sq": float(info["sigma0_sq"]),
+            "vce_rounds": int(info["vce_rounds"]),
             "robust": o.get("robust", "huber"),
         })
-    resid = be.extras["residuals"] if "residuals" in be.extras else _residuals(method, st, X)
-    return Estimate(method=method, position_m=X, iterations=int(be.iterations[0]), status=status,
+    resid = info["residuals"] if "residuals" in info else _residuals(method, st, X)
+    return Estimate(method=method, position_m=X, iterations=it, status=status,
                     residuals=resid, condition_number=cond, covariance_m2=cov, extras=extras)
 
 

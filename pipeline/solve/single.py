@@ -843,20 +843,18 @@ def _interp_q(q: float, p: float) -> float:
     return slope * (q - xj) + y[j]
 
 
-def summaries_one(cov: np.ndarray) -> dict:
-    """`mle` accuracy summaries of one (3,3) covariance, as (1,...) arrays like the batch's."""
+def summaries_one(cov: np.ndarray):
+    """`mle` accuracy summaries of one (3,3) covariance: CEP50 and CEP90 (m, floats), the 1-sigma semi-axes
+    (list of 3 floats, m, ascending) and the axes as columns (3,3); NaN when cov is not finite."""
     (a, b, _), (_, c, _), _ = rows = cov.tolist()
     if not all(map(math.isfinite, rows[0] + rows[1] + rows[2])):
-        nan = np.full(1, np.nan)
-        return {"cep50_m": nan, "cep90_m": nan.copy(), "ellipsoid_semi_axes_1sigma_m": np.full((1, 3), np.nan),
-                "ellipsoid_axes": np.full((1, 3, 3), np.nan)}
+        return math.nan, math.nan, [math.nan] * 3, np.full((3, 3), np.nan)
     ev, vec = _eigh(cov)
     half = math.sqrt(0.25 * (a - c) ** 2 + b * b)
     s1 = math.sqrt(max(0.5 * (a + c) + half, 0.0))
     s2 = math.sqrt(max(0.5 * (a + c) - half, 0.0))
-    ceps = [s1 * _interp_q(s2 / s1, p) if s1 > 0 else math.nan for p in (0.5, 0.9)]
-    return {"cep50_m": np.array([ceps[0]]), "cep90_m": np.array([ceps[1]]),
-            "ellipsoid_semi_axes_1sigma_m": np.sqrt(np.maximum(ev, 0.0))[None], "ellipsoid_axes": vec[None]}
+    cep50, cep90 = (s1 * _interp_q(s2 / s1, p) if s1 > 0 else math.nan for p in (0.5, 0.9))
+    return cep50, cep90, [math.sqrt(v if v > 0.0 else 0.0) for v in ev.tolist()], vec
 
 
 def _weight_curvature(e: np.ndarray, robust: str):

@@ -77,7 +77,7 @@ def open_frames(config: FlightConfig, log: FlightLog) -> tuple[FrameSeries, _Tim
         raise ConfigError("the flight has no video (files.video) and its logs carry no images", config.path)
     for path in config.files.telemetry:
         try:
-            images = ingest.BagImages(path, None, mapping=config.mapping)
+            images = ingest.BagImages(path, None, mapping=config.mapping, frames=log.frames)
         except (RidgelocError, ValueError, KeyError):
             continue
         return images.frames, _TimedDecoder(images.read), None

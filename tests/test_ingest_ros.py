@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -257,3 +258,17 @@ def test_bag_images_from_cut_ros1_bag_and_plain_mcap(tmp_path):
     assert log.frames.t_ns.tolist() == [T0 + i for i in range(5)] and log.frames.width_px == 10
     imgs = BagImages(p).read([4, 2])
     assert imgs[4][0, 0] == 160 and imgs[2].shape == (8, 10)
+
+
+def test_bag_images_reuse_the_frame_index_read_flight_built():
+    bag = Path(__file__).resolve().parents[1] / "sample_data" / "group4" / "flight_ros2"
+    log = read_flight([bag])
+    reused = BagImages(bag, frames=log.frames)
+    scanned = BagImages(bag)
+    assert reused.frames is log.frames
+    np.testing.assert_array_equal(scanned.frames.t_ns, reused.frames.t_ns)
+    a, b = reused.read([5, 40]), scanned.read([5, 40])
+    assert sorted(a) == [5, 40] and all(np.array_equal(a[i], b[i]) for i in (5, 40))
+    # A frame index of another stream is not taken for this one.
+    other = dataclasses.replace(log.frames, source="elsewhere:/topic")
+    assert BagImages(bag, frames=other).frames is not other

@@ -344,9 +344,11 @@ def _image_source(path: Path):
 class BagImages:
     """The images of one topic of a bag (ROS 1 file, ROS 2 folder, or plain MCAP file with ROS 2 messages):
     `frames` (FrameSeries: header stamps on the UNIX clock, index = message number on the topic) and
-    `read(indices)` decoding only those messages."""
+    `read(indices)` decoding only those messages. `frames`: the FrameSeries `read_flight` already built for
+    this bag's image topic (same source, image size known), which spares a second pass over the bag."""
 
-    def __init__(self, path, topic: str | None = None, mapping: dict | None = None):
+    def __init__(self, path, topic: str | None = None, mapping: dict | None = None,
+                 frames: FrameSeries | None = None):
         from pipeline.ingest.mapping import mapping_for
 
         self.path = Path(path)
@@ -360,6 +362,9 @@ class BagImages:
             raise LogReadError(f"no image topic ({topic or cfg['images']['topic']}) in the bag", path=self.path)
         self.topic = chosen["images"]
         self.msgtype = self._source.topic_types[self.topic]
+        if frames is not None and frames.source == f"{self.path}:{self.topic}" and frames.width_px > 0:
+            self.frames = frames
+            return
         acc = RosAccumulator("images", self.topic, self.msgtype, cfg["images"], cfg["stamp"],
                              f"{self.path}:{self.topic}")
         first = None

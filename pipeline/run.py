@@ -84,6 +84,16 @@ def open_frames(config: FlightConfig, log: FlightLog) -> tuple[FrameSeries, _Tim
     raise ConfigError(f"cannot open the image stream {log.frames.source!r} of the flight's logs", config.path)
 
 
+def plan_flight_observations(config: FlightConfig, frames: FrameSeries, log: FlightLog):
+    """Which frames are observations, with their laser shots, as the flight config's `observations:` and
+    `clock:` say (`pipeline.sync.select.plan_observations`; needs only timestamps)."""
+    c, sel = config.clock, config.observations
+    return plan_observations(frames, log.range, mode=sel.mode, video_offset_ns=c.video_to_telemetry_offset_ns,
+                             range_offset_ns=c.range_offset_ns, frame_tolerance_s=sel.frame_tolerance_s,
+                             max_range_gap_s=sel.max_range_gap_s, frame_indices=sel.frame_indices,
+                             burst_gap_s=sel.burst_gap_s)
+
+
 def _origin(config: FlightConfig, log: FlightLog) -> tuple[float, float, float]:
     if config.origin != "auto":
         return config.origin.as_tuple()
@@ -149,10 +159,7 @@ def process_group(config: FlightConfig) -> GroupResult:
     try:
         # Which frames are observations (needs only timestamps).
         c, sel = config.clock, config.observations
-        plan = plan_observations(frames, log.range, mode=sel.mode, video_offset_ns=c.video_to_telemetry_offset_ns,
-                                 range_offset_ns=c.range_offset_ns, frame_tolerance_s=sel.frame_tolerance_s,
-                                 max_range_gap_s=sel.max_range_gap_s, frame_indices=sel.frame_indices,
-                                 burst_gap_s=sel.burst_gap_s)
+        plan = plan_flight_observations(config, frames, log)
         notes.extend(plan.notes)
         report_stage("track")
         t1, c1 = time.perf_counter(), time.process_time()

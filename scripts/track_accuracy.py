@@ -20,8 +20,7 @@ import numpy as np
 
 from pipeline.flight_config import load_run_config
 from pipeline.ingest import read_flight
-from pipeline.run import open_frames
-from pipeline.sync.select import plan_observations
+from pipeline.run import open_frames, plan_flight_observations
 from pipeline.track.sift import SiftTracker
 
 
@@ -29,11 +28,7 @@ def track_group(cfg):
     log = read_flight(list(cfg.files.telemetry), mapping=cfg.mapping)
     frames, decoder, closable = open_frames(cfg, log)
     try:
-        c, sel = cfg.clock, cfg.observations
-        plan = plan_observations(frames, log.range, mode=sel.mode, video_offset_ns=c.video_to_telemetry_offset_ns,
-                                 range_offset_ns=c.range_offset_ns, frame_tolerance_s=sel.frame_tolerance_s,
-                                 max_range_gap_s=sel.max_range_gap_s, frame_indices=sel.frame_indices,
-                                 burst_gap_s=sel.burst_gap_s)
+        plan = plan_flight_observations(cfg, frames, log)
         tracker = SiftTracker(cfg.tracking)
         res = tracker.track(decoder, cfg.target.frame_index, cfg.target.pixel, plan.frame_index.tolist(),
                             available=np.asarray(frames.index).tolist())

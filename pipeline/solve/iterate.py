@@ -26,6 +26,20 @@ def problem_scale_m(st: Stacked, X0: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(d), np.maximum(d, 1.0), 1.0)
 
 
+def start_status(X0: np.ndarray, init_status: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """(status (B,) int8 all MAX_ITERATIONS but where the start is unusable, bad (B,) bool): a start that is not
+    finite, or that comes from a DIVERGED / DEGENERATE initial solve, keeps that status (DEGENERATE if none)."""
+    finite0 = np.isfinite(X0).all(axis=1)
+    status = np.full(X0.shape[0], Status.MAX_ITERATIONS, dtype=np.int8)
+    if init_status is not None:
+        bad = np.isin(init_status, (Status.DIVERGED, Status.DEGENERATE)) | ~finite0
+        status[bad] = np.where(init_status[bad] == Status.DIVERGED, Status.DIVERGED, Status.DEGENERATE)
+    else:
+        bad = ~finite0
+        status[bad] = Status.DEGENERATE
+    return status, bad
+
+
 def iterate(st: Stacked, X0: np.ndarray, step: StepFn, tol_m: float, max_iterations: int,
             init_status: np.ndarray | None = None, extra_names: tuple[str, ...] = ()):
     """Run `step(sub, X_sub) -> (dX (b,3), singular (b,) bool, extras {name: (b,)})` to convergence.
@@ -36,16 +50,10 @@ def iterate(st: Stacked, X0: np.ndarray, step: StepFn, tol_m: float, max_iterati
     B = st.size
     X = np.array(X0, dtype=np.float64, copy=True)
     iterations = np.zeros(B, dtype=np.int64)
-    status = np.full(B, Status.MAX_ITERATIONS, dtype=np.int8)
-    finite0 = np.isfinite(X).all(axis=1)
-    if init_status is not None:
-        bad_init = np.isin(init_status, (Status.DIVERGED, Status.DEGENERATE)) | ~finite0
-        status[bad_init] = np.where(init_status[bad_init] == Status.DIVERGED, Status.DIVERGED, Status.DEGENERATE)
-    else:
-        bad_init = ~finite0
-        status[bad_init] = Status.DEGENERATE
+    status, bad_init = start_status(X, init_status)
     active = ~bad_init
     centre = st.platform_m.mean(axis=1)
+    finite0 = np.isfinite(X).all(axis=1)
     bound = DIVERGENCE_FACTOR * problem_scale_m(st, np.where(finite0[:, None], X, centre))
     extras = {name: np.full(B, np.nan) for name in extra_names}
     for _ in range(max_iterations):

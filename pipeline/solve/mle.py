@@ -10,7 +10,7 @@ from scipy.special import erf, erfinv
 
 from pipeline.solve import iterate as _iterate
 from pipeline.solve.estimate import Status
-from pipeline.solve.iterate import problem_scale_m
+from pipeline.solve.iterate import problem_scale_m, start_status
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import SINGULAR_DET, Stacked, condition_numbers, inverse3
 
@@ -204,14 +204,7 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     """
     B = st.size
     X = np.array(X0, dtype=np.float64, copy=True)
-    finite0 = np.isfinite(X).all(axis=1)
-    status = np.full(B, Status.MAX_ITERATIONS, dtype=np.int8)
-    if init_status is not None:
-        bad = np.isin(init_status, (Status.DIVERGED, Status.DEGENERATE)) | ~finite0
-        status[bad] = np.where(init_status[bad] == Status.DIVERGED, Status.DIVERGED, Status.DEGENERATE)
-    else:
-        bad = ~finite0
-        status[bad] = Status.DEGENERATE
+    status, bad = start_status(X, init_status)
     X[bad] = 0.0
     pl = _Planes.from_stacked(st, base_variances(st, X, sigma))
     vf = np.ones((B, 2))  # variance factors of the pixel and range groups
@@ -223,6 +216,7 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     newton_ok = np.ones(B, dtype=bool)
     vce_rounds = np.zeros(B, dtype=np.int64)
     centre = st.platform_m.mean(axis=1)
+    finite0 = np.isfinite(X0).all(axis=1)
     bound = _iterate.DIVERGENCE_FACTOR * problem_scale_m(st, np.where(finite0[:, None], X0, centre))
     active = ~bad
     for _ in range(max_iterations):

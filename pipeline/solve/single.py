@@ -57,34 +57,8 @@ def spd_solve(N: np.ndarray, g: np.ndarray, singular_below: float = SINGULAR_DET
     k = len(b)
     if k == 3:
         return _solve3(A, b, singular_below)
-    d = []
-    for i in range(k):
-        a = A[i][i]
-        if not (a > 0 and math.isfinite(a)):
-            return None, True
-        d.append(math.sqrt(a))
-    L = [[0.0] * k for _ in range(k)]
-    det = 1.0
-    for j in range(k):
-        Lj = L[j]
-        s = A[j][j] / (d[j] * d[j]) - sum(v * v for v in Lj[:j])
-        if not s > 0:
-            return None, True
-        det *= s
-        Lj[j] = ljj = math.sqrt(s)
-        for i in range(j + 1, k):
-            Li = L[i]
-            Li[j] = (A[i][j] / (d[i] * d[j]) - sum(Li[m] * Lj[m] for m in range(j))) / ljj
-    if not det > singular_below:
-        return None, True
-    y = [0.0] * k
-    for i in range(k):
-        Li = L[i]
-        y[i] = (b[i] / d[i] - sum(Li[m] * y[m] for m in range(i))) / Li[i]
-    x = [0.0] * k
-    for i in range(k - 1, -1, -1):
-        x[i] = (y[i] - sum(L[m][i] * x[m] for m in range(i + 1, k))) / L[i][i]
-    return np.array([x[i] / d[i] for i in range(k)]), False
+    x = _chol_solve(A, b, singular_below)
+    return (None, True) if x is None else (np.array(x), False)
 
 
 def _solve3(A, b, singular_below):

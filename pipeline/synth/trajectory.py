@@ -20,7 +20,7 @@ from scipy.spatial.transform import Rotation
 from pipeline.errors import ConfigError
 from pipeline.geometry.camera import look_at_rotation
 from pipeline.synth.config import SynthConfig
-from pipeline.synth.noise import smooth_gauss_markov
+from pipeline.synth.noise import sample_process, smooth_gauss_markov
 
 R_OPTICAL_FROM_GIMBAL = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
 R_ENU_FROM_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -137,9 +137,6 @@ class Flight:
         jit[:, 0] += slip
         self.jitter_px = jit
 
-    def _interp(self, series: np.ndarray, t_s: np.ndarray) -> np.ndarray:
-        return np.stack([np.interp(t_s, self.grid_s, series[:, i]) for i in range(series.shape[1])], axis=-1)
-
     def enu_to_lla(self, enu: np.ndarray) -> np.ndarray:
         lat, lon, h = pymap3d.enu2geodetic(enu[:, 0], enu[:, 1], enu[:, 2], *self.target_lla)
         return np.stack([lat, lon, h], axis=-1)
@@ -165,7 +162,7 @@ class Flight:
         roll = np.arctan2(np.einsum("ni,ni->n", a_ned, right), GRAVITY_MPS2)  # coordinated turn
         climb = np.arctan2(-v_ned[:, 2], np.hypot(v_ned[:, 0], v_ned[:, 1]))
         pitch = math.radians(cfg.path.pitch_deg) + climb
-        w = self._interp(self.wobble_rad, t_s)
+        w = sample_process(self.grid_s, self.wobble_rad, t_s)
         ypr = np.stack([yaw + w[:, 2], pitch + w[:, 1], roll + w[:, 0]], axis=-1)
         R_ned_from_body = Rotation.from_euler("ZYX", ypr).as_matrix()
         R_enu_from_body = R_enu_t_from_ned_v @ R_ned_from_body
@@ -177,7 +174,7 @@ class Flight:
         # tracker's error as a small rotation putting the target at (jx, jy) px from the principal point
         up_v = R_enu_t_from_ned_v @ np.array([0.0, 0.0, -1.0])
         R_cam_from_enu = look_at_rotation(cam, np.zeros(3), up_v)
-        jit = self._interp(self.jitter_px, t_s)
+        jit = sample_process(self.grid_s, self.jitter_px, t_s)
         rotvec = np.stack([-np.arctan(jit[:, 1] / cfg.camera.fy_px), np.arctan(jit[:, 0] / cfg.camera.fx_px),
                            np.zeros(len(t_s))], axis=-1)
         R_cam_from_enu = Rotation.from_rotvec(rotvec).as_matrix() @ R_cam_from_enu

@@ -112,6 +112,22 @@ class FrameSeries:
 
 
 @dataclass(frozen=True)
+class FieldOfViewSeries:
+    """Camera field of view as the payload reports it (zoom lenses, MISB KLV tags 16/17, DJI SRT focal length):
+    t_ns (n,), hfov_deg (n,) across the image width, vfov_deg (n,) across the height (NaN where the source does
+    not state it). Where a flight config gives no calibration, these give the intrinsics of each frame."""
+
+    t_ns: np.ndarray
+    hfov_deg: np.ndarray
+    vfov_deg: np.ndarray
+    source: str = ""
+    clock: str = "unknown"
+
+    def __post_init__(self):
+        _check_series(f"field-of-view series {self.source!r}", self.t_ns, hfov=self.hfov_deg, vfov=self.vfov_deg)
+
+
+@dataclass(frozen=True)
 class ClockLink:
     """Pairs of simultaneous readings of two clocks (e.g. SYSTEM_TIME: boot ms and UNIX us), to map one
     time base onto the other: a_ns (n,) on clock `a`, b_ns (n,) on clock `b`."""
@@ -177,6 +193,7 @@ class FlightLog:
     warnings: list[str] = field(default_factory=list)
     camera_events: CameraEventSeries | None = None
     camera_info: CameraInfo | None = None
+    field_of_view: FieldOfViewSeries | None = None
     formats: list[str] = field(default_factory=list)  # reader format of each file read ("tlog", "ros1", ...)
 
     def missing_for_localization(self) -> list[str]:

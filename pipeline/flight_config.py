@@ -87,9 +87,10 @@ class Clock:
 
 @dataclass(frozen=True)
 class Altitude:
-    """Altitude datum conversion: ellipsoid height = AMSL altitude + geoid_separation_m."""
+    """Altitude datum conversion: ellipsoid height = AMSL altitude + geoid_separation_m. `"auto"` takes it from
+    the EGM2008 geoid model at the flight's first position (pipeline.geometry.geoid)."""
 
-    geoid_separation_m: float | None = None
+    geoid_separation_m: float | typing.Literal["auto"] | None = None
 
 
 @dataclass(frozen=True)

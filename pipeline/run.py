@@ -94,15 +94,30 @@ def plan_flight_observations(config: FlightConfig, frames: FrameSeries, log: Fli
                              burst_gap_s=sel.burst_gap_s)
 
 
-def _origin(config: FlightConfig, log: FlightLog) -> tuple[float, float, float]:
+def geoid_separation_m(config: FlightConfig, log: FlightLog) -> float | None:
+    """altitude.geoid_separation_m as a number: `auto` -> the EGM2008 undulation at the first finite position."""
+    value = config.altitude.geoid_separation_m
+    if value != "auto":
+        return value
+    from pipeline.geometry.geoid import geoid_undulation_m
+
+    pos = log.position
+    ok = np.zeros(0, bool) if pos is None else np.isfinite(pos.lat_deg) & np.isfinite(pos.lon_deg)
+    if not ok.any():
+        raise InputError("altitude.geoid_separation_m: auto needs a position in the logs", config.path)
+    i = int(np.flatnonzero(ok)[0])
+    return float(geoid_undulation_m(pos.lat_deg[i], pos.lon_deg[i]))
+
+
+def _origin(config: FlightConfig, log: FlightLog, separation_m: float | None) -> tuple[float, float, float]:
     if config.origin != "auto":
         return config.origin.as_tuple()
     pos = log.position
     alt = float(pos.alt_m[0])
     if pos.alt_datum == "amsl":
-        if config.altitude.geoid_separation_m is None:
-            raise ConfigError("altitudes are AMSL: set altitude.geoid_separation_m", config.path)
-        alt = float(ellipsoid_from_amsl_m(alt, config.altitude.geoid_separation_m))
+        if separation_m is None:
+            raise ConfigError("altitudes are AMSL: set altitude.geoid_separation_m (a number, or auto)", config.path)
+        alt = float(ellipsoid_from_amsl_m(alt, separation_m))
     return float(pos.lat_deg[0]), float(pos.lon_deg[0]), alt
 
 
@@ -201,10 +216,14 @@ def process_group(config: FlightConfig) -> GroupResult:
 
     report_stage("sync")
     t2, c2 = time.perf_counter(), time.process_time()
-    origin = _origin(config, log)
+    separation_m = geoid_separation_m(config, log)
+    if config.altitude.geoid_separation_m == "auto" and log.position.alt_datum == "amsl":
+        notes.append(f"geoid separation {separation_m:.2f} m (altitude.geoid_separation_m: auto, EGM2008 at the "
+                     "first position)")
+    origin = _origin(config, log, separation_m)
     states = frame_states(log, plan.t_ns, position_offset_ns=c.position_offset_ns,
                           attitude_offset_ns=c.attitude_offset_ns, gimbal_offset_ns=c.gimbal_offset_ns,
-                          geoid_separation_m=config.altitude.geoid_separation_m)
+                          geoid_separation_m=separation_m)
     if not states.inside.all():
         notes.append(f"{int((~states.inside).sum())} observation(s) outside the telemetry span were dropped")
     truth_lla = config.truth_lla()

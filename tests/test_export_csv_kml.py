@@ -5,6 +5,8 @@ from __future__ import annotations
 import csv
 import math
 import re
+import shutil
+import subprocess
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -12,7 +14,15 @@ import numpy as np
 import pytest
 from test_export_geojson import ORIGIN, hand_group, rotated_cov
 
-from pipeline.report.exports import TARGETS_CSV_COLUMNS, write_targets_csv, write_targets_geojson, write_targets_kml
+from pipeline.geometry.geoid import geoid_undulation_m
+from pipeline.report.exports import (
+    KML_SCHEMAS,
+    TARGETS_CSV_COLUMNS,
+    kml_field_type,
+    write_targets_csv,
+    write_targets_geojson,
+    write_targets_kml,
+)
 from pipeline.report.geometry import cep_m, ellipse_axes_m
 from pipeline.report.store import load_group_result, save_group_result
 
@@ -89,8 +99,9 @@ def test_kml_is_kml22_and_agrees_with_geojson(tmp_path, groups):
         for pm in folder.findall(f"{KML}Placemark"):
             c = pm.findtext(f"{KML}Point/{KML}coordinates")
             if c is not None:
-                data = {d.get("name"): d.findtext(f"{KML}value") for d in pm.iter(f"{KML}Data")}
+                data = {d.get("name"): d.text for d in pm.iter(f"{KML}SimpleData")}
                 pts[data.get("method", "truth")] = [float(v) for v in c.split(",")]
+                assert pm.findtext(f"{KML}Point/{KML}altitudeMode") == "absolute"
             ring = pm.findtext(f".//{KML}LinearRing/{KML}coordinates")
             if ring is not None:
                 coords = [tuple(map(float, p.split(","))) for p in ring.split()]
@@ -99,10 +110,51 @@ def test_kml_is_kml22_and_agrees_with_geojson(tmp_path, groups):
             p = f["properties"]
             if p["group"] == group and p["kind"] == "estimate":
                 assert pts[p["method"]][:2] == pytest.approx(f["geometry"]["coordinates"][:2], abs=1e-7)
+                # KML height = GeoJSON (ellipsoidal) height - the geoid undulation at the point
+                lon, lat, h = f["geometry"]["coordinates"]
+                n_m = float(geoid_undulation_m(lat, lon))
+                assert abs(n_m) > 1.0  # Zurich: ~47-48 m; a KML still in ellipsoidal heights would fail here
+                assert pts[p["method"]][2] == pytest.approx(h - n_m, abs=0.011)
+                assert p["alt_msl_m"] == pytest.approx(h - n_m, abs=0.011)
         # every Placemark style refers to a defined Style
         styles = {s.get("id") for s in root.iter(f"{KML}Style")}
         for pm in folder.iter(f"{KML}Placemark"):
             assert pm.findtext(f"{KML}styleUrl").lstrip("#") in styles
+
+
+def test_kml_attributes_are_typed_by_a_schema(tmp_path, groups):
+    """Every SimpleData is declared in the Schema its SchemaData names, with a KML type its text parses as;
+    numeric columns are double/int, not string (GDAL reads them as Real/Integer; see the ogrinfo test)."""
+    write_targets_kml(tmp_path / "t.kml", groups)
+    root = ET.parse(tmp_path / "t.kml").getroot()
+    schemas = {s.get("id"): {f.get("name"): f.get("type") for f in s.findall(f"{KML}SimpleField")}
+               for s in root.iter(f"{KML}Schema")}
+    assert set(schemas) == set(KML_SCHEMAS)
+    assert schemas["estimate"]["error_m"] == "double" and schemas["estimate"]["iterations"] == "int"
+    assert schemas["estimate"]["converged"] == "bool" and schemas["estimate"]["method"] == "string"
+    assert schemas["estimate"]["alt_msl_m"] == "double"
+    parse = {"double": float, "int": int, "bool": {"true": True, "false": False}.__getitem__, "string": str}
+    n = 0
+    for sd in root.iter(f"{KML}SchemaData"):
+        fields = schemas[sd.get("schemaUrl").lstrip("#")]
+        for d in sd.findall(f"{KML}SimpleData"):
+            parse[fields[d.get("name")]](d.text)
+            n += 1
+    assert n > 50
+    assert not list(root.iter(f"{KML}Data"))  # no untyped attributes left
+    assert kml_field_type("reason") == "string" and kml_field_type("cep50_m") == "double"
+
+
+def test_ogrinfo_reads_typed_kml_fields(tmp_path, groups):
+    """GDAL's own reading (skipped where gdal-bin is not installed; the schema test above checks without it)."""
+    if shutil.which("ogrinfo") is None:
+        pytest.skip("ogrinfo (GDAL, Debian package gdal-bin) is not installed")
+    write_targets_kml(tmp_path / "t.kml", groups)
+    out = subprocess.run(["ogrinfo", "-al", "-so", str(tmp_path / "t.kml")], capture_output=True, text=True,
+                         check=True).stdout
+    for field, kind in (("error_m", "Real"), ("alt_msl_m", "Real"), ("cep50_m", "Real"), ("iterations", "Integer"),
+                        ("method", "String")):
+        assert re.search(rf"^{field}: {kind}", out, flags=re.M), (field, kind, out[:2000])
 
 
 @pytest.mark.parametrize("sigma", [0.5, 2.0, 10.0])

@@ -123,3 +123,31 @@ def test_the_bundled_sample_configs_load():
     for e in entries:
         assert Path(e.config.truth_file).parent.name == e.config.name
         assert e.config.observations.mode == "bursts" and e.config.sigma.range_m == 5.0
+
+
+def test_geoid_separation_auto_is_the_geoid_model_at_the_first_position(flight_dir):
+    """`altitude.geoid_separation_m: auto` resolves to EGM2008's N where the flight starts; a word other than auto
+    is refused with the key named."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from pipeline.geometry.geoid import geoid_undulation_m
+    from pipeline.run import geoid_separation_m
+
+    doc = copy.deepcopy(_doc())
+    doc["files"] = {"telemetry": ["data/flight.tlog"], "video": "data/video.mp4"}
+    doc["altitude"] = {"geoid_separation_m": "auto"}
+    cfg = load_flight_config(_write(flight_dir / "g1.yaml", doc))
+    assert cfg.altitude.geoid_separation_m == "auto"
+    log = SimpleNamespace(position=SimpleNamespace(lat_deg=np.array([np.nan, 20.0, 21.0]),
+                                                   lon_deg=np.array([np.nan, 50.0, 50.0])))
+    # GeographicLib GeoidEval (egm2008-1) gives -30.7048 m at (20 N, 50 E): see tests/test_geoid.py
+    assert geoid_separation_m(cfg, log) == pytest.approx(-30.7048, abs=0.003)
+    assert geoid_separation_m(cfg, log) == pytest.approx(float(geoid_undulation_m(20.0, 50.0)))
+    doc["altitude"] = {"geoid_separation_m": -28.5}
+    cfg = load_flight_config(_write(flight_dir / "g1.yaml", doc))
+    assert geoid_separation_m(cfg, log) == -28.5
+    doc["altitude"] = {"geoid_separation_m": "egm96"}
+    with pytest.raises(ConfigError, match=r"altitude\.geoid_separation_m"):
+        load_flight_config(_write(flight_dir / "bad.yaml", doc))

@@ -1,8 +1,9 @@
 """GIS exports of a run: `targets.csv`, `targets.geojson` (RFC 7946) and `targets.kml` (KML 2.2).
 
-Every position is converted from the group's local ENU frame to WGS84 with pymap3d; heights are above the
-WGS84 ellipsoid (EPSG:4979), which is what RFC 7946 prescribes for GeoJSON. Columns and properties are
-documented in docs/outputs.md. All files are written atomically.
+Every position is converted from the group's local ENU frame to WGS84 with pymap3d. Heights: `alt_m` is above
+the WGS84 ellipsoid (EPSG:4979), which is what RFC 7946 prescribes for GeoJSON coordinates; `alt_msl_m` is above
+the EGM2008 geoid (pipeline.geometry.geoid), which is what KML's `absolute` altitude mode wants, so KML coordinates
+carry it. Columns and properties are documented in docs/outputs.md. All files are written atomically.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from os import PathLike
 import numpy as np
 
 from pipeline.atomic import atomic_write_bytes, atomic_write_text
+from pipeline.geometry.geoid import GEOID_MODEL_LONG, patch_around
 from pipeline.report.geometry import (
     ALT_DATUM,
     ELLIPSE_CONFIDENCE,
@@ -32,13 +34,14 @@ from pipeline.results import GroupResult
 # The documented columns of targets.csv, in order (docs/outputs.md describes each).
 TARGETS_CSV_COLUMNS = (
     "group", "method", "method_label",
-    "lat_deg", "lon_deg", "alt_m", "alt_datum",
+    "lat_deg", "lon_deg", "alt_m", "alt_datum", "alt_msl_m", "geoid_undulation_m", "alt_msl_datum",
     "e_m", "n_m", "u_m", "origin_lat_deg", "origin_lon_deg", "origin_alt_m",
     "error_m", "error_horizontal_m", "error_up_m",
     "cep50_m", "cep90_m", "sigma_up_m",
     "ellipse95_semi_major_m", "ellipse95_semi_minor_m", "ellipse95_azimuth_deg",
-    "converged", "status", "iterations", "n_observations", "intersection_angle_deg",
+    "converged", "status", "reason", "iterations", "n_observations", "intersection_angle_deg",
 )
+ALT_MSL_DATUM = f"height above the {GEOID_MODEL_LONG}"
 
 DEG_DECIMALS = 8  # ~1 mm: more than any estimate's accuracy, so rounding never shows
 GEOJSON_DEG_DECIMALS = 7  # ~1 cm, the precision RFC 7946 section 11.2 suggests is plenty
@@ -57,23 +60,61 @@ def _num(x, decimals: int = M_DECIMALS):
     return round(x, decimals) if np.isfinite(x) else None
 
 
+def _geoid(r: GroupResult):
+    """The geoid look-up of a group's area (one grid read per group)."""
+    return patch_around(r.origin_lla[0], r.origin_lla[1])
+
+
+def msl_lla(lla: np.ndarray, geoid) -> np.ndarray:
+    """(..., 3) lat, lon, ellipsoidal h -> lat, lon, height above the geoid (h - N)."""
+    lla = np.asarray(lla, dtype=np.float64)
+    out = lla.copy()
+    out[..., 2] = lla[..., 2] - geoid(lla[..., 0], lla[..., 1])
+    return out
+
+
+def _status_reason(r: GroupResult, method: str) -> tuple[str, str | None]:
+    """(status, reason) of a method: `failed` with its message when it could not run, else the estimate's status
+    and the reason the solver gives (`reason`/`message` in its extras), if any."""
+    failures = r.settings.get("solve_failures") or {}
+    e = r.estimates.get(method)
+    if e is None:
+        return "failed", str(failures.get(method, "not solved"))
+    reason = e.extras.get("reason", e.extras.get("message")) if isinstance(e.extras, dict) else None
+    return e.status.name.lower(), (None if reason is None else str(reason))
+
+
+def group_methods(r: GroupResult) -> list[str]:
+    """Every method the group asked for: solved ones and those that could not run, in Table-4 order."""
+    return ordered_methods([*r.estimates, *[m for m in (r.settings.get("solve_failures") or {})
+                                            if m not in r.estimates]])
+
+
 def target_rows(results: Iterable[GroupResult]) -> list[dict]:
-    """One dict per group and method with the keys of TARGETS_CSV_COLUMNS (None where undefined)."""
+    """One dict per group and method with the keys of TARGETS_CSV_COLUMNS (None where undefined). A method that
+    could not run, or gave no finite position, keeps its row: empty values, its status and reason."""
     rows = []
     for r in results:
         lat0, lon0, alt0 = r.origin_lla
-        for method in ordered_methods(r.estimates):
-            e = r.estimates[method]
-            pos = np.asarray(e.position_m, dtype=np.float64)
+        geoid = _geoid(r)
+        for method in group_methods(r):
+            e = r.estimates.get(method)
+            status, reason = _status_reason(r, method)
+            pos = np.full(3, np.nan) if e is None else np.asarray(e.position_m, dtype=np.float64)
             finite = bool(np.isfinite(pos).all())
             lla = geodetic_from_enu(pos, r.origin_lla) if finite else np.full(3, np.nan)
-            err = e.error_m(r.truth_m)
+            n_m = float(geoid(lla[0], lla[1])) if finite else None
+            err = None if e is None else e.error_m(r.truth_m)
             d = None if (err is None or r.truth_m is None) else pos - r.truth_m
-            u = uncertainty(e)
+            u = uncertainty(e) if e is not None else dict.fromkeys(
+                ("cep50_m", "cep90_m", "sigma_up_m", "ellipse95_semi_major_m", "ellipse95_semi_minor_m",
+                 "ellipse95_azimuth_deg"))
             rows.append({
                 "group": r.name, "method": method, "method_label": method_label(method),
                 "lat_deg": _num(lla[0], DEG_DECIMALS), "lon_deg": _num(lla[1], DEG_DECIMALS),
                 "alt_m": _num(lla[2]), "alt_datum": ALT_DATUM,
+                "alt_msl_m": None if n_m is None else _num(lla[2] - n_m),
+                "geoid_undulation_m": _num(n_m), "alt_msl_datum": ALT_MSL_DATUM,
                 "e_m": _num(pos[0]), "n_m": _num(pos[1]), "u_m": _num(pos[2]),
                 "origin_lat_deg": _num(lat0, DEG_DECIMALS), "origin_lon_deg": _num(lon0, DEG_DECIMALS),
                 "origin_alt_m": _num(alt0),
@@ -84,7 +125,8 @@ def target_rows(results: Iterable[GroupResult]) -> list[dict]:
                 "ellipse95_semi_major_m": _num(u["ellipse95_semi_major_m"]),
                 "ellipse95_semi_minor_m": _num(u["ellipse95_semi_minor_m"]),
                 "ellipse95_azimuth_deg": _num(u["ellipse95_azimuth_deg"], 2),
-                "converged": bool(e.converged), "status": e.status.name.lower(), "iterations": int(e.iterations),
+                "converged": None if e is None else bool(e.converged), "status": status, "reason": reason,
+                "iterations": None if e is None else int(e.iterations),
                 "n_observations": int(r.n_observations), "intersection_angle_deg": _num(r.intersection_angle_deg, 2),
             })
     return rows
@@ -147,9 +189,7 @@ def group_features(r: GroupResult, max_lines_of_sight: int | None = 200) -> list
                 "alt_datum": ALT_DATUM}))
     if r.truth_m is not None:
         lla = geodetic_from_enu(r.truth_m, r.origin_lla)
-        feats.append(_feature({"type": "Point", "coordinates": _positions(lla)[0]}, {
-            "kind": "truth", "group": r.name, "alt_m": _num(lla[2]), "alt_datum": ALT_DATUM,
-            "e_m": _num(r.truth_m[0]), "n_m": _num(r.truth_m[1]), "u_m": _num(r.truth_m[2])}))
+        feats.append(_feature({"type": "Point", "coordinates": _positions(lla)[0]}, _truth_props(r, lla)))
     obs = r.observations
     if obs.n >= 2:
         path = _positions(geodetic_from_enu(obs.platform_m, r.origin_lla))
@@ -163,6 +203,13 @@ def group_features(r: GroupResult, max_lines_of_sight: int | None = 200) -> list
                                "has_pixel": bool(obs.has_pixel[i]),
                                "range_m": _num(obs.range_m[i]) if obs.has_range[i] else None}))
     return feats
+
+
+def _truth_props(r: GroupResult, lla: np.ndarray) -> dict:
+    n_m = float(_geoid(r)(lla[0], lla[1]))
+    return {"kind": "truth", "group": r.name, "alt_m": _num(lla[2]), "alt_datum": ALT_DATUM,
+            "alt_msl_m": _num(lla[2] - n_m), "geoid_undulation_m": _num(n_m), "alt_msl_datum": ALT_MSL_DATUM,
+            "e_m": _num(r.truth_m[0]), "n_m": _num(r.truth_m[1]), "u_m": _num(r.truth_m[2])}
 
 
 def targets_geojson(results: Iterable[GroupResult], max_lines_of_sight: int | None = 200) -> dict:
@@ -182,6 +229,30 @@ def write_targets_geojson(path: str | PathLike, results: Iterable[GroupResult],
 
 # ---- KML 2.2 --------------------------------------------------------------------------------------------------
 
+# KML SimpleField types of the attributes (KML 2.2 section 9.9: string, int, uint, short, ushort, float, double,
+# bool); GIS clients (GDAL's LIBKML driver, Google Earth) read the typed <Schema> instead of treating all as text.
+_KML_STRING_FIELDS = {"group", "method", "method_label", "alt_datum", "alt_msl_datum", "status", "reason", "kind"}
+_KML_INT_FIELDS = {"iterations", "n_observations", "n_positions", "frame_count"}
+_KML_BOOL_FIELDS = {"converged"}
+ESTIMATE_KML_FIELDS = tuple(c for c in TARGETS_CSV_COLUMNS if c not in ("lat_deg", "lon_deg"))
+TRUTH_KML_FIELDS = ("group", "alt_m", "alt_datum", "alt_msl_m", "geoid_undulation_m", "alt_msl_datum",
+                    "e_m", "n_m", "u_m")
+ELLIPSE_KML_FIELDS = ("group", "method", "method_label", "confidence", "semi_major_m", "semi_minor_m",
+                      "azimuth_deg", "alt_msl_m")
+KML_SCHEMAS = {"estimate": ESTIMATE_KML_FIELDS, "truth": TRUTH_KML_FIELDS, "error_ellipse": ELLIPSE_KML_FIELDS}
+
+
+def kml_field_type(name: str) -> str:
+    """The KML SimpleField type of an attribute."""
+    if name in _KML_STRING_FIELDS:
+        return "string"
+    if name in _KML_INT_FIELDS:
+        return "int"
+    if name in _KML_BOOL_FIELDS:
+        return "bool"
+    return "double"
+
+
 def _kml_color(hex_rgb: str, alpha: int = 0xFF) -> str:
     """'#RRGGBB' -> KML 'aabbggrr'."""
     rr, gg, bb = hex_rgb[1:3], hex_rgb[3:5], hex_rgb[5:7]
@@ -200,34 +271,49 @@ def _kml_coords(lla: np.ndarray) -> str:
                     for lat, lon, alt in np.atleast_2d(lla))
 
 
-def _extended_data(pm: ET.Element, props: dict) -> None:
-    ext = _sub(pm, "ExtendedData")
-    for k, v in props.items():
+def _geometry(parent: ET.Element, tag: str, lla_msl: np.ndarray) -> ET.Element:
+    """A Point/LineString with absolute altitudes (heights above the geoid, KML's mean sea level)."""
+    g = _sub(parent, tag)
+    _sub(g, "altitudeMode", "absolute")
+    _sub(g, "coordinates", _kml_coords(lla_msl))
+    return g
+
+
+def _schema_data(pm: ET.Element, schema: str, props: dict) -> None:
+    sd = _sub(_sub(pm, "ExtendedData"), "SchemaData", schemaUrl=f"#{schema}")
+    for k in KML_SCHEMAS[schema]:
+        v = props.get(k)
         if v is None:
-            continue
-        data = _sub(ext, "Data", name=k)
-        _sub(data, "value", str(v).lower() if isinstance(v, bool) else str(v))
+            continue  # an absent SimpleData is a null attribute
+        _sub(sd, "SimpleData", str(v).lower() if isinstance(v, bool) else str(v), name=k)
 
 
-def _placemark(folder: ET.Element, name: str, style: str, props: dict | None = None) -> ET.Element:
+def _placemark(folder: ET.Element, name: str, style: str, schema: str | None = None,
+               props: dict | None = None) -> ET.Element:
     pm = _sub(folder, "Placemark")
     _sub(pm, "name", name)
     _sub(pm, "styleUrl", f"#{style}")
-    if props:
-        _extended_data(pm, props)
+    if schema is not None:
+        _schema_data(pm, schema, props or {})
     return pm
 
 
 def targets_kml(results: Iterable[GroupResult], max_lines_of_sight: int | None = 200) -> bytes:
     """A KML 2.2 document: one Folder per group with the estimates, truth, 95 % ellipses, flight path and lines of
-    sight. Geometry is clamped to the ground (KML's absolute altitude is above the geoid, not the ellipsoid);
-    the ellipsoidal height of every point is in its ExtendedData (`alt_m`)."""
+    sight. Coordinates are absolute altitudes: heights above the EGM2008 geoid (ellipsoidal height minus the
+    geoid undulation), as KML defines altitude (above sea level). Attributes are typed by a <Schema> per kind
+    of placemark (estimate, truth, error_ellipse); the ellipsoidal height is kept in `alt_m`."""
     results = list(results)
     ET.register_namespace("", KML_NS)
     root = ET.Element(f"{{{KML_NS}}}kml")
     doc = _sub(root, "Document")
     _sub(doc, "name", "ridgeloc targets")
-    _sub(doc, "description", f"Target estimates per flight group and method. Heights: {ALT_DATUM}.")
+    _sub(doc, "description", f"Target estimates per flight group and method. Coordinates: {ALT_MSL_DATUM} "
+                             f"(altitudeMode absolute); attribute alt_m: {ALT_DATUM}.")
+    for sid, fields in KML_SCHEMAS.items():
+        schema = _sub(doc, "Schema", name=sid, id=sid)
+        for f in fields:
+            _sub(schema, "SimpleField", name=f, type=kml_field_type(f))
     for method, color in METHOD_COLORS.items():
         st = _sub(doc, "Style", id=f"est-{method}")
         icon = _sub(st, "IconStyle")
@@ -248,36 +334,46 @@ def targets_kml(results: Iterable[GroupResult], max_lines_of_sight: int | None =
     for r in results:
         folder = _sub(doc, "Folder")
         _sub(folder, "name", r.name)
+        geoid = _geoid(r)
         rows = {row["method"]: row for row in target_rows([r])}
         for method in ordered_methods(r.estimates):
             e = r.estimates[method]
             if not np.isfinite(e.position_m).all():
-                continue
+                continue  # targets.csv keeps its row, with its status and reason
             row = rows[method]
             style = f"est-{method}" if method in METHOD_COLORS else "truth"
-            pm = _placemark(folder, f"{r.name}: {method_label(method)}", style, row)
-            _sub(_sub(pm, "Point"), "coordinates", _kml_coords(geodetic_from_enu(e.position_m, r.origin_lla)))
+            pm = _placemark(folder, f"{r.name}: {method_label(method)}", style, "estimate", row)
+            _geometry(pm, "Point", msl_lla(geodetic_from_enu(e.position_m, r.origin_lla), geoid))
             if row["ellipse95_semi_major_m"] is not None and row["ellipse95_semi_major_m"] >= MIN_ELLIPSE_M:
                 ring_en = ellipse_points_en_m(np.asarray(e.covariance_m2)[:2, :2], ELLIPSE_CONFIDENCE)
                 ring_enu = np.column_stack([ring_en + e.position_m[:2], np.full(len(ring_en), e.position_m[2])])
-                pm = _placemark(folder, f"{r.name}: {method_label(method)} 95 % error ellipse", style)
+                ring_msl = msl_lla(geodetic_from_enu(ring_enu, r.origin_lla), geoid)
+                ring_msl[-1] = ring_msl[0]
+                pm = _placemark(folder, f"{r.name}: {method_label(method)} 95 % error ellipse", style,
+                                "error_ellipse", {
+                                    "group": r.name, "method": method, "method_label": method_label(method),
+                                    "confidence": ELLIPSE_CONFIDENCE, "semi_major_m": row["ellipse95_semi_major_m"],
+                                    "semi_minor_m": row["ellipse95_semi_minor_m"],
+                                    "azimuth_deg": row["ellipse95_azimuth_deg"], "alt_msl_m": row["alt_msl_m"]})
                 poly = _sub(pm, "Polygon")
+                _sub(poly, "altitudeMode", "absolute")
                 ring = _sub(_sub(poly, "outerBoundaryIs"), "LinearRing")
-                _sub(ring, "coordinates", _kml_coords(geodetic_from_enu(ring_enu, r.origin_lla)))
+                _sub(ring, "coordinates", _kml_coords(ring_msl))
         if r.truth_m is not None:
             lla = geodetic_from_enu(r.truth_m, r.origin_lla)
-            pm = _placemark(folder, f"{r.name}: truth", "truth", {"alt_m": _num(lla[2]), "alt_datum": ALT_DATUM})
-            _sub(_sub(pm, "Point"), "coordinates", _kml_coords(lla))
+            pm = _placemark(folder, f"{r.name}: truth", "truth", "truth", _truth_props(r, lla))
+            _geometry(pm, "Point", msl_lla(lla, geoid))
         obs = r.observations
         if obs.n >= 2:
             pm = _placemark(folder, f"{r.name}: flight path", "path")
-            _sub(_sub(pm, "LineString"), "coordinates", _kml_coords(geodetic_from_enu(obs.platform_m, r.origin_lla)))
+            _geometry(pm, "LineString", msl_lla(geodetic_from_enu(obs.platform_m, r.origin_lla), geoid))
         seg, _ = lines_of_sight_m(obs, best_reference_m(r), max_lines_of_sight)
         if len(seg):
             pm = _placemark(folder, f"{r.name}: lines of sight", "los")
             multi = _sub(pm, "MultiGeometry")
-            for s in seg:
-                _sub(_sub(multi, "LineString"), "coordinates", _kml_coords(geodetic_from_enu(s, r.origin_lla)))
+            seg_msl = msl_lla(geodetic_from_enu(seg, r.origin_lla), geoid)
+            for s in seg_msl:
+                _geometry(multi, "LineString", s)
     ET.indent(root)
     return ET.tostring(root, encoding="utf-8", xml_declaration=True)
 

@@ -46,3 +46,25 @@ def test_markdown_has_paper_beside_ours_estimates_and_failures(tmp_path):
     md_path, csv_path = write_table4(tmp_path / "out", [a])
     assert md_path.read_text().startswith("# ridgeloc run report") and csv_path.exists()
     assert not list((tmp_path / "out").glob(".tmp-*"))
+
+
+def test_a_failed_method_keeps_its_row_in_table4_and_targets_csv():
+    """docs/outputs.md promises one row per (group, method): a method asked for that could not run keeps it,
+    with empty values, status `failed` and its reason."""
+    from pipeline.report.exports import targets_csv_text
+
+    a = _result("group1", [0.0, 0.0, 0.0], {"mle": [3.0, 4.0, 0.0]})
+    a.settings["solve_failures"] = {"range": "degenerate geometry: the ranges are collinear"}
+    b = _result("group2", [0.0, 0.0, 0.0], {"mle": [1.0, 0.0, 0.0], "range": [0.0, 2.0, 0.0]})
+    rows = list(csv.reader(io.StringIO(table4_csv_text([a, b]))))
+    body = {r[0]: r[1:] for r in rows[1:]}
+    assert body["range"] == ["", "2.000"] and body["mle"] == ["5.000", "1.000"]
+    targets = list(csv.DictReader(io.StringIO(targets_csv_text([a, b]))))
+    assert [(t["group"], t["method"]) for t in targets] == [("group1", "range"), ("group1", "mle"),
+                                                             ("group2", "range"), ("group2", "mle")]
+    failed = targets[0]
+    assert failed["status"] == "failed" and "collinear" in failed["reason"]
+    assert failed["lat_deg"] == failed["error_m"] == failed["converged"] == failed["alt_msl_m"] == ""
+    assert targets[1]["status"] == "converged" and targets[1]["reason"] == "" and targets[1]["error_m"] == "5.0"
+    md = report_markdown([a, b])
+    assert "| range | — | — | — | — |  | failed | — |" in md

@@ -1,7 +1,8 @@
 """`ridgeloc run`'s summary: report.md and table4.csv, laid out like the paper's Tables 3 and 4.
 
 table4.csv: columns `method,<group>,<group>,...`; one row per method named as in `ridgeloc solve` with the
-localization error in metres (empty when there is no truth or the method did not run), then the rows
+localization error in metres (empty when there is no truth or the method did not run: a method asked for that
+failed keeps its row), then the rows
 `intersection_angle_deg` and `observations`. report.md: the same tables with the paper's figures beside ours
 (never used for anything but display), the estimates as WGS84 coordinates, tracking and timing figures.
 """
@@ -43,7 +44,8 @@ PAPER_GROUPS = ("group1", "group2", "group3", "group4", "group5", "group6")
 
 
 def _methods(results: Sequence[GroupResult]) -> list[str]:
-    present = {m for r in results for m in r.estimates}
+    """Every method of any group: solved, or asked for and failed (it keeps its row, with empty values)."""
+    present = {m for r in results for m in (*r.estimates, *(r.settings.get("solve_failures") or {}))}
     return [m for m in METHOD_ROWS if m in present] + sorted(present - set(METHOD_ROWS))
 
 
@@ -129,9 +131,12 @@ def report_markdown(results: Sequence[GroupResult], failures: Sequence[GroupFail
             out += [f"### {r.name}", "",
                     f"Origin (lat, lon, h): {r.origin_lla[0]:.7f}, {r.origin_lla[1]:.7f}, {r.origin_lla[2]:.2f} m", ""]
             rows = []
+            failed = r.settings.get("solve_failures") or {}
             for m in methods:
                 e = r.estimates.get(m)
                 if e is None:
+                    if m in failed:
+                        rows.append([m, "—", "—", "—", "—", "", "failed", "—"])
                     continue
                 p = np.asarray(e.position_m, dtype=np.float64)
                 if np.isfinite(p).all():

@@ -11,8 +11,9 @@ A job that raises (a RidgelocError, or any other exception: a bug, but one fligh
 the workers and re-raises KeyboardInterrupt. Results come back in the order of `jobs`, whatever the order in
 which they finished, so every executor gives the same output.
 
-Progress: one bar for the whole batch and, on a terminal, one bar per running flight showing its stage
-(`report_stage`), plus one line per finished flight with its stage timings (`GroupResult.timings_s`).
+Progress: on a terminal, one bar for the whole batch and one per running flight showing its stage
+(`report_stage`); on stdout, flushed, one line per finished flight with its time itemised by stage
+(`GroupResult.timings_s`), and, when stdout is not a terminal (CI logs, `| tee`), one line per finished stage.
 """
 
 from __future__ import annotations
@@ -123,23 +124,47 @@ def _ignore_sigint() -> None:
 # ---- progress display ---------------------------------------------------------------------------------------
 
 class _Progress:
-    """A batch bar plus one bar per running flight (terminal only); lines for finished flights."""
+    """What a batch shows while it runs. Bars (on stderr) only when stderr is a terminal: one for the batch and one
+    per running flight with its stage. Lines on stdout, flushed as they happen: when stdout is not a terminal (a CI
+    log, `| tee`), one line per finished stage of each flight; in any case one line per finished flight with its
+    time itemised by stage (`GroupResult.timings_s`; `other` = the rest of the job's wall time)."""
 
-    def __init__(self, total: int, enabled: bool, stages: Sequence[str] | None, max_bars: int):
+    def __init__(self, total: int, enabled: bool, stages: Sequence[str] | None, max_bars: int, out=None):
         from tqdm.auto import tqdm
 
         self._tqdm = tqdm
         self.enabled = enabled
+        self.out = out if out is not None else sys.stdout
+        self.stage_lines = enabled and not _isatty(self.out)
         self.stages = list(stages) if stages else None
         self.max_bars = max_bars
         self.ok = self.failed = 0
-        disable = None if enabled else True  # None: tqdm shows bars only on a terminal
-        self.bar = tqdm(total=total, desc="flights", unit="flight", position=0, disable=disable, file=sys.stderr,
+        self.current: dict[str, tuple[str, float]] = {}  # flight -> (stage, when it began, perf_counter s)
+        bars = enabled and _isatty(sys.stderr)
+        self.bar = tqdm(total=total, desc="flights", unit="flight", position=0, disable=not bars, file=sys.stderr,
                         dynamic_ncols=True)
         self.flight_bars: dict[str, Any] = {}
         self.free_slots = list(range(1, max_bars + 1))
 
+    def _line(self, text: str) -> None:
+        if not self.enabled:
+            return
+        with contextlib.suppress(Exception):  # progress display must never fail a batch
+            if self.bar.disable:
+                print(text, file=self.out, flush=True)
+            else:
+                self._tqdm.write(text, file=self.out)
+                self.out.flush()
+
+    def _stage_done(self, name: str, now: float) -> None:
+        prev = self.current.pop(name, None)
+        if prev is not None and prev[0] != "start" and self.stage_lines:
+            self._line(f"{name}: {prev[0]} finished ({now - prev[1]:.2f} s)")
+
     def stage(self, name: str, stage: str) -> None:
+        now = time.perf_counter()
+        self._stage_done(name, now)
+        self.current[name] = (stage, now)
         if self.bar.disable:
             return
         fb = self.flight_bars.get(name)
@@ -158,6 +183,7 @@ class _Progress:
         fb.set_description_str(f"  {name}: {stage}")
 
     def finished(self, name: str, failure: GroupFailure | None, elapsed_s: float, timings: dict | None) -> None:
+        self._stage_done(name, time.perf_counter())
         fb = self.flight_bars.pop(name, None)
         if fb is not None:
             fb.close()
@@ -165,14 +191,11 @@ class _Progress:
             self.free_slots.sort()
         if failure is None:
             self.ok += 1
-            parts = ", ".join(f"{k} {v:.1f}" for k, v in (timings or {}).items()
-                              if isinstance(v, (int, float)))
-            line = f"{name}: done in {elapsed_s:.1f} s" + (f" ({parts} s)" if parts else "")
+            line = f"{name}: done in {elapsed_s:.2f} s" + itemised_timings(timings, elapsed_s)
         else:
             self.failed += 1
             line = f"{name}: FAILED: {failure.message}"
-        if self.enabled:
-            self._tqdm.write(line, file=sys.stderr)
+        self._line(line)
         self.bar.set_postfix(ok=self.ok, failed=self.failed)
         self.bar.update(1)
 
@@ -181,6 +204,27 @@ class _Progress:
             fb.close()
         self.flight_bars.clear()
         self.bar.close()
+
+
+def _isatty(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError, OSError):
+        return False
+
+
+def itemised_timings(timings: dict | None, elapsed_s: float | None = None) -> str:
+    """' (ingest 0.52, track 0.80, ..., other 0.02 s)': a flight's wall seconds by stage; `other` is what the
+    stages do not account for of `elapsed_s` (set-up, writing the folder). '' when there are no timings."""
+    items = [(k, float(v)) for k, v in (timings or {}).items()
+             if isinstance(v, (int, float)) and not isinstance(v, bool)]
+    if not items:
+        return ""
+    if elapsed_s is not None:
+        rest = elapsed_s - sum(v for _, v in items)
+        if rest >= 0.005:
+            items.append(("other", rest))
+    return " (" + ", ".join(f"{k} {v:.2f}" for k, v in items) + " s)"
 
 
 # ---- executors -------------------------------------------------------------------------------------------------

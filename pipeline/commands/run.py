@@ -72,7 +72,7 @@ def main(args) -> int:
     results, failed, reused = run_groups(
         jobs, process_group, args.outdir, digests=digests, force=args.force, extra_files=group_files,
         figures=not args.no_figures, workers=args.workers, executor=args.executor, scheduler=args.scheduler,
-        progress=not args.quiet and sys.stderr.isatty(), stages=STAGES)
+        progress=not args.quiet, stages=STAGES)
     failures = config_failures + failed
     settings = {"config": str(config), "outdir": str(args.outdir), "workers": args.workers,
                 "executor": args.executor, "ridgeloc": __version__, "reused": reused}

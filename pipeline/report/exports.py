@@ -62,7 +62,7 @@ def _num(x, decimals: int = M_DECIMALS):
 
 def _geoid(r: GroupResult):
     """The geoid look-up of a group's area (one grid read per group)."""
-    return patch_around(r.origin_lla[0], r.origin_lla[1])
+    return patch_around(float(r.origin_lla[0]), float(r.origin_lla[1]))
 
 
 def msl_lla(lla: np.ndarray, geoid) -> np.ndarray:

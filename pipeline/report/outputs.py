@@ -17,6 +17,7 @@ one, the new one, or absent, and a group folder without `.done` is never reused.
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Mapping, Sequence
 from os import PathLike
 from pathlib import Path
@@ -46,15 +47,18 @@ def write_group_outputs(outdir: str | PathLike, r: GroupResult, config_digest: s
                         extra_files: Mapping[str, bytes | str] | None = None, figures: bool = True) -> Path:
     """Write OUTDIR/<group>/ atomically (result.json, figures, targets.geojson, `extra_files` name -> content) and
     mark it finished for `config_digest` (see pipeline.atomic.config_hash). Returns the folder."""
-    from pipeline.report.figures import render_group_figures
+    t0 = time.perf_counter()
+    from pipeline.report.figures import render_group_figures  # matplotlib: its import counts as report time
 
     final = group_dir(outdir, r.name)
+    pngs = render_group_figures(r) if figures else {}
+    geojson = json.dumps(targets_geojson([r]), allow_nan=False) + "\n"
+    r.timings_s["report"] = time.perf_counter() - t0  # the group's figures and GeoJSON, itemised with the stages
     with atomic_dir(final) as tmp:
         save_group_result(tmp / RESULT_FILE, r)
-        if figures:
-            for name, png in render_group_figures(r).items():
-                (tmp / f"{name}.png").write_bytes(png)
-        (tmp / "targets.geojson").write_text(json.dumps(targets_geojson([r]), allow_nan=False) + "\n")
+        for name, png in pngs.items():
+            (tmp / f"{name}.png").write_bytes(png)
+        (tmp / "targets.geojson").write_text(geojson)
         for name, content in (extra_files or {}).items():
             p = tmp / name
             p.parent.mkdir(parents=True, exist_ok=True)

@@ -167,10 +167,10 @@ def report_markdown(results: Sequence[GroupResult], failures: Sequence[GroupFail
                     if c is not None and not lost]
             rows.append([r.name, str(r.n_observations), str(int((~r.observations.has_pixel).sum())),
                          _fmt(float(np.median(corr)) if corr else None, 3),
-                         *[_fmt(t.get(k), 3) for k in ("ingest", "decode", "track", "sync", "solve")],
+                         *[_fmt(t.get(k), 3) for k in ("ingest", "decode", "track", "sync", "solve", "report")],
                          _fmt(total, 3), _fmt(10 * total / max(r.n_observations, 1), 3)])
         out += [_md_table(["group", "obs", "lost", "median NCC", "ingest s", "decode s", "track s", "sync s", "solve s",
-                           "total s", "s per 10 obs"], rows), ""]
+                           "report s", "total s", "s per 10 obs"], rows), ""]
     if failures:
         out += ["## Failed groups", ""] + [f"- {f.name} ({f.source}): {f.message}" for f in failures] + [""]
     return "\n".join(out)

@@ -153,6 +153,18 @@ def solve_all(obs: Observations, methods: Sequence[str], options: dict) -> tuple
     return estimates, failures
 
 
+def _frame_reason(lost: bool, via: str, inside: bool, used: bool) -> str | None:
+    """Why a planned observation frame lacks its pixel or is not used (None when it is whole)."""
+    why = []
+    if lost:
+        why.append(f"target lost: {via}")
+    if not inside:
+        why.append("outside the telemetry span: dropped")
+    elif not used:
+        why.append("neither a tracked pixel nor a valid range: dropped")
+    return "; ".join(why) or None
+
+
 def process_group(config: FlightConfig) -> GroupResult:
     """Ingest, track, synchronize and solve one flight group (see the module docstring)."""
     from pipeline.ingest import read_flight
@@ -259,11 +271,12 @@ def process_group(config: FlightConfig) -> GroupResult:
         reference = best.position_m
     gamma = intersection_angle_deg(obs.platform_m, reference) if obs.n >= 2 and np.isfinite(reference).all() else \
         float("nan")
-    kept = np.flatnonzero(useful)
-    tracking = track.to_dict()
-    tracking = {k: [v[i] for i in kept] for k, v in tracking.items()}
-    tracking["t_ns"] = [int(t) for t in plan.t_ns[kept]]
-    tracking["range_t_ns"] = [int(t) for t in plan.range_t_ns[kept]]
+    tracking = track.to_dict()  # every planned observation frame, the dropped ones included
+    tracking["used"] = [bool(u) for u in useful]  # True: a row of observations.json, in the same order
+    tracking["reason"] = [_frame_reason(lost, via, inside, use) for lost, via, inside, use in
+                          zip(track.lost, tracking["via"], states.inside, useful, strict=True)]
+    tracking["t_ns"] = [int(t) for t in plan.t_ns]
+    tracking["range_t_ns"] = [int(t) for t in plan.range_t_ns]
     tracking["mark"] = {"frame_index": int(mark_index), "pixel_px": [float(mark_px[0]), float(mark_px[1])]}
     settings = config.to_dict()
     settings["notes"] = notes

@@ -51,7 +51,8 @@ def true_pose_errors(cfg, truth: dict) -> tuple[dict, dict]:
 
     r = process_group(cfg)
     by_index = {f["frame_index"]: f for f in truth["frames"]}
-    frames = [by_index[i] for i in r.tracking["frame_index"]]
+    used = r.tracking.get("used") or [True] * len(r.tracking["frame_index"])
+    frames = [by_index[i] for i, u in zip(r.tracking["frame_index"], used, strict=True) if u]
     lat0, lon0, h0 = r.origin_lla
     R_enu0_from_ecef = R_ecef_from_enu(lat0, lon0).T
     R_enu_from_opt = np.array([R_enu0_from_ecef @ np.array(f["R_ecef_from_optical"]) for f in frames])

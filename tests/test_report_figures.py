@@ -55,6 +55,41 @@ def test_map_marks_an_off_scale_estimate(group):
     fig = map_figure(g)
     closeup = fig.axes[1]
     texts = [t.get_text() for t in closeup.texts]
-    assert "2.5 km" in texts
+    assert "range 2.5 km" in texts
     half = closeup.get_xlim()[1]
     assert half < 200  # the close-up stayed at the scale of the other estimates
+
+
+def test_off_scale_labels_in_one_direction_do_not_overlap_and_light_colours_are_darkened(group):
+    """Three estimates off the close-up in nearly the same direction (group2's 68, 77, 586 m) get three
+    separate labels; the yellow of dlt is darkened to a legible contrast on white."""
+    import dataclasses
+
+    import numpy as np
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from pipeline.report.figures import text_color
+
+    moved = {m: dataclasses.replace(group.estimates[m], position_m=group.truth_m
+                                    + d * np.array([np.sin(a), -np.cos(a), 0.0]))
+             for m, a, d in (("vision", 0.13, 68.0), ("dlt", 0.13, 77.0), ("range", 0.05, 586.0))}
+    g = dataclasses.replace(group, estimates={**group.estimates, **moved})
+    fig = map_figure(g)
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    closeup = fig.axes[1]
+    labels = [t for t in closeup.texts if t.get_text().endswith(" m")]
+    assert sorted(t.get_text() for t in labels) == ["DLT 77 m", "range 586 m", "vision 68 m"]
+    boxes = [t.get_window_extent(renderer) for t in labels]
+    for i in range(len(boxes)):
+        for j in range(i + 1, len(boxes)):
+            assert not boxes[i].overlaps(boxes[j]), (labels[i].get_text(), labels[j].get_text())
+    dlt = next(t for t in labels if t.get_text().startswith("DLT"))
+    assert dlt.get_color().upper() == text_color("#F0E442").upper() != "#F0E442"
+
+    def contrast_on_white(hex_rgb):
+        c = np.array([int(hex_rgb[i:i + 2], 16) for i in (1, 3, 5)]) / 255.0
+        lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+        return 1.05 / (float(lin @ [0.2126, 0.7152, 0.0722]) + 0.05)
+
+    assert contrast_on_white("#F0E442") < 1.5 and contrast_on_white(text_color("#F0E442")) >= 4.5
+    assert text_color("#0072B2") == "#0072B2"  # already legible: unchanged

@@ -102,3 +102,21 @@ def test_finished_group_is_reused_only_for_the_same_config(tmp_path):
     write_group_outputs(tmp_path, r, config_digest="def", figures=False)
     assert not (tmp_path / "g" / "stale.txt").exists()
     assert load_finished_group(tmp_path, "g", "def") is not None
+
+
+def test_flight_settings_show_paths_relative_to_the_config(tmp_path):
+    """report.html must not show the folders of the machine that ran it: paths are relative to the config."""
+    from pipeline.report.html import relative_paths, report_html
+
+    g = synthetic_group("g1", seed=3, intersection_angle_deg=40, n_frames=8)
+    g.settings.update({"path": "/home/someone/survey/configs/flights/g1.yaml",
+                       "files": {"telemetry": ["/home/someone/survey/data/g1/flight.tlog"],
+                                 "video": "/home/someone/survey/data/g1/video.mp4", "frames_csv": None},
+                       "truth_file": "/home/someone/survey/configs/flights/truth.json", "name": "g1"})
+    rel = relative_paths(g.settings)
+    assert rel["path"] == "g1.yaml" and rel["truth_file"] == "truth.json"
+    assert rel["files"]["telemetry"] == ["../../data/g1/flight.tlog"]
+    assert rel["files"]["video"] == "../../data/g1/video.mp4" and rel["files"]["frames_csv"] is None
+    assert g.settings["files"]["video"].startswith("/home/someone")  # the result itself keeps them
+    html = report_html([g], [], {"config": "configs/sample.yaml"}, {"g1": {}})
+    assert "/home/someone" not in html and "../../data/g1/flight.tlog" in html

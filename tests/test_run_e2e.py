@@ -140,3 +140,24 @@ def test_template_mark_and_a_bad_mark_frame(tiny_flight):
     (root / "badmark.yaml").write_text(text.replace(mark_line, "target: {frame_index: 99999, pixel: [300, 200]}"))
     with pytest.raises(ConfigError, match=r"target\.frame_index 99999 is not a frame"):
         process_group(load_flight_config(root / "badmark.yaml"))
+
+
+def test_hard_outliers_tracking_lists_every_frame_with_its_reason():
+    """The sample flight with a cloud-covered and an out-of-view target: tracking.json keeps all 14 planned
+    frames, flags the 2 lost ones with why, and marks the one dropped (no range either) as not used."""
+    from pathlib import Path
+
+    from pipeline.run import group_files
+
+    cfg = Path(__file__).resolve().parent.parent / "configs" / "flights" / "hard_outliers.yaml"
+    r = process_group(load_flight_config(cfg))
+    t = json.loads(group_files(r)["tracking.json"])
+    assert len(t["frame_index"]) == len(t["lost"]) == len(t["reason"]) == len(t["used"]) == 14
+    assert sum(t["lost"]) == 2 and sum(t["used"]) == r.n_observations == 13
+    for lost, reason, used in zip(t["lost"], t["reason"], t["used"], strict=True):
+        assert (reason is None) == (not lost and used)
+        if lost:
+            assert reason.startswith("target lost: ")
+        if not used:
+            assert "dropped" in reason
+    assert "target lost in 2 of 14" in " ".join(r.settings["notes"])

@@ -68,3 +68,13 @@ def test_a_failed_method_keeps_its_row_in_table4_and_targets_csv():
     assert targets[1]["status"] == "converged" and targets[1]["reason"] == "" and targets[1]["error_m"] == "5.0"
     md = report_markdown([a, b])
     assert "| range | — | — | — | — |  | failed | — |" in md
+
+
+def test_tracking_lost_count_counts_dropped_frames_too():
+    """hard_outliers: 2 of 14 frames lost, one then dropped (no range either): the table says 2, as the note."""
+    a = _result("hard", [0.0, 0.0, 0.0], {"mle": [3.0, 4.0, 0.0]})
+    a.tracking = {"correlation": [1.0, None, 0.9, None], "lost": [False, True, False, True],
+                  "used": [True, True, True, False]}
+    md = report_markdown([a])
+    row = next(ln for ln in md.splitlines() if ln.startswith("| hard | 3 |"))
+    assert row.split(" | ")[2] == "2"

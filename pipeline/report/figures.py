@@ -59,23 +59,57 @@ def _closeup_half_width_m(r: GroupResult, centre: np.ndarray, methods: list[str]
     return 1.15 * max(ext)
 
 
+def text_color(hex_rgb: str, min_contrast: float = 4.5) -> str:
+    """`hex_rgb` darkened until its WCAG contrast against white is at least `min_contrast` (4.5: legible small
+    text), so light method colours (the yellow of dlt) stay readable as text; darker colours are unchanged."""
+    rgb = np.array([int(hex_rgb[i:i + 2], 16) for i in (1, 3, 5)], dtype=float) / 255.0
+
+    def contrast(c):
+        lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+        return 1.05 / (float(lin @ [0.2126, 0.7152, 0.0722]) + 0.05)
+
+    while contrast(rgb) < min_contrast:
+        rgb = rgb * 0.9
+    return "#" + "".join(f"{round(v * 255):02X}" for v in rgb)
+
+
+def _offscale_labels(ax, items: list[tuple[str, np.ndarray, float]], half: float) -> None:
+    """Arrows at the close-up's edge towards estimates outside it, each labelled with its method and distance.
+    Labels that would overlap (estimates in similar directions) are stacked inwards, one line apart."""
+    placed: list[np.ndarray] = []
+    step = 0.085 * half
+    for m, xy, dist in sorted(items, key=lambda it: it[2]):
+        color = METHOD_COLORS.get(m, "#000000")
+        u = xy / np.linalg.norm(xy)
+        edge = u * half * 0.86 / np.abs(u).max()
+        ax.annotate("", xy=edge + u * half * 0.12, xytext=edge,
+                    arrowprops={"arrowstyle": "-|>", "fc": color, "ec": text_color(color, 3.0), "lw": 1.8})
+        pos = edge - u * half * 0.08
+        inward = -np.sign(pos[1]) if abs(pos[1]) >= abs(pos[0]) else 0.0  # stack away from a top/bottom edge
+        along = np.array([0.0, inward if inward else -1.0])
+        while any(abs(pos[0] - q[0]) < 0.42 * half and abs(pos[1] - q[1]) < step for q in placed):
+            pos = pos + along * step
+        placed.append(pos)
+        txt = f"{dist / 1000:.1f} km" if dist >= 1000 else f"{dist:.0f} m"
+        ax.text(*pos, f"{_SHORT.get(m, m)} {txt}", color=text_color(color), fontsize=8, ha="center", va="center",
+                fontweight="bold", bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.85, "pad": 0.6},
+                zorder=8)
+
+
+_SHORT = {"vision": "vision", "range": "range", "los": "LOS", "fusion-raw": "fusion-raw", "fusion": "fusion",
+          "ridge": "ridge", "dlt": "DLT", "mle": "MLE"}
+
+
 def _draw_estimates_2d(ax, r: GroupResult, methods: list[str], offset: np.ndarray, half: float | None,
                        ellipses: bool) -> None:
+    offscale = []
     for m in methods:
         e = r.estimates[m]
         xy = e.position_m[:2] - offset[:2]
         color = METHOD_COLORS.get(m, "k")
         marker = METHOD_MARKERS.get(m, "o")
         if half is not None and np.abs(xy).max() > half:
-            # off the close-up: an arrow at the edge pointing at it, with the distance
-            u = xy / np.linalg.norm(xy)
-            edge = u * half * 0.86 / np.abs(u).max()
-            ax.annotate("", xy=edge + u * half * 0.12, xytext=edge,
-                        arrowprops={"arrowstyle": "-|>", "color": color, "lw": 1.6})
-            dist = np.linalg.norm(xy)
-            txt = f"{dist / 1000:.1f} km" if dist >= 1000 else f"{dist:.0f} m"
-            ax.text(*(edge - u * half * 0.06), txt, color=color, fontsize=8, ha="center", va="center",
-                    bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.7, "pad": 0.5})
+            offscale.append((m, xy, float(np.linalg.norm(xy))))  # off the close-up: an arrow at the edge
             continue
         ax.plot(*xy, marker=marker, color=color, markersize=11 if m == "mle" else 8, markeredgecolor="k",
                 markeredgewidth=0.6, linestyle="none", zorder=5)
@@ -83,6 +117,8 @@ def _draw_estimates_2d(ax, r: GroupResult, methods: list[str], offset: np.ndarra
         if ellipses and cov is not None and np.isfinite(cov).all():
             ring = ellipse_points_en_m(np.asarray(cov)[:2, :2]) + xy
             ax.plot(ring[:, 0], ring[:, 1], color=color, lw=1.4, ls="--", zorder=4)
+    if offscale:
+        _offscale_labels(ax, offscale, half)
 
 
 def map_figure(r: GroupResult) -> Figure:

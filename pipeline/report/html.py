@@ -10,6 +10,7 @@ from __future__ import annotations
 import base64
 import datetime as _dt
 import json
+import os
 from collections.abc import Mapping, Sequence
 from html import escape
 from os import PathLike
@@ -17,7 +18,7 @@ from os import PathLike
 import numpy as np
 
 from pipeline.atomic import atomic_write_text
-from pipeline.report.exports import target_rows
+from pipeline.report.exports import ALT_MSL_DATUM, target_rows
 from pipeline.report.geometry import ALT_DATUM
 from pipeline.report.labels import METHOD_COLORS, method_label, ordered_methods
 from pipeline.report.versions import software_versions
@@ -81,7 +82,8 @@ def _paper(group: str, table: dict, key: str, decimals: int = 2) -> str:
 def _summary_table(results: Sequence[GroupResult]) -> str:
     from pipeline.report.table4 import PAPER_TABLE3, PAPER_TABLE4_M
 
-    methods = ordered_methods(dict.fromkeys(m for r in results for m in r.estimates))
+    methods = ordered_methods(dict.fromkeys(m for r in results
+                                            for m in (*r.estimates, *(r.settings.get("solve_failures") or {}))))
     head = "".join(f'<th>{escape(r.name)}</th>' for r in results)
     rows = [f'<tr><th class="l">Group</th>{head}</tr>']
     rows.append('<tr><td class="l">Intersection angle /°</td>'
@@ -122,9 +124,9 @@ def _summary_table(results: Sequence[GroupResult]) -> str:
 
 def _estimates_table(r: GroupResult) -> str:
     cols = (("Method", "method_label", "l"), ("Latitude /°", "lat_deg", ""), ("Longitude /°", "lon_deg", ""),
-            ("Height /m", "alt_m", ""), ("E /m", "e_m", ""), ("N /m", "n_m", ""), ("U /m", "u_m", ""),
-            ("Error /m", "error_m", ""), ("CEP50 /m", "cep50_m", ""), ("CEP90 /m", "cep90_m", ""),
-            ("σ up /m", "sigma_up_m", ""), ("Status", "status", "l"))
+            ("Height /m", "alt_m", ""), ("Height MSL /m", "alt_msl_m", ""), ("E /m", "e_m", ""),
+            ("N /m", "n_m", ""), ("U /m", "u_m", ""), ("Error /m", "error_m", ""), ("CEP50 /m", "cep50_m", ""),
+            ("CEP90 /m", "cep90_m", ""), ("σ up /m", "sigma_up_m", ""), ("Status", "status", "l"))
     head = "".join(f'<th class="{c}">{escape(t)}</th>' for t, _, c in cols)
     body = []
     for row in target_rows([r]):
@@ -132,10 +134,12 @@ def _estimates_table(r: GroupResult) -> str:
         for _, key, c in cols:
             v = row[key]
             text = _fmt(v, 7) if key in ("lat_deg", "lon_deg") else _fmt(v)
-            cells.append(f'<td class="{c}">{text}</td>')
+            title = f' title="{escape(row["reason"])}"' if key == "status" and row.get("reason") else ""
+            cells.append(f'<td class="{c}"{title}>{text}</td>')
         body.append("<tr>" + "".join(cells) + "</tr>")
     return (f"<div class=\"scroll\"><table style=\"font-size: 13px\"><tr>{head}</tr>{''.join(body)}</table></div>"
-            f'<p class="note">Heights: {escape(ALT_DATUM)}. E, N, U: metres in the local frame at '
+            f'<p class="note">Height: {escape(ALT_DATUM)}; height MSL: {escape(ALT_MSL_DATUM)}. E, N, U: '
+            'metres in the local frame at '
             f"{_fmt(r.origin_lla[0], 7)}°, {_fmt(r.origin_lla[1], 7)}°, {_fmt(r.origin_lla[2])} m.</p>")
 
 
@@ -143,6 +147,30 @@ def _kv_table(d: Mapping, decimals: int = 2) -> str:
     rows = "".join(f'<tr><td class="l">{escape(str(k))}</td><td class="l">{_fmt(v, decimals)}</td></tr>'
                    for k, v in d.items())
     return f"<table>{rows}</table>"
+
+
+def relative_paths(settings: Mapping) -> dict:
+    """A flight's settings with every absolute path shown relative to its config file's folder (and the config
+    as its file name), so a report does not show the folders of the machine that ran it."""
+    config = settings.get("path")
+    base = os.path.dirname(config) if isinstance(config, str) and os.path.isabs(config) else None
+
+    def rel(v):
+        if isinstance(v, dict):
+            return {k: rel(x) for k, x in v.items()}
+        if isinstance(v, list):
+            return [rel(x) for x in v]
+        if isinstance(v, str) and base is not None and os.path.isabs(v):
+            try:
+                return os.path.relpath(v, base)
+            except ValueError:  # another drive (Windows)
+                return os.path.basename(v)
+        return v
+
+    out = rel(dict(settings))
+    if base is not None:
+        out["path"] = os.path.basename(config)
+    return out
 
 
 def _group_section(r: GroupResult, figures: Mapping[str, bytes]) -> str:
@@ -173,7 +201,7 @@ def _group_section(r: GroupResult, figures: Mapping[str, bytes]) -> str:
         parts.append("<h3>Stage timings</h3>" + _kv_table({f"{k} /s": float(v) for k, v in r.timings_s.items()}, 3))
     if r.settings:
         parts.append("<details><summary>Flight settings</summary><pre>"
-                     + escape(json.dumps(r.settings, indent=2, default=str)) + "</pre></details>")
+                     + escape(json.dumps(relative_paths(r.settings), indent=2, default=str)) + "</pre></details>")
     return "\n".join(parts)
 
 

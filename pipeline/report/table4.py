@@ -165,10 +165,14 @@ def report_markdown(results: Sequence[GroupResult], failures: Sequence[GroupFail
             total = sum(t.values())
             corr = [c for c, lost in zip(r.tracking.get("correlation", []), r.tracking.get("lost", []), strict=False)
                     if c is not None and not lost]
-            rows.append([r.name, str(r.n_observations), str(int((~r.observations.has_pixel).sum())),
+            lost = r.tracking.get("lost")
+            n_lost = int(sum(bool(v) for v in lost)) if lost is not None else int((~r.observations.has_pixel).sum())
+            rows.append([r.name, str(r.n_observations), str(n_lost),
                          _fmt(float(np.median(corr)) if corr else None, 3),
                          *[_fmt(t.get(k), 3) for k in ("ingest", "decode", "track", "sync", "solve", "report")],
                          _fmt(total, 3), _fmt(10 * total / max(r.n_observations, 1), 3)])
+        out += ["`lost`: observation frames where the target was not tracked (tracking.json: `lost`, `reason`), "
+                "including those then dropped for having no valid range either; `obs`: observations solved.", ""]
         out += [_md_table(["group", "obs", "lost", "median NCC", "ingest s", "decode s", "track s", "sync s", "solve s",
                            "report s", "total s", "s per 10 obs"], rows), ""]
     if failures:

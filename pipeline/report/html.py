@@ -1,4 +1,5 @@
-"""The run report: one self-contained HTML page (figures as base64 PNG data URIs, inline CSS, no scripts).
+"""The run report: one self-contained HTML page (figures as base64 PNG data URIs, inline CSS; the only scripts are
+Leaflet, inline, and each group's interactive map: nothing is loaded from the network but the basemap's tiles).
 
 Sections: a Table-4-like summary (error per method and group, the best per group highlighted, with the
 intersection angle and observation count of Table 3), the failures, one section per group (figures,
@@ -44,7 +45,8 @@ td.na { color: #999; }
 .paper { color: #8a8a8a; font-size: 11px; font-weight: 400; }
 .swatch { display: inline-block; width: 11px; height: 11px; border-radius: 2px; margin-right: 6px;
           vertical-align: -1px; border: 1px solid #0003; }
-img { max-width: 100%; height: auto; background: white; border: 1px solid #e2e2e2; border-radius: 4px; }
+figure img { max-width: 100%; height: auto; background: white; border: 1px solid #e2e2e2; border-radius: 4px; }
+.webmap { border: 1px solid #d0d0d0; border-radius: 4px; overflow: hidden; margin: 4px 0 6px; }
 .row { display: flex; gap: 14px; flex-wrap: wrap; align-items: flex-start; }
 .row > figure { flex: 1 1 480px; margin: 0; }
 figure { margin: 0 0 12px; }
@@ -173,11 +175,17 @@ def relative_paths(settings: Mapping) -> dict:
     return out
 
 
-def _group_section(r: GroupResult, figures: Mapping[str, bytes]) -> str:
+def _group_section(r: GroupResult, figures: Mapping[str, bytes], interactive: bool = True) -> str:
     parts = [f'<h2 id="group-{escape(r.name)}">{escape(r.name)}</h2>']
     angle = _fmt(float(r.intersection_angle_deg))
     parts.append(f'<p class="meta">{r.n_observations} observations, intersection angle {angle}°'
                  + ("" if r.truth_m is not None else ", target truth unknown") + "</p>")
+    if interactive:
+        from pipeline.report.webmap import map_fragment
+
+        parts.append("<h3>Interactive map</h3>" + map_fragment(r)
+                     + '<p class="note">Zoom and pan; tick a layer to show or hide a method. Basemap: OpenStreetMap '
+                     "when online, a plain grid when not (everything else is in this file).</p>")
     if "map" in figures:
         parts.append(f"<figure>{_img(figures['map'], f'{r.name} map view')}<figcaption>Plan view: flight path, "
                      "lines of sight, each method's estimate and the truth; right, a close-up around the target "
@@ -214,9 +222,10 @@ def _traceback(f: GroupFailure) -> str:
 
 
 def report_html(results: Sequence[GroupResult], failures: Sequence[GroupFailure], settings: Mapping,
-                figures: Mapping[str, Mapping[str, bytes]] | None = None, title: str = "ridgeloc run report") -> str:
+                figures: Mapping[str, Mapping[str, bytes]] | None = None, title: str = "ridgeloc run report",
+                interactive: bool = True) -> str:
     """The report page as a string. `figures`: group name -> {"map"|"view3d"|"residuals": PNG bytes}; groups
-    missing from it are rendered here."""
+    missing from it are rendered here. `interactive`: a Leaflet map per group (webmap.py; Leaflet inline)."""
     from pipeline.report.figures import render_group_figures  # matplotlib only when a page is made
 
     figures = dict(figures or {})
@@ -227,7 +236,8 @@ def report_html(results: Sequence[GroupResult], failures: Sequence[GroupFailure]
     status = (f'<span class="pill ok">{len(results)} group(s) processed</span>'
               + (f'<span class="pill bad">{len(failures)} failed</span>' if failures else ""))
     out = [f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>{escape(title)}</title>"
-           f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><style>{_CSS}</style></head>"
+           f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><style>{_CSS}</style>"
+           + (_leaflet_head() if interactive and results else "") + "</head>"
            f"<body><main><h1>{escape(title)}</h1><p class=\"meta\">Generated {now}. {status}</p>"]
     if results:
         nav = " · ".join(f'<a href="#group-{escape(r.name)}">{escape(r.name)}</a>' for r in results)
@@ -240,11 +250,17 @@ def report_html(results: Sequence[GroupResult], failures: Sequence[GroupFailure]
                    'groups are complete.</p><table class="fail"><tr><th class="l">Group</th><th class="l">Source</th>'
                    f'<th class="l">Error</th></tr>{rows}</table>')
     for r in results:
-        out.append(_group_section(r, figures[r.name]))
+        out.append(_group_section(r, figures[r.name], interactive))
     out.append("<h2>Run settings</h2><pre>" + escape(json.dumps(dict(settings), indent=2, default=str)) + "</pre>")
     out.append("<h2>Software</h2>" + _kv_table(software_versions()))
     out.append("</main></body></html>\n")
     return "\n".join(out)
+
+
+def _leaflet_head() -> str:
+    from pipeline.report.webmap import leaflet_head
+
+    return leaflet_head()
 
 
 def write_report_html(path: str | PathLike, results: Sequence[GroupResult], failures: Sequence[GroupFailure],

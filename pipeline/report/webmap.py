@@ -1,0 +1,153 @@
+"""The interactive map of a group in report.html: Leaflet through folium, with every asset embedded.
+
+    group_map(r) -> folium.Map       flight path, lines of sight, truth, each method's estimate and 95 % ellipse,
+                                     one layer per method (toggled in the layer control)
+    map_fragment(r) -> str           the map's <div> and <script> for a page that already loads Leaflet
+    leaflet_head() -> str            Leaflet's CSS and JS inline (once per page)
+
+folium links Leaflet, jQuery and Bootstrap from CDNs by default; here those links are dropped and Leaflet 1.9.4 (the
+npm package `leaflet`, vendored under pipeline/report/assets/leaflet with its BSD-2 licence) is inlined, and only
+core Leaflet layers are used (circle markers, polylines, polygons), so the page works offline. The base layer is
+OpenStreetMap's tiles when the browser can reach them; beneath it a plain grid drawn in the browser (a Leaflet
+GridLayer of canvas tiles, no network) shows where the tiles cannot load.
+"""
+
+from __future__ import annotations
+
+import functools
+from html import escape
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.report.geometry import (
+    ELLIPSE_CONFIDENCE,
+    best_reference_m,
+    ellipse_points_en_m,
+    geodetic_from_enu,
+    lines_of_sight_m,
+)
+from pipeline.report.labels import METHOD_COLORS, method_label, ordered_methods
+from pipeline.results import GroupResult
+
+ASSETS = Path(__file__).resolve().parent / "assets" / "leaflet"
+OSM_TILES = "https://tile.openstreetmap.org/{z}/{x}/{y}.png"
+OSM_ATTRIBUTION = '&copy; <a href="https://www.openstreetmap.org/copyright">OpenStreetMap</a> contributors'
+MAX_LINES_OF_SIGHT = 60
+
+# A grid of canvas tiles under the basemap: visible where the tiles do not load (offline).
+_GRID_JS = """
+(function (map) {
+  var Grid = L.GridLayer.extend({
+    createTile: function (coords) {
+      var tile = document.createElement('canvas');
+      var size = this.getTileSize();
+      tile.width = size.x; tile.height = size.y;
+      var ctx = tile.getContext('2d');
+      ctx.fillStyle = '#f4f4f1'; ctx.fillRect(0, 0, size.x, size.y);
+      ctx.strokeStyle = '#c9c9c4'; ctx.lineWidth = 1;
+      ctx.beginPath();
+      for (var i = 0; i <= 4; i++) {
+        var p = i * size.x / 4 + 0.5;
+        ctx.moveTo(p, 0); ctx.lineTo(p, size.y); ctx.moveTo(0, p); ctx.lineTo(size.x, p);
+      }
+      ctx.stroke();
+      return tile;
+    }
+  });
+  new Grid({zIndex: 0, maxZoom: 24, className: 'ridgeloc-grid'}).addTo(map);
+})(%s);
+"""
+
+
+@functools.cache
+def leaflet_head() -> str:
+    """Leaflet's stylesheet and script, inline, for a page's <head> (no network needed)."""
+    css = (ASSETS / "leaflet.css").read_text()
+    js = (ASSETS / "leaflet.js").read_text()
+    return (f"<style>/* Leaflet 1.9.4, BSD-2-Clause, see pipeline/report/assets/leaflet/LICENSE */\n{css}</style>\n"
+            f"<script>{js}</script>\n")
+
+
+def _latlon(lla: np.ndarray) -> list[list[float]]:
+    return [[round(float(a), 8), round(float(b), 8)] for a, b in np.atleast_2d(lla)[:, :2]]
+
+
+def group_map(r: GroupResult, tiles: bool = True):
+    """A folium.Map of one group (see the module docstring); its CDN links are removed."""
+    import folium
+
+    obs = r.observations
+    path = geodetic_from_enu(obs.platform_m, r.origin_lla)
+    m = folium.Map(location=[float(r.origin_lla[0]), float(r.origin_lla[1])], zoom_start=14, tiles=None,
+                   control_scale=True, max_zoom=22, prefer_canvas=False)
+    m.default_js, m.default_css = [], []  # Leaflet comes inline with the page (leaflet_head); nothing from a CDN
+    if tiles:
+        folium.TileLayer(OSM_TILES, attr=OSM_ATTRIBUTION, name="OpenStreetMap", max_zoom=22, max_native_zoom=19,
+                         control=False).add_to(m)
+    bounds = _latlon(path)
+
+    layer = folium.FeatureGroup(name="Flight path", show=True)
+    if obs.n >= 2:
+        folium.PolyLine(_latlon(path), color="#1F4E79", weight=3, tooltip="flight path").add_to(layer)
+    if obs.n:
+        folium.CircleMarker(_latlon(path[0])[0], radius=5, color="#1F4E79", fill=True, fill_opacity=1.0,
+                            tooltip="path start").add_to(layer)
+    layer.add_to(m)
+
+    seg, _ = lines_of_sight_m(obs, best_reference_m(r), MAX_LINES_OF_SIGHT)
+    if len(seg):
+        layer = folium.FeatureGroup(name="Lines of sight", show=True)
+        for s in geodetic_from_enu(seg, r.origin_lla):
+            folium.PolyLine(_latlon(s), color="#7F7F7F", weight=1, opacity=0.7).add_to(layer)
+        layer.add_to(m)
+
+    for method in ordered_methods(r.estimates):
+        e = r.estimates[method]
+        if not np.isfinite(e.position_m).all():
+            continue
+        color = METHOD_COLORS.get(method, "#000000")
+        lla = geodetic_from_enu(e.position_m, r.origin_lla)
+        err = e.error_m(r.truth_m)
+        tip = (f"{escape(method_label(method))} ({method}): {lla[0]:.7f}°, {lla[1]:.7f}°"
+               + ("" if err is None else f", error {err:.2f} m") + f", {e.status.name.lower()}")
+        swatch = (f'<span style="display:inline-block;width:10px;height:10px;border-radius:50%;background:{color};'
+                  'border:1px solid #000;margin-right:4px"></span>')
+        layer = folium.FeatureGroup(name=f"{swatch}{escape(method_label(method))}", show=True)
+        folium.CircleMarker(_latlon(lla)[0], radius=8 if method == "mle" else 6, color="#000000", weight=1,
+                            fill=True, fill_color=color, fill_opacity=0.95, tooltip=tip).add_to(layer)
+        cov = e.covariance_m2
+        if cov is not None and np.isfinite(cov).all():
+            ring_en = ellipse_points_en_m(np.asarray(cov)[:2, :2], ELLIPSE_CONFIDENCE) + e.position_m[:2]
+            ring = geodetic_from_enu(np.column_stack([ring_en, np.full(len(ring_en), e.position_m[2])]),
+                                     r.origin_lla)
+            folium.Polygon(_latlon(ring), color=color, weight=2, dash_array="6 4", fill=True, fill_opacity=0.08,
+                           tooltip=f"{escape(method_label(method))}: 95 % error ellipse").add_to(layer)
+        layer.add_to(m)
+        bounds += _latlon(lla)
+
+    if r.truth_m is not None:
+        lla = geodetic_from_enu(r.truth_m, r.origin_lla)
+        layer = folium.FeatureGroup(name="Truth", show=True)
+        folium.CircleMarker(_latlon(lla)[0], radius=9, color="#000000", weight=2, fill=True, fill_color="#FFD700",
+                            fill_opacity=1.0, tooltip=f"truth: {lla[0]:.7f}°, {lla[1]:.7f}°").add_to(layer)
+        layer.add_to(m)
+        bounds += _latlon(lla)
+
+    folium.LayerControl(collapsed=False).add_to(m)
+    b = np.array(bounds)
+    m.fit_bounds([b.min(axis=0).tolist(), b.max(axis=0).tolist()], padding=(20, 20))
+    return m
+
+
+def map_fragment(r: GroupResult, height_px: int = 520, tiles: bool = True) -> str:
+    """The <div> and <script> of `group_map(r)` for a page whose <head> has `leaflet_head()` (folium's page-wide
+    header, which restyles html and body, is left out: only the map's own size is kept)."""
+    m = group_map(r, tiles=tiles)
+    root = m.get_root()
+    root.render()
+    name = m.get_name()
+    return (f'<div class="webmap" data-group="{escape(r.name)}">'
+            f"<style>#{name} {{ position: relative; width: 100%; height: {int(height_px)}px; }}</style>"
+            f"{root.html.render()}</div>\n"
+            f"<script>\n{root.script.render()}\n{_GRID_JS % name}</script>")

@@ -105,6 +105,14 @@ def group_map(r: GroupResult, tiles: bool = True):
             folium.PolyLine(_latlon(s), color="#7F7F7F", weight=1, opacity=0.7).add_to(layer)
         layer.add_to(m)
 
+    if r.truth_m is not None:  # under the estimates, which are drawn after it
+        lla = geodetic_from_enu(r.truth_m, r.origin_lla)
+        layer = folium.FeatureGroup(name="Truth", show=True)
+        folium.CircleMarker(_latlon(lla)[0], radius=9, color="#000000", weight=2, fill=True, fill_color="#FFD700",
+                            fill_opacity=1.0, tooltip=f"truth: {lla[0]:.7f}°, {lla[1]:.7f}°").add_to(layer)
+        layer.add_to(m)
+        bounds += _latlon(lla)
+
     for method in ordered_methods(r.estimates):
         e = r.estimates[method]
         if not np.isfinite(e.position_m).all():
@@ -129,17 +137,11 @@ def group_map(r: GroupResult, tiles: bool = True):
         layer.add_to(m)
         bounds += _latlon(lla)
 
-    if r.truth_m is not None:
-        lla = geodetic_from_enu(r.truth_m, r.origin_lla)
-        layer = folium.FeatureGroup(name="Truth", show=True)
-        folium.CircleMarker(_latlon(lla)[0], radius=9, color="#000000", weight=2, fill=True, fill_color="#FFD700",
-                            fill_opacity=1.0, tooltip=f"truth: {lla[0]:.7f}°, {lla[1]:.7f}°").add_to(layer)
-        layer.add_to(m)
-        bounds += _latlon(lla)
-
-    folium.LayerControl(collapsed=False).add_to(m)
+    folium.LayerControl(collapsed=False, position="topleft").add_to(m)
     b = np.array(bounds)
-    m.fit_bounds([b.min(axis=0).tolist(), b.max(axis=0).tolist()], padding=(20, 20))
+    # the layer control (top left, ~280 px wide) must not hide the target: leave it room
+    m.fit_bounds([b.min(axis=0).tolist(), b.max(axis=0).tolist()], padding_top_left=(300, 20),
+                 padding_bottom_right=(30, 30))
     return m
 
 

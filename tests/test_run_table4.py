@@ -78,3 +78,15 @@ def test_tracking_lost_count_counts_dropped_frames_too():
     md = report_markdown([a])
     row = next(ln for ln in md.splitlines() if ln.startswith("| hard | 3 |"))
     assert row.split(" | ")[2] == "2"
+
+
+def test_a_failure_given_as_status_and_reason_keeps_both():
+    """`ridgeloc solve --json` lists unsolved methods as {status, reason}: the exports take either form."""
+    from pipeline.report.exports import targets_csv_text
+
+    a = _result("group1", [0.0, 0.0, 0.0], {"mle": [3.0, 4.0, 0.0]})
+    a.settings["solve_failures"] = {"range": {"status": "degenerate", "reason": "ranges collinear"}}
+    targets = list(csv.DictReader(io.StringIO(targets_csv_text([a]))))
+    assert (targets[0]["method"], targets[0]["status"], targets[0]["reason"]) == ("range", "degenerate",
+                                                                                  "ranges collinear")
+    assert "| range | — | — | — | — |  | degenerate | — |" in report_markdown([a])

@@ -73,13 +73,21 @@ def msl_lla(lla: np.ndarray, geoid) -> np.ndarray:
     return out
 
 
+def failure_status_reason(failure) -> tuple[str, str]:
+    """(status, reason) of a method that could not run, from its entry in settings["solve_failures"]: a message,
+    or a {"status", "reason"} mapping (as `ridgeloc solve --json` lists unsolved methods)."""
+    if isinstance(failure, dict):
+        return str(failure.get("status") or "failed"), str(failure.get("reason", ""))
+    return "failed", str(failure)
+
+
 def _status_reason(r: GroupResult, method: str) -> tuple[str, str | None]:
     """(status, reason) of a method: `failed` with its message when it could not run, else the estimate's status
     and the reason the solver gives (`reason`/`message` in its extras), if any."""
     failures = r.settings.get("solve_failures") or {}
     e = r.estimates.get(method)
     if e is None:
-        return "failed", str(failures.get(method, "not solved"))
+        return failure_status_reason(failures.get(method, "not solved"))
     reason = e.extras.get("reason", e.extras.get("message")) if isinstance(e.extras, dict) else None
     return e.status.name.lower(), (None if reason is None else str(reason))
 

@@ -19,7 +19,7 @@ from os import PathLike
 import numpy as np
 
 from pipeline.atomic import atomic_write_text
-from pipeline.report.exports import ALT_MSL_DATUM, target_rows
+from pipeline.report.exports import ALT_MSL_DATUM, failure_status_reason, target_rows
 from pipeline.report.geometry import ALT_DATUM
 from pipeline.report.labels import METHOD_COLORS, method_label, ordered_methods
 from pipeline.report.versions import software_versions
@@ -104,8 +104,9 @@ def _summary_table(results: Sequence[GroupResult]) -> str:
         cells = []
         for r in results:
             if m not in r.estimates:
-                why = (r.settings.get("solve_failures") or {}).get(m, "the estimator gave no answer")
-                cells.append(f'<td class="na" title="{escape(str(why))}">no estimate</td>')
+                why = failure_status_reason((r.settings.get("solve_failures") or {}).get(
+                    m, "the estimator gave no answer"))[1]
+                cells.append(f'<td class="na" title="{escape(why)}">no estimate</td>')
                 continue
             e = errors[r.name][m]
             if r.truth_m is None:
@@ -200,7 +201,8 @@ def _group_section(r: GroupResult, figures: Mapping[str, bytes], interactive: bo
     failed = r.settings.get("solve_failures") or {}
     if isinstance(failed, dict) and failed:
         parts.append('<p class="note">Estimators that gave no answer: ' + "; ".join(
-            f"<b>{escape(method_label(m))}</b>: {escape(str(msg))}" for m, msg in failed.items()) + "</p>")
+            f"<b>{escape(method_label(m))}</b>: {escape(failure_status_reason(msg)[1])}" for m, msg in failed.items())
+            + "</p>")
     notes = r.settings.get("notes") or []
     if isinstance(notes, list) and notes:
         parts.append("<h3>Notes</h3><ul class=\"note\">" + "".join(f"<li>{escape(str(n))}</li>" for n in notes)

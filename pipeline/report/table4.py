@@ -136,7 +136,8 @@ def report_markdown(results: Sequence[GroupResult], failures: Sequence[GroupFail
                 e = r.estimates.get(m)
                 if e is None:
                     if m in failed:
-                        rows.append([m, "—", "—", "—", "—", "", "failed", "—"])
+                        status = failed[m].get("status", "failed") if isinstance(failed[m], dict) else "failed"
+                        rows.append([m, "—", "—", "—", "—", "", str(status), "—"])
                     continue
                 p = np.asarray(e.position_m, dtype=np.float64)
                 if np.isfinite(p).all():

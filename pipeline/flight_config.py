@@ -90,7 +90,12 @@ class Altitude:
     """Altitude datum conversion: ellipsoid height = AMSL altitude + geoid_separation_m. `"auto"` takes it from
     the EGM2008 geoid model at the flight's first position (pipeline.geometry.geoid)."""
 
-    geoid_separation_m: float | typing.Literal["auto"] | None = None
+    geoid_separation_m: float | str | None = None
+
+    def __post_init__(self):
+        if isinstance(self.geoid_separation_m, str) and self.geoid_separation_m != "auto":
+            raise ValueError("geoid_separation_m must be a number (m) or 'auto' (the EGM2008 geoid model), "
+                             f"got {self.geoid_separation_m!r}")
 
 
 @dataclass(frozen=True)

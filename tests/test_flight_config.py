@@ -149,5 +149,5 @@ def test_geoid_separation_auto_is_the_geoid_model_at_the_first_position(flight_d
     cfg = load_flight_config(_write(flight_dir / "g1.yaml", doc))
     assert geoid_separation_m(cfg, log) == -28.5
     doc["altitude"] = {"geoid_separation_m": "egm96"}
-    with pytest.raises(ConfigError, match=r"altitude\.geoid_separation_m"):
+    with pytest.raises(ConfigError, match=r"altitude: geoid_separation_m must be a number \(m\) or .auto."):
         load_flight_config(_write(flight_dir / "bad.yaml", doc))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 from pipeline.flight_config import FlightConfig, load_run_config
@@ -76,8 +77,11 @@ def main(args) -> int:
     failures = config_failures + failed
     settings = {"config": str(config), "outdir": str(args.outdir), "workers": args.workers,
                 "executor": args.executor, "ridgeloc": __version__, "reused": reused}
+    t0 = time.perf_counter()
     write_run_outputs(args.outdir, results, failures, settings, figures=not args.no_figures)
+    t1 = time.perf_counter()
     md, tab = write_table4(args.outdir, results, failures)
+    t2 = time.perf_counter()
     for r in results:
         errs = r.errors_m()
         shown = ", ".join(f"{m} {errs[m]:.2f} m" for m in ("ridge", "mle") if errs.get(m) is not None)
@@ -87,6 +91,8 @@ def main(args) -> int:
     for f in failures:  # one line each on stderr; the count goes to stdout with the rest of the summary
         print(f"ridgeloc: {f.name}: failed: {f.message}", file=sys.stderr)
     if not args.quiet:
-        print(f"wrote {md}, {tab}, {Path(args.outdir) / 'report.html'} and targets.csv/.geojson/.kml")
+        print(f"wrote {md}, {tab}, {Path(args.outdir) / 'report.html'} and targets.csv/.geojson/.kml in "
+              f"{t2 - t0:.2f} s (report.html, targets.*, run.json {t1 - t0:.2f}; report.md, table4.csv "
+              f"{t2 - t1:.2f} s)")
     print(summarize_failures(failures, len(entries)).splitlines()[0])
     return 1 if failures else 0

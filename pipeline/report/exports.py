@@ -61,8 +61,11 @@ def _num(x, decimals: int = M_DECIMALS):
 
 
 def _geoid(r: GroupResult):
-    """The geoid look-up of a group's area (one grid read per group)."""
-    return patch_around(float(r.origin_lla[0]), float(r.origin_lla[1]))
+    """The geoid look-up of a group's area (one grid read per group); NaN everywhere without a valid origin."""
+    lat, lon = float(r.origin_lla[0]), float(r.origin_lla[1])
+    if not (np.isfinite(lat) and np.isfinite(lon) and abs(lat) <= 90.0):
+        return lambda la, lo: np.full(np.broadcast(np.asarray(la), np.asarray(lo)).shape, np.nan)
+    return patch_around(lat, lon)
 
 
 def msl_lla(lla: np.ndarray, geoid) -> np.ndarray:

@@ -23,10 +23,13 @@ import cv2
 import numpy as np
 
 from pipeline.batch import report_stage
+from pipeline.check.conventions import current_reading
+from pipeline.check.flight import ResolvedFlight, refusal_reason
 from pipeline.errors import ConfigError, InputError, RidgelocError
 from pipeline.flight_config import FlightConfig
 from pipeline.geometry.frames import ellipsoid_from_amsl_m, enu_from_lla
 from pipeline.ingest.model import FlightLog, FrameSeries
+from pipeline.intrinsics import resolve_camera
 from pipeline.results import GroupResult
 from pipeline.solve.estimate import Estimate
 from pipeline.solve.observations import Observations, Sigma
@@ -88,8 +91,8 @@ def plan_flight_observations(config: FlightConfig, frames: FrameSeries, log: Fli
     """Which frames are observations, with their laser shots, as the flight config's `observations:` and
     `clock:` say (`pipeline.sync.select.plan_observations`; needs only timestamps)."""
     c, sel = config.clock, config.observations
-    return plan_observations(frames, log.range, mode=sel.mode, video_offset_ns=c.video_to_telemetry_offset_ns,
-                             range_offset_ns=c.range_offset_ns, frame_tolerance_s=sel.frame_tolerance_s,
+    return plan_observations(frames, log.range, mode=sel.mode, video_offset_ns=c.offset_ns("video"),
+                             range_offset_ns=c.offset_ns("range"), frame_tolerance_s=sel.frame_tolerance_s,
                              max_range_gap_s=sel.max_range_gap_s, frame_indices=sel.frame_indices,
                              burst_gap_s=sel.burst_gap_s)
 
@@ -153,6 +156,7 @@ def process_group(config: FlightConfig) -> GroupResult:
         raise InputError(f"the flight's logs supply no {', '.join(missing)}: check `mapping:` "
                          "(see `ridgeloc inspect`)", config.path)
     frames, decoder, closable = open_frames(config, log)
+    cam, cam_source = resolve_camera(config, log if log.frames is not None else dataclasses.replace(log, frames=frames))
     notes.extend(log.warnings)
     timings["ingest"] = time.perf_counter() - t0
     cpu["ingest"] = time.process_time() - c0
@@ -192,7 +196,7 @@ def process_group(config: FlightConfig) -> GroupResult:
     if sel.max_laser_offset_px is not None:
         # The laser is boresighted: when the target is far from the principal point the shot is not on it.
         where = np.where(np.isnan(track.pixel_px), track.predicted_px, track.pixel_px)
-        offset = np.hypot(where[:, 0] - config.camera.cx_px, where[:, 1] - config.camera.cy_px)
+        offset = np.hypot(where[:, 0] - cam.cx_px, where[:, 1] - cam.cy_px)
         off_target = (offset > sel.max_laser_offset_px) & ~np.isnan(range_m)
         if off_target.any():
             range_m[off_target] = np.nan
@@ -202,14 +206,13 @@ def process_group(config: FlightConfig) -> GroupResult:
     report_stage("sync")
     t2, c2 = time.perf_counter(), time.process_time()
     origin = _origin(config, log)
-    states = frame_states(log, plan.t_ns, position_offset_ns=c.position_offset_ns,
-                          attitude_offset_ns=c.attitude_offset_ns, gimbal_offset_ns=c.gimbal_offset_ns,
+    states = frame_states(log, plan.t_ns, position_offset_ns=c.offset_ns("position"),
+                          attitude_offset_ns=c.offset_ns("attitude"), gimbal_offset_ns=c.offset_ns("gimbal"),
                           geoid_separation_m=config.altitude.geoid_separation_m)
     if not states.inside.all():
         notes.append(f"{int((~states.inside).sum())} observation(s) outside the telemetry span were dropped")
     truth_lla = config.truth_lla()
     truth_m = None if truth_lla is None else enu_from_lla(*truth_lla, origin)
-    cam = config.camera
     sigma = Sigma.from_dict(dataclasses.asdict(config.sigma), "sigma")
     useful = states.inside & (~track.lost | ~np.isnan(range_m))
     if (states.inside & ~useful).any():
@@ -217,6 +220,11 @@ def process_group(config: FlightConfig) -> GroupResult:
     if not useful.any():
         raise InputError("no usable observation: the target was never tracked and no laser range is valid",
                          config.path)
+    # A wrong convention gives an answer kilometres off with nothing else to show for it: refuse the flight.
+    resolved = ResolvedFlight(config, log, frames, cam, cam_source, current_reading(config, log), plan, None, origin)
+    refusal = refusal_reason(resolved, plan.t_ns[useful], track.pixel_px[useful], range_m[useful])
+    if refusal is not None:
+        raise InputError(refusal, config.path)
     sub = dataclasses.replace(states, inside=useful)
     obs, _ = assemble_observations(sub, track.pixel_px, range_m, K=cam.K, dist=cam.dist, origin_lla=origin,
                                        R_optical_from_gimbal=np.array(cam.R_optical_from_gimbal),
@@ -247,6 +255,8 @@ def process_group(config: FlightConfig) -> GroupResult:
     tracking["range_t_ns"] = [int(t) for t in plan.range_t_ns[kept]]
     tracking["mark"] = {"frame_index": int(mark_index), "pixel_px": [float(mark_px[0]), float(mark_px[1])]}
     settings = config.to_dict()
+    settings["camera_resolved"] = {"source": cam_source, **{k: getattr(cam, k) for k in (
+        "width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px", "dist")}}
     settings["notes"] = notes
     settings["solve_failures"] = failures
     settings["frames_decoded"] = decoder.decoded

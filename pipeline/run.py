@@ -87,11 +87,14 @@ def open_frames(config: FlightConfig, log: FlightLog) -> tuple[FrameSeries, _Tim
     raise ConfigError(f"cannot open the image stream {log.frames.source!r} of the flight's logs", config.path)
 
 
-def plan_flight_observations(config: FlightConfig, frames: FrameSeries, log: FlightLog):
+def plan_flight_observations(config: FlightConfig, frames: FrameSeries, log: FlightLog,
+                             video_offset_ns: int | None = None):
     """Which frames are observations, with their laser shots, as the flight config's `observations:` and
-    `clock:` say (`pipeline.sync.select.plan_observations`; needs only timestamps)."""
+    `clock:` say, or with `video_offset_ns` when given (`pipeline.sync.select.plan_observations`; needs only
+    timestamps)."""
     c, sel = config.clock, config.observations
-    return plan_observations(frames, log.range, mode=sel.mode, video_offset_ns=c.offset_ns("video"),
+    video_offset_ns = c.offset_ns("video") if video_offset_ns is None else video_offset_ns
+    return plan_observations(frames, log.range, mode=sel.mode, video_offset_ns=video_offset_ns,
                              range_offset_ns=c.offset_ns("range"), frame_tolerance_s=sel.frame_tolerance_s,
                              max_range_gap_s=sel.max_range_gap_s, frame_indices=sel.frame_indices,
                              burst_gap_s=sel.burst_gap_s)
@@ -141,6 +144,25 @@ def solve_all(obs: Observations, methods: Sequence[str], options: dict) -> tuple
     return estimates, failures
 
 
+def _estimate_clock(config, log, frames, cam, cam_source, plan, origin, decoder, tracker, mark_index, mark_px, notes):
+    """clock.estimate: the video (and range) offsets from the flight (`pipeline.sync.clock_estimate`); returns
+    (the estimate, the observation plan at the estimated video offset, or the given plan when not determined)."""
+    from pipeline.sync.clock_estimate import estimate_clock
+
+    resolved = ResolvedFlight(config, log, frames, cam, cam_source, current_reading(config, log), plan, None, origin)
+    est = estimate_clock(resolved, decoder, tracker, mark_index, mark_px)
+    v = est.video
+    if v is not None and v.determined:
+        plan = plan_flight_observations(config, frames, log, round(v.offset_s * 1e9))
+        notes.append(f"clock estimated: {v.describe()}; the estimate is used")
+    else:
+        notes.append(f"clock estimate: {v.describe() if v is not None else 'too few tracked frames'}; the "
+                     "configured offset is used")
+    if est.range is not None:
+        notes.append(f"clock estimate: {est.range.describe()} (reported, not applied)")
+    return est, plan
+
+
 def process_group(config: FlightConfig) -> GroupResult:
     """Ingest, track, synchronize and solve one flight group (see the module docstring)."""
     from pipeline.ingest import read_flight
@@ -178,6 +200,11 @@ def process_group(config: FlightConfig) -> GroupResult:
             mark_index, mark_px = config.target.frame_index, config.target.pixel
             if mark_index not in set(np.asarray(frames.index).tolist()):
                 raise ConfigError(f"target.frame_index {mark_index} is not a frame of the video", config.path)
+        origin = _origin(config, log)
+        clock_estimate = None
+        if c.estimate:
+            clock_estimate, plan = _estimate_clock(config, log, frames, cam, cam_source, plan, origin, decoder,
+                                                   tracker, mark_index, mark_px, notes)
         track = tracker.track(decoder, mark_index, mark_px, plan.frame_index.tolist(),
                               available=np.asarray(frames.index).tolist())
         timings["decode"] = decoder.seconds
@@ -205,7 +232,6 @@ def process_group(config: FlightConfig) -> GroupResult:
 
     report_stage("sync")
     t2, c2 = time.perf_counter(), time.process_time()
-    origin = _origin(config, log)
     states = frame_states(log, plan.t_ns, position_offset_ns=c.offset_ns("position"),
                           attitude_offset_ns=c.offset_ns("attitude"), gimbal_offset_ns=c.offset_ns("gimbal"),
                           geoid_separation_m=config.altitude.geoid_separation_m)
@@ -258,6 +284,8 @@ def process_group(config: FlightConfig) -> GroupResult:
     settings["camera_resolved"] = {"source": cam_source, **{k: getattr(cam, k) for k in (
         "width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px", "dist")}}
     settings["notes"] = notes
+    if clock_estimate is not None:
+        settings["clock_estimate"] = clock_estimate.to_dict()
     settings["solve_failures"] = failures
     settings["frames_decoded"] = decoder.decoded
     settings["cpu_s"] = cpu

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 from pipeline.check.flight import GeometryResult, ResolvedFlight, geometry_checks, mapping_lines, resolve_flight
 from pipeline.check.geometry import _fmt_m
+from pipeline.errors import InputError, RidgelocError
 from pipeline.flight_config import FlightConfig
 
 
@@ -33,13 +34,50 @@ class CheckResult:
         }
 
 
-def check_flight(config: FlightConfig) -> CheckResult:
-    """Resolve `config` against its data and run every check (no pixels decoded unless the clock is estimated)."""
+def check_flight(config: FlightConfig, clock: bool = True) -> CheckResult:
+    """Resolve `config` against its data and run every check; with `clock`, also estimate the clock offsets
+    (whether or not clock.estimate is set; this tracks the target through the frames around each observation)."""
     r = resolve_flight(config)
     geo = geometry_checks(r)
     result = CheckResult(r, mapping_lines(r), geo, problems=list(geo.problems), warnings=list(geo.warnings))
     result.warnings[:0] = r.notes
+    if clock and r.plan is not None and not geo.problems:
+        try:
+            result.clock = _estimate_clock(r)
+        except RidgelocError as exc:
+            result.warnings.append(f"clock offsets not estimated: {exc}")
+        v = getattr(result.clock, "video", None)
+        if v is not None and v.determined and not (v.low_s <= 0 <= v.high_s) and abs(v.delta_s) > 0.05:
+            result.problems.append(f"the video clock looks {v.delta_s:+.3f} s off (95 % [{v.low_s:+.3f}, "
+                                   f"{v.high_s:+.3f}] s): set clock.video_offset_s to {v.offset_s:.3f} (or the "
+                                   "equivalent video_start), or clock: {estimate: true}")
     return result
+
+
+def _estimate_clock(r: ResolvedFlight):
+    from pipeline.run import open_frames
+    from pipeline.sync.clock_estimate import estimate_clock
+    from pipeline.track.sift import SiftTracker
+
+    cfg = r.config
+    _, decoder, closable = open_frames(cfg, r.log)
+    try:
+        tracker = SiftTracker(cfg.tracking)
+        if cfg.target.template is not None:
+            import cv2
+
+            template = cv2.imread(cfg.target.template, cv2.IMREAD_GRAYSCALE)
+            if template is None:
+                raise InputError("target.template: not a readable image", cfg.target.template)
+            mark_index, mark_px = tracker.acquire(template, cfg.target.template_pixel, decoder,
+                                                  r.plan.frame_index.tolist())
+        else:
+            mark_index, mark_px = cfg.target.frame_index, cfg.target.pixel
+        return estimate_clock(r, decoder, tracker, mark_index, mark_px)
+    finally:
+        close = getattr(closable, "close", None)
+        if close is not None:
+            close()
 
 
 def format_check(result: CheckResult) -> str:

@@ -24,7 +24,7 @@ import numpy as np
 
 from pipeline.batch import report_stage
 from pipeline.check.conventions import current_reading
-from pipeline.check.flight import ResolvedFlight, refusal_reason
+from pipeline.check.flight import ResolvedFlight, outside_telemetry, refusal_reason
 from pipeline.errors import ConfigError, InputError, RidgelocError
 from pipeline.flight_config import FlightConfig
 from pipeline.geometry.frames import ellipsoid_from_amsl_m, enu_from_lla
@@ -235,6 +235,9 @@ def process_group(config: FlightConfig) -> GroupResult:
     states = frame_states(log, plan.t_ns, position_offset_ns=c.offset_ns("position"),
                           attitude_offset_ns=c.offset_ns("attitude"), gimbal_offset_ns=c.offset_ns("gimbal"),
                           geoid_separation_m=config.altitude.geoid_separation_m)
+    resolved = ResolvedFlight(config, log, frames, cam, cam_source, current_reading(config, log), plan, None, origin)
+    if not states.inside.any():
+        raise InputError(outside_telemetry(resolved), config.path)
     if not states.inside.all():
         notes.append(f"{int((~states.inside).sum())} observation(s) outside the telemetry span were dropped")
     truth_lla = config.truth_lla()
@@ -247,7 +250,6 @@ def process_group(config: FlightConfig) -> GroupResult:
         raise InputError("no usable observation: the target was never tracked and no laser range is valid",
                          config.path)
     # A wrong convention gives an answer kilometres off with nothing else to show for it: refuse the flight.
-    resolved = ResolvedFlight(config, log, frames, cam, cam_source, current_reading(config, log), plan, None, origin)
     refusal = refusal_reason(resolved, plan.t_ns[useful], track.pixel_px[useful], range_m[useful])
     if refusal is not None:
         raise InputError(refusal, config.path)

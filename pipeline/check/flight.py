@@ -173,6 +173,14 @@ def mapping_lines(r: ResolvedFlight) -> list[str]:
 # ---- geometry ---------------------------------------------------------------------------------------------------
 
 
+def outside_telemetry(r: ResolvedFlight) -> str:
+    """The one-line problem when no observation time falls inside the telemetry."""
+    tel = telemetry_span_ns(r)
+    span = "" if tel is None else f" ({_when(tel[0])} .. {_when(tel[1])})"
+    return (f"no observation time falls inside the telemetry{span}: the video clock is off; set clock.video_start "
+            "(the first frame's UNIX time or ISO 8601) or clock.video_offset_s")
+
+
 def rays(r: ResolvedFlight, t_ns: np.ndarray, pixel_px: np.ndarray | None = None, conv: Convention | None = None,
          log: FlightLog | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(origins (m, 3), directions (m, 3), inside (m,)) of the lines of sight at telemetry times t_ns: through
@@ -326,10 +334,7 @@ def geometry_checks(r: ResolvedFlight, pixel_px: np.ndarray | None = None, t_ns:
     o, d, inside = rays(r, t_ns, pixel_px)
     problems, warnings = [], []
     if not inside.any():
-        tel = telemetry_span_ns(r)
-        span = "" if tel is None else f" ({_when(tel[0])} .. {_when(tel[1])})"
-        problems.append(f"no observation time falls inside the telemetry{span}: the video clock is off; set "
-                        "clock.video_start (the first frame's UNIX time or ISO 8601) or clock.video_offset_s")
+        problems.append(outside_telemetry(r))
         return GeometryResult(None, [], problems, warnings, what)
     if not inside.all():
         warnings.append(f"{int((~inside).sum())} of {len(inside)} observation(s) fall outside the telemetry")
@@ -368,6 +373,13 @@ def refusal_reason(r: ResolvedFlight, t_ns, pixel_px, ranges_m) -> str | None:
     o, d, _ = rays(r, t_ns, pixel_px)
     c = cluster(o, d, ranges_m)
     if c is None or not c.inconsistent:
+        # consistent lines of sight through a wrong mark: the gimbal (and the laser) track something else
+        oa, da, _ = rays(r, t_ns)
+        axes = cluster(oa, da, ranges_m)
+        if axes is not None and axes.consistent:
+            swapped = [p for p in mark_checks(r, axes.centre_m)[0] if "swapped to" in p or "row, column" in p]
+            if swapped:
+                return f"the marked target is not what the gimbal tracks: {swapped[0]}; give target.pixel as [x, y]"
         return None
     alts = try_alternatives(r, t_ns, pixel_px, ranges_m, c, limit=1)
     head = f"inconsistent geometry: the lines of sight through the tracked target do not converge ({c.describe()})"

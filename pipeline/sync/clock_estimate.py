@@ -13,8 +13,9 @@ that wanders like a random walk over a burst, which would otherwise mimic the gi
 
 The estimate is the minimum over a grid (10 ms steps over +-search_s, then 1 ms steps near the best). Its 95 %
 interval is the wider of the profile-likelihood set {delta: cost(delta) - cost_min <= 3.84 s^2} (s^2 = cost_min /
-dof, the frame-to-frame steps independent) and a jackknife over the groups (leave one group out, Student's t with
-groups - 1 degrees of freedom), which holds where the steps are not independent but the groups are. When the
+dof, the frame-to-frame steps independent) the 2.5-97.5 % range of a bootstrap over the groups (groups drawn
+with replacement, the argmin of each resampled total) and a jackknife over the groups (Student's t), which hold
+where the steps are not independent but the groups are (with few groups each alone under-covers). When the
 interval reaches the window's edge the offset is not determined by the data (a gimbal with no jitter, too few
 groups), and the estimate is not used.
 
@@ -41,6 +42,7 @@ from pipeline.sync.assemble import frame_states
 CHI2_95_1DOF = 3.841
 GROUP_HALF_WINDOW_S = 0.4  # frames within this of an observation form its group (continuous video)
 MAX_FRAMES_PER_GROUP = 11
+BOOTSTRAP = 400
 
 
 @dataclass(frozen=True)
@@ -221,13 +223,20 @@ def estimate_video_offset(r: ResolvedFlight, t_video_ns: np.ndarray, pixel_px: n
     dof = 2 * len(pair) - 1
     d_best, lo, hi, s2 = _profile(deltas, total, dof, 1.0)
     # The pixel errors are correlated along a group (a gimbal's attitude error wanders), so the likelihood
-    # interval above, which counts every frame as independent, is too narrow; the groups are far apart in time
-    # and nearly independent: a jackknife over groups gives the spread, widened by Student's t.
+    # interval above, which counts every step as independent, can be far too narrow; the groups are seconds apart
+    # and nearly independent: a bootstrap over groups (resampled with replacement, the argmin of each resampled
+    # total) gives the spread the data support.
+    # The bootstrap of an argmin under-covers with few groups; a jackknife (leave one group out, Student's t) is
+    # added, and the widest of the three kept.
     if n_groups >= 3:
-        loo = np.array([deltas[int(np.argmin(total - cg[:, j]))] for j in range(n_groups)])
+        rng = np.random.default_rng(0)  # fixed: the same data give the same interval
+        counts = rng.multinomial(n_groups, np.full(n_groups, 1.0 / n_groups), size=BOOTSTRAP)
+        boot = deltas[np.argmin(counts @ cg.T, axis=1)]
+        loo = deltas[np.argmin(total[None, :] - cg.T, axis=1)]
         sd = math.sqrt((n_groups - 1) / n_groups * float(np.sum((loo - loo.mean()) ** 2)))
-        t975 = float(student_t.ppf(0.975, n_groups - 1))
-        lo, hi = min(lo, d_best - t975 * sd), max(hi, d_best + t975 * sd)
+        half = float(student_t.ppf(0.975, n_groups - 1)) * sd
+        lo = min(lo, float(np.quantile(boot, 0.025)), d_best - half)
+        hi = max(hi, float(np.quantile(boot, 0.975)), d_best + half)
     else:
         lo, hi = -search_s, search_s
     determined = lo > -search_s + 0.015 and hi < search_s - 0.015

@@ -145,7 +145,7 @@ def solve_all(obs: Observations, methods: Sequence[str], options: dict) -> tuple
 
 
 def _estimate_clock(config, log, frames, cam, cam_source, plan, origin, decoder, tracker, mark_index, mark_px, notes):
-    """clock.estimate: the video (and range) offsets from the flight (`pipeline.sync.clock_estimate`); returns
+    """clock.estimate: the video offset from the flight (`pipeline.sync.clock_estimate`); returns
     (the estimate, the observation plan at the estimated video offset, or the given plan when not determined)."""
     from pipeline.sync.clock_estimate import estimate_clock
 
@@ -158,8 +158,6 @@ def _estimate_clock(config, log, frames, cam, cam_source, plan, origin, decoder,
     else:
         notes.append(f"clock estimate: {v.describe() if v is not None else 'too few tracked frames'}; the "
                      "configured offset is used")
-    if est.range is not None:
-        notes.append(f"clock estimate: {est.range.describe()} (reported, not applied)")
     return est, plan
 
 

@@ -1,4 +1,4 @@
-"""The video-to-telemetry clock offset (and the range source's) estimated from the flight itself.
+"""The video-to-telemetry clock offset estimated from the flight itself.
 
 A gimbal that tracks a target keeps pointing at it whatever the time, so poses taken at a wrong time still point
 roughly at the target: the offset shows only in what the gimbal does not follow, its lag and jitter, against
@@ -19,8 +19,10 @@ where the steps are not independent but the groups are (with few groups each alo
 interval reaches the window's edge the offset is not determined by the data (a gimbal with no jitter, too few
 groups), and the estimate is not used.
 
-The range offset: the ranges against the distance from the shifted platform positions to X (a constant range
-bias as nuisance); determined only where the platform moves towards or away from the target.
+The range source's offset is not estimated: the ranges would show it only through the platform's motion
+towards or away from the target, which an orbit around it hardly has, and there the meeting point's error of
+tens of metres (a range-rate error of a fraction of a metre per second) decides the answer: tried on the sample
+flights, it gave offsets of -0.5 and -1.1 s with intervals excluding the true 0.
 """
 
 from __future__ import annotations
@@ -49,7 +51,7 @@ BOOTSTRAP = 400
 class OffsetEstimate:
     """delta_s: the estimated correction to the configured offset (seconds; the estimated offset is the configured
     one plus delta_s); low_s / high_s its 95 % interval; determined: the interval is inside the search window;
-    n: frames (or ranges) used; rms: the misfit at the estimate (px or m); window_s the search half-width."""
+    n: frames used; rms: the misfit at the estimate (px); window_s the search half-width."""
 
     source: str
     configured_s: float
@@ -78,20 +80,21 @@ class OffsetEstimate:
                     f"{self.configured_s:.3f} s ({self.n} samples)")
         return (f"{what}: {self.offset_s:.3f} s = configured {self.delta_s * 1000:+.0f} ms, 95 % "
                 f"[{self.low_s * 1000:+.0f}, {self.high_s * 1000:+.0f}] ms ({self.n} samples, misfit "
-                f"{self.rms:.2f} {'px' if self.source == 'video' else 'm'} rms)")
+                f"{self.rms:.2f} px rms)")
 
 
 @dataclass(frozen=True)
 class ClockEstimate:
+    """The video offset's estimate (None: too few tracked frames). The range source's offset is not estimated
+    (see the module docstring)."""
+
     video: OffsetEstimate | None
-    range: OffsetEstimate | None
 
     def to_dict(self) -> dict:
-        return {"video": None if self.video is None else self.video.to_dict(),
-                "range": None if self.range is None else self.range.to_dict()}
+        return {"video": None if self.video is None else self.video.to_dict(), "range": None}
 
     def describe(self) -> str:
-        return "; ".join(e.describe() for e in (self.video, self.range) if e is not None) or "no estimate"
+        return self.video.describe() if self.video is not None else "video offset: too few tracked frames"
 
 
 def estimation_frames(r: ResolvedFlight) -> tuple[np.ndarray, np.ndarray]:
@@ -244,52 +247,8 @@ def estimate_video_offset(r: ResolvedFlight, t_video_ns: np.ndarray, pixel_px: n
                           len(t0), math.sqrt(s2), search_s)
 
 
-def estimate_range_offset(r: ResolvedFlight, X_m: np.ndarray, search_s: float) -> OffsetEstimate | None:
-    """The range source's offset correction: valid ranges against the distance from the rangefinder at the shifted
-    times to X_m (3,), with a constant bias as nuisance. None without enough ranges."""
-    rs = r.log.range
-    if rs is None or r.origin is None:
-        return None
-    cfg = r.config
-    c = cfg.clock
-    ok = np.asarray(rs.valid, bool) & np.isfinite(rs.range_m)
-    if r.plan is not None and len(r.plan.t_ns):  # ranges during the observed part of the flight
-        ok &= (rs.t_ns + c.offset_ns("range") >= r.plan.t_ns.min() - 5e9) & \
-              (rs.t_ns + c.offset_ns("range") <= r.plan.t_ns.max() + 5e9)
-    if ok.sum() < 5:
-        return None
-    t0 = np.asarray(rs.t_ns)[ok] + c.offset_ns("range")
-    rng = np.asarray(rs.range_m, float)[ok]
-    window = round(search_s * 1e9)
-    deltas = np.arange(-window, window + 1, 10_000_000, dtype=np.int64)
-    t = (t0[None, :] + deltas[:, None]).ravel()
-    st = frame_states(r.log, t, position_offset_ns=c.offset_ns("position"), attitude_offset_ns=c.offset_ns("attitude"),
-                      gimbal_offset_ns=c.offset_ns("gimbal"), geoid_separation_m=cfg.altitude.geoid_separation_m)
-    dist = np.full(len(t), np.nan)
-    k = st.inside
-    if not k.any():
-        return None
-    poses = frame_poses(st.lat_deg[k], st.lon_deg[k], st.alt_m[k], st.body_quat_wxyz[k], st.gimbal_quat_wxyz[k],
-                        st.yaw_in_vehicle_frame[k], r.origin, lever_camera_m=cfg.lever_arms_m.camera,
-                        lever_rangefinder_m=cfg.lever_arms_m.rangefinder)
-    dist[k] = np.linalg.norm(X_m - poses.laser_m, axis=1)
-    resid = (np.tile(rng, len(deltas)) - dist).reshape(len(deltas), -1)
-    resid -= np.nanmedian(resid, axis=1, keepdims=True)
-    # robust: a Huber-like cap at 3 robust sigmas keeps an outlier shot from steering the profile
-    scale = 1.4826 * np.nanmedian(np.abs(resid), axis=1, keepdims=True) + 1e-9
-    capped = np.minimum(np.abs(resid), 3 * scale)
-    cost = np.nansum(capped ** 2, axis=1)
-    cost = np.where(np.isfinite(resid).all(axis=1), cost, np.inf)
-    if not np.isfinite(cost).any():
-        return None
-    d_best, lo, hi, s2 = _profile(deltas / 1e9, cost, len(rng) - 2, 1.0)
-    determined = lo > -search_s + 0.015 and hi < search_s - 0.015
-    return OffsetEstimate("range", c.offset_ns("range") / 1e9, d_best, lo, hi, determined, len(rng),
-                          math.sqrt(s2), search_s)
-
-
 def estimate_clock(r: ResolvedFlight, decoder, tracker, mark_index: int, mark_px) -> ClockEstimate:
-    """Track the frames around each observation and estimate the video (and range) offsets (see the module
+    """Track the frames around each observation and estimate the video offset (see the module
     docstring). `decoder(indices)` -> {index: image}; `tracker` a SiftTracker."""
     if r.plan is None:
         return ClockEstimate(None, None)
@@ -297,14 +256,4 @@ def estimate_clock(r: ResolvedFlight, decoder, tracker, mark_index: int, mark_px
     pos, groups = estimation_frames(r)
     idx = np.asarray(r.frames.index)[pos]
     track = tracker.track(decoder, mark_index, mark_px, idx.tolist(), available=np.asarray(r.frames.index).tolist())
-    video = estimate_video_offset(r, np.asarray(r.frames.t_ns)[pos], track.pixel_px, groups, search_s)
-    rng = None
-    o, d, inside = rays(r, np.asarray(r.frames.t_ns)[pos] + r.config.clock.offset_ns("video")
-                        + (0 if video is None or not video.determined else round(video.delta_s * 1e9)),
-                        track.pixel_px)
-    good = inside & np.isfinite(d).all(1)
-    if good.sum() >= 3:
-        X, _, _ = meeting_point(o[good], d[good])
-        if np.isfinite(X).all():
-            rng = estimate_range_offset(r, X, search_s)
-    return ClockEstimate(video, rng)
+    return ClockEstimate(estimate_video_offset(r, np.asarray(r.frames.t_ns)[pos], track.pixel_px, groups, search_s))

@@ -13,7 +13,7 @@ from pipeline import __version__
 from pipeline.errors import RidgelocError
 
 # The stage order of the product, written once.
-COMMANDS = ("run", "solve", "simulate", "synth", "inspect")
+COMMANDS = ("run", "check", "solve", "simulate", "synth", "inspect")
 
 
 def _load_commands() -> dict:

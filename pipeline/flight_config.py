@@ -10,6 +10,7 @@ A run config (configs/sample.yaml) lists flight configs under `groups:`; `load_r
 from __future__ import annotations
 
 import dataclasses
+import datetime
 import json
 import typing
 from dataclasses import dataclass, field
@@ -39,28 +40,48 @@ class Files:
 
 @dataclass(frozen=True)
 class Camera:
-    width_px: int
-    height_px: int
-    fx_px: float
-    fy_px: float
-    cx_px: float
-    cy_px: float
-    dist: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
+    """Intrinsics (OpenCV pinhole + distortion; pixel coordinates with integer values at pixel centres, (0, 0) the
+    centre of the top-left pixel) and the camera's mounting in the gimbal. The intrinsics may be left out
+    together (all of width_px .. cy_px, and dist): they then come from the logs (`pipeline.intrinsics`)."""
+
+    width_px: int | None = None
+    height_px: int | None = None
+    fx_px: float | None = None
+    fy_px: float | None = None
+    cx_px: float | None = None
+    cy_px: float | None = None
+    dist: tuple[float, ...] | None = None
     R_optical_from_gimbal: tuple[tuple[float, float, float], tuple[float, float, float],
                                  tuple[float, float, float]] = ((0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0))
 
     def __post_init__(self):
-        if self.width_px <= 0 or self.height_px <= 0 or self.fx_px <= 0 or self.fy_px <= 0:
+        given = [k for k in INTRINSIC_KEYS if getattr(self, k) is not None]
+        if given and len(given) < len(INTRINSIC_KEYS):
+            missing = [k for k in INTRINSIC_KEYS if getattr(self, k) is None]
+            raise ValueError(f"give all of {', '.join(INTRINSIC_KEYS)} or none (to take them from the logs' "
+                             f"CameraInfo); missing: {', '.join(missing)}")
+        if given and (self.width_px <= 0 or self.height_px <= 0 or self.fx_px <= 0 or self.fy_px <= 0):
             raise ValueError("image size and focal lengths must be positive")
-        if len(self.dist) not in (4, 5, 8):
+        if self.dist is not None and len(self.dist) not in (4, 5, 8):
             raise ValueError(f"'dist' must be [k1, k2, p1, p2] or [k1, k2, p1, p2, k3] (or 8), got {len(self.dist)}")
+        if self.dist is not None and not given:
+            raise ValueError("'dist' needs the intrinsics it belongs to (width_px .. cy_px)")
         R = np.array(self.R_optical_from_gimbal)
         if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
             raise ValueError("'R_optical_from_gimbal' must be a proper rotation matrix")
+        if given and self.dist is None:
+            object.__setattr__(self, "dist", (0.0, 0.0, 0.0, 0.0, 0.0))
+
+    @property
+    def has_intrinsics(self) -> bool:
+        return self.fx_px is not None
 
     @property
     def K(self) -> np.ndarray:
         return np.array([[self.fx_px, 0.0, self.cx_px], [0.0, self.fy_px, self.cy_px], [0.0, 0.0, 1.0]])
+
+
+INTRINSIC_KEYS = ("width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px")
 
 
 Vec3 = tuple[float, float, float]
@@ -74,15 +95,79 @@ class LeverArms:
     rangefinder: Vec3 = (0.0, 0.0, 0.0)
 
 
+CLOCK_SOURCES = ("video", "range", "position", "attitude", "gimbal")
+
+
 @dataclass(frozen=True)
 class Clock:
-    """Offsets added to each source's timestamps to put them on the telemetry clock (ns)."""
+    """How each source's timestamps map onto the telemetry clock, and whether to estimate the video's offset.
+
+    Per source (video, range, position, attitude, gimbal) the offset added to its timestamps is
+        <source>_offset_s (or the integer <source>_offset_ns; the video's is video_to_telemetry_offset_ns)
+        + video_start (video only: the first frame's time on the telemetry clock, UNIX seconds or ISO 8601)
+        - <source>_latency_s (how long after the measurement its timestamp was taken).
+    estimate: estimate the video-to-telemetry offset from the flight itself, within +-search_s of the configured
+    one (`pipeline.sync.clock_estimate`)."""
 
     video_to_telemetry_offset_ns: int = 0
     range_offset_ns: int = 0
     position_offset_ns: int = 0
     attitude_offset_ns: int = 0
     gimbal_offset_ns: int = 0
+    video_start: float | datetime.datetime | str | None = None
+    video_offset_s: float | None = None
+    range_offset_s: float | None = None
+    position_offset_s: float | None = None
+    attitude_offset_s: float | None = None
+    gimbal_offset_s: float | None = None
+    video_latency_s: float = 0.0
+    range_latency_s: float = 0.0
+    position_latency_s: float = 0.0
+    attitude_latency_s: float = 0.0
+    gimbal_latency_s: float = 0.0
+    estimate: bool = False
+    search_s: float = 2.0
+
+    def __post_init__(self):
+        for src in CLOCK_SOURCES:
+            ns_key = "video_to_telemetry_offset_ns" if src == "video" else f"{src}_offset_ns"
+            given = [k for k in (ns_key, f"{src}_offset_s") if getattr(self, k) not in (None, 0)]
+            if src == "video" and self.video_start is not None:
+                given.append("video_start")
+            if len(given) > 1:
+                raise ValueError(f"give one of {' and '.join(given)}: both set the {src} offset")
+        if not 0 < self.search_s <= 600:
+            raise ValueError(f"'search_s' must be in (0, 600] seconds, got {self.search_s}")
+        self.video_start_ns  # noqa: B018 (validates the time)
+
+    @property
+    def video_start_ns(self) -> int | None:
+        """video_start as UNIX ns (None when not given)."""
+        v = self.video_start
+        if v is None:
+            return None
+        if isinstance(v, (int, float)):
+            return round(float(v) * 1e6) * 1000
+        if isinstance(v, str):
+            try:
+                v = datetime.datetime.fromisoformat(v.strip().replace("Z", "+00:00"))
+            except ValueError:
+                raise ValueError(f"'video_start' must be UNIX seconds or an ISO 8601 time, got {v!r}") from None
+        if isinstance(v, datetime.date) and not isinstance(v, datetime.datetime):
+            raise ValueError("'video_start' needs a time of day, not only a date")
+        if v.tzinfo is None:
+            v = v.replace(tzinfo=datetime.timezone.utc)  # ISO 8601 without a zone: UTC, as logs keep time
+        whole = v.replace(microsecond=0)
+        return round(whole.timestamp()) * 1_000_000_000 + v.microsecond * 1000
+
+    def offset_ns(self, source: str) -> int:
+        """The offset (ns) added to `source`'s timestamps (one of CLOCK_SOURCES), every key above combined."""
+        ns_key = "video_to_telemetry_offset_ns" if source == "video" else f"{source}_offset_ns"
+        seconds = getattr(self, f"{source}_offset_s")
+        total = int(getattr(self, ns_key)) + (0 if seconds is None else round(seconds * 1e9))
+        if source == "video" and self.video_start is not None:
+            total += self.video_start_ns
+        return total - round(getattr(self, f"{source}_latency_s") * 1e9)
 
 
 @dataclass(frozen=True)
@@ -166,8 +251,8 @@ class FlightConfig:
 
     name: str
     files: Files
-    camera: Camera
     target: Target
+    camera: Camera = field(default_factory=Camera)
     mapping: dict[str, typing.Any] | None = None
     lever_arms_m: LeverArms = field(default_factory=LeverArms)
     clock: Clock = field(default_factory=Clock)
@@ -190,7 +275,7 @@ class FlightConfig:
             raise ValueError("give 'truth' or 'truth_file', not both")
 
     def to_dict(self) -> dict:
-        """JSON-serialisable form (for reports and GroupResult.settings)."""
+        """JSON-serialisable form (for reports and GroupResult.settings; `clock.video_start` as given)."""
         return json.loads(json.dumps(dataclasses.asdict(self), default=str))
 
     def truth_lla(self) -> tuple[float, float, float] | None:

@@ -23,10 +23,13 @@ import cv2
 import numpy as np
 
 from pipeline.batch import report_stage
+from pipeline.check.conventions import current_reading
+from pipeline.check.flight import ResolvedFlight, outside_telemetry, refusal_reason
 from pipeline.errors import ConfigError, InputError, RidgelocError
 from pipeline.flight_config import FlightConfig
 from pipeline.geometry.frames import ellipsoid_from_amsl_m, enu_from_lla
 from pipeline.ingest.model import FlightLog, FrameSeries
+from pipeline.intrinsics import resolve_camera
 from pipeline.results import GroupResult
 from pipeline.solve.estimate import Estimate
 from pipeline.solve.observations import Observations, Sigma
@@ -84,12 +87,15 @@ def open_frames(config: FlightConfig, log: FlightLog) -> tuple[FrameSeries, _Tim
     raise ConfigError(f"cannot open the image stream {log.frames.source!r} of the flight's logs", config.path)
 
 
-def plan_flight_observations(config: FlightConfig, frames: FrameSeries, log: FlightLog):
+def plan_flight_observations(config: FlightConfig, frames: FrameSeries, log: FlightLog,
+                             video_offset_ns: int | None = None):
     """Which frames are observations, with their laser shots, as the flight config's `observations:` and
-    `clock:` say (`pipeline.sync.select.plan_observations`; needs only timestamps)."""
+    `clock:` say, or with `video_offset_ns` when given (`pipeline.sync.select.plan_observations`; needs only
+    timestamps)."""
     c, sel = config.clock, config.observations
-    return plan_observations(frames, log.range, mode=sel.mode, video_offset_ns=c.video_to_telemetry_offset_ns,
-                             range_offset_ns=c.range_offset_ns, frame_tolerance_s=sel.frame_tolerance_s,
+    video_offset_ns = c.offset_ns("video") if video_offset_ns is None else video_offset_ns
+    return plan_observations(frames, log.range, mode=sel.mode, video_offset_ns=video_offset_ns,
+                             range_offset_ns=c.offset_ns("range"), frame_tolerance_s=sel.frame_tolerance_s,
                              max_range_gap_s=sel.max_range_gap_s, frame_indices=sel.frame_indices,
                              burst_gap_s=sel.burst_gap_s)
 
@@ -99,14 +105,15 @@ def geoid_separation_m(config: FlightConfig, log: FlightLog) -> float | None:
     value = config.altitude.geoid_separation_m
     if value != "auto":
         return value
-    from pipeline.geometry.geoid import geoid_undulation_m
+    from pipeline.geometry.geoid import patch_around
 
     pos = log.position
     ok = np.zeros(0, bool) if pos is None else np.isfinite(pos.lat_deg) & np.isfinite(pos.lon_deg)
     if not ok.any():
         raise InputError("altitude.geoid_separation_m: auto needs a position in the logs", config.path)
     i = int(np.flatnonzero(ok)[0])
-    return float(geoid_undulation_m(pos.lat_deg[i], pos.lon_deg[i]))
+    lat, lon = float(pos.lat_deg[i]), float(pos.lon_deg[i])
+    return float(patch_around(lat, lon)(lat, lon))  # cached per flight: check and the clock estimate ask again
 
 
 def _origin(config: FlightConfig, log: FlightLog, separation_m: float | None) -> tuple[float, float, float]:
@@ -165,6 +172,23 @@ def _frame_reason(lost: bool, via: str, inside: bool, used: bool) -> str | None:
     return "; ".join(why) or None
 
 
+def _estimate_clock(config, log, frames, cam, cam_source, plan, origin, decoder, tracker, mark_index, mark_px, notes):
+    """clock.estimate: the video offset from the flight (`pipeline.sync.clock_estimate`); returns
+    (the estimate, the observation plan at the estimated video offset, or the given plan when not determined)."""
+    from pipeline.sync.clock_estimate import estimate_clock
+
+    resolved = ResolvedFlight(config, log, frames, cam, cam_source, current_reading(config, log), plan, None, origin)
+    est = estimate_clock(resolved, decoder, tracker, mark_index, mark_px)
+    v = est.video
+    if v is not None and v.determined:
+        plan = plan_flight_observations(config, frames, log, round(v.offset_s * 1e9))
+        notes.append(f"clock estimated: {v.describe()}; the estimate is used")
+    else:
+        notes.append(f"clock estimate: {v.describe() if v is not None else 'too few tracked frames'}; the "
+                     "configured offset is used")
+    return est, plan
+
+
 def process_group(config: FlightConfig) -> GroupResult:
     """Ingest, track, synchronize and solve one flight group (see the module docstring)."""
     from pipeline.ingest import read_flight
@@ -180,6 +204,7 @@ def process_group(config: FlightConfig) -> GroupResult:
         raise InputError(f"the flight's logs supply no {', '.join(missing)}: check `mapping:` "
                          "(see `ridgeloc inspect`)", config.path)
     frames, decoder, closable = open_frames(config, log)
+    cam, cam_source = resolve_camera(config, log if log.frames is not None else dataclasses.replace(log, frames=frames))
     notes.extend(log.warnings)
     timings["ingest"] = time.perf_counter() - t0
     cpu["ingest"] = time.process_time() - c0
@@ -201,6 +226,15 @@ def process_group(config: FlightConfig) -> GroupResult:
             mark_index, mark_px = config.target.frame_index, config.target.pixel
             if mark_index not in set(np.asarray(frames.index).tolist()):
                 raise ConfigError(f"target.frame_index {mark_index} is not a frame of the video", config.path)
+        separation_m = geoid_separation_m(config, log)
+        if config.altitude.geoid_separation_m == "auto" and log.position.alt_datum == "amsl":
+            notes.append(f"geoid separation {separation_m:.2f} m (altitude.geoid_separation_m: auto, EGM2008 at "
+                         "the first position)")
+        origin = _origin(config, log, separation_m)
+        clock_estimate = None
+        if c.estimate:
+            clock_estimate, plan = _estimate_clock(config, log, frames, cam, cam_source, plan, origin, decoder,
+                                                   tracker, mark_index, mark_px, notes)
         track = tracker.track(decoder, mark_index, mark_px, plan.frame_index.tolist(),
                               available=np.asarray(frames.index).tolist())
         timings["decode"] = decoder.seconds
@@ -219,7 +253,7 @@ def process_group(config: FlightConfig) -> GroupResult:
     if sel.max_laser_offset_px is not None:
         # The laser is boresighted: when the target is far from the principal point the shot is not on it.
         where = np.where(np.isnan(track.pixel_px), track.predicted_px, track.pixel_px)
-        offset = np.hypot(where[:, 0] - config.camera.cx_px, where[:, 1] - config.camera.cy_px)
+        offset = np.hypot(where[:, 0] - cam.cx_px, where[:, 1] - cam.cy_px)
         off_target = (offset > sel.max_laser_offset_px) & ~np.isnan(range_m)
         if off_target.any():
             range_m[off_target] = np.nan
@@ -228,19 +262,16 @@ def process_group(config: FlightConfig) -> GroupResult:
 
     report_stage("sync")
     t2, c2 = time.perf_counter(), time.process_time()
-    separation_m = geoid_separation_m(config, log)
-    if config.altitude.geoid_separation_m == "auto" and log.position.alt_datum == "amsl":
-        notes.append(f"geoid separation {separation_m:.2f} m (altitude.geoid_separation_m: auto, EGM2008 at the "
-                     "first position)")
-    origin = _origin(config, log, separation_m)
-    states = frame_states(log, plan.t_ns, position_offset_ns=c.position_offset_ns,
-                          attitude_offset_ns=c.attitude_offset_ns, gimbal_offset_ns=c.gimbal_offset_ns,
+    states = frame_states(log, plan.t_ns, position_offset_ns=c.offset_ns("position"),
+                          attitude_offset_ns=c.offset_ns("attitude"), gimbal_offset_ns=c.offset_ns("gimbal"),
                           geoid_separation_m=separation_m)
+    resolved = ResolvedFlight(config, log, frames, cam, cam_source, current_reading(config, log), plan, None, origin)
+    if not states.inside.any():
+        raise InputError(outside_telemetry(resolved), config.path)
     if not states.inside.all():
         notes.append(f"{int((~states.inside).sum())} observation(s) outside the telemetry span were dropped")
     truth_lla = config.truth_lla()
     truth_m = None if truth_lla is None else enu_from_lla(*truth_lla, origin)
-    cam = config.camera
     sigma = Sigma.from_dict(dataclasses.asdict(config.sigma), "sigma")
     useful = states.inside & (~track.lost | ~np.isnan(range_m))
     if (states.inside & ~useful).any():
@@ -248,6 +279,10 @@ def process_group(config: FlightConfig) -> GroupResult:
     if not useful.any():
         raise InputError("no usable observation: the target was never tracked and no laser range is valid",
                          config.path)
+    # A wrong convention gives an answer kilometres off with nothing else to show for it: refuse the flight.
+    refusal = refusal_reason(resolved, plan.t_ns[useful], track.pixel_px[useful], range_m[useful])
+    if refusal is not None:
+        raise InputError(refusal, config.path)
     sub = dataclasses.replace(states, inside=useful)
     obs, _ = assemble_observations(sub, track.pixel_px, range_m, K=cam.K, dist=cam.dist, origin_lla=origin,
                                        R_optical_from_gimbal=np.array(cam.R_optical_from_gimbal),
@@ -279,7 +314,11 @@ def process_group(config: FlightConfig) -> GroupResult:
     tracking["range_t_ns"] = [int(t) for t in plan.range_t_ns]
     tracking["mark"] = {"frame_index": int(mark_index), "pixel_px": [float(mark_px[0]), float(mark_px[1])]}
     settings = config.to_dict()
+    settings["camera_resolved"] = {"source": cam_source, **{k: getattr(cam, k) for k in (
+        "width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px", "dist")}}
     settings["notes"] = notes
+    if clock_estimate is not None:
+        settings["clock_estimate"] = clock_estimate.to_dict()
     settings["solve_failures"] = failures
     settings["frames_decoded"] = decoder.decoded
     settings["cpu_s"] = cpu

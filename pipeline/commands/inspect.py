@@ -11,14 +11,26 @@ HELP = "summarise flight logs, bags and videos: streams, counts, rates, spans, a
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("logs", nargs="+", metavar="LOG",
-                        help="telemetry logs (.tlog .bin .ulg .bag .mcap .SRT), ROS 2 bag folders, videos, or a flight "
-                             "folder (all of those in it)")
+                        help="telemetry logs (.tlog .bin .ulg .bag .mcap .SRT), ROS 2 bag folders, videos, a flight "
+                             "folder (all of those in it), or one flight config (.yaml): the roles it resolves to "
+                             "(`ridgeloc check` adds the geometry checks)")
     parser.add_argument("--json", action="store_true", help="print one JSON document instead of tables")
+
+
+def _inspect_config(path: str, as_json: bool) -> int:
+    from pipeline.check.flight import mapping_lines, resolve_flight
+    from pipeline.flight_config import load_flight_config
+
+    lines = mapping_lines(resolve_flight(load_flight_config(path)))
+    print(json.dumps({"config": path, "mapping": lines}, indent=2) if as_json else "\n".join(lines))
+    return 0
 
 
 def main(args) -> int:
     from pipeline.ingest.inspect import combined_missing, format_result, inspect_paths, result_as_dict
 
+    if len(args.logs) == 1 and args.logs[0].lower().endswith((".yaml", ".yml")):
+        return _inspect_config(args.logs[0], args.json)
     results = inspect_paths(args.logs)
     if args.json:
         doc = {"files": [result_as_dict(r) for r in results],

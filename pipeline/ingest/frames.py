@@ -4,6 +4,9 @@
   R_ned_from_frd = Rz(yaw) @ Ry(pitch) @ Rx(roll) = Rotation.from_euler("ZYX", [yaw, pitch, roll]).
 - ROS (REP-103): orientation rotates body FLU into local ENU; q_ned_from_frd = R_ned_from_enu * q_enu_from_flu *
   R_flu_from_frd, both fixed rotations.
+- Any orientation named `<body>_<world>` (ORIENTATION_FRAMES: body frd, flu or optical = REP-103 `_optical`, x right,
+  y down, z forward; world ned or enu) is converted the same way: q_ned_from_frd = R_ned_from_world * q *
+  R_body_from_frd (`quat_ned_frd_from_frame`; `frame_quat_from_ned_frd` is its inverse).
 """
 
 from __future__ import annotations
@@ -13,6 +16,12 @@ from scipy.spatial.transform import Rotation, Slerp
 
 R_NED_FROM_ENU = Rotation.from_matrix([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 R_FLU_FROM_FRD = Rotation.from_matrix([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
+# Camera optical (REP-103 `_optical`: x right, y down, z forward) from gimbal FRD (x forward, y right, z down).
+R_OPTICAL_FROM_FRD = Rotation.from_matrix([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+_BODY = {"frd": Rotation.identity(), "flu": R_FLU_FROM_FRD, "optical": R_OPTICAL_FROM_FRD}
+_WORLD = {"ned": Rotation.identity(), "enu": R_NED_FROM_ENU}
+ORIENTATION_FRAMES = tuple(f"{b}_{w}" for b in _BODY for w in _WORLD)  # frd_ned, frd_enu, flu_ned, flu_enu, ...
+QUAT_ORDERS = ("wxyz", "xyzw")
 
 
 def quat_wxyz_from_rotation(rot: Rotation) -> np.ndarray:
@@ -36,6 +45,34 @@ def quat_ned_frd_from_enu_flu(q_enu_from_flu_wxyz: np.ndarray) -> np.ndarray:
     """ROS orientation (FLU -> ENU, w, x, y, z) -> (n, 4) FRD -> NED, w, x, y, z."""
     rot = R_NED_FROM_ENU * rotation_from_quat_wxyz(q_enu_from_flu_wxyz) * R_FLU_FROM_FRD
     return quat_wxyz_from_rotation(rot)
+
+
+def _frame_parts(frame: str) -> tuple[Rotation, Rotation]:
+    body, _, world = frame.partition("_")
+    if body not in _BODY or world not in _WORLD:
+        raise ValueError(f"unknown orientation frame {frame!r} (known: {', '.join(ORIENTATION_FRAMES)})")
+    return _WORLD[world], _BODY[body]
+
+
+def quat_ned_frd_from_frame(q_wxyz: np.ndarray, frame: str) -> np.ndarray:
+    """(n, 4) quaternions (w, x, y, z) rotating `frame`'s body axes into its world axes (e.g. "optical_enu": a
+    camera optical frame -> ENU) -> (n, 4) FRD -> NED, w, x, y, z. ValueError for an unknown frame name."""
+    A, B = _frame_parts(frame)
+    return quat_wxyz_from_rotation(A * rotation_from_quat_wxyz(q_wxyz) * B)
+
+
+def frame_quat_from_ned_frd(q_wxyz: np.ndarray, frame: str) -> np.ndarray:
+    """Inverse of quat_ned_frd_from_frame: FRD -> NED quaternions expressed in `frame` (w, x, y, z)."""
+    A, B = _frame_parts(frame)
+    return quat_wxyz_from_rotation(A.inv() * rotation_from_quat_wxyz(q_wxyz) * B.inv())
+
+
+def quat_wxyz_from_order(q: np.ndarray, order: str) -> np.ndarray:
+    """(n, 4) quaternions stored in `order` ("wxyz" scalar first, "xyzw" scalar last) -> w, x, y, z."""
+    if order not in QUAT_ORDERS:
+        raise ValueError(f"unknown quaternion order {order!r} (known: {', '.join(QUAT_ORDERS)})")
+    q = np.asarray(q, dtype=np.float64)
+    return q if order == "wxyz" else q[..., [3, 0, 1, 2]]
 
 
 def euler_zyx_from_quat_wxyz(q_wxyz: np.ndarray) -> np.ndarray:

@@ -12,7 +12,7 @@ import numpy as np
 
 from pipeline.errors import LogReadError
 from pipeline.ingest.columns import Columns, sort_by_time
-from pipeline.ingest.frames import quat_ned_frd_from_enu_flu, quat_wxyz_from_rotation, rotation_from_quat_wxyz
+from pipeline.ingest.frames import ORIENTATION_FRAMES, quat_ned_frd_from_frame, quat_wxyz_from_order
 from pipeline.ingest.model import (
     ALT_DATUMS,
     AttitudeSeries,
@@ -26,8 +26,10 @@ from pipeline.ingest.ros_messages import RosAccumulator, normalize_type, supplie
 from pipeline.ingest.rosbag import _fill, resolve_topics
 
 JSON_QUANTITIES = ("position", "attitude", "gimbal", "range")
-ATTITUDE_FRAMES = {"body_frd_to_ned": "frd_ned", "gimbal_frd_to_ned": "frd_ned", "frd_ned": "frd_ned",
-                   "body_flu_to_enu": "flu_enu", "gimbal_flu_to_enu": "flu_enu", "flu_enu": "flu_enu"}
+# A message's `frame` field: <body>_<world> (ORIENTATION_FRAMES), optionally as body_/gimbal_/camera_<b>_to_<w>.
+ATTITUDE_FRAMES = {f: f for f in ORIENTATION_FRAMES}
+ATTITUDE_FRAMES.update({f"{who}_{f.replace('_', '_to_')}": f for f in ORIENTATION_FRAMES
+                        for who in ("body", "gimbal", "camera")})
 
 
 def _errors():
@@ -91,9 +93,12 @@ class _JsonAcc:
             if len(kinds) != 1 or None in kinds:
                 raise LogReadError(f"{self.source}: unknown or mixed orientation frame {sorted(self.frames)} "
                                    f"(known: {', '.join(ATTITUDE_FRAMES)})", path=path)
-            raw = np.column_stack([a["w"], a["x"], a["y"], a["z"]])
-            rot = quat_ned_frd_from_enu_flu(raw) if kinds == {"flu_enu"} else \
-                quat_wxyz_from_rotation(rotation_from_quat_wxyz(raw))
+            order = self.cfg.get("quat_order", "wxyz")
+            try:
+                raw = quat_wxyz_from_order(np.column_stack([a["w"], a["x"], a["y"], a["z"]]), order)
+            except ValueError as exc:
+                raise LogReadError(f"mcap mapping {self.q}.quat_order: {exc}", path=path) from None
+            rot = quat_ned_frd_from_frame(raw, next(iter(kinds)))
             t, q, veh = sort_by_time(a["t"], rot, a["veh"].astype(bool))
             if self.q == "attitude":
                 return AttitudeSeries(t, q, source=self.source, clock="unix")

@@ -12,7 +12,7 @@ import numpy as np
 
 from pipeline.errors import ConfigError
 from pipeline.ingest.columns import Columns, sort_by_time
-from pipeline.ingest.frames import quat_ned_frd_from_enu_flu, quat_wxyz_from_rotation, rotation_from_quat_wxyz
+from pipeline.ingest.frames import ORIENTATION_FRAMES, quat_ned_frd_from_frame
 from pipeline.ingest.model import (
     AttitudeSeries,
     CameraInfo,
@@ -182,12 +182,10 @@ class RosAccumulator:
         if q in ("attitude", "gimbal"):
             raw = np.column_stack([a["w"], a["x"], a["y"], a["z"]])
             frame = self.cfg.get("frame", "flu_enu")
-            if frame == "flu_enu":
-                quat = quat_ned_frd_from_enu_flu(raw)
-            elif frame == "frd_ned":
-                quat = quat_wxyz_from_rotation(rotation_from_quat_wxyz(raw))
-            else:
-                raise ConfigError(f"ros mapping: {q}.frame must be 'flu_enu' or 'frd_ned', not {frame!r}")
+            if frame not in ORIENTATION_FRAMES:
+                raise ConfigError(f"ros mapping: {q}.frame must be one of {', '.join(ORIENTATION_FRAMES)} "
+                                  f"(body axes _ world axes; optical = REP-103 camera optical), not {frame!r}")
+            quat = quat_ned_frd_from_frame(raw, frame)
             t, quat = sort_by_time(a["t"], quat)
             if q == "attitude":
                 return AttitudeSeries(t, quat, source=src, clock="unix")

@@ -3,7 +3,8 @@
     OUTDIR/
       report.html                  self-contained report (html.py)
       targets.csv / .geojson / .kml  GIS exports of every group (exports.py)
-      run.json                     groups done, failures with their messages, settings, software versions
+      run.json                     groups done, failures with their messages, settings, clock offsets estimated
+                                   (clock.estimate), software versions
       <group>/                     one folder per group, written atomically, then marked finished:
         result.json                the GroupResult (store.py), reused by a re-run
         map.png view3d.png residuals.png
@@ -115,6 +116,7 @@ def write_run_outputs(outdir: str | PathLike, results: Sequence[GroupResult], fa
         "failures": [{"name": f.name, "source": f.source, "message": f.message,
                       **({"traceback": f.detail} if getattr(f, "detail", "") else {})} for f in failures],
         "settings": dict(settings),
+        "clock_estimates": {r.name: r.settings["clock_estimate"] for r in results if r.settings.get("clock_estimate")},
         "software": software_versions(),
     }, indent=1, default=str) + "\n")
     return paths

@@ -92,11 +92,16 @@ class CameraConfig:
 class GimbalConfig:
     """jitter_px: std of the tracker's pointing error (Ornstein-Uhlenbeck, per image axis, in pixels at the
     principal point) so the target is near but not at the centre; jitter_tau_s its correlation time.
-    yaw_in_vehicle_frame: log the gimbal quaternion with yaw relative to the vehicle heading (MAVLink flag 32)."""
+    yaw_in_vehicle_frame: log the gimbal quaternion with yaw relative to the vehicle heading (MAVLink flag 32).
+    ros_frame: bags only: the frame the gimbal topic's orientation is written in (<body>_<world>, body frd, flu or
+        optical, world ned or enu; REP-103 flu_enu by default), to test other vehicles' conventions.
+    quat_order: plain MCAP only: the order of the gimbal's `q_wxyz` array (xyzw writes it scalar last)."""
 
     jitter_px: float = 2.0
     jitter_tau_s: float = 2.0
     yaw_in_vehicle_frame: bool = False
+    ros_frame: Literal["flu_enu", "frd_ned", "optical_enu", "optical_ned", "flu_ned", "frd_enu"] = "flu_enu"
+    quat_order: Literal["wxyz", "xyzw"] = "wxyz"
 
 
 @dataclass(frozen=True)

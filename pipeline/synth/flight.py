@@ -121,7 +121,7 @@ def _write_files(cfg: SynthConfig, tl: Timeline, tel, frames: FrameSource, folde
         write_tlog(folder / "flight.tlog", tel, cfg.site.geoid_separation_m, home_alt_m)
         files["telemetry"] = "flight.tlog"
     elif cfg.format == "mcap":
-        write_mcap(folder / "flight.mcap", tel)
+        write_mcap(folder / "flight.mcap", tel, cfg.gimbal.quat_order)
         files["telemetry"] = "flight.mcap"
     else:
         name = "flight.bag" if cfg.format == "ros1" else "flight_ros2"
@@ -133,7 +133,7 @@ def _write_files(cfg: SynthConfig, tl: Timeline, tel, frames: FrameSource, folde
             images = ((int(t), encode_jpeg(img, cfg.video.jpeg_quality)) for t, img in zip(t_img, frames, strict=True))
         gps_sigma = float(np.hypot(cfg.noise.gnss_drift_m, cfg.noise.gnss_white_m))
         write_bag(folder / name, cfg.format, tel, camera, gps_sigma, float(np.radians(cfg.noise.attitude_deg)),
-                  (cfg.laser.min_range_m, cfg.laser.max_range_m), images)
+                  (cfg.laser.min_range_m, cfg.laser.max_range_m), images, cfg.gimbal.ros_frame)
         files["telemetry"] = name
         if images is not None:
             files["frames"] = f"{name}:/uav/camera/image/compressed"

@@ -134,6 +134,21 @@ def build_truth(cfg: SynthConfig, tl: Timeline, flight: Flight, laser: LaserTrut
         "laser_shots": {"t_ns": laser.t_ns.tolist(), "range_true_m": np.round(laser.range_true_m, 4).tolist(),
                         "logged": laser.logged.tolist(), "outlier": laser.outlier.tolist()},
         "frames": frames,
-        "config": cfg.to_dict(),
+        "config": config_record(cfg),
         "seed": cfg.seed,
     }
+
+
+# Keys added to the generator after the sample flights were written: recorded only when they differ from their
+# default, so that regenerating a sample flight reproduces its committed truth.json (and the record still loads).
+_LATER_KEYS = {"gimbal": {"ros_frame": "flu_enu", "quat_order": "wxyz"}}
+
+
+def config_record(cfg: SynthConfig) -> dict:
+    """The generator config as truth.json records it (SynthConfig.to_dict without later keys at their default)."""
+    doc = cfg.to_dict()
+    for section, keys in _LATER_KEYS.items():
+        for key, default in keys.items():
+            if doc[section].get(key) == default:
+                del doc[section][key]
+    return doc

@@ -34,8 +34,10 @@ def _schema(name: str, props: dict) -> bytes:
                        "properties": props, "required": sorted(props)}).encode()
 
 
-def write_mcap(path: Path, tel: Telemetry) -> dict[str, int]:
-    """Write the telemetry; returns message counts per topic."""
+def write_mcap(path: Path, tel: Telemetry, gimbal_quat_order: str = "wxyz") -> dict[str, int]:
+    """Write the telemetry; returns message counts per topic. gimbal_quat_order "xyzw" writes the gimbal's
+    quaternion array scalar last (another vehicle's convention, under the same field name)."""
+    order = [0, 1, 2, 3] if gimbal_quat_order == "wxyz" else [1, 2, 3, 0]
     def gps():
         for t, lla in zip(tel.gps_t_ns, tel.gps_lla, strict=True):
             yield int(t), "/uav/gps", {"t_ns": int(t), "latitude_deg": float(lla[0]), "longitude_deg": float(lla[1]),
@@ -47,7 +49,8 @@ def write_mcap(path: Path, tel: Telemetry) -> dict[str, int]:
 
     def gim():
         for t, q in zip(tel.gimbal_t_ns, tel.gimbal_quat_wxyz, strict=True):
-            yield int(t), "/uav/gimbal", {"t_ns": int(t), "q_wxyz": [float(x) for x in q], "frame": "gimbal_frd_to_ned",
+            yield int(t), "/uav/gimbal", {"t_ns": int(t), "q_wxyz": [float(x) for x in q[order]],
+                                          "frame": "gimbal_frd_to_ned",
                                           "yaw_in_vehicle_frame": bool(tel.gimbal_yaw_in_vehicle)}
 
     def laser():

@@ -20,6 +20,7 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 from scipy.spatial.transform import Rotation
 
+from pipeline.ingest.frames import frame_quat_from_ned_frd
 from pipeline.synth.telemetry import Telemetry
 
 FLU_FROM_FRD = np.diag([1.0, -1.0, -1.0])
@@ -61,8 +62,8 @@ class _Msgs:
 
 
 def _streams(m: _Msgs, tel: Telemetry, camera: dict, gps_sigma_m: float, att_sigma_rad: float,
-             laser_limits: tuple[float, float],
-             images: Iterator[tuple[int, bytes]] | None) -> list[Iterator[tuple[int, str, Callable]]]:
+             laser_limits: tuple[float, float], images: Iterator[tuple[int, bytes]] | None,
+             gimbal_frame: str = "flu_enu") -> list[Iterator[tuple[int, str, Callable]]]:
     T = m.T
     Vec3, Quat = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
 
@@ -88,7 +89,10 @@ def _streams(m: _Msgs, tel: Telemetry, camera: dict, gps_sigma_m: float, att_sig
                 linear_acceleration_covariance=acov)
 
     def gimbal():
-        q = enu_flu_quat_xyzw(tel.gimbal_quat_wxyz)
+        if gimbal_frame == "flu_enu":
+            q = enu_flu_quat_xyzw(tel.gimbal_quat_wxyz)
+        else:  # another vehicle's convention (synth gimbal.ros_frame)
+            q = frame_quat_from_ned_frd(tel.gimbal_quat_wxyz, gimbal_frame)[:, [1, 2, 3, 0]]
         for t, qi in zip(tel.gimbal_t_ns, q, strict=True):
             yield int(t), "gimbal", lambda t=t, qi=qi: T["geometry_msgs/msg/QuaternionStamped"](
                 header=m.header(t, "gimbal"), quaternion=Quat(x=qi[0], y=qi[1], z=qi[2], w=qi[3]))
@@ -123,13 +127,15 @@ def _streams(m: _Msgs, tel: Telemetry, camera: dict, gps_sigma_m: float, att_sig
 
 
 def write_bag(path: Path, kind: str, tel: Telemetry, camera: dict, gps_sigma_m: float, att_sigma_rad: float,
-              laser_limits: tuple[float, float], images: Iterator[tuple[int, bytes]] | None = None) -> dict[str, int]:
+              laser_limits: tuple[float, float], images: Iterator[tuple[int, bytes]] | None = None,
+              gimbal_frame: str = "flu_enu") -> dict[str, int]:
     """kind: "ros1" (path = .bag file), "ros2-sqlite3" or "ros2-mcap" (path = bag folder). `images` yields
     (t_ns, jpeg bytes) in time order. gps_sigma_m, att_sigma_rad: the stated accuracies (covariances).
+    gimbal_frame: the frame of the gimbal topic's orientation (pipeline.ingest.frames.ORIENTATION_FRAMES).
     Returns message counts per topic."""
     ros1 = kind == "ros1"
     m = _Msgs(ros1)
-    streams = _streams(m, tel, camera, gps_sigma_m, att_sigma_rad, laser_limits, images)
+    streams = _streams(m, tel, camera, gps_sigma_m, att_sigma_rad, laser_limits, images, gimbal_frame)
     if ros1:
         writer = Writer1(path)
     else:

@@ -1,0 +1,413 @@
+"""The checks of one flight: its config resolved against its data (`resolve_flight`, `mapping_lines`), the geometry
+checks (`geometry_checks`) and the one-line refusal `ridgeloc run` gives an inconsistent flight
+(`refusal_reason`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pipeline.check.conventions import (
+    Convention,
+    Reading,
+    candidates,
+    current_reading,
+    fix,
+    fix_lines,
+    mount_matrix,
+    reinterpret,
+)
+from pipeline.check.geometry import Cluster, _fmt_m, cluster, range_bias_problem
+from pipeline.errors import InputError, RidgelocError
+from pipeline.flight_config import CLOCK_SOURCES, Camera, FlightConfig
+from pipeline.geometry.lens import undistort_pixels
+from pipeline.geometry.pose import frame_poses
+from pipeline.ingest.model import FlightLog, FrameSeries
+from pipeline.sync.assemble import frame_states
+
+
+@dataclass
+class ResolvedFlight:
+    """A flight config resolved against its data: the log, the frames, the camera (with intrinsics, and where
+    they came from), the observation plan (None with the reason in `plan_error`), the origin, the gimbal reading."""
+
+    config: FlightConfig
+    log: FlightLog
+    frames: FrameSeries
+    camera: Camera
+    camera_source: str
+    reading: Reading
+    plan: object | None
+    plan_error: str | None
+    origin: tuple[float, float, float] | None
+    notes: list[str] = field(default_factory=list)
+
+
+def resolve_flight(config: FlightConfig) -> ResolvedFlight:
+    """Read the flight's logs and frame index (no pixels decoded) and resolve every role; raises RidgelocError for
+    what makes the flight unreadable."""
+    from pipeline.ingest import read_flight
+    from pipeline.intrinsics import resolve_camera
+    from pipeline.run import _origin, geoid_separation_m, open_frames, plan_flight_observations
+
+    log = read_flight(list(config.files.telemetry), mapping=config.mapping)
+    missing = [q for q in ("position", "attitude", "gimbal") if getattr(log, q) is None]
+    if missing:
+        raise InputError(f"the flight's logs supply no {', '.join(missing)}: check `mapping:` (see `ridgeloc "
+                         "inspect`)", config.path)
+    frames, _, closable = open_frames(config, log)
+    close = getattr(closable, "close", None)
+    if close is not None:
+        close()
+    if log.frames is None:
+        log.frames = frames
+    camera, source = resolve_camera(config, log)
+    plan, plan_error = None, None
+    try:
+        plan = plan_flight_observations(config, frames, log)
+    except InputError as exc:
+        plan_error = str(exc)
+    try:
+        origin = _origin(config, log, geoid_separation_m(config, log))
+    except RidgelocError:
+        origin = None
+    return ResolvedFlight(config, log, frames, camera, source, current_reading(config, log), plan, plan_error,
+                          origin, list(log.warnings))
+
+
+# ---- the resolved mapping ---------------------------------------------------------------------------------------
+
+
+def _span(t_ns) -> tuple[int, int] | None:
+    t = np.asarray(t_ns, dtype=np.int64)
+    return (int(t[0]), int(t[-1])) if t.size else None
+
+
+def _utc(t_ns: int) -> str:
+    dt = datetime.datetime.fromtimestamp(t_ns / 1e9, tz=datetime.timezone.utc)
+    return dt.isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def _when(t_ns: int) -> str:
+    return _utc(t_ns) if t_ns > 10**17 else f"{t_ns / 1e9:.3f} s"  # UNIX times as UTC, others as seconds
+
+
+def _rate(t_ns) -> str:
+    t = np.asarray(t_ns, dtype=np.int64)
+    return f"{(t.size - 1) / ((t[-1] - t[0]) / 1e9):.1f} Hz" if t.size > 1 and t[-1] > t[0] else "-"
+
+
+def telemetry_span_ns(r: ResolvedFlight) -> tuple[int, int] | None:
+    """The interval (telemetry clock, ns) that position, attitude and gimbal all cover, with their offsets."""
+    c = r.config.clock
+    lo, hi = -(2**62), 2**62
+    for role in ("position", "attitude", "gimbal"):
+        s = getattr(r.log, role)
+        off = c.offset_ns(role)
+        lo, hi = max(lo, int(s.t_ns[0]) + off), min(hi, int(s.t_ns[-1]) + off)
+    return (lo, hi) if lo <= hi else None
+
+
+def mapping_lines(r: ResolvedFlight) -> list[str]:
+    """What each role comes from, in which frame, units and time base, with spans, rates and overlaps."""
+    c, log, now = r.config.clock, r.log, r.reading
+    lines = [f"flight {r.config.name} ({r.config.path or 'built in code'})"]
+    yaw = {None: "per the log's flags", True: "relative to the vehicle heading", False: "earth-referenced"}
+    describe = {
+        "position": lambda s: f"WGS84 deg, altitude {s.alt_datum}",
+        "attitude": lambda s: "quaternion body FRD -> local NED (as read)",
+        "gimbal": lambda s: (f"quaternion read as {now.frame} (order {now.quat_order}), yaw "
+                             f"{yaw[now.yaw_in_vehicle_frame]}; mapping format {now.fmt}"),
+        "range": lambda s: f"metres, {int(np.asarray(s.valid).sum())} of {s.t_ns.size} valid",
+    }
+    for role in ("position", "attitude", "gimbal", "range"):
+        s = getattr(log, role)
+        if s is None:
+            lines.append(f"  {role:<10} none")
+            continue
+        off = c.offset_ns(role)
+        a, b = _span(s.t_ns)
+        lines.append(f"  {role:<10} {s.source}: {s.t_ns.size} samples, {_rate(s.t_ns)}, {s.clock} clock"
+                     + (f" + {off / 1e9:+.3f} s" if off else "") + f"; {describe[role](s)}")
+        lines.append(f"  {'':<10} span {_when(a + off)} .. {_when(b + off)} ({(b - a) / 1e9:.1f} s)")
+    f = r.frames
+    off = c.offset_ns("video")
+    lines.append(f"  {'frames':<10} {f.source}: {f.t_ns.size} frames, {_rate(f.t_ns)}, {f.clock} clock + "
+                 f"{off / 1e9:.3f} s" + (f" (first frame at {_utc(off)})" if off > 10**17 else "")
+                 + (" (video_start " + str(c.video_start) + ")" if c.video_start is not None else ""))
+    if f.t_ns.size:
+        lines.append(f"  {'':<10} span {_when(int(f.t_ns[0]) + off)} .. {_when(int(f.t_ns[-1]) + off)}")
+    cam = r.camera
+    lines.append(f"  {'intrinsics':<10} {cam.width_px}x{cam.height_px} px, fx {cam.fx_px:.1f} fy {cam.fy_px:.1f}, "
+                 f"principal point ({cam.cx_px:.1f}, {cam.cy_px:.1f}), dist {list(cam.dist)} from {r.camera_source}")
+    lines.append(f"  {'mount':<10} R_optical_from_gimbal {[list(row) for row in cam.R_optical_from_gimbal]} "
+                 f"({'gimbal FRD' if now.mount == 'frd' else now.mount})")
+    arms = r.config.lever_arms_m
+    lines.append(f"  {'levers':<10} camera {list(arms.camera)} m, rangefinder {list(arms.rangefinder)} m (body FRD)")
+    offsets = ", ".join(f"{s} {c.offset_ns(s) / 1e9:+.3f} s" for s in CLOCK_SOURCES if s != "video" and
+                        c.offset_ns(s))
+    lines.append(f"  {'clock':<10} video {off / 1e9:+.6f} s" + (f", {offsets}" if offsets else "")
+                 + (f"; estimate within +-{c.search_s:g} s" if c.estimate else ""))
+    tel = telemetry_span_ns(r)
+    if tel is None:
+        lines.append("  overlap    position, attitude and gimbal do not overlap in time")
+    elif f.t_ns.size:
+        va, vb = int(f.t_ns[0]) + off, int(f.t_ns[-1]) + off
+        ov = max(0, min(vb, tel[1]) - max(va, tel[0]))
+        lines.append(f"  overlap    telemetry {(tel[1] - tel[0]) / 1e9:.1f} s, video {(vb - va) / 1e9:.1f} s, both "
+                     f"{ov / 1e9:.1f} s")
+    if r.plan is not None:
+        n_r = int(np.isfinite(r.plan.range_m).sum())
+        lines.append(f"  observations {r.plan.n} ({r.config.observations.mode}), {n_r} with a laser range")
+    else:
+        lines.append(f"  observations none: {r.plan_error}")
+    if r.origin is not None:
+        lines.append(f"  origin     {r.origin[0]:.6f}, {r.origin[1]:.6f}, {r.origin[2]:.1f} m (ellipsoid)")
+    return lines
+
+
+# ---- geometry ---------------------------------------------------------------------------------------------------
+
+
+def outside_telemetry(r: ResolvedFlight) -> str:
+    """The one-line problem when no observation time falls inside the telemetry."""
+    tel = telemetry_span_ns(r)
+    span = "" if tel is None else f" ({_when(tel[0])} .. {_when(tel[1])})"
+    return (f"no observation time falls inside the telemetry{span}: the video clock is off; set clock.video_start "
+            "(the first frame's UNIX time or ISO 8601) or clock.video_offset_s")
+
+
+def separation_m(cfg: FlightConfig, log: FlightLog) -> float | None:
+    """altitude.geoid_separation_m as a number (`auto` resolved from the geoid model; pipeline.run)."""
+    from pipeline.run import geoid_separation_m
+
+    return geoid_separation_m(cfg, log)
+
+
+def rays(r: ResolvedFlight, t_ns: np.ndarray, pixel_px: np.ndarray | None = None, conv: Convention | None = None,
+         log: FlightLog | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(origins (m, 3), directions (m, 3), inside (m,)) of the lines of sight at telemetry times t_ns: through
+    pixel_px (m, 2) as tracked (distorted; NaN rows give NaN rays), or the optical axis when None; under the
+    convention `conv` (None: as configured). Origins are the rangefinder's; rows outside the telemetry are NaN."""
+    log = log or r.log
+    cfg, cam = r.config, r.camera
+    M = np.asarray(cam.R_optical_from_gimbal, dtype=float)
+    if conv is not None:
+        log = dataclasses.replace(log, gimbal=reinterpret(log.gimbal, conv, r.reading))
+        M = mount_matrix(conv, r.reading)
+    c = cfg.clock
+    st = frame_states(log, t_ns, position_offset_ns=c.offset_ns("position"),
+                      attitude_offset_ns=c.offset_ns("attitude"), gimbal_offset_ns=c.offset_ns("gimbal"),
+                      geoid_separation_m=separation_m(cfg, log))
+    m = len(t_ns)
+    origins, dirs = np.full((m, 3), np.nan), np.full((m, 3), np.nan)
+    k = st.inside
+    if not k.any() or r.origin is None:
+        return origins, dirs, k
+    poses = frame_poses(st.lat_deg[k], st.lon_deg[k], st.alt_m[k], st.body_quat_wxyz[k], st.gimbal_quat_wxyz[k],
+                        st.yaw_in_vehicle_frame[k], r.origin, R_optical_from_gimbal=M,
+                        lever_camera_m=cfg.lever_arms_m.camera, lever_rangefinder_m=cfg.lever_arms_m.rangefinder)
+    if pixel_px is None:
+        d = poses.optical_axis_enu()
+    else:
+        px = undistort_pixels(np.asarray(pixel_px, dtype=float)[k], cam.K, cam.dist)
+        v = np.c_[px, np.ones(len(px))] @ np.linalg.inv(cam.K).T
+        d = np.einsum("nij,nj->ni", poses.R_enu0_from_optical, v)
+    origins[k], dirs[k] = poses.laser_m, d / np.linalg.norm(d, axis=1, keepdims=True)
+    return origins, dirs, k
+
+
+@dataclass(frozen=True)
+class Alternative:
+    convention: Convention
+    cluster: Cluster
+    lines: list[str]
+    notes: list[str]
+    n_changes: int
+
+
+@dataclass
+class GeometryResult:
+    """The cluster as configured, the better alternatives (best first; empty when the configured one is
+    consistent), problems and warnings (one line each)."""
+
+    cluster: Cluster | None
+    alternatives: list[Alternative]
+    problems: list[str]
+    warnings: list[str]
+    what: str  # which rays: "optical axes" or "tracked target"
+
+
+def try_alternatives(r: ResolvedFlight, t_ns, pixel_px, ranges_m, configured: Cluster | None,
+                     limit: int = 4) -> list[Alternative]:
+    """The alternative conventions whose lines of sight cluster (consistent), best first, one per distinct
+    cluster size (equivalent fixes: the one with fewest changes)."""
+    found: list[Alternative] = []
+    for conv in candidates(r.reading)[1:]:
+        try:
+            o, d, _ = rays(r, t_ns, pixel_px, conv)
+        except RidgelocError:
+            continue
+        c = cluster(o, d, ranges_m)
+        if c is None or not c.consistent:
+            continue
+        if configured is not None and configured.ahead and c.spread_m >= 0.5 * configured.spread_m:
+            continue
+        changes, notes = fix(conv, r.reading)
+        found.append(Alternative(conv, c, fix_lines(changes), notes, conv.changes(r.reading)))
+    if not found:
+        return []
+    # Alternatives within 2x (or 0.3 deg) of the tightest fit the data equally well (a camera rolled 180 deg about
+    # its axis fits as well as the right one while the target stays near the image centre): among those, the
+    # fewest changes, then the commonest convention. The rest follow by cluster size, one per distinct fix.
+    tight = min(a.cluster.spread_m for a in found)
+    tie = max(2 * tight, tight + 0.005 * min(a.cluster.distance_m for a in found))
+    found.sort(key=lambda a: (a.cluster.spread_m > tie, a.n_changes, _rarity(a.convention), a.cluster.spread_m))
+    out: list[Alternative] = []
+    for a in found:
+        if len(out) < limit and all(a.lines != b.lines or a.notes != b.notes for b in out):
+            out.append(a)
+    return out
+
+
+_COMMON_FRAMES = ("flu_enu", "frd_ned", "optical_enu", "optical_ned", "frd_enu", "flu_ned")
+_COMMON_MOUNTS = ("frd", "custom", "optical", "flu")
+
+
+def _rarity(conv: Convention) -> tuple[int, int]:
+    return _COMMON_MOUNTS.index(conv.mount), _COMMON_FRAMES.index(conv.frame)
+
+
+def mark_checks(r: ResolvedFlight, centre_m: np.ndarray | None,
+                conv: Convention | None = None) -> tuple[list[str], list[str]]:
+    """The marked target pixel against the image bounds and the principal point, and (with the cluster's centre)
+    whether its line of sight passes near the cluster. Returns (problems, warnings)."""
+    problems, warnings = [], []
+    t = r.config.target
+    cam = r.camera
+    if t.pixel is None:
+        return problems, warnings
+    u, v = t.pixel
+    w, h = cam.width_px, cam.height_px
+
+    def inside(a, b):  # OpenCV convention: integer coordinates at pixel centres, the image spans -0.5 .. size-0.5
+        return -0.5 <= a <= w - 0.5 and -0.5 <= b <= h - 0.5
+    if not inside(u, v):
+        hint = (" it looks like [row, column]: give target.pixel as [x (column), y (row)]" if inside(v, u) else "")
+        problems.append(f"target.pixel [{u:g}, {v:g}] is outside the {w}x{h} image (x in -0.5..{w - 0.5:g}, y in "
+                        f"-0.5..{h - 0.5:g}; OpenCV pixel centres at integers);{hint}".rstrip(";"))
+        return problems, warnings
+    off = math.hypot(u - cam.cx_px, v - cam.cy_px)
+    if off > 0.25 * min(w, h):
+        warnings.append(f"target.pixel [{u:g}, {v:g}] is {off:.0f} px from the principal point "
+                        f"({cam.cx_px:.1f}, {cam.cy_px:.1f}): the laser may not be on the target")
+    if centre_m is None or r.plan is None or t.frame_index is None:
+        return problems, warnings
+    lookup = {int(k): i for i, k in enumerate(np.asarray(r.frames.index))}
+    if t.frame_index not in lookup:
+        problems.append(f"target.frame_index {t.frame_index} is not a frame of the video")
+        return problems, warnings
+    t_mark = np.array([int(r.frames.t_ns[lookup[t.frame_index]]) + r.config.clock.offset_ns("video")])
+    cands = {"as given": (u, v)}
+    if inside(v, u):
+        cands["swapped (row, column)"] = (v, u)
+    miss = {}
+    for name, px in cands.items():
+        o, d, k = rays(r, t_mark, np.array([px]), conv)
+        if k[0]:
+            miss[name] = float(np.linalg.norm(np.cross(centre_m - o[0], d[0])))
+    if "as given" in miss:
+        dist = float(np.linalg.norm(centre_m - o[0]))
+        if miss["as given"] > 0.05 * dist:
+            better = {k: m for k, m in miss.items() if k != "as given" and m < 0.3 * miss["as given"]}
+            hint = f"; swapped to [{v:g}, {u:g}] it misses by {_fmt_m(min(better.values()))}" if better else ""
+            problems.append(f"the line of sight through target.pixel [{u:g}, {v:g}] in frame {t.frame_index} "
+                            f"misses where the lines of sight meet by {_fmt_m(miss['as given'])}{hint}")
+    return problems, warnings
+
+
+def geometry_checks(r: ResolvedFlight, pixel_px: np.ndarray | None = None, t_ns: np.ndarray | None = None,
+                    ranges_m: np.ndarray | None = None) -> GeometryResult:
+    """The geometry checks at the planned observations (or at t_ns with pixel_px / ranges_m, as `run` has them)."""
+    if t_ns is None:
+        if r.plan is None:
+            return GeometryResult(None, [], [f"no observations to check: {r.plan_error}"], [], "none")
+        t_ns, ranges_m = r.plan.t_ns, r.plan.range_m
+    what = "optical axes" if pixel_px is None else "lines of sight through the tracked target"
+    o, d, inside = rays(r, t_ns, pixel_px)
+    problems, warnings = [], []
+    if not inside.any():
+        problems.append(outside_telemetry(r))
+        return GeometryResult(None, [], problems, warnings, what)
+    if not inside.all():
+        warnings.append(f"{int((~inside).sum())} of {len(inside)} observation(s) fall outside the telemetry")
+    c = cluster(o, d, ranges_m)
+    if c is None:
+        warnings.append("fewer than 3 observations with a line of sight: the geometry cannot be checked")
+        return GeometryResult(None, [], problems, warnings, what)
+    alts: list[Alternative] = []
+    if not c.consistent:
+        alts = try_alternatives(r, t_ns, pixel_px, ranges_m, c)
+        where = c.describe()
+        if alts:
+            best = alts[0]
+            problems.append(f"the {what} do not converge ({where}); with " + "; ".join(best.lines or best.notes)
+                            + f" they do ({best.cluster.describe()})")
+        elif c.inconsistent:
+            problems.append(f"the {what} do not converge ({where}) and no common alternative convention makes "
+                            "them converge: check the gimbal's frame and mount"
+                            + (", or the gimbal does not track the target (check with the tracked target: "
+                               "`ridgeloc run`)" if pixel_px is None else ""))
+        else:
+            warnings.append(f"the {what} converge loosely ({where}): more than the attitude errors explain")
+    rb = range_bias_problem(c)
+    if rb and not alts:
+        problems.append(rb)
+    p, w = mark_checks(r, c.centre_m if c.consistent else (alts[0].cluster.centre_m if alts else None),
+                       alts[0].convention if alts and not c.consistent else None)
+    if c.consistent or alts:
+        problems += p
+    warnings += w
+    return GeometryResult(c, alts, problems, warnings, what)
+
+
+def refusal_reason(r: ResolvedFlight, t_ns, pixel_px, ranges_m) -> str | None:
+    """One line when the flight's geometry is inconsistent beyond doubt (ridgeloc run refuses it), else None."""
+    o, d, _ = rays(r, t_ns, pixel_px)
+    c = cluster(o, d, ranges_m)
+    if c is None or not c.inconsistent:
+        # consistent lines of sight through a wrong mark: the gimbal (and the laser) track something else
+        oa, da, _ = rays(r, t_ns)
+        axes = cluster(oa, da, ranges_m)
+        if axes is not None and axes.consistent:
+            swapped = [p for p in mark_checks(r, axes.centre_m)[0] if "swapped to" in p or "row, column" in p]
+            if swapped:
+                return f"the marked target is not what the gimbal tracks: {swapped[0]}; give target.pixel as [x, y]"
+        return None
+    alts = try_alternatives(r, t_ns, pixel_px, ranges_m, c, limit=1)
+    head = f"inconsistent geometry: the lines of sight through the tracked target do not converge ({c.describe()})"
+    if alts:
+        a = alts[0]
+        cause = _cause(a.convention, r.reading)
+        return (f"{head}; probable cause: {cause}; fix: {'; '.join(a.lines or a.notes)} (then "
+                f"{_fmt_m(a.cluster.spread_m)}); details: ridgeloc check")
+    return f"{head}; no common convention fixes it: check the gimbal frame and mount with `ridgeloc check`"
+
+
+def _cause(conv: Convention, now: Reading) -> str:
+    causes = []
+    if conv.frame != now.frame:
+        causes.append(f"the gimbal orientation is in {conv.frame}, not {now.frame}")
+    if conv.quat_order != now.quat_order:
+        causes.append(f"the gimbal quaternion is stored {conv.quat_order}, not {now.quat_order}")
+    if conv.yaw_flipped:
+        causes.append("the gimbal yaw is " + ("earth-referenced, not relative to the vehicle"
+                                              if now.yaw_in_vehicle_frame else "relative to the vehicle heading, not "
+                                              "earth-referenced"))
+    if conv.mount != now.mount:
+        causes.append(f"the camera mount is {conv.mount}, not {now.mount}")
+    return " and ".join(causes)

@@ -1,0 +1,143 @@
+"""Where a flight's lines of sight meet: the cluster a gimbal that tracks a target makes, and its size.
+
+Per frame i a ray (origin o_i, unit direction d_i, ENU metres) and optionally a laser range r_i. Two clusters:
+- the laser-sphere points P_i = o_i + r_i d_i (frames with a range): their spread is the cluster size;
+- the rays' least-squares meeting point X (minimising the squared perpendicular distances): the rays' median
+  miss distance is the cluster size where there are no ranges, and X is the reference the ranges are checked
+  against (independent of them).
+A right convention gives a spread of the attitude error times the distance (tens of metres at 5 km); a wrong one
+scatters the points over kilometres, or puts the meeting point behind the cameras.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+# A spread above this fraction of the distance (2.9 deg) is beyond any attitude, tracking or clock error a flight
+# can have, and below CONSISTENT_REL (1.1 deg) everything is consistent; in between the check warns.
+INCONSISTENT_REL = 0.05
+CONSISTENT_REL = 0.02
+MIN_RAYS = 3
+
+
+@dataclass(frozen=True)
+class Cluster:
+    """n rays used (n_ranged of them with a range); spread_m the cluster size (`metric`: "laser sphere" or
+    "ray intersection"); centre_m (3,) the cluster's centre (median laser-sphere point, else X); meet_m (3,) the
+    rays' meeting point X; distance_m the median distance from the origins to the centre; ahead: X lies in front
+    of the cameras (positive depth along the median ray) and below the highest origin; range_bias_m the median of
+    r_i - |X - o_i| and range_bias_sigma_m its standard error (NaN without ranges)."""
+
+    n: int
+    n_ranged: int
+    metric: str
+    spread_m: float
+    centre_m: np.ndarray
+    meet_m: np.ndarray
+    distance_m: float
+    ahead: bool
+    range_bias_m: float
+    range_bias_sigma_m: float
+
+    @property
+    def relative_spread(self) -> float:
+        return self.spread_m / self.distance_m if self.distance_m > 0 and self.ahead else math.inf
+
+    @property
+    def consistent(self) -> bool:
+        return self.relative_spread <= CONSISTENT_REL
+
+    @property
+    def inconsistent(self) -> bool:
+        """Beyond doubt: behind the cameras or scattered over more than INCONSISTENT_REL of the distance."""
+        return self.relative_spread > INCONSISTENT_REL
+
+    def describe(self) -> str:
+        if not self.ahead:
+            return "the lines of sight meet behind the cameras or above them"
+        return f"{self.metric} points within {_fmt_m(self.spread_m)} (median, at {_fmt_m(self.distance_m)})"
+
+
+def _fmt_m(x: float) -> str:
+    return f"{x / 1000:.1f} km" if abs(x) >= 1000 else f"{x:.0f} m"
+
+
+def meeting_point(origins: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(X (3,), miss distances (n,), covariance scale N^-1 (3, 3)) of the rays' least-squares meeting point,
+    with one Cauchy-like reweighting pass so that a few stray rays do not drag it. NaN when the rays are parallel."""
+    o, d = np.asarray(origins, float), np.asarray(dirs, float)
+    proj = np.eye(3) - d[:, :, None] * d[:, None, :]  # (n, 3, 3) projectors orthogonal to each ray
+    w = np.ones(len(o))
+    X = np.full(3, np.nan)
+    Ninv = np.full((3, 3), np.nan)
+    for _ in range(3):
+        N = np.einsum("i,ijk->jk", w, proj)
+        b = np.einsum("i,ijk,ik->j", w, proj, o)
+        if np.linalg.cond(N) > 1e12:
+            return X, np.full(len(o), np.nan), Ninv
+        X = np.linalg.solve(N, b)
+        miss = np.linalg.norm(np.einsum("ijk,ik->ij", proj, X - o), axis=1)
+        scale = max(float(np.median(miss)), 1e-6) * 3.0
+        w = 1.0 / (1.0 + (miss / scale) ** 2)
+        Ninv = np.linalg.inv(N)
+    return X, miss, Ninv
+
+
+def cluster(origins: np.ndarray, dirs: np.ndarray, ranges_m: np.ndarray | None = None) -> Cluster | None:
+    """The cluster of n rays (see the module docstring); None with fewer than MIN_RAYS finite rays."""
+    o = np.asarray(origins, float).reshape(-1, 3)
+    d = np.asarray(dirs, float).reshape(-1, 3)
+    r = np.full(len(o), np.nan) if ranges_m is None else np.asarray(ranges_m, float).reshape(-1)
+    ok = np.isfinite(o).all(1) & np.isfinite(d).all(1)
+    o, d, r = o[ok], d[ok] / np.linalg.norm(d[ok], axis=1, keepdims=True), r[ok]
+    if len(o) < MIN_RAYS:
+        return None
+    X, miss, Ninv = meeting_point(o, d)
+    ranged = np.isfinite(r) & (r > 0)
+    d_med = np.median(d, axis=0)
+    d_med /= np.linalg.norm(d_med)
+    finite_X = bool(np.isfinite(X).all())
+    depth = (X - o) @ d_med if finite_X else np.full(len(o), -1.0)
+    ahead = finite_X and float(np.median(depth)) > 0 and float(X[2]) < float(o[:, 2].max())
+    bias = sigma = math.nan
+    if ranged.sum() >= MIN_RAYS:
+        P = o[ranged] + r[ranged, None] * d[ranged]
+        centre = np.median(P, axis=0)
+        spread = float(np.median(np.linalg.norm(P - centre, axis=1)))
+        metric = "laser sphere"
+        distance = float(np.median(r[ranged]))
+        # Laser-sphere points are in front by construction; rays pointing above the platform give a wrong
+        # convention away.
+        ahead = bool(np.median(P[:, 2]) < o[:, 2].max())
+        if finite_X:
+            resid = r[ranged] - np.linalg.norm(X - o[ranged], axis=1)
+            bias = float(np.median(resid))
+            s2 = float(np.sum(miss ** 2) / max(2 * len(o) - 3, 1))
+            sigma_depth = math.sqrt(max(float(d_med @ Ninv @ d_med) * s2, 0.0))
+            sigma_r = 1.2533 * float(np.std(resid)) / math.sqrt(ranged.sum())
+            sigma = math.hypot(sigma_depth, sigma_r)
+    else:
+        centre = X
+        spread = float(np.median(miss)) if finite_X else math.inf
+        metric = "ray intersection"
+        distance = float(np.median(np.linalg.norm(X - o, axis=1))) if finite_X else math.nan
+    return Cluster(n=len(o), n_ranged=int(ranged.sum()), metric=metric, spread_m=spread, centre_m=centre,
+                   meet_m=X, distance_m=distance, ahead=bool(ahead), range_bias_m=bias, range_bias_sigma_m=sigma)
+
+
+def range_bias_problem(c: Cluster) -> str | None:
+    """A one-line problem when the laser ranges disagree with the distance to where the rays meet beyond their
+    uncertainty (5 sigma) and by more than 3 % of the range (a bias, a wrong range source or unit), else None."""
+    if not math.isfinite(c.range_bias_m) or not c.ahead:
+        return None
+    if abs(c.range_bias_m) <= max(5 * c.range_bias_sigma_m, 0.03 * c.distance_m):
+        return None
+    longer = "longer" if c.range_bias_m > 0 else "shorter"
+    ratio = c.distance_m / (c.distance_m - c.range_bias_m) if c.distance_m != c.range_bias_m else math.inf
+    hint = " (a unit: feet?)" if abs(ratio - 3.2808) < 0.1 else ""
+    return (f"the laser ranges are {_fmt_m(abs(c.range_bias_m))} {longer} than the distance to where the lines "
+            f"of sight meet (+-{_fmt_m(c.range_bias_sigma_m)}): a range bias, a wrong range source{hint} or a "
+            "wrong clock.range offset")

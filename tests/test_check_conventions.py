@@ -1,0 +1,130 @@
+"""`ridgeloc check` and `ridgeloc run` on flights written in other vehicles' conventions
+(pipeline/synth/conventions.py): every mistake is named with the config lines that fix it, and run refuses the
+flight with a one-line reason; the right configs pass and locate the target. Plus the pieces: orientation frames,
+clock keys, the clusters."""
+
+import datetime
+import math
+import re
+
+import numpy as np
+import pytest
+
+from pipeline.check.geometry import cluster, range_bias_problem
+from pipeline.check.report import check_flight, format_check
+from pipeline.cli import main as cli_main
+from pipeline.errors import InputError
+from pipeline.flight_config import Clock, load_flight_config
+from pipeline.ingest.frames import (
+    ORIENTATION_FRAMES,
+    frame_quat_from_ned_frd,
+    quat_ned_frd_from_enu_flu,
+    quat_ned_frd_from_frame,
+    rotation_from_quat_wxyz,
+)
+from pipeline.run import process_group
+from pipeline.synth.conventions import CASES, case_config, write_flights
+
+# the tiny flights' noise (attitude and gimbal 0.02 deg, GNSS 0.3 m, laser 1 m) bounds the error as in
+# tests/test_run_e2e.py: 4 sigma_3d = 15.4 m
+BOUND_M = 15.4
+
+
+@pytest.fixture(scope="session")
+def flights(tmp_path_factory):
+    return write_flights(tmp_path_factory.mktemp("conventions"))
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+def test_check_names_the_fix_and_run_refuses(flights, case):
+    cfg = load_flight_config(case_config(flights[case.flight], case))
+    res = check_flight(cfg, clock=False)
+    text = format_check(res)
+    if case.expect is None:
+        assert res.problems == [], text
+        r = process_group(cfg)
+        assert r.errors_m()["mle"] < BOUND_M
+        return
+    assert any(case.expect in p for p in res.problems), text
+    if case.refused:
+        with pytest.raises(InputError) as exc:
+            process_group(cfg)
+        message = str(exc.value)
+        assert "\n" not in message and case.expect in message, message
+
+
+def test_check_command_exit_status(flights, capsys):
+    wrong = next(c for c in CASES if c.name == "ros_frd_default")
+    right = next(c for c in CASES if c.name == "tlog_right")
+    assert cli_main(["check", "--no-clock", str(case_config(flights[wrong.flight], wrong))]) == 1
+    out = capsys.readouterr().out
+    assert "frame: frd_ned" in out and "gimbal" in out and "intrinsics" in out and "overlap" in out
+    assert cli_main(["check", str(case_config(flights[right.flight], right))]) == 0
+    assert "consistent" in capsys.readouterr().out.splitlines()[-1]
+
+
+def test_inspect_takes_a_flight_config(flights, capsys):
+    case = next(c for c in CASES if c.name == "ros_optical_no_camera")
+    assert cli_main(["inspect", str(case_config(flights[case.flight], case))]) == 0
+    out = capsys.readouterr().out
+    assert "read as optical_enu" in out and "CameraInfo" in out and "geometry" not in out
+
+
+def test_a_batch_goes_on_past_a_refused_flight(flights, tmp_path, capsys):
+    bad = case_config(flights["ros_frd_ned"], next(c for c in CASES if c.name == "ros_frd_default"))
+    good = case_config(flights["tlog"], next(c for c in CASES if c.name == "tlog_right"))
+    (tmp_path / "run.yaml").write_text(f"groups: [{bad}, {good}]\n")
+    assert cli_main(["run", str(tmp_path / "run.yaml"), "-o", str(tmp_path / "out"), "-q", "--no-figures"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "ros_frd_default" in err[0] and "frame: frd_ned" in err[0]
+    assert (tmp_path / "out" / "tlog_right").is_dir() and not (tmp_path / "out" / "ros_frd_default").exists()
+
+
+# ---- the pieces ------------------------------------------------------------------------------------------------
+
+
+def test_orientation_frames_known_values():
+    # a camera looking north, level: optical z = north, x = east, y = down. In optical_enu its orientation maps
+    # (x, y, z) -> (E, -U, N); as gimbal FRD -> NED that is the identity (forward north, right east, down down).
+    R_enu_from_optical = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])
+    from scipy.spatial.transform import Rotation
+    q = Rotation.from_matrix(R_enu_from_optical).as_quat(scalar_first=True)[None]
+    np.testing.assert_allclose(rotation_from_quat_wxyz(quat_ned_frd_from_frame(q, "optical_enu")).as_matrix()[0],
+                               np.eye(3), atol=1e-12)
+    rng = np.random.default_rng(3)
+    raw = rng.normal(size=(20, 4))
+    np.testing.assert_allclose(quat_ned_frd_from_frame(raw, "flu_enu"), quat_ned_frd_from_enu_flu(raw), atol=1e-12)
+    for f in ORIENTATION_FRAMES:
+        back = frame_quat_from_ned_frd(quat_ned_frd_from_frame(raw, f), f)
+        dots = np.abs(np.sum(back * raw / np.linalg.norm(raw, axis=1, keepdims=True), axis=1))
+        np.testing.assert_allclose(dots, 1.0, atol=1e-12)
+
+
+def test_clock_keys_in_human_units():
+    iso = Clock(video_start="2024-05-14T02:30:02.316Z", video_latency_s=0.12, range_offset_s=-0.03)
+    unix = Clock(video_start=1715653802.316)
+    dt = Clock(video_start=datetime.datetime(2024, 5, 14, 2, 30, 2, 316000, tzinfo=datetime.timezone.utc))
+    assert unix.offset_ns("video") == dt.offset_ns("video") == 1_715_653_802_316_000_000
+    assert iso.offset_ns("video") == 1_715_653_802_316_000_000 - 120_000_000
+    assert iso.offset_ns("range") == -30_000_000 and iso.offset_ns("gimbal") == 0
+    assert Clock(video_offset_s=2.5, gimbal_latency_s=0.04).offset_ns("gimbal") == -40_000_000
+    with pytest.raises(ValueError, match="give one of"):
+        Clock(video_to_telemetry_offset_ns=5, video_start=1.0)
+
+
+def test_cluster_sizes_and_range_bias():
+    rng = np.random.default_rng(5)
+    target = np.array([0.0, 0.0, 0.0])
+    a = np.radians(np.linspace(200, 250, 12))
+    origins = np.c_[4600 * np.sin(a), 4600 * np.cos(a), np.full(12, 2000.0)]
+    d = target - origins
+    dist = np.linalg.norm(d, axis=1)
+    d = d / dist[:, None] + rng.normal(scale=np.radians(0.1), size=d.shape)  # 0.1 deg pointing noise
+    good = cluster(origins, d, dist + rng.normal(scale=2.0, size=12))
+    assert good.consistent and good.spread_m < 20 and range_bias_problem(good) is None
+    biased = cluster(origins, d, dist + 400.0)
+    assert biased.consistent and re.search(r"\b(39\d|40\d) m longer", range_bias_problem(biased))
+    flipped = cluster(origins, -d, dist)  # rays pointing up and away
+    assert flipped.inconsistent and not flipped.ahead
+    yawed = cluster(origins, d @ np.array([[0, -1.0, 0], [1, 0, 0], [0, 0, 1]]).T, dist)  # 90 deg yaw off
+    assert yawed.inconsistent and math.isfinite(yawed.spread_m)

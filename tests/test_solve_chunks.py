@@ -1,11 +1,11 @@
-"""solve_batch splits large batches into chunks (`pipeline.solve.CHUNK`): the answers must not depend on it
+"""solve_batch splits large batches into chunks (`pipeline.solve.methods.CHUNK`): the answers must not depend on it
 (beyond rounding: a vectorised sum may group its terms differently on arrays of another length)."""
 
 import numpy as np
 import pytest
 
-import pipeline.solve as solve_pkg
 from pipeline.solve import METHODS, solve_batch
+from pipeline.solve import methods as solve_pkg
 from pipeline.solve.scenes import paper_batch
 
 

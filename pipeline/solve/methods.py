@@ -1,0 +1,365 @@
+"""The eight estimators behind `solve` and `solve_batch`: option checks, the dispatch of each method to its
+batched kernel (linear.py, least_squares.py, mle.py; correlated.py for the generalized least squares mle), and
+for one problem the checks of unusable input and the conversion of the batch-of-one answer into an `Estimate`.
+
+One implementation per estimator: `solve(method, obs)` runs the same kernel as `solve_batch` on a batch of one.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from pipeline.errors import GeometryError, ObservationError, SolverError
+from pipeline.solve import correlated as _correlated
+from pipeline.solve import least_squares, linear
+from pipeline.solve import mle as _mle
+from pipeline.solve.estimate import BatchEstimate, Estimate, Status
+from pipeline.solve.iterate import start_status
+from pipeline.solve.observations import ObservationBatch, Observations, Sigma
+from pipeline.solve.stacked import Stacked, pixel_model, range_model
+
+METHODS = ("dlt", "vision", "range", "los", "fusion-raw", "fusion", "ridge", "mle")
+
+_COMMON = {"tol_m", "max_iterations", "initial_m"}
+_OPTIONS = {
+    "dlt": set(), "los": set(),
+    "vision": _COMMON, "range": _COMMON, "fusion-raw": _COMMON, "fusion": _COMMON,
+    "ridge": _COMMON | {"hkb", "k"},
+    "mle": _COMMON | {"robust", "sigma", "estimate_variance_components"},
+}
+_USES_PIXELS = {"dlt", "vision", "fusion-raw", "fusion", "ridge", "mle"}
+
+
+def _check_options(method: str, options: dict) -> dict:
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    unknown = sorted(set(options) - _OPTIONS[method])
+    if unknown:
+        raise ValueError(f"method {method!r} takes no option(s) {', '.join(unknown)}; it takes "
+                         f"{', '.join(sorted(_OPTIONS[method])) or 'none'}")
+    o = dict(options)
+    tol = float(o.get("tol_m", 1e-4))
+    if not tol > 0:
+        raise ValueError(f"tol_m must be > 0, got {tol}")
+    o["tol_m"] = tol
+    it = o.get("max_iterations", 50)
+    if isinstance(it, bool) or not isinstance(it, (int, np.integer)) or it < 1:
+        raise ValueError(f"max_iterations must be an integer >= 1, got {it!r}")
+    o["max_iterations"] = int(it)
+    if o.get("hkb", "paper") not in least_squares.HKB_VARIANTS:
+        raise ValueError(f"hkb must be one of {least_squares.HKB_VARIANTS}, got {o['hkb']!r}")
+    if o.get("k") is not None and not (np.isfinite(o["k"]) and o["k"] >= 0):
+        raise ValueError(f"k must be a finite number >= 0, got {o['k']!r}")
+    if o.get("robust", "huber") not in _mle.ROBUST_LOSSES:
+        raise ValueError(f"robust must be one of {_mle.ROBUST_LOSSES}, got {o['robust']!r}")
+    s = o.get("sigma")
+    if isinstance(s, dict):
+        o["sigma"] = Sigma.from_dict(s, "sigma option")
+    elif s is not None and not isinstance(s, Sigma):
+        raise ValueError(f"sigma must be a Sigma or a dict, got {type(s).__name__}")
+    return o
+
+
+def _initial(options: dict, B: int):
+    x0 = options.get("initial_m")
+    if x0 is None:
+        return None
+    x0 = np.asarray(x0, dtype=np.float64)
+    if x0.shape == (3,):
+        x0 = np.broadcast_to(x0, (B, 3)).copy()
+    if x0.shape != (B, 3) or not np.isfinite(x0).all():
+        raise ValueError(f"initial_m must be 3 finite numbers or ({B}, 3) of them, got shape {x0.shape}")
+    return x0
+
+
+def _vision_init(st: Stacked, o: dict):
+    x0 = _initial(o, st.size)
+    if x0 is not None:
+        return x0, None
+    X, status, _ = linear.dlt(st, with_condition=False)
+    X, _, status, _ = least_squares.vision(st, X, o["tol_m"], o["max_iterations"], status)
+    # a vision result that hit the iteration limit is still a usable initial value
+    return X, status
+
+
+def _solve_stacked(method: str, st: Stacked, o: dict) -> BatchEstimate:
+    B = st.size
+    tol, itmax = o["tol_m"], o["max_iterations"]
+    extras: dict = {}
+    cov = None
+    if method == "dlt":
+        X, status, cond = linear.dlt(st)
+        it = np.zeros(B, dtype=np.int64)
+    elif method == "los":
+        X, status, pts, oracle = linear.los(st)
+        it = np.zeros(B, dtype=np.int64)
+        cond = np.full(B, np.nan)
+        extras = {"points_m": pts, "oracle_error_m": oracle}
+    elif method == "vision":
+        x0 = _initial(o, B)
+        init_status = None
+        if x0 is None:
+            x0, init_status, _ = linear.dlt(st, with_condition=False)
+        X, it, status, cond = least_squares.vision(st, x0, tol, itmax, init_status)
+    elif method == "range":
+        x0, init_status = _vision_init(st, o)
+        X, it, status, cond, flat = least_squares.range_only(st, x0, tol, itmax, init_status)
+        extras = {"collinear_platforms": flat}
+    elif method == "fusion-raw":
+        x0, init_status = _vision_init(st, o)
+        X, it, status, cond = least_squares.fusion_raw(st, x0, tol, itmax, init_status)
+    elif method in ("fusion", "ridge"):
+        x0, init_status = _vision_init(st, o)
+        if method == "fusion":
+            k, hkb = None, None
+        else:
+            k = o.get("k")
+            hkb = None if k is not None else o.get("hkb", "paper")
+        X, it, status, cond, ex = least_squares.normalized_fusion(st, x0, tol, itmax, init_status, k=k, hkb=hkb)
+        extras = {"augmented_component": ex["augmented"]}
+        if method == "ridge":
+            extras["k"] = ex["k"]
+    elif method == "mle":
+        X, it, status, cond, cov, ex = _mle_dispatch(st, o)
+        extras = {**_mle_summaries(cov), **ex}
+    else:  # pragma: no cover - _check_options rejects it
+        raise ValueError(method)
+    if method in _USES_PIXELS:
+        behind = _behind_camera(st, X)
+        if behind.any():
+            status[behind] = Status.DEGENERATE
+            X[behind] = np.nan
+        extras["behind_camera"] = behind
+    return BatchEstimate(method=method, position_m=X, iterations=it, status=status.astype(np.int8),
+                         condition_number=cond, covariance_m2=cov, extras=extras)
+
+
+def _mle_start(st: Stacked, o: dict):
+    """Initial values (B,3) and their status, the sigmas and whether to estimate variance components.
+
+    The start is the DLT point; where there are fewer than two pixels, or the DLT point is not in front of
+    every camera with a pixel (no baseline: it is then a camera centre, or behind), the line-of-sight median.
+    """
+    x0 = _initial(o, st.size)
+    init_status = None
+    if x0 is None:
+        near = 1e-3 * (1.0 + st.range_m.max(axis=1, keepdims=True))
+        x0, init_status, _ = linear.dlt(st, with_condition=False)
+        need = ~np.isfinite(x0).all(axis=1)
+        need |= ((st.depths(np.where(need[:, None], 0.0, x0)) <= near) & st.has_pix).any(axis=1)
+        if need.any():
+            Xl, sl, _, _ = linear.los(st.take(np.flatnonzero(need)))
+            x0[need], init_status[need] = Xl, sl
+    sigma = o.get("sigma") or st.sigma
+    vce = o.get("estimate_variance_components")
+    if vce is None:
+        vce = sigma.pixel_px is None or sigma.range_m is None
+    return x0, init_status, sigma, bool(vce)
+
+
+def _mle_dispatch(st: Stacked, o: dict):
+    """`mle.mle` on the batch, or `correlated.mle_gls` for one problem whose sigma has correlation times (and
+    whose residual covariance is not diagonal: with vanishing correlation it is the independent problem)."""
+    x0, init_status, sigma, vce = _mle_start(st, o)
+    robust, tol, itmax = o.get("robust", "huber"), o["tol_m"], o["max_iterations"]
+    if sigma.correlated:
+        if st.t_ns is None:
+            raise ValueError("mle with time-correlated errors (sigma attitude_tau_s / position_tau_s) needs the "
+                             "frames' timestamps: use solve() per problem; solve_batch() has no t_ns")
+        status, bad = start_status(x0, init_status)
+        if bad[0]:
+            nan = np.full((1, 3), np.nan)
+            return (nan, np.zeros(1, dtype=np.int64), status, np.full(1, np.nan), np.full((1, 3, 3), np.nan),
+                    {"variance_factor_pixel": np.ones(1), "variance_factor_range": np.ones(1),
+                     "sigma0_sq": np.full(1, np.nan), "vce_rounds": np.zeros(1, dtype=np.int64)})
+        C = _correlated.problem_covariance(st, x0[0], sigma)
+        if (C != np.diag(np.diag(C))).any():
+            return _correlated.mle_gls(st, x0[0], C, robust, vce, tol, itmax)
+        sigma = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
+    return _mle.mle(st, x0, sigma, robust, vce, tol, itmax, init_status)
+
+
+def _mle_summaries(cov: np.ndarray) -> dict:
+    axes, vecs = _mle.ellipsoid(cov)
+    return {"cep50_m": _mle.cep_m(cov[:, :2, :2], 0.5), "cep90_m": _mle.cep_m(cov[:, :2, :2], 0.9),
+            "ellipsoid_semi_axes_1sigma_m": axes, "ellipsoid_axes": vecs}
+
+
+def _behind_camera(st: Stacked, X: np.ndarray) -> np.ndarray:
+    ok = np.isfinite(X).all(axis=1)
+    depth = st.depths(np.where(ok[:, None], X, 0.0))
+    return ok & ((depth <= 0) & st.has_pix).any(axis=1)
+
+
+def solve_batch(method: str, batch: ObservationBatch, **options) -> BatchEstimate:
+    """Solve B problems with one estimator. Problems it cannot solve get status DEGENERATE (geometry does not
+    determine the target, too few observations, target behind a camera) or DIVERGED, and NaN positions."""
+    o = _check_options(method, options)
+    if not isinstance(batch, ObservationBatch):
+        raise TypeError(f"solve_batch wants an ObservationBatch, got {type(batch).__name__}")
+    x0 = _initial(o, batch.size)  # validated once; chunks get their rows
+    # degenerate problems produce inf/NaN on the way to their status: expected, not worth a warning
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        if batch.size <= CHUNK:
+            return _solve_stacked(method, Stacked.from_batch(batch), o)
+        parts = []
+        for lo in range(0, batch.size, CHUNK):
+            sl = slice(lo, lo + CHUNK)
+            sub = ObservationBatch(P=batch.P[sl], pixel=batch.pixel[sl], platform_m=batch.platform_m[sl],
+                                   range_m=batch.range_m[sl], sigma=batch.sigma,
+                                   truth_m=None if batch.truth_m is None else batch.truth_m[sl])
+            oc = o if x0 is None else {**o, "initial_m": x0[sl]}
+            parts.append(_solve_stacked(method, Stacked.from_batch(sub), oc))
+        return _concatenate(parts)
+
+
+#: problems solved together: the kernels' temporaries (a few per n x CHUNK plane) stay in the CPU caches and
+#: below the allocator's mmap threshold; problems are independent, so the answers do not depend on it
+CHUNK = 2048
+
+
+def _concatenate(parts: list[BatchEstimate]) -> BatchEstimate:
+    first = parts[0]
+    cat = np.concatenate
+    return BatchEstimate(method=first.method, position_m=cat([p.position_m for p in parts]),
+                         iterations=cat([p.iterations for p in parts]), status=cat([p.status for p in parts]),
+                         condition_number=cat([p.condition_number for p in parts]),
+                         covariance_m2=None if first.covariance_m2 is None else cat([p.covariance_m2 for p in parts]),
+                         extras={k: cat([p.extras[k] for p in parts]) for k in first.extras})
+
+
+# ---- single problem: clear errors for unusable input --------------------------------------------------------
+
+def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
+    has_pix, has_rng = st.has_pix[0], st.has_range[0]
+    npix = int(np.count_nonzero(has_pix))
+    nrng = int(np.count_nonzero(has_rng))
+    nboth = int(np.count_nonzero(has_pix & has_rng))
+    has_init = o.get("initial_m") is not None
+    if method != "range" or not has_init:  # range starts from vision, which projects through P
+        # |det M| against |M|^3 (the rows' lengths, from the Gram matrix M M^T)
+        g = st._gram()[0]
+        scale = np.sqrt(g[:, 0, 0] * g[:, 1, 1] * g[:, 2, 2])
+        bad = np.flatnonzero(~(np.abs(st.det_M()[0]) > 1e-12 * scale))
+        if bad.size:
+            raise ObservationError(f"frame(s) {bad.tolist()}: the left 3x3 block of P is singular, not a finite "
+                                   "camera")
+    if method == "los":
+        if nboth == 0:
+            raise ObservationError("los needs at least one frame with both a target pixel and a range")
+        return
+    if method == "mle":
+        sigma = o.get("sigma") or obs.sigma
+        span_ns = int(obs.t_ns.max() - obs.t_ns.min()) if sigma.correlated and obs.n > 1 else None
+        if span_ns is not None and span_ns < 1_000_000:
+            raise ObservationError(f"mle: the sigma gives correlation times (attitude_tau_s, position_tau_s) but "
+                                   f"the frames' t_ns span only {span_ns} ns: they need real timestamps (without "
+                                   "t_ns the frames are numbered 0, 1, 2, ... ns)")
+        if not has_init and npix < 2 and nboth == 0:
+            raise ObservationError(f"mle starts from the linear intersection (two or more pixels) or a line of "
+                                   f"sight (a pixel and a range in one frame); there are {npix} pixel(s) and "
+                                   f"no frame with both")
+        if 2 * npix + nrng < 3:
+            raise ObservationError(f"mle needs at least three observations (2 per pixel, 1 per range), got "
+                                   f"{2 * npix + nrng}")
+        return
+    needs_pixels = method in ("dlt", "vision") or not has_init
+    if needs_pixels and npix < 2:
+        what = method if method in ("dlt", "vision") else f"{method} (initialised from vision)"
+        raise ObservationError(f"{what} needs at least two frames with a target pixel, got {npix}"
+                               + ("" if method in ("dlt", "vision") else "; or pass initial_m"))
+    if needs_pixels:
+        centres = -np.linalg.solve(st.M[0, has_pix], st.p4[0, has_pix][:, :, None])[:, :, 0]
+        spread = np.sqrt(((centres - centres.mean(axis=0)) ** 2).sum(axis=1).max())
+        if spread <= 1e-6 * (1.0 + np.abs(centres).max()):
+            raise GeometryError("all frames with a target pixel share one camera position: no baseline to "
+                                "intersect the lines of sight")
+    if method == "range":
+        if nrng < 3:
+            raise ObservationError(f"range needs at least three laser ranges, got {nrng}")
+        s = obs.platform_m[has_rng]
+        sv = np.linalg.svd(s - s.mean(axis=0), compute_uv=False)
+        if sv[0] <= 1e-6 * (1.0 + np.abs(s).max()):
+            raise GeometryError("all ranged frames share one platform position: ranges from one point do not "
+                                "locate the target")
+        if sv[1] <= 1e-9 * sv[0]:
+            raise GeometryError("the platform positions of the ranged frames are collinear: ranges cannot fix "
+                                "the rotation of the target about that line")
+    if method in ("fusion", "ridge") and nrng == 0:
+        raise ObservationError(f"{method} fuses pixels with ranges but there are no ranges; use vision")
+
+
+def solve(method: str, obs: Observations, **options) -> Estimate:
+    """Solve one problem with one estimator (see the module docstring for methods and options).
+
+    Raises ObservationError for unusable input (too few pixels or ranges, a singular P), GeometryError when
+    the geometry does not determine the target (coincident or collinear positions, rank-deficient design,
+    target behind a camera), SolverError when the iteration diverged. An estimate that reached max_iterations
+    is returned with status MAX_ITERATIONS (converged False).
+    """
+    o = _check_options(method, options)
+    if not isinstance(obs, Observations):
+        raise TypeError(f"solve wants an Observations, got {type(obs).__name__}")
+    st = Stacked.from_observations(obs)
+    _check_inputs(method, obs, st, o)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        be = _solve_stacked(method, st, o)
+    X, it, cond = be.position_m[0], int(be.iterations[0]), float(be.condition_number[0])
+    status = Status(int(be.status[0]))
+    info = {k: v[0] for k, v in be.extras.items()}
+    if status == Status.DEGENERATE:
+        if method in _USES_PIXELS and info["behind_camera"]:
+            raise GeometryError(f"{method}: the estimate lies behind the camera of a frame with a target "
+                                "pixel (check the pixels and the sign convention of P)")
+        if method == "range" and info["collinear_platforms"]:
+            raise GeometryError("range: the ranged platform positions lie on a straight line within their position "
+                                f"noise (sigma {obs.sigma.position_m or 0:g} m, chi-square test at 95 %): ranges "
+                                "cannot fix the rotation of the target about that line")
+        raise GeometryError(f"{method}: the geometry does not determine the target (design matrix rank "
+                            f"deficient, condition number {cond:.3g}); more baseline or other observations "
+                            "are needed")
+    if status == Status.DIVERGED:
+        raise SolverError(f"{method}: the iteration diverged after {it} iterations "
+                          "(the estimate ran away or became non-finite)")
+    extras = {}
+    if method == "los":
+        extras["points_m"] = [None if not np.isfinite(p).all() else p.tolist() for p in info["points_m"]]
+        oracle = float(info["oracle_error_m"])
+        if np.isfinite(oracle):
+            extras["oracle_error_m"] = oracle
+    for key in ("augmented_component", "k"):
+        if key in info:
+            extras[key] = float(info[key])
+    if method == "mle":
+        ax = info["ellipsoid_semi_axes_1sigma_m"].tolist()
+        s95 = np.sqrt(_mle.CHI2_3_95)
+        extras.update({
+            "cep50_m": float(info["cep50_m"]), "cep90_m": float(info["cep90_m"]),
+            "ellipsoid": {"semi_axes_1sigma_m": ax, "semi_axes_95pct_m": [v * s95 for v in ax],
+                          "axes": info["ellipsoid_axes"].T.tolist()},
+            "variance_factors": {"pixel": float(info["variance_factor_pixel"]),
+                                 "range": float(info["variance_factor_range"])},
+            "sigma0_sq": float(info["sigma0_sq"]),
+            "vce_rounds": int(info["vce_rounds"]),
+            "robust": o.get("robust", "huber"),
+        })
+    cov = None if be.covariance_m2 is None else be.covariance_m2[0]
+    return Estimate(method=method, position_m=X, iterations=it, status=status,
+                    residuals=_residuals(method, st, X), condition_number=cond, covariance_m2=cov, extras=extras)
+
+
+def _residuals(method: str, st: Stacked, X: np.ndarray) -> np.ndarray:
+    """Observed minus predicted of the observations the method used: pixels (px, u v interleaved), then
+    ranges (m)."""
+    if not np.isfinite(X).all():
+        return np.zeros(0)
+    parts = []
+    if method in _USES_PIXELS or method == "los":
+        _, r, _ = pixel_model(st, X[None])
+        parts.append(r[0, np.repeat(st.has_pix[0], 2)])
+    if method not in ("dlt", "vision"):
+        _, r, _ = range_model(st, X[None])
+        parts.append(r[0, st.has_range[0]])
+    return np.concatenate(parts)

@@ -1,14 +1,12 @@
-"""File-type detection, one-file reading and merging several files of one flight into one FlightLog."""
+"""File-type detection, one-file reading, and reading every file of one flight into one FlightLog."""
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
-
-import numpy as np
 
 from pipeline.errors import InputError, LogReadError
 from pipeline.ingest.mapping import check_override, mapping_for
+from pipeline.ingest.merge import merge_logs
 from pipeline.ingest.model import FlightLog
 
 VIDEO_SUFFIXES = {".mp4", ".mov", ".avi", ".mkv", ".m4v", ".mpg", ".mpeg", ".ts", ".webm"}
@@ -90,52 +88,6 @@ def read_file(path: str | Path, mapping: dict | None = None, scan_all: bool = Fa
         from pipeline.ingest.srt import read_srt
         return read_srt(p, mapping_for("srt", mapping))
     raise LogReadError(f"unsupported format {fmt}", path=p)
-
-
-QUANTITIES = ("position", "attitude", "gimbal", "range", "frames", "camera_events")
-
-
-def _concat(series_list: list, name: str, warnings: list[str]):
-    first = series_list[0]
-    same = [s for s in series_list if s.clock == first.clock and type(s) is type(first)]
-    if len(same) < len(series_list):
-        warnings.append(f"{name}: sources on different clocks ({', '.join(s.source for s in series_list)}); "
-                        f"using {first.source}")
-    if len(same) == 1:
-        return first
-    if hasattr(first, "alt_datum") and len({s.alt_datum for s in same}) > 1:
-        warnings.append(f"{name}: sources with different altitude datums; using {first.source}")
-        return first
-    if name == "frames":
-        warnings.append(f"frames: several frame sources; using {first.source}")
-        return first
-    t = np.concatenate([s.t_ns for s in same])
-    order = np.argsort(t, kind="stable")
-    changes = {"t_ns": t[order], "source": "+".join(s.source for s in same)}
-    for f in dataclasses.fields(first):
-        v = getattr(first, f.name)
-        if f.name != "t_ns" and isinstance(v, np.ndarray):
-            changes[f.name] = np.concatenate([getattr(s, f.name) for s in same])[order]
-    return dataclasses.replace(first, **changes)
-
-
-def merge_logs(logs: list[FlightLog]) -> FlightLog:
-    """Several files of one flight -> one FlightLog (series of one quantity on one clock are concatenated)."""
-    if len(logs) == 1:
-        return logs[0]
-    out = FlightLog(path=", ".join(log.path for log in logs))
-    for log in logs:
-        out.clock_links += log.clock_links
-        out.streams += log.streams
-        out.warnings += log.warnings
-        out.formats += log.formats
-        if out.camera_info is None:
-            out.camera_info = log.camera_info
-    for q in QUANTITIES:
-        found = [getattr(log, q) for log in logs if getattr(log, q) is not None]
-        if found:
-            setattr(out, q, _concat(found, q, out.warnings))
-    return out
 
 
 def read_flight(paths, mapping: dict | None = None) -> FlightLog:

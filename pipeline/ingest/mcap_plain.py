@@ -5,7 +5,6 @@ read (`iter_messages(topics=...)`) and decoded."""
 from __future__ import annotations
 
 import json
-import struct
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +12,7 @@ import numpy as np
 from pipeline.errors import LogReadError
 from pipeline.ingest.columns import Columns, sort_by_time
 from pipeline.ingest.frames import ORIENTATION_FRAMES, quat_ned_frd_from_frame, quat_wxyz_from_order
+from pipeline.ingest.mcap_records import first_line, linear_messages, mcap_errors, scan_channels
 from pipeline.ingest.model import (
     ALT_DATUMS,
     AttitudeSeries,
@@ -22,23 +22,13 @@ from pipeline.ingest.model import (
     RangeSeries,
     StreamInfo,
 )
-from pipeline.ingest.ros_messages import RosAccumulator, normalize_type, supplies_of
-from pipeline.ingest.rosbag import _fill, resolve_topics
+from pipeline.ingest.ros_messages import RosAccumulator, fill_log, normalize_type, resolve_topics, supplies_of
 
 JSON_QUANTITIES = ("position", "attitude", "gimbal", "range")
 # A message's `frame` field: <body>_<world> (ORIENTATION_FRAMES), optionally as body_/gimbal_/camera_<b>_to_<w>.
 ATTITUDE_FRAMES = {f: f for f in ORIENTATION_FRAMES}
 ATTITUDE_FRAMES.update({f"{who}_{f.replace('_', '_to_')}": f for f in ORIENTATION_FRAMES
                         for who in ("body", "gimbal", "camera")})
-
-
-def _errors():
-    from mcap.exceptions import McapError
-    return (McapError, ValueError, EOFError, AssertionError, KeyError, struct.error)
-
-
-def _first_line(exc: Exception) -> str:
-    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
 
 
 class _JsonAcc:
@@ -121,12 +111,12 @@ def read_mcap(path: str | Path, mapping: dict, ros_mapping: dict, scan_all: bool
         try:
             reader = make_reader(fh)
             summary = reader.get_summary()
-        except _errors() as exc:
+        except mcap_errors() as exc:
             summary = None
-            warnings.append(f"{path}: no MCAP summary ({_first_line(exc)}); scanning the file")
+            warnings.append(f"{path}: no MCAP summary ({first_line(exc)}); scanning the file")
         if summary is None:
             fh.seek(0)
-            channels, schemas = _scan_channels(fh, path)
+            channels, schemas = scan_channels(fh, path)
             counts = {}
         else:
             channels, schemas = summary.channels, summary.schemas
@@ -161,7 +151,7 @@ def read_mcap(path: str | Path, mapping: dict, ros_mapping: dict, scan_all: bool
         if topics:
             try:
                 it = make_reader(fh).iter_messages(topics=topics) if summary is not None \
-                    else _linear_messages(fh, set(topics))
+                    else linear_messages(fh, set(topics))
                 for schema, channel, message in it:
                     st = stats[channel.topic]
                     st[0] += 1
@@ -184,11 +174,11 @@ def read_mcap(path: str | Path, mapping: dict, ros_mapping: dict, scan_all: bool
                         msg = dec(message.data)
                         for acc in ros_by_topic[channel.topic]:
                             acc.add(msg, message.log_time)
-            except _errors() as exc:
+            except mcap_errors() as exc:
                 read = sum(s[0] for s in stats.values())
                 if read == 0:
-                    raise LogReadError(f"cannot read MCAP messages: {_first_line(exc)}", path=path) from None
-                warnings.append(f"{path}: reading stopped after {read} messages: {_first_line(exc)} "
+                    raise LogReadError(f"cannot read MCAP messages: {first_line(exc)}", path=path) from None
+                warnings.append(f"{path}: reading stopped after {read} messages: {first_line(exc)} "
                                 "(truncated or corrupt)")
     streams = []
     for t, ch in topic_chan.items():
@@ -203,40 +193,5 @@ def read_mcap(path: str | Path, mapping: dict, ros_mapping: dict, scan_all: bool
     log = FlightLog(path=str(path), streams=streams, warnings=warnings, formats=["mcap"])
     for acc in json_accs.values():
         setattr(log, acc.q, acc.series(path, warnings))
-    _fill(log, ros_accs, warnings, path)
+    fill_log(log, ros_accs, warnings, path)
     return log
-
-
-def _scan_channels(fh, path: Path):
-    """Channels and schemas of an MCAP file without a summary section (e.g. cut off while recording)."""
-    from mcap.records import Channel, Schema
-    from mcap.stream_reader import StreamReader
-
-    channels, schemas = {}, {}
-    try:
-        for rec in StreamReader(fh, skip_magic=False).records:
-            if isinstance(rec, Schema):
-                schemas[rec.id] = rec
-            elif isinstance(rec, Channel):
-                channels[rec.id] = rec
-    except _errors() as exc:
-        if not channels:
-            raise LogReadError(f"not a readable MCAP file: {_first_line(exc)}", path=path) from None
-    return channels, schemas
-
-
-def _linear_messages(fh, topics: set[str]):
-    """(schema, channel, message) of the selected topics by a linear scan (no summary/index needed)."""
-    from mcap.records import Channel, Message, Schema
-    from mcap.stream_reader import StreamReader
-
-    channels, schemas = {}, {}
-    for rec in StreamReader(fh, skip_magic=False).records:
-        if isinstance(rec, Schema):
-            schemas[rec.id] = rec
-        elif isinstance(rec, Channel):
-            channels[rec.id] = rec
-        elif isinstance(rec, Message):
-            ch = channels.get(rec.channel_id)
-            if ch is not None and ch.topic in topics:
-                yield schemas.get(ch.schema_id), ch, rec

@@ -16,6 +16,7 @@ from pipeline.ingest.frames import ORIENTATION_FRAMES, quat_ned_frd_from_frame
 from pipeline.ingest.model import (
     AttitudeSeries,
     CameraInfo,
+    FlightLog,
     FrameSeries,
     GimbalSeries,
     PositionSeries,
@@ -230,3 +231,52 @@ def decode_image(msg, msgtype: str) -> np.ndarray:
     elif enc == "bgra8":
         img = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
     return img
+
+
+# ---- shared by the bag and MCAP readers ------------------------------------------------------------------
+
+ROS_QUANTITIES = ("position", "attitude", "gimbal", "range", "images", "camera_info")
+
+
+def resolve_topics(cfg: dict, topic_types: dict[str, str], warnings: list[str], where: str) -> dict[str, str]:
+    """quantity -> topic chosen from the mapping: the named topic, else the first fallback present, else (by_type)
+    the only topic of a matching type. A topic of the wrong type is a warning, not a guess."""
+    chosen: dict[str, str] = {}
+    for q in ROS_QUANTITIES:
+        c = cfg[q]
+        types = TYPES[q]
+        for topic in [c["topic"], *c["fallback_topics"]]:
+            if topic in topic_types:
+                if normalize_type(topic_types[topic]) in types:
+                    chosen[q] = topic
+                    break
+                warnings.append(f"{where}: topic {topic} has type {topic_types[topic]}, not one of "
+                                f"{', '.join(types)}; not used for {q}")
+        if q in chosen or not c["by_type"]:
+            continue
+        taken = set(chosen.values())
+        cands = [t for t, ty in topic_types.items() if normalize_type(ty) in types and t not in taken]
+        if len(cands) == 1:
+            chosen[q] = cands[0]
+            warnings.append(f"{where}: {q} from {cands[0]} (the only {topic_types[cands[0]]} topic; "
+                            f"set ros.{q}.topic to silence)")
+        elif len(cands) > 1:
+            warnings.append(f"{where}: several topics could supply {q} ({', '.join(cands)}); set ros.{q}.topic")
+    return chosen
+
+
+def fill_log(log: FlightLog, accs: dict[str, RosAccumulator], warnings: list[str], path) -> None:
+    """Put the series of the accumulators into log (images as frames), with warnings on dropped messages."""
+    for q, acc in accs.items():
+        s = acc.series()
+        if acc.dropped:
+            what = "without a GPS fix" if q == "position" else "without an orientation"
+            warnings.append(f"{path}: {acc.dropped} of {acc.n} {acc.topic} messages {what} dropped")
+        if q == "position" and s is None and acc.n:
+            warnings.append(f"{path}: no GPS fix in {acc.n} {acc.topic} messages; no position read")
+        if q == "images":
+            log.frames = s
+        elif q == "camera_info":
+            log.camera_info = s
+        else:
+            setattr(log, q, s)

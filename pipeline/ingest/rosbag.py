@@ -14,37 +14,16 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
 from pipeline.errors import LogReadError
+from pipeline.ingest.mcap_records import linear_messages, mcap_errors, scan_channels
 from pipeline.ingest.model import FlightLog, FrameSeries, StreamInfo
-from pipeline.ingest.ros_messages import TYPES, RosAccumulator, decode_image, normalize_type, supplies_of
-
-QUANTITIES = ("position", "attitude", "gimbal", "range", "images", "camera_info")
-
-
-def resolve_topics(cfg: dict, topic_types: dict[str, str], warnings: list[str], where: str) -> dict[str, str]:
-    """quantity -> topic chosen from the mapping: the named topic, else the first fallback present, else (by_type)
-    the only topic of a matching type. A topic of the wrong type is a warning, not a guess."""
-    chosen: dict[str, str] = {}
-    for q in QUANTITIES:
-        c = cfg[q]
-        types = TYPES[q]
-        for topic in [c["topic"], *c["fallback_topics"]]:
-            if topic in topic_types:
-                if normalize_type(topic_types[topic]) in types:
-                    chosen[q] = topic
-                    break
-                warnings.append(f"{where}: topic {topic} has type {topic_types[topic]}, not one of "
-                                f"{', '.join(types)}; not used for {q}")
-        if q in chosen or not c["by_type"]:
-            continue
-        taken = set(chosen.values())
-        cands = [t for t, ty in topic_types.items() if normalize_type(ty) in types and t not in taken]
-        if len(cands) == 1:
-            chosen[q] = cands[0]
-            warnings.append(f"{where}: {q} from {cands[0]} (the only {topic_types[cands[0]]} topic; "
-                            f"set ros.{q}.topic to silence)")
-        elif len(cands) > 1:
-            warnings.append(f"{where}: several topics could supply {q} ({', '.join(cands)}); set ros.{q}.topic")
-    return chosen
+from pipeline.ingest.ros_messages import (
+    RosAccumulator,
+    decode_image,
+    fill_log,
+    normalize_type,
+    resolve_topics,
+    supplies_of,
+)
 
 
 def _typestore():
@@ -158,7 +137,7 @@ def read_rosbag(path: str | Path, mapping: dict, scan_all: bool = False) -> Flig
     finally:
         reader.close()
     log = FlightLog(path=str(path), streams=streams, warnings=warnings, formats=[fmt])
-    _fill(log, accs, warnings, path)
+    fill_log(log, accs, warnings, path)
     return log
 
 
@@ -209,16 +188,16 @@ def _read_ros1_scan(path: Path, mapping: dict, scan_all: bool, open_error: LogRe
     streams = [StreamInfo(t, ty, int(stats[t][0]), stats[t][1], stats[t][2], supplies_of(ty))
                for t, ty in topic_types.items()]
     log = FlightLog(path=str(path), streams=streams, warnings=warnings, formats=["ros1"])
-    _fill(log, accs, warnings, path)
+    fill_log(log, accs, warnings, path)
     return log
 
 
 def _read_ros2_mcap_direct(path: Path, mapping: dict, scan_all: bool, open_error: LogReadError) -> FlightLog:
     """A ROS 2 bag with MCAP storage that rosbags cannot open (e.g. cut off: no summary), read file by file with
     the plain-MCAP reader (linear scan, CDR channels by the ros mapping); else the original error."""
-    from pipeline.ingest.dispatch import merge_logs
     from pipeline.ingest.mapping import mapping_for
     from pipeline.ingest.mcap_plain import read_mcap
+    from pipeline.ingest.merge import merge_logs
 
     try:
         files = _McapDirect(path).files
@@ -232,22 +211,6 @@ def _read_ros2_mcap_direct(path: Path, mapping: dict, scan_all: bool, open_error
     log.warnings.insert(0, f"{path}: rosbags cannot open it ({why}); read its MCAP file(s) directly")
     log.path, log.formats = str(path), ["ros2"]
     return log
-
-
-def _fill(log: FlightLog, accs: dict[str, RosAccumulator], warnings: list[str], path) -> None:
-    for q, acc in accs.items():
-        s = acc.series()
-        if acc.dropped:
-            what = "without a GPS fix" if q == "position" else "without an orientation"
-            warnings.append(f"{path}: {acc.dropped} of {acc.n} {acc.topic} messages {what} dropped")
-        if q == "position" and s is None and acc.n:
-            warnings.append(f"{path}: no GPS fix in {acc.n} {acc.topic} messages; no position read")
-        if q == "images":
-            log.frames = s
-        elif q == "camera_info":
-            log.camera_info = s
-        else:
-            setattr(log, q, s)
 
 
 class _RosbagsSource:
@@ -290,13 +253,11 @@ class _McapSource:
     decoded by mcap_ros2; files without a summary are scanned linearly."""
 
     def __init__(self, files: list[Path]):
-        from pipeline.ingest.mcap_plain import _scan_channels
-
         self.files = files
         self.topic_types: dict[str, str] = {}
         for f in files:
             with open(f, "rb") as fh:
-                channels, schemas = _scan_channels(fh, f)
+                channels, schemas = scan_channels(fh, f)
             for ch in channels.values():
                 if ch.message_encoding == "cdr" and ch.schema_id in schemas:
                     self.topic_types[ch.topic] = normalize_type(schemas[ch.schema_id].name)
@@ -304,19 +265,18 @@ class _McapSource:
     def messages(self, topic: str):
         from mcap_ros2.decoder import DecoderFactory
 
-        from pipeline.ingest.mcap_plain import _errors, _linear_messages
 
         factory = DecoderFactory()
         for f in self.files:
             with open(f, "rb") as fh:
                 decoders: dict[int, object] = {}
                 try:
-                    for schema, channel, message in _linear_messages(fh, {topic}):
+                    for schema, channel, message in linear_messages(fh, {topic}):
                         if channel.id not in decoders:
                             decoders[channel.id] = factory.decoder_for(channel.message_encoding, schema)
                         dec = decoders[channel.id]
                         yield message.log_time, (lambda data=message.data, dec=dec: dec(data))
-                except _errors():
+                except mcap_errors():
                     return  # file cut off: the images before the cut are all there is
 
 

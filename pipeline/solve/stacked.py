@@ -12,14 +12,6 @@ import numpy as np
 
 from pipeline.solve.observations import ObservationBatch, Observations, Sigma
 
-try:  # numpy.linalg.det without its per-call wrapping (type checks, errstate): the same LAPACK call
-    from numpy.linalg import _umath_linalg
-
-    def _det(a: np.ndarray) -> np.ndarray:
-        return _umath_linalg.det(a, signature="d->d")
-except (ImportError, AttributeError):  # pragma: no cover - other numpy layouts
-    _det = np.linalg.det
-
 
 @dataclass
 class Stacked:
@@ -102,11 +94,8 @@ class Stacked:
     def det_M(self) -> np.ndarray:
         """(B,n) det of the left 3x3 block of each P, computed once."""
         det = self.__dict__.get("_det_cache")
-        if det is None and self.M.shape[0] * self.M.shape[1] <= 256:  # few matrices: one LAPACK call is cheaper
-            det = self.__dict__["_det_cache"] = _det(self.M)
         if det is None:
-            m = self.M
-            a, b, c = m[..., 0, :], m[..., 1, :], m[..., 2, :]
+            a, b, c = self.M[..., 0, :], self.M[..., 1, :], self.M[..., 2, :]
             det = self.__dict__["_det_cache"] = (
                 a[..., 0] * (b[..., 1] * c[..., 2] - b[..., 2] * c[..., 1])
                 - a[..., 1] * (b[..., 0] * c[..., 2] - b[..., 2] * c[..., 0])

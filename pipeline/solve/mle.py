@@ -178,11 +178,12 @@ def _solve3(N, g, lam=None):
     if lam is not None:
         a, d, i = a + lam * a, d + lam * d, i + lam * i
     A0, B0, C0 = d * i - f * f, c * f - b * i, b * f - c * d
-    D0, E0, F0 = a * i - c * c, b * c - a * f, a * d - b * b
     det = a * A0 + b * B0 + c * C0
     singular = ~((a > 0) & (d > 0) & (i > 0) & (det / (a * d * i) > SINGULAR_DET))
-    adj = np.stack([A0, B0, C0, B0, D0, E0, C0, E0, F0]).reshape(3, 3, -1)
-    x = np.einsum("ijb,jb->bi", adj, np.asarray(g)) / det[:, None]
+    D0, E0, F0 = a * i - c * c, b * c - a * f, a * d - b * b
+    g0, g1, g2 = g
+    x = np.stack([(A0 * g0 + B0 * g1 + C0 * g2), (B0 * g0 + D0 * g1 + E0 * g2), (C0 * g0 + E0 * g1 + F0 * g2)],
+                 axis=1) / det[:, None]
     return x, singular, (A0, B0, C0, D0, E0, F0), det
 
 

@@ -32,7 +32,7 @@ def start_status(X0: np.ndarray, init_status: np.ndarray | None) -> tuple[np.nda
     finite0 = np.isfinite(X0).all(axis=1)
     status = np.full(X0.shape[0], Status.MAX_ITERATIONS, dtype=np.int8)
     if init_status is not None:
-        bad = np.isin(init_status, (Status.DIVERGED, Status.DEGENERATE)) | ~finite0
+        bad = (init_status == Status.DIVERGED) | (init_status == Status.DEGENERATE) | ~finite0
         status[bad] = np.where(init_status[bad] == Status.DIVERGED, Status.DIVERGED, Status.DEGENERATE)
     else:
         bad = ~finite0

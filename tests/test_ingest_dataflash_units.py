@@ -14,7 +14,7 @@ from pipeline.ingest.writers import DataFlashWriter
 WEEK, MS0 = 2300, 100_000_000  # GPS week 2300, 100000 s into the week
 
 
-def _write(path, n=10, with_mnt=True, with_rfnd=True):
+def _write(path, n=10, with_mnt=True, with_rfnd=True, orient=0):
     with DataFlashWriter(path) as w:
         w.fmt("GPS", "QBIHLLe", "TimeUS,Status,GMS,GWk,Lat,Lng,Alt")
         w.fmt("ATT", "QccC", "TimeUS,Roll,Pitch,Yaw")
@@ -29,7 +29,7 @@ def _write(path, n=10, with_mnt=True, with_rfnd=True):
             if with_mnt:
                 w.write("MNT", t_us + 20, 0.0, -30.0, 15.0, 285.0, 1234.5 if i % 2 else 0.0)
             if with_rfnd:
-                w.write("RFND", t_us + 30, 0, 1234 + i, 4 if i % 3 else 2, 25)
+                w.write("RFND", t_us + 30, 0, 1234 + i, 4 if i % 3 else 2, orient)
 
 
 def test_dataflash_units_frames_clock(tmp_path):
@@ -95,3 +95,21 @@ def test_dataflash_old_firmware_fields(tmp_path):
     assert any("no GPS week/time in the log; series stay on the boot clock" in w for w in log.warnings)
     assert log.range is None  # MNT has no Dist in this firmware
     assert log.gimbal.yaw_in_vehicle_frame.all()  # old MNT Yaw: relative to the vehicle
+
+
+def test_dataflash_rfnd_orientation_and_instance(tmp_path):
+    """RFND Orient 25 (down) is a terrain altimeter, not the laser at the target: ignored unless configured."""
+    p = tmp_path / "down.bin"
+    _write(p, with_mnt=False, orient=25)
+    log = read_flight([p])
+    assert log.range is None
+    assert any("10 of 10 RFND records" in w and "down-facing" in w for w in log.warnings)
+    log = read_flight([p], mapping={"dataflash": {"range": {"orientations": [25]}}})
+    np.testing.assert_allclose(log.range.range_m[:3], [12.34, 12.35, 12.36])
+    p = tmp_path / "two.bin"
+    with DataFlashWriter(p) as w:
+        w.fmt("RFND", "QBCBB", "TimeUS,Instance,Dist,Stat,Orient")
+        for i in range(6):
+            w.write("RFND", 1_000_000 + i * 100_000, i % 2, 50_000 + i, 4, 0)  # instance 1 at 500.01 m, ...
+    log = read_flight([p], mapping={"dataflash": {"range": {"instance": 1}}})
+    np.testing.assert_allclose(log.range.range_m, [500.01, 500.03, 500.05])

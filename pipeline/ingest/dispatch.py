@@ -20,7 +20,8 @@ MAGIC = (
 
 
 def detect_format(path: str | Path) -> str:
-    """One of tlog, dataflash, ulog, ros1, ros2, mcap, video, srt, by folder layout, magic bytes, then suffix."""
+    """One of tlog, dataflash (binary or text), ulog, ros1, ros2, mcap, video, srt, by folder layout, magic bytes
+    (an `FMT,` line for text DataFlash), then suffix."""
     p = Path(path)
     if not p.exists():
         raise InputError("no such file or folder", path=p)
@@ -35,7 +36,7 @@ def detect_format(path: str | Path) -> str:
         return "srt"
     try:
         with open(p, "rb") as f:
-            head = f.read(16)
+            head = f.read(4096)
     except OSError as exc:
         raise LogReadError(f"cannot read: {exc.strerror}", path=p) from None
     for magic, fmt in MAGIC:
@@ -43,14 +44,18 @@ def detect_format(path: str | Path) -> str:
             if fmt in ("mcap", "ros2") and (p.parent / "metadata.yaml").is_file():
                 return "ros2"
             return fmt
+    from pipeline.ingest.dataflash import is_text_dataflash
+    if is_text_dataflash(head):
+        return "dataflash"  # text DataFlash (.log): Mission Planner's conversion, old firmware
     by_suffix = {".tlog": "tlog", ".bin": "dataflash", ".ulg": "ulog", ".bag": "ros1", ".mcap": "mcap",
-                 ".db3": "ros2"}
+                 ".db3": "ros2", ".log": "dataflash"}
     if suffix in by_suffix:
         if not head:
             raise LogReadError("empty file", path=p)
         if suffix in (".tlog",):
             return "tlog"
-        raise LogReadError(f"not a {by_suffix[suffix]} file (unexpected leading bytes {head[:8]!r})", path=p)
+        what = "text DataFlash log (no FMT lines)" if suffix == ".log" else by_suffix[suffix] + " file"
+        raise LogReadError(f"not a {what} (unexpected leading bytes {head[:8]!r})", path=p)
     raise LogReadError(f"unknown log type (suffix {suffix or 'none'!r}, leading bytes {head[:8]!r})", path=p)
 
 

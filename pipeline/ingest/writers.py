@@ -169,3 +169,22 @@ class DataFlashWriter:
 
     def __exit__(self, *exc):
         self.close()
+
+
+def dataflash_text_from_binary(src, dst, newline: str = "\n") -> int:
+    """Write a binary DataFlash log as a text DataFlash log (`FMT, type, len, name, format, columns` lines, then
+    `NAME, v1, v2, ...` with the values pymavlink decodes, scaled as Mission Planner prints them). Returns the
+    number of data records written."""
+    from pymavlink import DFReader
+
+    df = DFReader.DFReader_binary(str(src), zero_time_base=True)
+    n = 0
+    with open(Path(dst), "w", newline="") as out:
+        while (m := df.recv_msg()) is not None:
+            if m.get_type() == "FMT":
+                out.write(f"FMT, {m.Type}, {m.Length}, {m.Name}, {m.Format}, {m.Columns}{newline}")
+                continue
+            vals = [repr(v) if isinstance(v, float) else str(v) for v in (getattr(m, c) for c in m.fmt.columns)]
+            out.write(", ".join([m.get_type(), *vals]) + newline)
+            n += 1
+    return n

@@ -10,7 +10,7 @@ from pipeline.errors import RidgelocError
 from pipeline.ingest.dispatch import detect_format, merge_logs, read_file
 from pipeline.ingest.model import FlightLog
 
-QUANTITY_ATTRS = ("position", "attitude", "gimbal", "range", "frames", "camera_events")
+QUANTITY_ATTRS = ("position", "attitude", "gimbal", "range", "frames", "camera_events", "field_of_view")
 
 
 @dataclass

@@ -8,7 +8,7 @@ import numpy as np
 
 from pipeline.ingest.model import FlightLog
 
-QUANTITIES = ("position", "attitude", "gimbal", "range", "frames", "camera_events")
+QUANTITIES = ("position", "attitude", "gimbal", "range", "frames", "camera_events", "field_of_view")
 
 
 def _concat(series_list: list, name: str, warnings: list[str]):

@@ -134,3 +134,25 @@ def test_ulog_gimbal_flags_distance_sensor_units():
     assert log.range.clock == "unix" and log.range.t_ns[0] == 1_700_000_000 * 10**9
     assert log.position.t_ns.tolist() == [(1_700_000_000 + k) * 10**9 for k in (1, 2, 3)]
     assert log.position.alt_m[0] == pytest.approx(536.0) and log.position.alt_datum == "ellipsoid"
+
+
+def test_ulog_distance_sensor_instances_by_orientation():
+    """Instance 0 is the down-facing altimeter (orientation 25), instance 1 the forward laser: the laser is used."""
+    from pipeline.ingest.mapping import mapping_for
+    from pipeline.ingest.model import FlightLog
+    from pipeline.ingest.ulog import fill_from_topics
+
+    ts = np.array([1_000_000, 2_000_000], np.uint64)
+
+    def sensor(dist, orient):
+        return {"timestamp": ts, "current_distance": np.array(dist, np.float32),
+                "min_distance": np.full(2, 0.1, np.float32), "max_distance": np.full(2, 3000.0, np.float32),
+                "signal_quality": np.full(2, -1, np.int8), "orientation": np.full(2, orient, np.uint8)}
+
+    data = {"distance_sensor": sensor([3.5, 3.6], 25), "distance_sensor[1]": sensor([1520.0, 1519.5], 0)}
+    log = FlightLog(path="x.ulg")
+    fill_from_topics(log, data, mapping_for("ulog"), Path("x.ulg"))
+    np.testing.assert_allclose(log.range.range_m, [1520.0, 1519.5])
+    log = FlightLog(path="x.ulg")
+    fill_from_topics(log, {"distance_sensor": sensor([3.5, 3.6], 25)}, mapping_for("ulog"), Path("x.ulg"))
+    assert log.range is None and any("facing down or sideways ignored" in w for w in log.warnings)

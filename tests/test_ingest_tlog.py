@@ -33,7 +33,7 @@ def _write_flight(path: Path, n: int = 20) -> None:
                 0, 0, boot_ms, 64 if i % 2 else 32, [math.cos(0.25), 0.0, math.sin(0.25), 0.0],
                 0, 0, 0, 0), src_component=154)
             w.write(t + 5, ml.MAVLink_distance_sensor_message(boot_ms, 20, 4000, [1234, 5000, 10, 65535][i % 4],
-                                                              0, 0, 25, 0), src_component=1)
+                                                              0, 0, 0, 0), src_component=1)
             w.write(t + 6, ml.MAVLink_camera_tracking_geo_status_message(
                 0, 0, 0, 0.0, 0, 0, 0, 0, 0, 0, [2500.5, float("nan"), -1.0, 812.25][i % 4], 0, 0))
 
@@ -189,3 +189,52 @@ def test_mount_status_rangefinder_camera_feedback_and_system_choice(tmp_path):
     assert any("systems [1, 7]; using system 1" in w for w in log.warnings)
     log7 = read_flight([p], mapping={"tlog": {"system_id": 7}})
     assert log7.position.t_ns.size == 2
+
+
+def test_distance_sensor_orientation_and_signal_quality(tmp_path):
+    """Two DISTANCE_SENSORs: id 1 down-facing (orientation 25, the altimeter), id 2 forward (0, the laser).
+    Only the forward one is the range; signal_quality 1 = invalid signal (0 = unknown is fine)."""
+    p = tmp_path / "two.tlog"
+    with TlogWriter(p) as w:
+        for i in range(4):
+            t, boot = T0_US + i * 100_000, 1000 + i * 100
+            w.write(t, ml.MAVLink_distance_sensor_message(boot, 10, 4000, 250, 0, 1, 25, 0))
+            w.write(t + 1, ml.MAVLink_distance_sensor_message(boot, 10, 60000, 45678 + i, 0, 2, 0, 0,
+                                                              signal_quality=[0, 100, 1, 50][i]))
+    log = read_flight([p], mapping={"tlog": {"range": {"messages": ["DISTANCE_SENSOR"]}}})
+    np.testing.assert_allclose(log.range.range_m, [456.78, 456.79, 456.80, 456.81])
+    assert log.range.valid.tolist() == [True, True, False, True]
+    assert any("4 of 8 DISTANCE_SENSOR samples with orientation 25 ignored" in w for w in log.warnings)
+    log = read_flight([p], mapping={"tlog": {"range": {"messages": ["DISTANCE_SENSOR"],
+                                                       "distance_sensor_orientations": None,
+                                                       "distance_sensor_id": 1}}})
+    np.testing.assert_allclose(log.range.range_m, [2.5] * 4)
+
+
+def test_mount_orientation_and_mount_status(tmp_path):
+    """MOUNT_ORIENTATION: roll/pitch deg earth frame, yaw deg relative to the vehicle, yaw_absolute deg earth
+    (used when set); MOUNT_STATUS: pointing_a pitch, b roll, c yaw in cdeg (ArduPilot: yaw relative to vehicle)."""
+    p = tmp_path / "mount.tlog"
+    with TlogWriter(p) as w:
+        w.write(T0_US, ml.MAVLink_mount_orientation_message(1000, 1.0, -30.0, 15.0, 250.0))
+        w.write(T0_US + 1, ml.MAVLink_mount_orientation_message(1100, 0.0, -45.0, 20.0, 0.0))
+        w.write(T0_US + 2, ml.MAVLink_mount_status_message(0, 0, -2500, 100, 9000))
+    log = read_flight([p], mapping={"tlog": {"gimbal": {"messages": ["MOUNT_ORIENTATION"]}}})
+    ypr = Rotation.from_quat(log.gimbal.quat_wxyz, scalar_first=True).as_euler("ZYX", degrees=True)
+    np.testing.assert_allclose(ypr, [[250.0 - 360, -30.0, 1.0], [20.0, -45.0, 0.0]], atol=1e-9)
+    assert log.gimbal.yaw_in_vehicle_frame.tolist() == [False, True]
+    log = read_flight([p], mapping={"tlog": {"gimbal": {"messages": ["MOUNT_STATUS"]}}})
+    ypr = Rotation.from_quat(log.gimbal.quat_wxyz, scalar_first=True).as_euler("ZYX", degrees=True)
+    np.testing.assert_allclose(ypr, [[90.0, -25.0, 1.0]], atol=1e-9)
+    assert log.gimbal.yaw_in_vehicle_frame.tolist() == [True]
+
+
+def test_rangefinder_float_metres(tmp_path):
+    """ArduPilot RANGEFINDER: float metres (beyond DISTANCE_SENSOR's 655.35 m); <= 0 and NaN invalid."""
+    p = tmp_path / "rf.tlog"
+    with TlogWriter(p) as w:
+        for i, d in enumerate([1234.5, 0.0, float("nan"), 2000.25]):
+            w.write(T0_US + i * 100_000, ml.MAVLink_rangefinder_message(d, 12.0))
+    log = read_flight([p], mapping={"tlog": {"range": {"messages": ["RANGEFINDER"]}}})
+    np.testing.assert_allclose(log.range.range_m, [1234.5, 0.0, np.nan, 2000.25])
+    assert log.range.valid.tolist() == [True, False, False, True]

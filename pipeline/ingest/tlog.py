@@ -159,9 +159,9 @@ class _Collector:
         if want is not None and m.id != want:
             return
         r = np.nan if m.current_distance == 65535 else m.current_distance * 0.01
-        self._c("DISTANCE_SENSOR", r="d", lo="d", hi="d").add(
+        self._c("DISTANCE_SENSOR", r="d", lo="d", hi="d", orient="q", quality="q").add(
             rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, r=r, lo=m.min_distance * 0.01,
-            hi=m.max_distance * 0.01)
+            hi=m.max_distance * 0.01, orient=m.orientation, quality=getattr(m, "signal_quality", 0))
 
     def _camera_feedback(self, m, rec, sysid, compid):
         self._c("CAMERA_FEEDBACK", idx="q").add(rec_ns=rec, boot_ns=-1, sys=sysid, idx=m.img_idx)
@@ -306,6 +306,35 @@ def _times(a: dict, mapping: dict, link: ClockLink | None, name: str = "", warni
     return a["rec_ns"], "unix"
 
 
+def _distance_sensor_orientation(coll: _Collector, mapping: dict, warnings: list[str], path: Path) -> None:
+    """Keep only DISTANCE_SENSOR samples whose orientation is the laser's (forward or custom, e.g. on the
+    gimbal): a down-facing sensor (25) is the terrain altimeter, not the range to the target."""
+    cols, allowed = coll.cols.get("DISTANCE_SENSOR"), mapping["range"]["distance_sensor_orientations"]
+    if cols is None or not len(cols) or allowed is None:
+        return
+    a = cols.arrays()
+    keep = np.isin(a["orient"], [int(o) for o in allowed])
+    if not keep.all():
+        found = ", ".join(str(int(o)) for o in np.unique(a["orient"][~keep]))
+        warnings.append(f"{path}: {int((~keep).sum())} of {keep.size} DISTANCE_SENSOR samples with orientation "
+                        f"{found} ignored (not the laser: 25 = down-facing altimeter; see "
+                        "tlog.range.distance_sensor_orientations)")
+    coll.cols["DISTANCE_SENSOR"] = _Kept({k: v[keep] for k, v in a.items()})
+
+
+class _Kept:
+    """Already assembled columns standing in for a Columns object."""
+
+    def __init__(self, arrays: dict):
+        self._a = arrays
+
+    def __len__(self) -> int:
+        return int(self._a["rec_ns"].size)
+
+    def arrays(self) -> dict:
+        return self._a
+
+
 def _assemble(path: Path, coll: _Collector, mapping: dict, streams, warnings) -> FlightLog:
     log = FlightLog(path=str(path), streams=streams, warnings=warnings, formats=["tlog"])
     src = path.name
@@ -364,6 +393,7 @@ def _assemble(path: Path, coll: _Collector, mapping: dict, streams, warnings) ->
         t, q, veh = sort_by_time(t, q, veh)
         log.gimbal = GimbalSeries(t, q, veh, source=f"{src}:{name}", clock=clock)
 
+    _distance_sensor_orientation(coll, mapping, warnings, path)
     got = _pick(coll, mapping["range"]["messages"], mapping, "range", warnings, path)
     if got is not None:
         name, a = got
@@ -373,7 +403,7 @@ def _assemble(path: Path, coll: _Collector, mapping: dict, streams, warnings) ->
         hi = np.minimum(a["hi"], float(mapping["range"]["max_m"]))
         with np.errstate(invalid="ignore"):
             valid = np.isfinite(r) & (r > lo) & (r <= hi) if name != "DISTANCE_SENSOR" else \
-                np.isfinite(r) & (r >= lo) & (r <= hi) & (r > float(mapping["range"]["min_m"]))
+                np.isfinite(r) & (r >= lo) & (r <= hi) & (r > float(mapping["range"]["min_m"])) & (a["quality"] != 1)
         t, r, valid = sort_by_time(t, r, valid)
         log.range = RangeSeries(t, r, valid, source=f"{src}:{name}", clock=clock)
 

@@ -104,6 +104,8 @@ def read_ulog(path: str | Path, mapping: dict, scan_all: bool = False) -> Flight
     for d in ulog.data_list:
         if d.multi_id == 0 and len(d.data["timestamp"]):
             data[d.name] = d.data
+        elif d.multi_id > 0 and d.name in mapping["range"]["topics"] and len(d.data["timestamp"]):
+            data[f"{d.name}[{d.multi_id}]"] = d.data  # several rangefinders: chosen by orientation
         elif d.multi_id > 0 and d.name in topics:
             warnings.append(f"{path}: {d.name} has several instances; using instance 0")
     log = FlightLog(path=str(path), warnings=warnings, formats=["ulog"])
@@ -125,6 +127,27 @@ def read_ulog(path: str | Path, mapping: dict, scan_all: bool = False) -> Flight
 def series_to_clock_scalar(t_ns: int, link: ClockLink) -> int:
     from pipeline.ingest.clocks import map_clock
     return int(map_clock(np.array([t_ns], np.int64), link)[0])
+
+
+def _laser_instance(name: str, data: dict[str, dict], orientations, warnings: list[str], path: Path) -> dict | None:
+    """Samples of the first instance of a distance_sensor topic (`name`, `name[1]`, ...) whose orientation is
+    the laser's (0 forward, 100 custom): a down-facing one (25) is the terrain altimeter. None if there is none."""
+    keys = [k for k in data if k == name or (k.startswith(name + "[") and k.endswith("]"))]
+    ignored = 0
+    for k in sorted(keys, key=len):
+        d = data[k]
+        if orientations is None or "orientation" not in d:
+            return d
+        keep = np.isin(d["orientation"], [int(o) for o in orientations])
+        ignored += int((~keep).sum())
+        if keep.any():
+            if not keep.all():
+                warnings.append(f"{path}: {k}: {int((~keep).sum())} samples with another orientation ignored")
+            return {f: v[keep] for f, v in d.items()}
+    if ignored:
+        warnings.append(f"{path}: {ignored} {name} samples facing down or sideways ignored (not the laser; see "
+                        "ulog.range.orientations)")
+    return None
 
 
 def fill_from_topics(log: FlightLog, data: dict[str, dict], mapping: dict, path: Path) -> None:
@@ -168,8 +191,8 @@ def fill_from_topics(log: FlightLog, data: dict[str, dict], mapping: dict, path:
             log.gimbal = GimbalSeries(t, q, veh, source=f"{src}:{name}", clock="boot")
             break
     for name in mapping["range"]["topics"]:
-        if name in data:
-            d = data[name]
+        d = _laser_instance(name, data, mapping["range"]["orientations"], warnings, path)
+        if d is not None:
             r = d["current_distance"].astype(float)
             lo = np.maximum(d["min_distance"].astype(float), float(mapping["range"]["min_m"]))
             hi = np.minimum(d["max_distance"].astype(float), float(mapping["range"]["max_m"]))

@@ -18,7 +18,9 @@ prints one, is kept as a ClockLink from "video" to "local" (the aircraft's wall 
 
 from __future__ import annotations
 
+import math
 import re
+from datetime import timedelta
 from pathlib import Path
 
 import numpy as np
@@ -39,8 +41,6 @@ from pipeline.ingest.model import (
 NUM = r"[-+]?\d+(?:\.\d+)?"
 VAL = r"(N/A|n/a|" + NUM + r")"
 NO_TIME = np.iinfo(np.int64).min  # wall_ns of a cue without a date
-_CUE = re.compile(r"^[ \t]*(\d+):(\d\d):(\d\d)[,.](\d{1,3})[ \t]*-->[^\n]*$", re.M)
-_INDEX = re.compile(r"\n[ \t]*\d+[ \t]*\n?$")
 _KEY = re.compile(r"([A-Za-z_]+)\s*:\s*" + VAL)
 _GPS = re.compile(r"GPS\s*\(\s*" + VAL + r"\s*,\s*" + VAL + r"\s*(?:,\s*" + VAL + r"\s*([Mm])?\s*)?\)")
 _PRY = re.compile(r"([FG])\.PRY\s*\(\s*(" + NUM + r")°?\s*,\s*(" + NUM + r")°?\s*,\s*(" + NUM + r")°?\s*\)")
@@ -54,6 +54,7 @@ ALIASES = {"latitude": ("latitude", "lat"), "longitude": ("longitude", "longtitu
            "focal_len": ("focal_len",), "dzoom": ("dzoom_ratio", "dzoom"),
            "g_yaw": ("gb_yaw",), "g_pitch": ("gb_pitch",), "g_roll": ("gb_roll",),
            "f_yaw": ("drone_yaw",), "f_pitch": ("drone_pitch",), "f_roll": ("drone_roll",)}
+_QUANTITY_OF = {name: (q, rank) for q, names in ALIASES.items() for rank, name in enumerate(names)}
 FLOAT_COLS = ("lat", "lon", "alt", "abs_alt", "rel_alt", "f_roll", "f_pitch", "f_yaw", "g_roll", "g_pitch", "g_yaw",
               "focal_mm", "dzoom")
 
@@ -63,14 +64,16 @@ def _num(s: str | None) -> float:
 
 
 def _cues(text: str):
-    """(start ns, body text) of every cue. A cue runs from its time line to the index line before the next
-    time line, so blank lines inside a cue (M300) and missing blank lines between cues do not split it."""
-    marks = list(_CUE.finditer(text))
-    for k, m in enumerate(marks):
-        end = marks[k + 1].start() if k + 1 < len(marks) else len(text)
-        body = _INDEX.sub("", text[m.end():end].rstrip())
-        h, mi, s, ms = m.groups()
-        yield ((int(h) * 60 + int(mi)) * 60 + int(s)) * 10**9 + int(ms.ljust(3, "0")) * 10**6, body
+    """(start ns, body text) of every cue, split by the `srt` library (it keeps blank lines inside a cue, as the
+    M300 writes them, and skips what is not a cue, such as a cut-off time line)."""
+    import srt
+
+    us = timedelta(microseconds=1)
+    for sub in srt.parse(text, ignore_errors=True):
+        yield (sub.start // us) * 1000, sub.content
+
+
+_DAY_NS: dict[str, int] = {}
 
 
 def _wall_ns(body: str) -> int:
@@ -79,8 +82,11 @@ def _wall_ns(body: str) -> int:
     if d is None:
         return NO_TIME
     y, mo, da, h, mi, s, ms, us = d.groups()
-    day = np.datetime64(f"{y}-{mo}-{da}T{h}:{mi}:{s}", "ns").astype(np.int64)
-    return int(day) + int((ms or "0").ljust(3, "0")) * 10**6 + int((us or "0").ljust(3, "0")) * 10**3
+    key = y + mo + da
+    if key not in _DAY_NS:
+        _DAY_NS[key] = int(np.datetime64(f"{y}-{mo}-{da}", "ns").astype(np.int64))
+    return (_DAY_NS[key] + ((int(h) * 60 + int(mi)) * 60 + int(s)) * 10**9 + int((ms or "0").ljust(3, "0")) * 10**6
+            + int((us or "0").ljust(3, "0")) * 10**3)
 
 
 def _focal_mm(raw: str | None, scale) -> float:
@@ -114,21 +120,24 @@ def parse_srt(text: str, alt: str = "abs", gps_order: str = "auto", focal_len_sc
     nan = float("nan")
     for t_ns, body in _cues(text):
         n_cues += 1
-        plain = re.sub(r"<[^>]+>", " ", body)
-        raw: dict[str, str] = {}
+        plain = body  # <font> tags need no removal: no pattern matches inside them
+        got: dict[str, str] = {}
+        ranks: dict[str, int] = {}
         for k, v in _KEY.findall(plain):
-            raw.setdefault(k.lower(), v)
-        got = {q: next((raw[n] for n in names if n in raw), None) for q, names in ALIASES.items()}
+            qr = _QUANTITY_OF.get(k.lower())
+            if qr is not None and qr[1] < ranks.get(qr[0], 99):
+                got[qr[0]], ranks[qr[0]] = v, qr[1]
         row = dict.fromkeys(FLOAT_COLS, nan)
         row.update(t_ns=t_ns, wall_ns=_wall_ns(plain))
         for q in ("abs_alt", "rel_alt", "g_yaw", "g_pitch", "g_roll", "f_yaw", "f_pitch", "f_roll"):
-            row[q] = _num(got[q])
-        row["focal_mm"] = _focal_mm(got["focal_len"], focal_len_scale)
-        dz = got["dzoom"] or (m.group(1) if (m := _DZOOM.search(plain)) else None)
+            if q in got:
+                row[q] = _num(got[q])
+        row["focal_mm"] = _focal_mm(got.get("focal_len"), focal_len_scale)
+        dz = got.get("dzoom") or (m.group(1) if "DZOOM" in plain and (m := _DZOOM.search(plain)) else None)
         row["dzoom"] = _dzoom(dz) if dz is not None else nan
-        if got["latitude"] is not None or got["longitude"] is not None:
-            row["lat"], row["lon"] = _num(got["latitude"]), _num(got["longitude"])
-        elif (g := _GPS.search(plain)) is not None:
+        if "latitude" in got or "longitude" in got:
+            row["lat"], row["lon"] = _num(got.get("latitude")), _num(got.get("longitude"))
+        elif "GPS" in plain and (g := _GPS.search(plain)) is not None:
             a, b, third, unit = g.groups()
             order = gps_order
             if order == "auto":  # GPS(lat, lon, 12.3M) carries an altitude; GPS(lon, lat, sats) a count
@@ -141,16 +150,18 @@ def parse_srt(text: str, alt: str = "abs", gps_order: str = "auto", focal_len_sc
                 row["abs_alt"] = _num(third)
         else:
             continue  # no position in this cue (a camera-only cue, or cut off before it)
-        if np.isnan(row["rel_alt"]):
+        if "rel_alt" not in got and ("H" in plain or "BAROMETER" in plain):
             hm = _H.search(plain) or _BARO.search(plain)
             row["rel_alt"] = float(hm.group(1)) if hm else nan
-        for which, p, r, y in _PRY.findall(plain):
-            pre = "f_" if which == "F" else "g_"
-            row[pre + "pitch"], row[pre + "roll"], row[pre + "yaw"] = float(p), float(r), float(y)
-        if not (np.isfinite(row["lat"]) and np.isfinite(row["lon"])) or (row["lat"] == 0 and row["lon"] == 0):
+        if "PRY" in plain:
+            for which, p, r, y in _PRY.findall(plain):
+                pre = "f_" if which == "F" else "g_"
+                row[pre + "pitch"], row[pre + "roll"], row[pre + "yaw"] = float(p), float(r), float(y)
+        lat, lon = row["lat"], row["lon"]
+        if not (math.isfinite(lat) and math.isfinite(lon)) or (lat == 0 and lon == 0):
             n_no_fix += 1
             continue  # no GPS fix yet (0, 0 or N/A), or the cue was cut off inside the position
-        use_rel = alt == "rel" or np.isnan(row["abs_alt"])
+        use_rel = alt == "rel" or math.isnan(row["abs_alt"])
         row["alt"], row["rel"] = (row["rel_alt"], True) if use_rel else (row["abs_alt"], False)
         rows.append(row)
     out: dict[str, np.ndarray] = {"n_no_fix": np.array(n_no_fix), "n_cues": np.array(n_cues)}

@@ -1,15 +1,19 @@
 """Ingest throughput and peak memory per reader, next to the underlying library's raw iteration in the same run.
 
-    python scripts/bench_ingest.py [--messages 1200000] [--out bench_ingest.md]
+    python scripts/bench_ingest.py [--messages 1200000] [--only tlog,mcap,ros2,dflog,srt,real] [--out FILE]
 
 Generates (in a temp dir) a MAVLink 2 .tlog with >= 1 M messages (position 10 Hz, attitude 50 Hz, gimbal 50 Hz,
 laser 10 Hz, SYSTEM_TIME 1 Hz, and 16 other common message types that our reader only counts), a plain MCAP
-with JSON channels and a ROS 2 bag (MCAP storage) of the synthetic-flight layout, then times each in a fresh
+with JSON channels, a ROS 2 bag (MCAP storage) of the synthetic-flight layout, a text DataFlash log (.log, GPS
+10 Hz, ATT/MNT 50 Hz, RFND 10 Hz, IMU/BARO 50 Hz only counted) and a DJI SRT of a 30 fps video in the Mavic 3
+layout (focal length and zoom changing), then times each in a fresh
 subprocess (peak RSS = VmHWM, reset through /proc/self/clear_refs after all imports, minus the RSS then) for:
 - ours:  pipeline.ingest.read_flight (full conversion into the model);
 - raw:   the library alone: pymavlink mavutil recv_msg() over every message, mcap iter_messages + json.loads,
-         rosbags AnyReader.messages + deserialize, DFReader recv_msg, pyulog ULog(...);
-and the same on every file in ../shared/logs. msgs/s = messages in the file / wall time. Each child first runs
+         rosbags AnyReader.messages + deserialize, DFReader recv_msg (binary and text), pyulog ULog(...),
+         srt.parse (cues only: the library that splits our SRT cues, without the telemetry in them);
+and the same on every file in ../shared/logs and ../shared/srt, and on ../shared/logs' .BIN converted to text.
+msgs/s = messages in the file / wall time. Each child first runs
 its reader once on a small file of the same format (untimed), so one-time costs (type stores, generated
 deserializers, first calls into numpy/scipy) are left out on both sides.
 """
@@ -29,6 +33,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 LOGS = REPO / ".." / "shared" / "logs"
+SRTS = REPO / ".." / "shared" / "srt"
 T0_NS = 1_700_000_000 * 10**9
 
 
@@ -159,11 +164,57 @@ def gen_ros2(path: Path, n_target: int) -> int:
     return n
 
 
+def gen_dataflash_text(path: Path, n_target: int) -> int:
+    """Text DataFlash (Mission Planner's conversion layout) with modern TimeUS records."""
+    fmts = ["FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format,Columns",
+            "FMT, 130, 46, GPS, QBIHBcLLefffB, TimeUS,Status,GMS,GWk,NSats,HDop,Lat,Lng,Alt,Spd,GCrs,VZ,U",
+            "FMT, 131, 27, ATT, QccccCCCC, TimeUS,DesRoll,Roll,DesPitch,Pitch,DesYaw,Yaw,ErrRP,ErrYaw",
+            "FMT, 132, 43, MNT, Qffffffff, TimeUS,DRoll,Roll,DPitch,Pitch,DYawB,YawB,DYawE,YawE",
+            "FMT, 133, 12, RFND, QBCBB, TimeUS,Instance,Dist,Stat,Orient",
+            "FMT, 134, 53, IMU, QffffffIIfBBHH, TimeUS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,EG,EA,T,GH,AH,GHz,AHz",
+            "FMT, 135, 37, BARO, QffcfIff, TimeUS,Alt,Press,Temp,CRt,SMS,Offset,GndTemp"]
+    seconds = math.ceil(n_target / (10 + 50 * 4 + 10))
+    n = 0
+    with open(path, "w") as f:
+        f.write("\n".join(fmts) + "\n")
+        for s in range(seconds):
+            lines = []
+            for j in range(50):
+                t = 60_000_000 + s * 1_000_000 + j * 20_000
+                if j % 5 == 0:
+                    lines.append(f"GPS, {t}, 3, {100_000_000 + s * 1000 + j * 20}, 2300, 12, 0.7, "
+                                 f"{47.3977419 + s * 1e-6:.7f}, 8.5455939, 488.12, 5.0, 90.0, 0.1, 1")
+                    lines.append(f"RFND, {t + 5}, 0, {1234.5 + j:.2f}, 4, 0")
+                lines.append(f"ATT, {t + 1}, 0.0, 5.0, 0.0, -2.5, 0.0, {j * 7.2:.2f}, 0.1, 0.0")
+                lines.append(f"MNT, {t + 2}, 0.0, 0.0, -30.0, -30.0, 15.0, 15.0, 285.0, 285.0")
+                lines.append(f"IMU, {t + 3}, 0.001, 0.002, 0.003, 0.1, 0.2, -9.8, 0, 0, 45.0, 1, 1, 400, 400")
+                lines.append(f"BARO, {t + 4}, 12.5, 101300.0, 25.0, 0.1, {t // 1000}, 0.0, 25.0")
+            n += len(lines)
+            f.write("\n".join(lines) + "\n")
+    return n
+
+
+def gen_srt(path: Path, n_cues: int) -> int:
+    """DJI SRT, Mavic 3 layout, 30 fps, with the focal length and digital zoom changing every 10 s."""
+    with open(path, "w") as f:
+        for i in range(n_cues):
+            t0, t1 = i * 1000 // 30, (i + 1) * 1000 // 30
+            ts = [f"{t // 3_600_000:02d}:{t // 60_000 % 60:02d}:{t // 1000 % 60:02d},{t % 1000:03d}" for t in (t0, t1)]
+            zoom = 1 + (i // 300) % 4
+            f.write(f"{i + 1}\n{ts[0]} --> {ts[1]}\n<font size=\"28\">FrameCnt: {i + 1}, DiffTime: 33ms\n"
+                    f"2023-01-14 12:{51 + t0 // 60_000 % 8}:{t0 // 1000 % 60:02d}.{t0 % 1000:03d}\n"
+                    f"[iso: 100] [shutter: 1/1600.0] [fnum: 1.7] [ev: 0] [focal_len: 24.00] [dzoom_ratio: {zoom}.00] "
+                    f"[latitude: {45.4631 + i * 1e-6:.6f}] [longitude: {9.1882 + i * 1e-6:.6f}] "
+                    f"[rel_alt: {50 + i * 1e-3:.3f} abs_alt: {180 + i * 1e-3:.3f}] "
+                    f"[gb_yaw: {i % 360 - 180:.1f} gb_pitch: -30.0 gb_roll: 0.0]</font>\n\n")
+    return n_cues
+
+
 CHILD = r'''
 import json, sys, time
 sys.path.insert(0, {repo!r})
 kind, path, warm_path = sys.argv[1], sys.argv[2], sys.argv[3]
-import pipeline.ingest, pymavlink.mavutil, pymavlink.DFReader, mcap.reader, rosbags.highlevel, pyulog, numpy, scipy
+import pipeline.ingest, pymavlink.mavutil, pymavlink.DFReader, mcap.reader, rosbags.highlevel, pyulog, numpy, scipy, srt
 import pipeline.ingest.tlog, pipeline.ingest.ulog, pipeline.ingest.dataflash, pipeline.ingest.rosbag
 import pipeline.ingest.mcap_plain, pipeline.ingest.srt, pipeline.ingest.video, mcap_ros2.decoder
 from rosbags.typesys import Stores, get_typestore
@@ -187,6 +238,14 @@ def run(path):
         r = pymavlink.DFReader.DFReader_binary(path, zero_time_base=True)
         while r.recv_msg() is not None:
             n += 1
+    elif kind == "raw-dataflash-text":
+        r = pymavlink.DFReader.DFReader_text(path, zero_time_base=True)
+        while r.recv_msg() is not None:
+            n += 1
+    elif kind == "raw-srt":
+        import srt
+        with open(path, encoding="utf-8", errors="replace") as f:
+            n = sum(1 for _ in srt.parse(f.read(), ignore_errors=True))
     elif kind == "raw-ulog":
         pyulog.ULog(path)
     elif kind == "raw-mcap":
@@ -233,7 +292,14 @@ def count_messages(path: Path) -> int:
 
 
 RAW = {"tlog": "raw-tlog", "dataflash": "raw-dataflash", "ulog": "raw-ulog", "mcap": "raw-mcap",
-       "ros1": "raw-rosbags", "ros2": "raw-rosbags"}
+       "ros1": "raw-rosbags", "ros2": "raw-rosbags", "dataflash-text": "raw-dataflash-text", "srt": "raw-srt"}
+
+
+def raw_kind(fmt: str, path: Path) -> str:
+    """The raw-library baseline of a file: text DataFlash is read by DFReader_text."""
+    if fmt == "dataflash" and path.is_file() and not path.read_bytes()[:2] == b"\xa3\x95":
+        return RAW["dataflash-text"]
+    return RAW[fmt]
 
 
 def main() -> int:
@@ -241,34 +307,49 @@ def main() -> int:
     ap.add_argument("--messages", type=int, default=1_200_000, help="messages in the generated tlog")
     ap.add_argument("--mcap-messages", type=int, default=600_000)
     ap.add_argument("--ros2-messages", type=int, default=300_000)
+    ap.add_argument("--dflog-messages", type=int, default=600_000, help="records in the generated text DataFlash")
+    ap.add_argument("--srt-cues", type=int, default=54_000, help="cues in the generated SRT (30 min at 30 fps)")
+    ap.add_argument("--only", default="tlog,mcap,ros2,dflog,srt,real",
+                    help="comma-separated subset of: tlog, mcap, ros2, dflog (text DataFlash), srt, real")
     ap.add_argument("--out", type=Path, default=None, help="also write the table (markdown) here")
     args = ap.parse_args()
+    only = set(args.only.split(","))
     sys.path.insert(0, str(REPO))
     from pipeline.ingest import detect_format
+    from pipeline.ingest.writers import dataflash_text_from_binary
 
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         t = time.perf_counter()
-        files = [(tmp / "large.tlog", gen_tlog(tmp / "large.tlog", args.messages))]
-        files.append((tmp / "large.mcap", gen_mcap(tmp / "large.mcap", args.mcap_messages)))
-        files.append((tmp / "large_ros2", gen_ros2(tmp / "large_ros2", args.ros2_messages)))
-        warm = {"large.tlog": tmp / "warm.tlog", "large.mcap": tmp / "warm.mcap", "large_ros2": tmp / "warm_ros2"}
-        gen_tlog(warm["large.tlog"], 5000)
-        gen_mcap(warm["large.mcap"], 2000)
-        gen_ros2(warm["large_ros2"], 2000)
+        gens = {"tlog": ("large.tlog", gen_tlog, args.messages, 5000),
+                "mcap": ("large.mcap", gen_mcap, args.mcap_messages, 2000),
+                "ros2": ("large_ros2", gen_ros2, args.ros2_messages, 2000),
+                "dflog": ("large_text_dataflash.log", gen_dataflash_text, args.dflog_messages, 2000),
+                "srt": ("large_30min_30fps.SRT", gen_srt, args.srt_cues, 300)}
+        files, warm = [], {}
+        for key, (name, gen, n_target, n_warm) in gens.items():
+            if key in only:
+                files.append((tmp / name, gen(tmp / name, n_target)))
+                warm[name] = tmp / ("warm_" + name)
+                gen(warm[name], n_warm)
         print(f"generated {', '.join(f'{p.name}: {n} msgs' for p, n in files)} in {time.perf_counter() - t:.1f} s",
               file=sys.stderr)
-        for p in sorted(LOGS.iterdir()):
-            if p.name != "README.md":
-                files.append((p, count_messages(p)))
+        if "real" in only:
+            for p in sorted(LOGS.iterdir()) + sorted(SRTS.iterdir()):
+                if p.name != "README.md":
+                    files.append((p, count_messages(p)))
+                if p.suffix == ".BIN":
+                    txt = tmp / (p.stem + "_as_text.log")
+                    dataflash_text_from_binary(p, txt)
+                    files.append((txt, count_messages(txt)))
         for path, n in files:
             fmt = detect_format(path)
             size_mib = (sum(f.stat().st_size for f in path.iterdir()) if path.is_dir() else path.stat().st_size) / 2**20
             warm_path = warm.get(path.name, path)  # real logs are small: warm up on the file itself
             ours = run_child("ours", path, warm_path)
-            raw = run_child(RAW[fmt], path, warm_path)
-            rows.append((path.name, fmt, n, size_mib, ours, raw))
+            raw = run_child(raw_kind(fmt, path), path, warm_path)
+            rows.append((path.name, fmt, n, size_mib, ours, raw, raw_kind(fmt, path)))
             print(f"{path.name}: ours {ours} raw {raw}", file=sys.stderr)
     head = ("| file | format | messages | MiB | ours s | ours msgs/s | ours peak MiB | raw library | raw s | "
             "raw msgs/s | raw peak MiB | ours/raw time |")
@@ -278,9 +359,9 @@ def main() -> int:
             return ["error", "-", "-"]
         return [f"{d['seconds']:.3f}", f"{n / d['seconds']:,.0f}", f"{d['peak_mib']:.1f}"]
 
-    for name, fmt, n, mib, o, r in rows:
+    for name, fmt, n, mib, o, r, rk in rows:
         ratio = "-" if "error" in o or "error" in r else f"{o['seconds'] / r['seconds']:.2f}"
-        lines.append(f"| {name} | {fmt} | {n:,} | {mib:.1f} | " + " | ".join(cells(o, n)) + f" | {RAW[fmt]} | "
+        lines.append(f"| {name} | {fmt} | {n:,} | {mib:.1f} | " + " | ".join(cells(o, n)) + f" | {rk} | "
                      + " | ".join(cells(r, n)) + f" | {ratio} |")
     table = "\n".join(lines)
     print(table)

@@ -95,6 +95,8 @@ def test_layout_details():
     ypr = Rotation.from_quat(log.attitude.quat_wxyz[0], scalar_first=True).as_euler("ZYX", degrees=True)
     np.testing.assert_allclose(ypr, [-88.3, 6.0, 0.7], atol=1e-9)
     assert log.streams[0].count == 4  # the cut-off fourth cue is counted, not read
+    assert any("1 cue(s) cut off inside the position" in w for w in log.warnings)
+    assert not any("GPS fix" in w for w in log.warnings)
 
     log = read_flight(DATA / "avata_gimbal.SRT")
     pitch = Rotation.from_quat(log.gimbal.quat_wxyz, scalar_first=True).as_euler("ZYX", degrees=True)[:, 1]

@@ -110,13 +110,13 @@ def parse_srt(text: str, alt: str = "abs", gps_order: str = "auto", focal_len_sc
     (chosen by `alt`, NaN where absent) and rel (alt is relative to take-off), abs_alt and rel_alt (NaN where
     absent), aircraft f_* and gimbal g_* roll/pitch/yaw in degrees, focal_mm (35 mm equivalent) and dzoom (NaN
     where absent), wall_ns (the cue's printed date/time, naive, NO_TIME where absent). Also `n_no_fix` (cues
-    with 0,0 or N/A positions) and `n_cues` (every cue) as 0-d arrays."""
+    with 0,0 or N/A positions), `n_cut` (cues cut off inside the position) and `n_cues` (every cue), 0-d."""
     if alt not in ("abs", "rel"):
         raise ConfigError(f"srt mapping: alt must be 'abs' or 'rel', not {alt!r}")
     if gps_order not in ("auto", "lat_lon", "lon_lat"):
         raise ConfigError(f"srt mapping: gps_order must be auto, lat_lon or lon_lat, not {gps_order!r}")
     text = text.lstrip("\ufeff").replace("\r\n", "\n").replace("\r", "\n")
-    rows, n_no_fix, n_cues = [], 0, 0
+    rows, n_no_fix, n_cut, n_cues = [], 0, 0, 0
     nan = float("nan")
     for t_ns, body in _cues(text):
         n_cues += 1
@@ -135,8 +135,11 @@ def parse_srt(text: str, alt: str = "abs", gps_order: str = "auto", focal_len_sc
         row["focal_mm"] = _focal_mm(got.get("focal_len"), focal_len_scale)
         dz = got.get("dzoom") or (m.group(1) if "DZOOM" in plain and (m := _DZOOM.search(plain)) else None)
         row["dzoom"] = _dzoom(dz) if dz is not None else nan
-        if "latitude" in got or "longitude" in got:
-            row["lat"], row["lon"] = _num(got.get("latitude")), _num(got.get("longitude"))
+        if ("latitude" in got) != ("longitude" in got):
+            n_cut += 1
+            continue  # half a position: the cue was cut off (end of file) inside it
+        if "latitude" in got:
+            row["lat"], row["lon"] = _num(got["latitude"]), _num(got["longitude"])
         elif "GPS" in plain and (g := _GPS.search(plain)) is not None:
             a, b, third, unit = g.groups()
             order = gps_order
@@ -160,11 +163,11 @@ def parse_srt(text: str, alt: str = "abs", gps_order: str = "auto", focal_len_sc
         lat, lon = row["lat"], row["lon"]
         if not (math.isfinite(lat) and math.isfinite(lon)) or (lat == 0 and lon == 0):
             n_no_fix += 1
-            continue  # no GPS fix yet (0, 0 or N/A), or the cue was cut off inside the position
+            continue  # no GPS fix yet (0, 0 or N/A)
         use_rel = alt == "rel" or math.isnan(row["abs_alt"])
         row["alt"], row["rel"] = (row["rel_alt"], True) if use_rel else (row["abs_alt"], False)
         rows.append(row)
-    out: dict[str, np.ndarray] = {"n_no_fix": np.array(n_no_fix), "n_cues": np.array(n_cues)}
+    out: dict[str, np.ndarray] = {"n_no_fix": np.array(n_no_fix), "n_cut": np.array(n_cut), "n_cues": np.array(n_cues)}
     if not rows:
         return out
     for k in rows[0]:
@@ -230,6 +233,8 @@ def read_srt(path: str | Path, mapping: dict) -> FlightLog:
     warn = log.warnings.append
     if cols["n_no_fix"]:
         warn(f"{path}: {int(cols['n_no_fix'])} cues without a GPS fix (0,0 or N/A) skipped")
+    if cols["n_cut"]:
+        warn(f"{path}: {int(cols['n_cut'])} cue(s) cut off inside the position (end of file?) skipped")
     t = cols["t_ns"]
     if (np.diff(t) < 0).any():
         warn(f"{path}: cue times start again {int((np.diff(t) < 0).sum())} time(s) (SRT files joined?); each run "

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import re
+from array import array
 from datetime import timedelta
 from pathlib import Path
 
@@ -116,7 +117,9 @@ def parse_srt(text: str, alt: str = "abs", gps_order: str = "auto", focal_len_sc
     if gps_order not in ("auto", "lat_lon", "lon_lat"):
         raise ConfigError(f"srt mapping: gps_order must be auto, lat_lon or lon_lat, not {gps_order!r}")
     text = text.lstrip("\ufeff").replace("\r\n", "\n").replace("\r", "\n")
-    rows, n_no_fix, n_cut, n_cues = [], 0, 0, 0
+    n_no_fix, n_cut, n_cues = 0, 0, 0
+    col = {k: array("d") for k in FLOAT_COLS} | {"t_ns": array("q"), "wall_ns": array("q"), "rel": array("b")}
+    appends = [(k, c.append) for k, c in col.items()]  # compact columns: 8 bytes a value, not a dict per cue
     nan = float("nan")
     for t_ns, body in _cues(text):
         n_cues += 1
@@ -166,13 +169,14 @@ def parse_srt(text: str, alt: str = "abs", gps_order: str = "auto", focal_len_sc
             continue  # no GPS fix yet (0, 0 or N/A)
         use_rel = alt == "rel" or math.isnan(row["abs_alt"])
         row["alt"], row["rel"] = (row["rel_alt"], True) if use_rel else (row["abs_alt"], False)
-        rows.append(row)
+        for k, append in appends:
+            append(row[k])
     out: dict[str, np.ndarray] = {"n_no_fix": np.array(n_no_fix), "n_cut": np.array(n_cut), "n_cues": np.array(n_cues)}
-    if not rows:
+    if not col["t_ns"]:
         return out
-    for k in rows[0]:
-        dtype = np.int64 if k in ("t_ns", "wall_ns") else (bool if k == "rel" else float)
-        out[k] = np.array([r[k] for r in rows], dtype=dtype)
+    for k, c in col.items():
+        out[k] = np.frombuffer(c, np.int64) if c.typecode == "q" else np.frombuffer(c, c.typecode).astype(
+            bool if k == "rel" else float)
     return out
 
 

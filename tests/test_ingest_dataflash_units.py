@@ -113,3 +113,24 @@ def test_dataflash_rfnd_orientation_and_instance(tmp_path):
             w.write("RFND", 1_000_000 + i * 100_000, i % 2, 50_000 + i, 4, 0)  # instance 1 at 500.01 m, ...
     log = read_flight([p], mapping={"dataflash": {"range": {"instance": 1}}})
     np.testing.assert_allclose(log.range.range_m, [500.01, 500.03, 500.05])
+
+
+def test_dataflash_instances_are_never_interleaved(tmp_path):
+    """Two GPS receivers and two mounts (field I, ArduPilot 4.x): one instance each, never both in one series."""
+    p = tmp_path / "dual.bin"
+    with DataFlashWriter(p) as w:
+        w.fmt("GPS", "QBBIHLLe", "TimeUS,I,Status,GMS,GWk,Lat,Lng,Alt")
+        w.fmt("MNT", "QBfffff", "TimeUS,I,Roll,Pitch,YawB,YawE,Dist")
+        for i in range(6):
+            t_us = 1_000_000 + i * 100_000
+            w.write("GPS", t_us, i % 2, 3, MS0 + i * 100, WEEK, 473977419 + 1000 * (i % 2), 85455939, 48812)
+            w.write("MNT", t_us + 1, i % 2, 0.0, -30.0 - 10 * (i % 2), 0.0, 90.0, 0.0)
+    log = read_flight([p])
+    np.testing.assert_allclose(log.position.lat_deg, [47.3977419] * 3)  # instance 0
+    assert any("GPS records of instances [0, 1]; position from instance 0" in w for w in log.warnings)
+    pitch = Rotation.from_quat(log.gimbal.quat_wxyz, scalar_first=True).as_euler("ZYX", degrees=True)[:, 1]
+    np.testing.assert_allclose(pitch, [-30.0] * 3, atol=1e-9)
+    log = read_flight([p], mapping={"dataflash": {"position": {"instance": 1}, "gimbal": {"instance": 1}}})
+    np.testing.assert_allclose(log.position.lat_deg, [47.3978419] * 3)
+    pitch = Rotation.from_quat(log.gimbal.quat_wxyz, scalar_first=True).as_euler("ZYX", degrees=True)[:, 1]
+    np.testing.assert_allclose(pitch, [-40.0] * 3, atol=1e-9)

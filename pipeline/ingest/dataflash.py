@@ -246,6 +246,24 @@ def _time_untimed(arrays: dict[str, dict], tfield: dict, clock_msg: str, mapping
     return clock
 
 
+def _one_instance(a: dict | None, cfg: dict, quantity: str, warnings: list[str], path: Path) -> dict | None:
+    """The records of one sensor instance (GPS, MNT, RFND carry an instance field `I`/`Instance` on firmware
+    with several): `cfg["instance"]`, or the lowest one logged, with a warning when there are several, so two
+    receivers or mounts are never interleaved into one series."""
+    if a is None or "instance" not in a or not a["t"].size:
+        return a
+    want = cfg.get("instance")
+    if want is None:
+        found = np.unique(a["instance"]).astype(int)
+        if found.size == 1:
+            return a
+        want = int(found.min())
+        warnings.append(f"{path}: {cfg['message']} records of instances {found.tolist()}; {quantity} from instance "
+                        f"{want} (set dataflash.{quantity}.instance to choose)")
+    keep = a["instance"] == int(want)
+    return {k: v[keep] for k, v in a.items()}
+
+
 def _streams(df, types: list, scan_all: bool) -> list[StreamInfo]:
     """One StreamInfo per record type; first/last times (boot) by decoding the first and last record."""
     streams = []
@@ -278,7 +296,7 @@ def _assemble(log: FlightLog, arrays: dict[str, dict], mapping: dict, path: Path
             log.clock_links.append(ClockLink("boot", "unix", a["t"][ok], unix))
 
     c = mapping["position"]
-    a = arrays.get(c["message"])
+    a = _one_instance(arrays.get(c["message"]), c, "position", warnings, path)
     if a is not None and {"lat_deg", "lon_deg", "alt_m"} <= set(a):
         ok = np.isfinite(a["lat_deg"]) & ~((a["lat_deg"] == 0) & (a["lon_deg"] == 0))
         if "status" in a:
@@ -297,7 +315,7 @@ def _assemble(log: FlightLog, arrays: dict[str, dict], mapping: dict, path: Path
         log.attitude = AttitudeSeries(t, q, source=f"{src}:{c['message']}", clock=clock)
 
     c = mapping["gimbal"]
-    a = arrays.get(c["message"])
+    a = _one_instance(arrays.get(c["message"]), c, "gimbal", warnings, path)
     if a is not None and {"roll_deg", "pitch_deg"} <= set(a) and a["t"].size:
         if "yaw_earth_deg" in a:
             yaw, veh = a["yaw_earth_deg"], np.zeros(a["t"].size, bool)
@@ -313,16 +331,14 @@ def _assemble(log: FlightLog, arrays: dict[str, dict], mapping: dict, path: Path
     c = mapping["range"]
     a = arrays.get(c["message"])
     if a is not None and "range_m" in a and a["t"].size:
-        keep = np.ones(a["t"].size, bool)
-        if "instance" in a and c["instance"] is not None:
-            keep &= a["instance"] == int(c["instance"])
         if "orient" in a and c["orientations"] is not None:
-            keep &= np.isin(a["orient"], [int(o) for o in c["orientations"]])
-        if not keep.all():
-            warnings.append(f"{path}: {int((~keep).sum())} of {keep.size} {c['message']} records from other "
-                            "rangefinders (instance, or orientation not forward: a down-facing one is an "
-                            "altimeter) ignored; see dataflash.range.instance/orientations")
-            a = {k: v[keep] for k, v in a.items()}
+            keep = np.isin(a["orient"], [int(o) for o in c["orientations"]])
+            if not keep.all():
+                warnings.append(f"{path}: {int((~keep).sum())} of {keep.size} {c['message']} records from "
+                                "rangefinders not facing forward (a down-facing one is an altimeter) ignored; see "
+                                "dataflash.range.orientations")
+                a = {k: v[keep] for k, v in a.items()}
+        a = _one_instance(a, c, "range", warnings, path)
     if a is not None and "range_m" in a and a["t"].size:
         r = a["range_m"]
         valid = np.isfinite(r) & (r > float(c["min_m"])) & (r <= float(c["max_m"]))

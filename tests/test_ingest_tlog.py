@@ -209,6 +209,33 @@ def test_distance_sensor_orientation_and_signal_quality(tmp_path):
                                                        "distance_sensor_orientations": None,
                                                        "distance_sensor_id": 1}}})
     np.testing.assert_allclose(log.range.range_m, [2.5] * 4)
+    # both forward-facing: never interleaved, the sensor with more samples is used
+    with TlogWriter(p) as w:
+        for i in range(5):
+            t, boot = T0_US + i * 100_000, 1000 + i * 100
+            if i < 2:
+                w.write(t, ml.MAVLink_distance_sensor_message(boot, 10, 4000, 250, 0, 1, 0, 0))
+            w.write(t + 1, ml.MAVLink_distance_sensor_message(boot, 10, 60000, 45678, 0, 2, 0, 0))
+    log = read_flight([p], mapping={"tlog": {"range": {"messages": ["DISTANCE_SENSOR"]}}})
+    np.testing.assert_allclose(log.range.range_m, [456.78] * 5)
+    assert any("component 1 sensor id 2 for range" in w for w in log.warnings)
+
+
+def test_two_gimbals_are_not_interleaved(tmp_path):
+    """GIMBAL_DEVICE_ATTITUDE_STATUS from two gimbal components: one is used (most samples, or the chosen one)."""
+    p = tmp_path / "g.tlog"
+    with TlogWriter(p) as w:
+        for i in range(4):
+            q = [math.cos(0.25), 0.0, math.sin(0.25), 0.0]
+            w.write(T0_US + i * 1000, ml.MAVLink_gimbal_device_attitude_status_message(0, 0, i, 64, q, 0, 0, 0, 0),
+                    src_component=154)
+            if i < 2:
+                w.write(T0_US + i * 1000 + 1, ml.MAVLink_gimbal_device_attitude_status_message(
+                    0, 0, i, 64, [1.0, 0.0, 0.0, 0.0], 0, 0, 0, 0), src_component=171)
+    log = read_flight([p])
+    assert log.gimbal.t_ns.size == 4 and any("component 154 for gimbal" in w for w in log.warnings)
+    log = read_flight([p], mapping={"tlog": {"gimbal": {"component_id": 171}}})
+    np.testing.assert_allclose(log.gimbal.quat_wxyz, [[1, 0, 0, 0]] * 2)
 
 
 def test_mount_orientation_and_mount_status(tmp_path):

@@ -98,30 +98,30 @@ class _Collector:
 
     def _c(self, name: str, **typecodes) -> Columns:
         if name not in self.cols:
-            self.cols[name] = Columns(rec_ns="q", boot_ns="q", sys="q", **typecodes)
+            self.cols[name] = Columns(rec_ns="q", boot_ns="q", sys="q", dev="q", **typecodes)
         return self.cols[name]
 
     def _global_position_int(self, m, rec, sysid, compid):
         if m.lat == 0 and m.lon == 0:
             return  # no fix yet
         self._c("GLOBAL_POSITION_INT", lat="d", lon="d", alt="d").add(
-            rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, lat=m.lat * 1e-7, lon=m.lon * 1e-7,
+            rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, dev=compid, lat=m.lat * 1e-7, lon=m.lon * 1e-7,
             alt=m.alt * 1e-3)
 
     def _gps_raw_int(self, m, rec, sysid, compid):
         if m.fix_type < 3:
             return
         self._c("GPS_RAW_INT", lat="d", lon="d", alt="d", alt_ell="d").add(
-            rec_ns=rec, boot_ns=-1, sys=sysid, lat=m.lat * 1e-7, lon=m.lon * 1e-7, alt=m.alt * 1e-3,
+            rec_ns=rec, boot_ns=-1, sys=sysid, dev=compid, lat=m.lat * 1e-7, lon=m.lon * 1e-7, alt=m.alt * 1e-3,
             alt_ell=m.alt_ellipsoid * 1e-3)
 
     def _attitude(self, m, rec, sysid, compid):
         self._c("ATTITUDE", roll="d", pitch="d", yaw="d").add(
-            rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, roll=m.roll, pitch=m.pitch, yaw=m.yaw)
+            rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, dev=compid, roll=m.roll, pitch=m.pitch, yaw=m.yaw)
 
     def _attitude_quaternion(self, m, rec, sysid, compid):
         self._c("ATTITUDE_QUATERNION", w="d", x="d", y="d", z="d").add(
-            rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, w=m.q1, x=m.q2, y=m.q3, z=m.q4)
+            rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, dev=compid, w=m.q1, x=m.q2, y=m.q3, z=m.q4)
 
     def _gimbal_device_attitude_status(self, m, rec, sysid, compid):
         q = m.q
@@ -133,25 +133,25 @@ class _Collector:
         else:
             veh = not flags & GIMBAL_FLAG_YAW_LOCK
         self._c("GIMBAL_DEVICE_ATTITUDE_STATUS", w="d", x="d", y="d", z="d", veh="b").add(
-            rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, w=q[0], x=q[1], y=q[2], z=q[3], veh=veh)
+            rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, dev=compid, w=q[0], x=q[1], y=q[2], z=q[3], veh=veh)
 
     def _mount_status(self, m, rec, sysid, compid):
         self._c("MOUNT_STATUS", roll="d", pitch="d", yaw="d").add(
-            rec_ns=rec, boot_ns=-1, sys=sysid, roll=m.pointing_b * 0.01, pitch=m.pointing_a * 0.01,
+            rec_ns=rec, boot_ns=-1, sys=sysid, dev=compid, roll=m.pointing_b * 0.01, pitch=m.pointing_a * 0.01,
             yaw=m.pointing_c * 0.01)
 
     def _mount_orientation(self, m, rec, sysid, compid):
         earth = np.isfinite(m.yaw_absolute) and m.yaw_absolute != 0.0
         self._c("MOUNT_ORIENTATION", roll="d", pitch="d", yaw="d", veh="b").add(
-            rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, roll=m.roll, pitch=m.pitch,
+            rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, dev=compid, roll=m.roll, pitch=m.pitch,
             yaw=m.yaw_absolute if earth else m.yaw, veh=not earth)
 
     def _camera_tracking_geo_status(self, m, rec, sysid, compid):
         self._c("CAMERA_TRACKING_GEO_STATUS", r="d", lo="d", hi="d").add(
-            rec_ns=rec, boot_ns=-1, sys=sysid, r=m.dist, lo=0.0, hi=np.inf)
+            rec_ns=rec, boot_ns=-1, sys=sysid, dev=compid, r=m.dist, lo=0.0, hi=np.inf)
 
     def _rangefinder(self, m, rec, sysid, compid):
-        self._c("RANGEFINDER", r="d", lo="d", hi="d").add(rec_ns=rec, boot_ns=-1, sys=sysid, r=m.distance,
+        self._c("RANGEFINDER", r="d", lo="d", hi="d").add(rec_ns=rec, boot_ns=-1, sys=sysid, dev=compid, r=m.distance,
                                                             lo=0.0, hi=np.inf)
 
     def _distance_sensor(self, m, rec, sysid, compid):
@@ -160,20 +160,21 @@ class _Collector:
             return
         r = np.nan if m.current_distance == 65535 else m.current_distance * 0.01
         self._c("DISTANCE_SENSOR", r="d", lo="d", hi="d", orient="q", quality="q").add(
-            rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, r=r, lo=m.min_distance * 0.01,
-            hi=m.max_distance * 0.01, orient=m.orientation, quality=getattr(m, "signal_quality", 0))
+            rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, dev=compid * 256 + m.id, r=r,
+            lo=m.min_distance * 0.01, hi=m.max_distance * 0.01, orient=m.orientation,
+            quality=getattr(m, "signal_quality", 0))
 
     def _camera_feedback(self, m, rec, sysid, compid):
-        self._c("CAMERA_FEEDBACK", idx="q").add(rec_ns=rec, boot_ns=-1, sys=sysid, idx=m.img_idx)
+        self._c("CAMERA_FEEDBACK", idx="q").add(rec_ns=rec, boot_ns=-1, sys=sysid, dev=compid, idx=m.img_idx)
 
     def _camera_image_captured(self, m, rec, sysid, compid):
-        self._c("CAMERA_IMAGE_CAPTURED", idx="q").add(rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid,
+        self._c("CAMERA_IMAGE_CAPTURED", idx="q").add(rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, dev=compid,
                                                       idx=m.image_index)
 
     def _system_time(self, m, rec, sysid, compid):
         if m.time_unix_usec == 0:
             return  # no UNIX time before the GPS fix
-        self._c("SYSTEM_TIME", unix_ns="q").add(rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid,
+        self._c("SYSTEM_TIME", unix_ns="q").add(rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, dev=compid,
                                                 unix_ns=m.time_unix_usec * 1000)
 
 
@@ -290,8 +291,30 @@ def _pick(coll: _Collector, names: list[str], mapping: dict, what: str, warnings
             if not keep.any():
                 continue
             a = {k: v[keep] for k, v in a.items()}
+        if what in ("gimbal", "range"):
+            a = _one_device(a, name, what, mapping, warnings, path)
         return name, a
     return None
+
+
+def _one_device(a: dict, name: str, what: str, mapping: dict, warnings: list[str], path: Path) -> dict:
+    """Samples of one device: a vehicle may carry two gimbals (components) or several rangefinders (DISTANCE_SENSOR
+    ids); interleaving them would make one jumping series. `tlog.gimbal.component_id` chooses the gimbal, else the
+    device with the most samples is used, with a warning."""
+    want = mapping["gimbal"]["component_id"] if what == "gimbal" else None
+    if want is not None:
+        keep = a["dev"] == int(want)
+    else:
+        devs, n = np.unique(a["dev"], return_counts=True)
+        if devs.size == 1:
+            return a
+        keep = a["dev"] == devs[np.argmax(n)]
+        label = ([f"component {d // 256} sensor id {d % 256}" for d in devs] if name == "DISTANCE_SENSOR"
+                 else [f"component {d}" for d in devs])
+        key = "tlog.range.distance_sensor_id" if name == "DISTANCE_SENSOR" else "tlog.gimbal.component_id"
+        warnings.append(f"{path}: {name} from several devices ({', '.join(label)}); using "
+                        f"{label[int(np.argmax(n))]} for {what} (set {key})")
+    return {k: v[keep] for k, v in a.items()}
 
 
 def _times(a: dict, mapping: dict, link: ClockLink | None, name: str = "", warnings: list | None = None):

@@ -7,7 +7,7 @@ Layouts (the test corpus in tests/data/srt has one file per layout; docs/ingest.
   `[focal_len: ..]` (35 mm equivalent; x10 integers on older firmware) and digital zoom `[dzoom_ratio: ..]`
   (x10000 integers on some firmware) or `[dzoom: ..]`;
 - `GPS (lon, lat, sats) ... H 38.00m ... F.PRY (p°, r°, y°), G.PRY (p°, r°, y°)` (Phantom 4 RTK / Pro), aircraft
-  and gimbal pitch/roll/yaw in degrees (NED, ZYX, yaw from true north), `DZOOM 2.000` on some;
+  and gimbal pitch/roll/yaw in degrees (NED, ZYX, yaw from true north); a `DZOOM 2.000` token is read too;
 - `HOME(lon,lat) date ... GPS(lon,lat,sats) BAROMETER:h` (Phantom 3/4, Mavic Pro);
 - `GPS(lat,lon,12.3M)` (enterprise payloads: a decimal third value with an `M` is the altitude, an integer is
   the satellite count, which is what tells the coordinate order apart).

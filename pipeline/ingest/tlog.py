@@ -98,30 +98,31 @@ class _Collector:
 
     def _c(self, name: str, **typecodes) -> Columns:
         if name not in self.cols:
-            self.cols[name] = Columns(rec_ns="q", boot_ns="q", sys="q", dev="q", **typecodes)
+            dev = {"dev": "q"} if SUPPLIES[name] in ("gimbal", "range") else {}  # sender device, for _one_device
+            self.cols[name] = Columns(rec_ns="q", boot_ns="q", sys="q", **dev, **typecodes)
         return self.cols[name]
 
     def _global_position_int(self, m, rec, sysid, compid):
         if m.lat == 0 and m.lon == 0:
             return  # no fix yet
         self._c("GLOBAL_POSITION_INT", lat="d", lon="d", alt="d").add(
-            rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, dev=compid, lat=m.lat * 1e-7, lon=m.lon * 1e-7,
+            rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, lat=m.lat * 1e-7, lon=m.lon * 1e-7,
             alt=m.alt * 1e-3)
 
     def _gps_raw_int(self, m, rec, sysid, compid):
         if m.fix_type < 3:
             return
         self._c("GPS_RAW_INT", lat="d", lon="d", alt="d", alt_ell="d").add(
-            rec_ns=rec, boot_ns=-1, sys=sysid, dev=compid, lat=m.lat * 1e-7, lon=m.lon * 1e-7, alt=m.alt * 1e-3,
+            rec_ns=rec, boot_ns=-1, sys=sysid, lat=m.lat * 1e-7, lon=m.lon * 1e-7, alt=m.alt * 1e-3,
             alt_ell=m.alt_ellipsoid * 1e-3)
 
     def _attitude(self, m, rec, sysid, compid):
         self._c("ATTITUDE", roll="d", pitch="d", yaw="d").add(
-            rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, dev=compid, roll=m.roll, pitch=m.pitch, yaw=m.yaw)
+            rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, roll=m.roll, pitch=m.pitch, yaw=m.yaw)
 
     def _attitude_quaternion(self, m, rec, sysid, compid):
         self._c("ATTITUDE_QUATERNION", w="d", x="d", y="d", z="d").add(
-            rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, dev=compid, w=m.q1, x=m.q2, y=m.q3, z=m.q4)
+            rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, w=m.q1, x=m.q2, y=m.q3, z=m.q4)
 
     def _gimbal_device_attitude_status(self, m, rec, sysid, compid):
         q = m.q
@@ -165,16 +166,16 @@ class _Collector:
             quality=getattr(m, "signal_quality", 0))
 
     def _camera_feedback(self, m, rec, sysid, compid):
-        self._c("CAMERA_FEEDBACK", idx="q").add(rec_ns=rec, boot_ns=-1, sys=sysid, dev=compid, idx=m.img_idx)
+        self._c("CAMERA_FEEDBACK", idx="q").add(rec_ns=rec, boot_ns=-1, sys=sysid, idx=m.img_idx)
 
     def _camera_image_captured(self, m, rec, sysid, compid):
-        self._c("CAMERA_IMAGE_CAPTURED", idx="q").add(rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, dev=compid,
+        self._c("CAMERA_IMAGE_CAPTURED", idx="q").add(rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid,
                                                       idx=m.image_index)
 
     def _system_time(self, m, rec, sysid, compid):
         if m.time_unix_usec == 0:
             return  # no UNIX time before the GPS fix
-        self._c("SYSTEM_TIME", unix_ns="q").add(rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid, dev=compid,
+        self._c("SYSTEM_TIME", unix_ns="q").add(rec_ns=rec, boot_ns=m.time_boot_ms * 10**6, sys=sysid,
                                                 unix_ns=m.time_unix_usec * 1000)
 
 

@@ -97,7 +97,8 @@ def test_variance_component_estimation_recovers_the_sensor_sigmas():
 
 def test_covariance_is_consistent_with_the_actual_errors():
     batch = paper_batch(1500, gamma_deg=30.0, seed=13)
-    be = solve_batch("mle", batch, robust=None, estimate_variance_components=False)
+    be = solve_batch("mle", batch, robust=None, estimate_variance_components=False,
+                     bias_prior_deg=0.0)
     err = be.position_m - batch.truth_m
     # Mahalanobis distances of the errors follow chi-square(3) when the covariance is right: mean 3
     d2 = np.einsum("bi,bij,bj->b", err, np.linalg.inv(be.covariance_m2), err)

@@ -58,6 +58,8 @@ def solver_options(cfg: SimulationConfig, method: str) -> dict:
         opts["hkb"] = s.ridge_hkb
     if method == "mle":
         opts["robust"] = None if s.mle_robust == "none" else s.mle_robust
+        # the simulated errors are independent from frame to frame, and the MLE is told so: no boresight bias
+        opts["bias_prior_deg"] = 0.0
     return opts
 
 

@@ -5,21 +5,34 @@ estimation, posterior covariance, CEP and error ellipsoid. Batched over B proble
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 from scipy.special import erf, erfinv
 
+from pipeline.solve import fit_checks
 from pipeline.solve import iterate as _iterate
 from pipeline.solve.estimate import Status
 from pipeline.solve.iterate import problem_scale_m, start_status
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import SINGULAR_DET, Stacked, condition_numbers, inverse3
 
-ROBUST_LOSSES = (None, "huber", "cauchy")
+ROBUST_LOSSES = (None, "huber", "cauchy", "redescending")
+#: the default loss of `solve` and `solve_batch`
+DEFAULT_ROBUST = "redescending"
 #: tuning constants in units of the standardized residual (95 % efficiency under Gaussian noise)
 HUBER_C = 1.345
 CAUCHY_C = 2.3849
+#: the redescending loss: quadratic up to REDESCEND_A (full weight: ~100 % Gaussian efficiency), the weight
+#: falling smoothly (biweight-shaped) to zero at REDESCEND_B, zero beyond: a gross outlier has no pull at all
+REDESCEND_A = 3.0
+REDESCEND_B = 8.0
 #: 95 % quantile of chi-square with 3 degrees of freedom, for the 95 % ellipsoid
 CHI2_3_95 = 7.814727903251178
+#: the range of the bias prior's variance estimated from the flight, relative to the stated prior's
+BIAS_FACTOR_RANGE = (1e-4, 100.0)
+#: the boresight bias prior when the sigma gives no attitude accuracy (deg)
+DEFAULT_BIAS_PRIOR_DEG = 0.5
 VCE_MAX_ROUNDS = 10
 VCE_TOL = 0.01
 
@@ -44,8 +57,35 @@ def _rho_and_weight(e: np.ndarray, robust: str | None):
         a = np.abs(e)
         t = np.maximum(a - HUBER_C, 0.0)  # rho = e^2/2 inside, c|e| - c^2/2 = e^2/2 - (|e| - c)^2/2 outside
         return 0.5 * (e * e - t * t), np.minimum(1.0, HUBER_C / np.maximum(a, 1e-300))
+    if robust == "redescending":
+        return _redescending(e)
     z = (e / CAUCHY_C) ** 2
     return 0.5 * CAUCHY_C ** 2 * np.log1p(z), 1.0 / (1.0 + z)
+
+
+def _redescending(e: np.ndarray):
+    """rho and weight of the redescending loss: w = 1 for |e| <= A, (1 - t^2)^2 with t = (|e| - A) / (B - A)
+    up to B, 0 beyond; rho = integral of w e de (continuous, constant beyond B)."""
+    A, D = REDESCEND_A, REDESCEND_B - REDESCEND_A
+    a = np.abs(e)
+    t = np.clip((a - A) / D, 0.0, 1.0)
+    u = 1.0 - t * t
+    w = np.where(a <= A, 1.0, u * u)
+    tail = 0.5 * A * A + D * (A * (t - 2.0 * t ** 3 / 3.0 + t ** 5 / 5.0) + D * (1.0 - u ** 3) / 6.0)
+    return np.where(a <= A, 0.5 * e * e, tail), w
+
+
+def bias_prior_deg(sigma: Sigma, options: dict) -> tuple[float | None, bool]:
+    """The prior standard deviation (deg) of the constant boresight bias `mle` estimates, and whether the flight
+    may revise it: the option bias_prior_deg when given (0: no bias; kept as given), none when the sigma gives
+    correlation times (the configured error model wins), else the attitude sigma, else
+    DEFAULT_BIAS_PRIOR_DEG, revised from the flight."""
+    b = options.get("bias_prior_deg")
+    if b is not None:
+        return float(b) or None, False
+    if sigma.correlated:
+        return None, False
+    return sigma.attitude_deg or DEFAULT_BIAS_PRIOR_DEG, True
 
 
 def base_variances(st: Stacked, X0: np.ndarray, sigma: Sigma):
@@ -117,21 +157,30 @@ def _evaluate(pl: _Planes, X: np.ndarray):
     J = np.empty((3, 3, n, b))
     E = np.empty((3, n, b))
     ok = np.empty((3, n, b), dtype=bool)
-    Mc, isd = pl.Mc, pl.isd
-    Xp = X.T[:, None, :]  # (3,1,b): broadcasts over the frames
-    q = Mc[:, 0] * Xp[0] + Mc[:, 1] * Xp[1] + Mc[:, 2] * Xp[2] + pl.p4c  # (3,n,b)
-    okp = np.logical_and(pl.has_pix, q[2] != 0, out=ok[0])
+    Mc, p4c, isd = pl.Mc, pl.p4c, pl.isd
+    x0, x1, x2 = X[:, 0], X[:, 1], X[:, 2]
+    q0 = Mc[0, 0] * x0 + Mc[0, 1] * x1 + Mc[0, 2] * x2 + p4c[0]
+    q1 = Mc[1, 0] * x0 + Mc[1, 1] * x1 + Mc[1, 2] * x2 + p4c[1]
+    q2 = Mc[2, 0] * x0 + Mc[2, 1] * x1 + Mc[2, 2] * x2 + p4c[2]
+    okp = np.logical_and(pl.has_pix, q2 != 0, out=ok[0])
     ok[1] = okp
-    iw = 1.0 / np.where(okp, q[2], np.inf)  # 1/q3, 0 on unusable rows
-    uv = q[:2] * iw
-    s = iw * isd[:2]
-    for c in range(3):  # per coordinate, so that the temporaries stay (2,n,b) planes (in cache)
-        np.multiply(Mc[:2, c] - uv * Mc[2, c], s, out=J[c, :2])
-    np.multiply(pl.pixc - uv, np.where(okp, isd[:2], 0.0), out=E[:2])
-    d = Xp - pl.sc
-    dist = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    iw = 1.0 / np.where(okp, q2, np.inf)  # 1/q3, 0 on unusable rows
+    u, v = q0 * iw, q1 * iw
+    su, sv = iw * isd[0], iw * isd[1]
+    for c in range(3):
+        m2 = Mc[2, c]
+        np.multiply(Mc[0, c] - u * m2, su, out=J[c, 0])
+        np.multiply(Mc[1, c] - v * m2, sv, out=J[c, 1])
+    np.multiply(pl.pixc[0] - u, np.where(okp, isd[0], 0.0), out=E[0])
+    np.multiply(pl.pixc[1] - v, np.where(okp, isd[1], 0.0), out=E[1])
+    sc = pl.sc
+    d0, d1, d2 = x0 - sc[0], x1 - sc[1], x2 - sc[2]
+    dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     okr = np.logical_and(pl.has_range, dist > 0, out=ok[2])
-    np.multiply(d, isd[2] / np.where(okr, dist, np.inf), out=J[:, 2])
+    sr = isd[2] / np.where(okr, dist, np.inf)
+    np.multiply(d0, sr, out=J[0, 2])
+    np.multiply(d1, sr, out=J[1, 2])
+    np.multiply(d2, sr, out=J[2, 2])
     np.multiply(pl.rng - dist, np.where(okr, isd[2], 0.0), out=E[2])
     return J, E, ok
 
@@ -161,14 +210,12 @@ def _cost_weights(E: np.ndarray, robust: str | None):
 def _normal(J: np.ndarray, E: np.ndarray, w, wn=None):
     """The six entries N00 N01 N02 N11 N12 N22 (b,) of J^T diag(wn) J (wn defaults to w; None = 1) and the three
     of g = J^T diag(w) E."""
-    b = E.shape[-1]
     WE = E if w is None else w * E
-    Jr = J.reshape(3, -1, b)
-    g = np.einsum("crb,rb->cb", Jr, WE.reshape(-1, b))
+    g = [_dot_rows(J[c], WE) for c in range(3)]
     wn = w if wn is None else wn
-    CJ = Jr if wn is None else (J * wn).reshape(3, -1, b)
-    N = np.einsum("crb,drb->cdb", CJ, Jr)  # one call: as fast as six row sums on large batches, cheaper on small
-    return [N[0, 0], N[0, 1], N[0, 2], N[1, 1], N[1, 2], N[2, 2]], g
+    CJ = J if wn is None else J * wn
+    N = [_dot_rows(CJ[c], J[d]) for c, d in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))]
+    return N, g
 
 
 def _solve3(N, g, lam=None):
@@ -188,9 +235,18 @@ def _solve3(N, g, lam=None):
 
 
 def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
-        max_iterations: int, init_status: np.ndarray | None = None):
+        max_iterations: int, init_status: np.ndarray | None = None, bias_deg: float | None = None,
+        estimate_bias_prior: bool = True):
     """Returns X (B,3), iterations (B,), status (B,) int8, cond (B,) of the weighted design W^1/2 J,
-    covariance (B,3,3) m^2, and extras {variance_factor_pixel, variance_factor_range, sigma0_sq, vce_rounds}.
+    covariance (B,3,3) m^2, and extras (B, ...) arrays: variance_factor_pixel, variance_factor_range, sigma0_sq,
+    vce_rounds, rejected (B,n,3) bool (u, v, range rows with zero weight), residual_sigmas (B,n,3) (the
+    standardized residuals), the fit checks (`fit_checks`) and, with bias_deg, the boresight bias.
+
+    robust "redescending" (the default of `solve`) runs Huber to convergence first (a convex start), then the
+    redescending loss from there. bias_deg > 0 estimates a constant boresight bias (two camera-frame angles,
+    seen as constant pixel offsets f * angle in u and v) jointly with the target, with a zero-mean Gaussian
+    prior of that standard deviation; it is eliminated from the normal equations (Schur complement), so the
+    target covariance is the marginal one.
 
     Works on planes (`_Planes`): the normal equations as six (B,) entries, the 3x3 steps in closed form.
     Converged problems are frozen once fewer than all are active.
@@ -200,123 +256,320 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     status, bad = start_status(X, init_status)
     X[bad] = 0.0
     pl = _Planes.from_stacked(st, base_variances(st, X, sigma))
-    vf = np.ones((B, 2))  # variance factors of the pixel and range groups
-    J, E, ok = _evaluate(pl, X)
-    cost, wr = _cost_weights(E, robust)
+    n = pl.has_pix.shape[0]
+    if bias_deg:
+        fx, fy = st.focal_px()
+        sb = np.deg2rad(bias_deg)
+        a = np.zeros((3, n, B))
+        a[0] = np.where(pl.has_pix, fx.T * sb, 0.0) * pl.isd[0]
+        a[1] = np.where(pl.has_pix, fy.T * sb, 0.0) * pl.isd[1]
+    else:
+        a = None
+    it = _Iteration(st, pl, a, X, status, bad, X0, tol_m, max_iterations, vce)
+    it.bias_sigma_deg = bias_deg
+    it.estimate_bias_prior = estimate_bias_prior
+    if bias_deg and estimate_bias_prior:  # no error model configured: a GNSS offset shared by the segment, too
+        it.common_position_m = sigma.position_m or 0.0
+    if robust == "redescending":
+        it.run("huber")
+        it.robust_scale()
+        it.restart()
+        it.run("redescending")
+    else:
+        it.run(robust)
+    return it.finish(robust)
 
-    iterations = np.zeros(B, dtype=np.int64)
-    lam = np.zeros(B)
-    newton_ok = np.ones(B, dtype=bool)
-    vce_rounds = np.zeros(B, dtype=np.int64)
-    centre = st.platform_m.mean(axis=1)
-    finite0 = np.isfinite(X0).all(axis=1)
-    bound = _iterate.DIVERGENCE_FACTOR * problem_scale_m(st, np.where(finite0[:, None], X0, centre))
-    active = ~bad
-    for _ in range(max_iterations):
-        idx = np.flatnonzero(active)
-        if idx.size == 0:
-            break
-        full = idx.size == B
-        Ji, Ei = (J, E) if full else (J[..., idx], E[..., idx])
-        wi = wr if (full or wr is None) else wr[..., idx]
-        if robust is None:
-            N, g = _normal(Ji, Ei, None)
-        else:  # Newton: the loss's curvature in the normal matrix, unless it just failed
-            curv = _curvature(Ei, robust)
-            nok = newton_ok if full else newton_ok[idx]
-            N, g = _normal(Ji, Ei, wi, np.where(nok, curv, wi))
-        lam_i = lam if full else lam[idx]
-        dX, singular, _, _ = _solve3(N, g, lam_i)
-        iterations[idx] += 1
-        Xi = X if full else X[idx]
-        Xn = Xi + np.where(singular[:, None], 0.0, dX)
-        finite = np.isfinite(Xn).all(axis=1)
-        cen = centre if full else centre[idx]
-        exploded = ~finite | (np.sqrt(((Xn - cen) ** 2).sum(axis=1)) > (bound if full else bound[idx]))
-        Xn = np.where(exploded[:, None], Xi, Xn)
-        Jn, En, okn = _evaluate(pl if full else pl.take(idx), Xn)
-        cost_n, wr_n = _cost_weights(En, robust)
-        old = cost[idx]
-        accept = ~singular & ~exploded & (cost_n <= old * (1 + 1e-12) + 1e-300)
-        step_norm = np.where(singular, np.inf, np.sqrt((dX * dX).sum(axis=1)))
-        # accept: move and relax damping; reject: stay and damp harder
-        a_idx = idx[accept]
-        X[a_idx] = Xn[accept]
-        if full and a_idx.size == B:  # every problem moved: take the new arrays as they are
-            J, E, ok, wr = Jn, En, okn, wr_n
-        elif a_idx.size == idx.size:
-            J[..., a_idx], E[..., a_idx], ok[..., a_idx] = Jn, En, okn
-            if wr is not None:
-                wr[..., a_idx] = wr_n
-        else:
-            J[..., a_idx], E[..., a_idx], ok[..., a_idx] = Jn[..., accept], En[..., accept], okn[..., accept]
-            if wr is not None:
-                wr[..., a_idx] = wr_n[..., accept]
-        cost[a_idx] = cost_n[accept]
-        lam[a_idx] = np.where(lam[a_idx] / 10 < 1e-9, 0.0, lam[a_idx] / 10)
-        rej = idx[~accept]
-        # a rejected Newton step is retried as the IRLS step (a descent step) before damping
-        retry = newton_ok[rej] if robust is not None else np.zeros(rej.size, dtype=bool)
-        newton_ok[a_idx] = True
-        newton_ok[rej[retry]] = False
-        rej = rej[~retry]
-        lam[rej] = np.where(lam[rej] == 0, 1e-4, lam[rej] * 10)
-        small = step_norm <= tol_m
-        inner_done = small & ~singular & ~exploded
-        st_idx = status[idx]
-        st_idx[singular & ~small] = Status.DEGENERATE
-        st_idx[exploded & ~singular] = Status.DIVERGED
-        still = ~(singular & ~small) & ~(exploded & ~singular) & ~inner_done
-        # damping that cannot help any more: the minimum along every direction is reached
-        stuck = ~accept & (lam[idx] > 1e12)
-        inner_done |= stuck & still
-        still &= ~stuck
-        if vce and inner_done.any():
-            d_idx = idx[inner_done]
-            factors, usable = _vce_factors(J[..., d_idx], E[..., d_idx], ok[..., d_idx], robust)
-            more = (np.abs(factors - 1) > VCE_TOL) & usable
-            again = more.any(axis=1) & (vce_rounds[d_idx] < VCE_MAX_ROUNDS)
-            change = np.where(usable & again[:, None], factors, 1.0)
-            vf[d_idx] *= change
-            vce_rounds[d_idx] += again
-            rd = d_idx[again]
-            if rd.size:  # rescale the standardized rows: sigma_g -> sigma_g sqrt(factor_g)
-                s = 1.0 / np.sqrt(change[again])
-                rows = np.stack([s[:, 0], s[:, 0], s[:, 1]])[:, None, :]  # (3, 1, rd): u, v, range rows
-                J[..., rd] *= rows
-                E[..., rd] *= rows
-                pl.isd[..., rd] *= rows
-                cost[rd], w_rd = _cost_weights(E[..., rd], robust)
+
+class _Iteration:
+    """The state of the batched Levenberg-Marquardt / IRLS iteration of `mle` (all arrays over the B problems),
+    so that it can run in phases (a convex loss, then a redescending one from where it stopped)."""
+
+    def __init__(self, st, pl, a, X, status, bad, X0, tol_m, max_iterations, vce):
+        B = st.size
+        self.st, self.pl, self.a, self.X, self.status = st, pl, a, X, status
+        self.tol_m, self.max_iterations, self.vce = tol_m, max_iterations, vce
+        self.vf = np.ones((B, 2))  # variance factors of the pixel and range groups
+        self.iterations = np.zeros(B, dtype=np.int64)
+        self.vce_rounds = np.zeros(B, dtype=np.int64)
+        self.z = np.zeros((3, B))  # the bias in prior standard deviations (u, v; the range row stays 0)
+        self.centre = st.platform_m.mean(axis=1)
+        finite0 = np.isfinite(X0).all(axis=1)
+        self.bound = _iterate.DIVERGENCE_FACTOR * problem_scale_m(st, np.where(finite0[:, None], X0, self.centre))
+        self.bad = bad
+        self.active = ~bad
+        self.bias_sigma_deg = None
+        self.bias_factor = np.ones((B, 2))  # the bias prior variance found from the data, over the prior's
+        self.common_position_m = 0.0
+
+    def _eval(self, pl, a, X, z, robust):
+        """J, bias-corrected E, ok, z, cost, IRLS weights at X (the sub-batch of pl, a, z)."""
+        J, E, ok = _evaluate(pl, X)
+        if a is not None:
+            E, z = _profile_bias(E, a, robust, z.copy())
+        cost, w = _cost_weights(E, robust)
+        if a is not None:
+            cost = cost + 0.5 * (z * z).sum(axis=0)
+        return J, E, ok, z, cost, w
+
+    def restart(self):
+        """Make every problem that has not failed active again (it must converge again with the next loss)."""
+        self.active = ~((self.status == Status.DIVERGED) | (self.status == Status.DEGENERATE)) & ~self.bad
+        self.status[self.active] = Status.MAX_ITERATIONS
+
+    def robust_scale(self):
+        """Fold a robust scale of the Huber fit's residuals into the sigmas before the redescending phase: where
+        the residuals of a group are more spread than its sigma says (1.4826 x median |e| > 1), the rejection
+        thresholds (and the covariance) scale with them, so that a misfit model does not reject good data."""
+        E, ok = self.E, self.ok
+        for g, rows in ((0, slice(0, 2)), (1, slice(2, 3))):
+            e = np.where(ok[rows], np.abs(E[rows]), np.nan).reshape(-1, E.shape[-1])
+            cnt = ok[rows].reshape(-1, E.shape[-1]).sum(axis=0)
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                mad = 1.4826 * np.nanmedian(e, axis=0)
+            f = np.where((cnt >= 4) & np.isfinite(mad), np.maximum(mad, 1.0) ** 2, 1.0)
+            self._rescale_group(np.arange(E.shape[-1]), g, f)
+
+    def _rescale_group(self, idx, g, factor):
+        """Multiply the variances of group g (0 pixels, 1 ranges) of problems idx by factor (len(idx),)."""
+        self.vf[idx, g] *= factor
+        s = 1.0 / np.sqrt(factor)
+        rows = slice(0, 2) if g == 0 else slice(2, 3)
+        for arr in (self.J[:, rows], self.E[rows], self.pl.isd[rows]) + ((self.a[rows],) if self.a is not None
+                                                                          else ()):
+            arr[..., idx] *= s
+
+    def run(self, robust):
+        """Iterate the active problems to convergence with this loss (variance components between rounds)."""
+        pl, a, X, status = self.pl, self.a, self.X, self.status
+        B = self.st.size
+        self.J, self.E, self.ok, self.z, self.cost, self.wr = self._eval(pl, a, X, self.z, robust)
+        lam = np.zeros(B)
+        # Newton (the loss's curvature in the normal matrix) only where it is convex or nearly so
+        newton_ok = np.full(B, robust in ("huber", "cauchy") and a is None)
+        centre, bound, tol_m, vce = self.centre, self.bound, self.tol_m, self.vce
+        active = self.active
+        for _ in range(self.max_iterations):
+            idx = np.flatnonzero(active)
+            if idx.size == 0:
+                break
+            J, E, ok, wr, z = self.J, self.E, self.ok, self.wr, self.z
+            full = idx.size == B
+            Ji, Ei = (J, E) if full else (J[..., idx], E[..., idx])
+            ai = a if (full or a is None) else a[..., idx]
+            wi = wr if (full or wr is None) else wr[..., idx]
+            if robust is None:
+                N, g = _normal(Ji, Ei, None)
+            else:
+                nok = newton_ok if full else newton_ok[idx]
+                curv = _curvature(Ei, robust) if nok.any() else wi
+                N, g = _normal(Ji, Ei, wi, np.where(nok, curv, wi))
+            if ai is not None:
+                _bias_schur(N, Ji, ai, wi)
+            lam_i = lam if full else lam[idx]
+            dX, singular, _, _ = _solve3(N, g, lam_i)
+            self.iterations[idx] += 1
+            Xi = X if full else X[idx]
+            Xn = Xi + np.where(singular[:, None], 0.0, dX)
+            finite = np.isfinite(Xn).all(axis=1)
+            cen = centre if full else centre[idx]
+            exploded = ~finite | (np.sqrt(((Xn - cen) ** 2).sum(axis=1)) > (bound if full else bound[idx]))
+            Xn = np.where(exploded[:, None], Xi, Xn)
+            Jn, En, okn, zn, cost_n, wr_n = self._eval(pl if full else pl.take(idx), ai, Xn,
+                                                         z if full else z[:, idx], robust)
+            old = self.cost[idx]
+            accept = ~singular & ~exploded & (cost_n <= old * (1 + 1e-12) + 1e-300)
+            step_norm = np.where(singular, np.inf, np.sqrt((dX * dX).sum(axis=1)))
+            a_idx = idx[accept]
+            X[a_idx] = Xn[accept]
+            if full and a_idx.size == B:  # every problem moved: take the new arrays as they are
+                self.J, self.E, self.ok, self.wr, self.z = Jn, En, okn, wr_n, zn
+            else:
+                sel = accept if a_idx.size != idx.size else slice(None)
+                J[..., a_idx], E[..., a_idx], ok[..., a_idx] = Jn[..., sel], En[..., sel], okn[..., sel]
+                z[:, a_idx] = zn[:, sel]
                 if wr is not None:
-                    wr[..., rd] = w_rd
-                lam[rd] = 0.0
-            keep = np.zeros(idx.size, dtype=bool)
-            keep[np.flatnonzero(inner_done)[again]] = True
-            inner_done &= ~keep
-            still |= keep
-        st_idx[inner_done] = Status.CONVERGED
-        status[idx] = st_idx
-        active[idx] = still
-    failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
-    # covariance and condition number at the final iterate with the final weights
-    N6, _ = _normal(J, E, wr)
+                    wr[..., a_idx] = wr_n[..., sel]
+            self.cost[a_idx] = cost_n[accept]
+            lam[a_idx] = np.where(lam[a_idx] / 10 < 1e-9, 0.0, lam[a_idx] / 10)
+            rej = idx[~accept]
+            # a rejected Newton step is retried as the IRLS step (a descent step) before damping
+            fallback = rej[newton_ok[rej]] if robust is not None else rej[:0]
+            if robust in ("huber", "cauchy") and a is None:
+                newton_ok[a_idx] = True
+            newton_ok[fallback] = False
+            rej = rej[~np.isin(rej, fallback)]
+            lam[rej] = np.where(lam[rej] == 0, 1e-4, lam[rej] * 10)
+            small = step_norm <= tol_m
+            inner_done = small & ~singular & ~exploded
+            st_idx = status[idx]
+            st_idx[singular & ~small] = Status.DEGENERATE
+            st_idx[exploded & ~singular] = Status.DIVERGED
+            still = ~(singular & ~small) & ~(exploded & ~singular) & ~inner_done
+            # damping that cannot help any more: the minimum along every direction is reached
+            stuck = ~accept & (lam[idx] > 1e12)
+            inner_done |= stuck & still
+            still &= ~stuck
+            if (vce or (a is not None and self.estimate_bias_prior)) and inner_done.any():
+                d_idx = idx[inner_done]
+                J, E, ok = self.J, self.E, self.ok
+                factors, usable, zf, zuse = _vce_factors(J[..., d_idx], E[..., d_idx], ok[..., d_idx], robust,
+                                                         None if a is None else a[..., d_idx],
+                                                         None if a is None else self.z[:, d_idx])
+                if not vce:
+                    usable[:] = False
+                more = (np.abs(factors - 1) > VCE_TOL) & usable
+                if a is not None and self.estimate_bias_prior:
+                    # the bias prior's variance from the flight, within BIAS_FACTOR_RANGE of the stated one
+                    bf = self.bias_factor[d_idx]
+                    zf = np.clip(zf * bf, BIAS_FACTOR_RANGE[0], BIAS_FACTOR_RANGE[1]) / bf
+                    zuse &= np.abs(zf - 1) > VCE_TOL
+                    more |= zuse.any(axis=1)[:, None]
+                again = more.any(axis=1) & (self.vce_rounds[d_idx] < VCE_MAX_ROUNDS)
+                change = np.where(usable & again[:, None], factors, 1.0)
+                self.vce_rounds[d_idx] += again
+                rd = d_idx[again]
+                if rd.size:  # rescale the standardized rows: sigma_g -> sigma_g sqrt(factor_g)
+                    ch = change[again]
+                    self._rescale_group(rd, 0, ch[:, 0])
+                    self._rescale_group(rd, 1, ch[:, 1])
+                    if a is not None and self.estimate_bias_prior:
+                        zc = np.where(zuse[again], zf[again], 1.0)
+                        self.bias_factor[rd] *= zc
+                        a[:2, :, rd] *= np.sqrt(zc.T)[:, None, :]
+                        self.z[:2, rd] /= np.sqrt(zc.T)
+                    J, E, ok, z, cost, w_rd = self._eval(pl.take(rd), None if a is None else a[..., rd], X[rd],
+                                                         self.z[:, rd], robust)
+                    self.J[..., rd], self.E[..., rd], self.z[:, rd], self.cost[rd] = J, E, z, cost
+                    if self.wr is not None:
+                        self.wr[..., rd] = w_rd
+                    lam[rd] = 0.0
+                keep = np.zeros(idx.size, dtype=bool)
+                keep[np.flatnonzero(inner_done)[again]] = True
+                inner_done &= ~keep
+                still |= keep
+            st_idx[inner_done] = Status.CONVERGED
+            status[idx] = st_idx
+            active[idx] = still
+        self.active = active
+
+    def finish(self, robust):
+        """Covariance, condition number, fit checks and extras at the final iterate with the final weights."""
+        X, status, a = self.X, self.status, self.a
+        J, E, ok, wr = self.J, self.E, self.ok, self.wr
+        B = self.st.size
+        failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
+        use = ok if wr is None else ok & (wr > 0)
+        m = _sum_rows(use)
+        WE = E if wr is None else wr * E
+        chi2 = _dot_rows(WE, E)
+        dof = m - 3  # a bias angle costs a degree of freedom, its prior gives one back
+        if a is not None:
+            chi2 = chi2 + (self.z * self.z).sum(axis=0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sigma0_sq = np.where(dof > 0, chi2 / dof, np.nan)
+        p = fit_checks.chi_square_p(chi2, dof)
+        rho_pix, pairs_pix = fit_checks.lag1_autocorrelation(E, use, slice(0, 2))
+        rho_rng, pairs_rng = fit_checks.lag1_autocorrelation(E, use, slice(2, 3))
+        acf_pix = fit_checks.acf_significant(rho_pix, pairs_pix)
+        acf_rng = fit_checks.acf_significant(rho_rng, pairs_rng)
+        infl_pix = fit_checks.acf_inflation(rho_pix, acf_pix)
+        infl_rng = fit_checks.acf_inflation(rho_rng, acf_rng)
+        N6, _ = _normal(J, E, wr)
+        if a is not None:
+            hs = _bias_schur(N6, J, a, wr)
+        cov0 = _cov_from_six(N6)[0]
+        # inflate: the drifting groups' variances by their autocorrelation factor, then everything by the
+        # chi-square's variance factor when the test fails
+        s = np.stack([1.0 / np.sqrt(infl_pix)] * 2 + [1.0 / np.sqrt(infl_rng)])[:, None, :]
+        Js = J * s
+        Es = E * s
+        N6s, _ = _normal(Js, Es, wr)
+        if a is not None:
+            hs = _bias_schur(N6s, Js, a * s, wr)
+        chi2_s = _dot_rows(Es if wr is None else wr * Es, Es) + (0.0 if a is None else (self.z ** 2).sum(axis=0))
+        p_fail = np.isfinite(p) & (p < fit_checks.CHI2_ALPHA)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            vf_chi = np.where(p_fail & (dof > 0), np.maximum(chi2_s / dof, 1.0), 1.0)
+        cov, singular = _cov_from_six(N6s)
+        cov = cov * vf_chi[:, None, None] + self.common_position_m ** 2 * np.eye(3)
+        cond = condition_numbers(_full3(N6))
+        status[singular & ~failed] = Status.DEGENERATE
+        failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
+        X[failed] = np.nan
+        cov[failed] = np.nan
+        cond[failed & ~singular] = np.nan
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inflation = np.trace(cov, axis1=1, axis2=2) / np.trace(cov0, axis1=1, axis2=2)
+        extras = {"variance_factor_pixel": self.vf[:, 0], "variance_factor_range": self.vf[:, 1],
+                  "sigma0_sq": sigma0_sq, "vce_rounds": self.vce_rounds,
+                  "rejected": (ok & (wr == 0)).transpose(2, 1, 0) if wr is not None else np.zeros((B, ok.shape[1], 3),
+                                                                                                    dtype=bool),
+                  "residual_sigmas": E.transpose(2, 1, 0).copy(),
+                  "residuals": (E / self.pl.isd).transpose(2, 1, 0),
+                  "chi2": chi2, "chi2_dof": dof.astype(np.float64), "chi2_p": p,
+                  "autocorrelation_pixel": rho_pix, "autocorrelation_range": rho_rng,
+                  "drift_pixel": acf_pix, "drift_range": acf_rng,
+                  "consistent": ~(p_fail | acf_pix | acf_rng),
+                  "covariance_inflation": np.where(np.isfinite(inflation), inflation, 1.0)}
+        if a is not None:
+            extras.update(_bias_summary(self, cov, hs, vf_chi))
+        return X, self.iterations, status, cond, cov, extras
+
+
+def _full3(N6):
     a, b, c, d, f, i = N6
-    N = np.stack([a, b, c, b, d, f, c, f, i], axis=1).reshape(B, 3, 3)
-    cov, singular = _inverse_spd(N)
-    cond = condition_numbers(N)
-    bad_cond = singular  # the Jacobi-scaled criterion of the iteration: cond of the scaled design ~> 1e10
-    status[bad_cond & ~failed] = Status.DEGENERATE
-    failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
-    X[failed] = np.nan
-    cov[failed] = np.nan
-    cond[failed & ~bad_cond] = np.nan
-    m = _sum_rows(ok)
-    WE = E if wr is None else wr * E
-    with np.errstate(divide="ignore", invalid="ignore"):
-        sigma0_sq = np.where(m > 3, _dot_rows(WE, E) / (m - 3), np.nan)
-    extras = {"variance_factor_pixel": vf[:, 0], "variance_factor_range": vf[:, 1], "sigma0_sq": sigma0_sq,
-              "vce_rounds": vce_rounds}
-    return X, iterations, status, cond, cov, extras
+    return np.stack([a, b, c, b, d, f, c, f, i], axis=1).reshape(-1, 3, 3)
+
+
+def _cov_from_six(N6):
+    return _inverse_spd(_full3(N6))
+
+
+def _profile_bias(E, a, robust, z):
+    """The bias-corrected residuals E - a z (3,n,b) and z (3,b): the bias (in prior standard deviations) that
+    minimizes sum rho(E - a z) + |z|^2 / 2 for the u and v rows (a few IRLS rounds from the previous z)."""
+    for _ in range(1 if robust is None else 4):
+        for k in (0, 1):
+            if robust is None:
+                w = 1.0
+            else:
+                w = _rho_and_weight(E[k] - a[k] * z[k], robust)[1]
+            wa = w * a[k]
+            z[k] = (wa * E[k]).sum(axis=0) / (1.0 + (wa * a[k]).sum(axis=0))
+    return E - a * z[:, None, :], z
+
+
+def _bias_schur(N, J, a, w):
+    """Eliminate the u and v bias from the six normal-matrix entries N (in place): N -= h h^T / (1 + s) with
+    h = J^T W a, s = a^T W a per group. Returns [(h (3 of (b,)), s (b,)) for u, v]."""
+    out = []
+    for k in (0, 1):
+        wa = a[k] if w is None else w[k] * a[k]
+        s = (wa * a[k]).sum(axis=0)
+        h = [(wa * J[c, k]).sum(axis=0) for c in range(3)]
+        for e, (c, d) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
+            N[e] = N[e] - h[c] * h[d] / (1.0 + s)
+        out.append((np.stack(h, axis=1), s))
+    return out
+
+
+def _bias_summary(it: _Iteration, cov, hs, vf_chi) -> dict:
+    """The bias estimate (B,2) deg (u: about the camera's vertical axis, v: about its horizontal axis, as
+    pixel offsets / f), its posterior standard deviation and its correlation with the target (B,2,3)."""
+    sb = it.bias_sigma_deg * np.sqrt(it.bias_factor)  # (B, 2) the prior in use
+    B = cov.shape[0]
+    bias = it.z[:2].T * sb
+    sd = np.empty((B, 2))
+    corr = np.empty((B, 2, 3))
+    sx = np.sqrt(np.einsum("bii->bi", cov))
+    for k, (h, s) in enumerate(hs):
+        c_xz = -np.einsum("bij,bj->bi", cov, h) / (1.0 + s)[:, None]
+        var_z = vf_chi / (1.0 + s) + np.einsum("bi,bij,bj->b", h, cov, h) / (1.0 + s) ** 2
+        sd[:, k] = np.sqrt(var_z) * sb[:, k]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            corr[:, k] = c_xz / (sx * np.sqrt(var_z)[:, None])
+    return {"bias_deg": bias, "bias_sigma_deg": sd, "bias_target_correlation": corr, "bias_prior_deg": sb}
 
 
 def _inverse_spd(N: np.ndarray):
@@ -324,24 +577,44 @@ def _inverse_spd(N: np.ndarray):
     return 0.5 * (inv + np.swapaxes(inv, 1, 2)), singular
 
 
-def _vce_factors(J, E, ok, robust):
+def _vce_factors(J, E, ok, robust, a=None, z=None):
     """Helmert/Foerstner variance component factors (b, 2) = (sum_g w e^2) / r_g with the redundancy numbers
-    r_g = sum_g (1 - w_i J_i N^-1 J_i^T) over the usable rows of each group (pixels: the u and v rows, ranges),
-    from the standardized J (3,3,n,b), E (3,n,b); and a (b, 2) flag 'usable' (redundancy of the group >= 0.5)."""
+    r_g = sum_g (1 - w_i h_i) over the usable rows of each group (pixels: the u and v rows, ranges; rows a
+    redescending loss rejected do not count), h_i the leverage of row i in the joint problem (target, and the
+    bias columns a when given), from the standardized J (3,3,n,b), E (3,n,b); and a (b, 2) flag 'usable'
+    (redundancy of the group >= 0.5). With the bias: also (b, 2) factors z^2 / r_z of the bias priors (r_z =
+    1 - posterior variance of z, the prior's redundancy) and their 'usable' flags (r_z >= 0.2: the flight tells
+    at least a fifth of what is known about the bias)."""
     _, w = _cost_weights(E, robust)
     N, _ = _normal(J, E, w)
+    hs = _bias_schur(N, J, a, w) if a is not None else None
     _, singular, (A0, B0, C0, D0, E0, F0), det = _solve3(N, [N[0]] * 3)
     inv = [np.where(singular, np.nan, x / det) for x in (A0, B0, C0, D0, E0, F0)]
     j0, j1, j2 = J
     quad = (inv[0] * j0 * j0 + inv[3] * j1 * j1 + inv[5] * j2 * j2
             + 2.0 * (inv[1] * j0 * j1 + inv[2] * j0 * j2 + inv[4] * j1 * j2))
+    zfac = np.ones((E.shape[-1], 2))
+    zok = np.zeros((E.shape[-1], 2), dtype=bool)
+    if hs is not None:
+        C00, C01, C02, C11, C12, C22 = inv
+        for k, (h, s) in enumerate(hs):
+            h0, h1, h2 = h[:, 0], h[:, 1], h[:, 2]
+            c = [-(C00 * h0 + C01 * h1 + C02 * h2) / (1 + s), -(C01 * h0 + C11 * h1 + C12 * h2) / (1 + s),
+                 -(C02 * h0 + C12 * h1 + C22 * h2) / (1 + s)]
+            czz = 1.0 / (1 + s) - (c[0] * h0 + c[1] * h1 + c[2] * h2) / (1 + s)
+            rz = 1.0 - czz
+            zok[:, k] = np.isfinite(rz) & (rz >= 0.2)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                zfac[:, k] = np.where(zok[:, k], z[k] ** 2 / rz, 1.0)
+            quad[k] = quad[k] + 2.0 * a[k] * (J[0, k] * c[0] + J[1, k] * c[1] + J[2, k] * c[2]) + a[k] ** 2 * czz
     lev = quad if w is None else w * quad
     q = E * E if w is None else w * E * E
+    use = ok if w is None else ok & (w > 0)
     b = E.shape[-1]
     out = np.ones((b, 2))
     usable = np.zeros((b, 2), dtype=bool)
     for g, rows in ((0, slice(0, 2)), (1, slice(2, 3))):
-        sel = ok[rows]
+        sel = use[rows]
         red = _sum_rows(np.where(sel, 1.0 - lev[rows], 0.0))
         qs = _sum_rows(np.where(sel, q[rows], 0.0))
         usable[:, g] = red >= 0.5
@@ -349,7 +622,7 @@ def _vce_factors(J, E, ok, robust):
             out[:, g] = np.where(usable[:, g], qs / red, 1.0)
         usable[:, g] &= np.isfinite(out[:, g]) & (out[:, g] > 0)
         out[:, g] = np.where(usable[:, g], out[:, g], 1.0)
-    return out, usable
+    return out, usable, zfac, zok
 
 
 # ---- accuracy summaries from the covariance ----------------------------------------------------------------

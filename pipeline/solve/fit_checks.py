@@ -1,0 +1,72 @@
+"""Does the error model fit the flight? Tests on the standardized residuals of a solve, batched over problems.
+
+- chi-square: sum of the squared standardized residuals (robust weights applied) against its degrees of
+  freedom; too large means the stated sigmas are too small, or errors the model does not have.
+- lag-1 autocorrelation of the residuals from frame to frame, per sensor group (pixels u and v pooled, ranges):
+  slowly varying errors (attitude drift, GNSS wander) make neighbouring residuals alike, and an estimator that
+  assumes independent errors then counts one error many times. For a first-order autoregressive error with
+  lag-1 correlation rho, the variance of an average grows by (1 + rho) / (1 - rho) over the independent case:
+  that factor inflates the group's variances (`acf_inflation`).
+
+Residual planes are (3, n, b): rows u, v, range of the n frames of b problems, zero where unused.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.stats import chi2 as _chi2
+
+#: a model whose chi-square has a p-value below this fails the test
+CHI2_ALPHA = 0.01
+#: the largest inflation of a group's variances by the autocorrelation (rho = 0.98)
+MAX_ACF_INFLATION = 99.0
+
+
+def lag1_autocorrelation(E: np.ndarray, use: np.ndarray, rows: slice) -> tuple[np.ndarray, np.ndarray]:
+    """(rho (b,), pairs (b,)): lag-1 autocorrelation of the residuals E (3,n,b) over the frames, pooled over the
+    given rows (e.g. slice(0, 2) for u and v); only consecutive used frames (`use` (3,n,b) bool) pair up.
+    NaN where there is no pair."""
+    e = np.where(use[rows], E[rows], 0.0)
+    pair = use[rows][:, 1:] & use[rows][:, :-1]
+    num = np.where(pair, e[:, 1:] * e[:, :-1], 0.0).sum(axis=(0, 1))
+    den = (e * e).sum(axis=(0, 1))
+    pairs = pair.sum(axis=(0, 1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rho = np.where((pairs > 0) & (den > 0), num / den, np.nan)
+    return rho, pairs
+
+
+def acf_significant(rho: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """(b,) True where a positive lag-1 autocorrelation exceeds two standard errors 2 / sqrt(pairs) of white
+    residuals (about 2.3 % false alarms)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.isfinite(rho) & (pairs >= 3) & (rho > 2.0 / np.sqrt(np.maximum(pairs, 1)))
+
+
+def acf_inflation(rho: np.ndarray, significant: np.ndarray) -> np.ndarray:
+    """(b,) variance inflation (1 + rho) / (1 - rho) where the autocorrelation is significant, else 1."""
+    r = np.clip(np.where(significant, rho, 0.0), 0.0, 0.98)
+    return np.minimum((1.0 + r) / (1.0 - r), MAX_ACF_INFLATION)
+
+
+def chi_square_p(chi2: np.ndarray, dof: np.ndarray) -> np.ndarray:
+    """(b,) upper-tail p-value of chi2 with dof degrees of freedom (NaN where dof < 1)."""
+    with np.errstate(invalid="ignore"):
+        return np.where(dof >= 1, _chi2.sf(chi2, np.maximum(dof, 1)), np.nan)
+
+
+def describe(chi2: float, dof: float, p: float, rho_pix: float, rho_rng: float, acf_pix: bool, acf_rng: bool,
+             inflation: float) -> str | None:
+    """One sentence for the console and the report when the model does not fit; None when it does."""
+    parts = []
+    if np.isfinite(p) and p < CHI2_ALPHA:
+        parts.append(f"the residuals are {np.sqrt(chi2 / dof):.1f} times larger than the error model says "
+                     f"(chi-square {chi2:.0f} on {dof:.0f} degrees of freedom, p = {p:.1g})")
+    if acf_pix:
+        parts.append(f"the pixel residuals drift slowly from frame to frame (lag-1 autocorrelation {rho_pix:.2f})")
+    if acf_rng:
+        parts.append(f"the range residuals drift slowly from frame to frame (lag-1 autocorrelation {rho_rng:.2f})")
+    if not parts:
+        return None
+    return ("the error model does not fit this flight: " + "; ".join(parts)
+            + f"; the covariance was inflated (ellipse axes x{np.sqrt(inflation):.1f}) to stay honest")

@@ -90,13 +90,31 @@ def test_method_that_cannot_solve_exits_non_zero(tmp_path, capsys):
     assert main(["solve", str(path), "--method", "range"]) == 1
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "at least three laser ranges" in err
-    # the others still print, the failure is listed and the exit status says so
-    assert main(["solve", str(path), "--json"]) == 1
+    # --method all (the default): the others solve, range is listed with its status and reason, exit 0
+    for argv in (["solve", str(path), "--json"], ["solve", str(path), "--method", "all", "--json"]):
+        assert main(argv) == 0
+        doc = json.loads(capsys.readouterr().out)
+        assert doc["unsolved"]["range"]["status"] == "insufficient_data"
+        assert "at least three laser ranges" in doc["unsolved"]["range"]["reason"]
+        assert "range" not in doc["estimates"] and "mle" in doc["estimates"] and "vision" in doc["estimates"]
+    assert main(["solve", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "range      not solved (insufficient_data): range needs at least three laser ranges" in out
+    # named methods must all solve
+    assert main(["solve", str(path), "--method", "mle", "--method", "range"]) == 1
+    assert "at least three laser ranges" in capsys.readouterr().err
+
+
+def test_method_all_fails_only_when_nothing_solves(tmp_path, capsys):
+    doc = json.loads(EXAMPLE.read_text())
+    for i, row in enumerate(doc["observations"]):
+        row["pixel"] = None
+        if i >= 2:
+            row["range_m"] = None
+    path = _write(tmp_path, doc)
+    assert main(["solve", str(path), "--method", "all"]) == 1
     captured = capsys.readouterr()
-    doc = json.loads(captured.out)
-    assert "range" in doc["failures"] and "mle" in doc["estimates"]
-    err = captured.err.strip()
-    assert err.count("\n") == 0 and ("at least three laser ranges" in err or "estimators failed (range" in err)
+    assert "not solved" in captured.out and captured.err.count("\n") == 1 and "estimators failed" in captured.err
 
 
 def test_unknown_method_is_rejected_by_argparse(capsys):

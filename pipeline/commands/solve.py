@@ -1,5 +1,10 @@
 """`ridgeloc solve OBS.json [--method NAME ...|--method all] [--json]`: run estimators on an observations file
-(docs/observations_format.md) and print their estimates."""
+(docs/observations_format.md) and print their estimates.
+
+With `--method all` (the default) every estimator that can runs; the others are listed with their status and
+reason (e.g. range-only on a straight pass, anything with pixels on a file without them), and the command
+succeeds when at least one solved. Named methods must all solve.
+"""
 
 from __future__ import annotations
 
@@ -9,7 +14,7 @@ import sys
 
 import numpy as np
 
-from pipeline.errors import RidgelocError, SolverError
+from pipeline.errors import GeometryError, ObservationError, RidgelocError, SolverError
 from pipeline.solve import METHODS, solve
 from pipeline.solve.observations import Observations
 
@@ -29,6 +34,33 @@ def _methods(chosen: list[str] | None) -> list[str]:
     return list(dict.fromkeys(chosen))
 
 
+def unsolved_status(exc: RidgelocError) -> str:
+    """The status of an estimator that did not solve, from its error: degenerate (the geometry does not
+    determine the target), insufficient_data (too few or unusable observations), diverged."""
+    if isinstance(exc, GeometryError):
+        return "degenerate"
+    if isinstance(exc, ObservationError):
+        return "insufficient_data"
+    return "diverged"
+
+
+def _mle_notes(m: dict) -> list[str]:
+    """The mle's fit message, boresight bias and rejected observations in words."""
+    notes = []
+    fit = m.get("fit") or {}
+    if fit.get("message"):
+        notes.append(f"mle: {fit['message']}")
+    bias = m.get("boresight_bias")
+    if bias:
+        notes.append(f"mle: boresight bias {bias['u_deg']:+.3f} +/- {bias['u_sigma_deg']:.3f} deg (u), "
+                     f"{bias['v_deg']:+.3f} +/- {bias['v_sigma_deg']:.3f} deg (v), estimated from the flight")
+    for r in m.get("rejected", []):
+        unit = "m" if r["residual"] == "range" else "px"
+        notes.append(f"mle: rejected frame {r['frame']} (t {r['t_ns']} ns) {r['residual']} residual "
+                     f"{r['value']:+.2f} {unit} ({r['sigmas']:+.1f} sigma)")
+    return notes
+
+
 def _table(results: dict, failures: dict, truth) -> str:
     head = f"{'method':<11}{'x_m':>12}{'y_m':>12}{'z_m':>11}{'iter':>6}  {'status':<15}{'cond':>10}"
     if truth is not None:
@@ -41,8 +73,8 @@ def _table(results: dict, failures: dict, truth) -> str:
         if truth is not None:
             line += f"{d['error_m']:10.3f}"
         lines.append(line)
-    for name, msg in failures.items():
-        lines.append(f"{name:<11}failed: {msg}")
+    for name, f in failures.items():
+        lines.append(f"{name:<11}not solved ({f['status']}): {f['reason']}")
     notes = []
     if "los" in results and "oracle_error_m" in results["los"]:
         notes.append(f"los: median of {sum(p is not None for p in results['los']['points_m'])} frames; best "
@@ -52,6 +84,7 @@ def _table(results: dict, failures: dict, truth) -> str:
         ax = m["ellipsoid"]["semi_axes_1sigma_m"]
         notes.append(f"mle: CEP50 {m['cep50_m']:.3f} m, CEP90 {m['cep90_m']:.3f} m (horizontal); 1-sigma "
                      f"ellipsoid semi-axes {ax[0]:.3f} {ax[1]:.3f} {ax[2]:.3f} m; robust {m['robust']}")
+        notes += _mle_notes(m)
     if "ridge" in results and "k" in results["ridge"]:
         notes.append(f"ridge: last k = {results['ridge']['k']:.4g}")
     return "\n".join(lines + notes)
@@ -61,25 +94,26 @@ def main(args) -> int:
     obs = Observations.load(args.observations)
     results: dict = {}
     failures: dict = {}
+    every = not args.method or "all" in args.method
     for name in _methods(args.method):
         try:
             est = solve(name, obs)
         except RidgelocError as exc:
-            failures[name] = str(exc)
+            failures[name] = {"status": unsolved_status(exc), "reason": str(exc)}
             continue
         results[name] = est.to_dict(obs.truth_m)
     if args.json:
         doc: dict = {"estimates": results}
         if failures:
-            doc["failures"] = failures
+            doc["unsolved"] = failures
         print(json.dumps(doc, indent=1, default=_json_default))
     else:
         print(_table(results, failures, obs.truth_m))
     sys.stdout.flush()
-    if failures:
+    if failures and (not every or not results):
         names = ", ".join(failures)
         if len(failures) == 1:
-            raise SolverError(next(iter(failures.values())), args.observations)
+            raise SolverError(next(iter(failures.values()))["reason"], args.observations)
         raise SolverError(f"{len(failures)} estimators failed ({names}); see the output above",
                           args.observations)
     return 0

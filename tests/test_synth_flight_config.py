@@ -26,8 +26,8 @@ def test_committed_sample_configs_are_what_the_function_writes(group):
     assert doc == committed
     assert yaml.safe_load(flight_config_text(doc, f"Sample flight {group}")) == committed
     # the values an operator knows, spelled out (the generator's noise of the sample flights = the paper's specs)
-    assert committed["sigma"] == {"pixel_px": 0.5, "range_m": 5.0, "position_m": 2.0, "attitude_deg": 0.2,
-                                  "attitude_tau_s": 20.0, "position_tau_s": 60.0}
+    # no correlation times: an operator does not know them (issue 12)
+    assert committed["sigma"] == {"pixel_px": 0.5, "range_m": 5.0, "position_m": 2.0, "attitude_deg": 0.2}
     assert committed["target"] == truth["target_mark"]
     assert committed["truth_file"] == f"../../sample_data/{group}/truth.json"
     assert load_flight_config(committed_path).name == group  # every listed file exists
@@ -62,8 +62,8 @@ def test_synth_writes_a_flight_config_that_runs(tmp_path, capsys):
     # paths relative to the flight folder; sensor specs from this flight's noise, not the sample flights'
     assert doc["files"] == {"telemetry": ["flight.tlog"], "video": "video.mp4", "frames_csv": "video.frames.csv"}
     assert doc["truth_file"] == "truth.json"
-    assert doc["sigma"] == {"pixel_px": 0.5, "range_m": 1.0, "position_m": 0.3, "attitude_deg": 0.02,
-                            "attitude_tau_s": 7.0, "position_tau_s": 30.0}  # hypot(0.25, 0.15) = 0.29 -> 0.3
+    # hypot(0.25, 0.15) = 0.29 -> 0.3
+    assert doc["sigma"] == {"pixel_px": 0.5, "range_m": 1.0, "position_m": 0.3, "attitude_deg": 0.02}
     assert doc["clock"]["video_to_telemetry_offset_ns"] == truth["metadata"]["clock"]["video_to_telemetry_offset_ns"]
 
     r = process_group(load_flight_config(folder / "flight.yaml"))

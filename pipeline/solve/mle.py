@@ -30,7 +30,7 @@ REDESCEND_B = 8.0
 #: 95 % quantile of chi-square with 3 degrees of freedom, for the 95 % ellipsoid
 CHI2_3_95 = 7.814727903251178
 #: the range of the bias prior's variance estimated from the flight, relative to the stated prior's
-BIAS_FACTOR_RANGE = (1e-4, 100.0)
+BIAS_FACTOR_RANGE = (1e-4, 1.0)
 #: the boresight bias prior when the sigma gives no attitude accuracy (deg)
 DEFAULT_BIAS_PRIOR_DEG = 0.5
 VCE_MAX_ROUNDS = 10

@@ -28,14 +28,14 @@ def sensor_sigmas(truth: dict) -> dict:
 
     range_m = noise.laser_m; position_m = the GNSS error per axis (drift and white parts combined,
     hypot(gnss_drift_m, gnss_white_m)) to one decimal, as a receiver spec gives it (1.97 -> 2.0 m);
-    attitude_deg = noise.attitude_deg; attitude_tau_s = noise.attitude_tau_s; position_tau_s = noise.gnss_tau_s;
-    pixel_px = PIXEL_SIGMA_PX.
+    attitude_deg = noise.attitude_deg; pixel_px = PIXEL_SIGMA_PX. No correlation times: an operator does not
+    know them (the generator's attitude and GNSS errors do drift); the MLE learns from the flight what it can
+    (a boresight bias, drifting residuals) and says when its model does not fit.
     """
     noise = truth["config"]["noise"]
     return {"pixel_px": PIXEL_SIGMA_PX, "range_m": float(noise["laser_m"]),
             "position_m": round(math.hypot(noise["gnss_drift_m"], noise["gnss_white_m"]), 1),
-            "attitude_deg": float(noise["attitude_deg"]), "attitude_tau_s": float(noise["attitude_tau_s"]),
-            "position_tau_s": float(noise["gnss_tau_s"])}
+            "attitude_deg": float(noise["attitude_deg"])}
 
 
 def _rel(path: Path, relative_to: Path) -> str:
@@ -112,11 +112,9 @@ def flight_config_text(doc: dict, title: str) -> str:
         "nothing reads it during processing. Written from truth.json by pipeline/synth/flight_config.py "
         "(docs/synth.md).")
     tau_note = (
-        "The attitude and GNSS errors drift slowly rather than jumping from shot to shot: the IMU/AHRS spec gives "
-        f"an attitude error correlation time of ~{s['attitude_tau_s']:g} s, the GNSS receiver spec a position "
-        f"error correlation time of ~{s['position_tau_s']:g} s. With them the MLE treats the errors of shots "
-        "seconds apart as correlated (generalized least squares, docs/solvers.md), so that its covariance, CEP "
-        "and ellipses are honest.")
+        "No error correlation times (attitude_tau_s, position_tau_s): spec sheets do not give them. The MLE "
+        "estimates a constant boresight bias from the flight, tests its residuals for drift and inflates its "
+        "covariance when they do not fit (docs/solvers.md); add them here if you know them.")
     lines = [
         *_comment(header),
         f"name: {_flow(doc['name'])}",
@@ -134,8 +132,7 @@ def flight_config_text(doc: dict, title: str) -> str:
         *(f"  {k}: {_flow(v)}" for k, v in doc["target"].items()),
         f"observations: {_flow(doc['observations'])}",
         *_comment(tau_note),
-        "sigma: {" + ", ".join(f"{k}: {_flow(v)}" for k, v in list(s.items())[:5]) + ",",
-        "        " + ", ".join(f"{k}: {_flow(v)}" for k, v in list(s.items())[5:]) + "}",
+        "sigma: {" + ", ".join(f"{k}: {_flow(v)}" for k, v in s.items()) + "}",
         f"truth_file: {_flow(doc['truth_file'])}",
     ]
     text = "\n".join(lines) + "\n"

@@ -1,0 +1,58 @@
+"""The batched `mle` kernel's per-problem results as the JSON-ready extras of one `Estimate`: the fit checks
+in words, the boresight bias and the rejected observations (frame, time, which residual, its size)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pipeline.solve import fit_checks
+
+_ROWS = ("u", "v", "range")
+
+
+def _f(x) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def rejected_observations(ex: dict, b: int, t_ns: np.ndarray) -> list[dict]:
+    """[{frame, t_ns, residual ("u" | "v" | "range"), value (px or m), sigmas}] of problem b's rows that the
+    redescending loss gave zero weight."""
+    rej = ex["rejected"][b]
+    out = []
+    for i, k in zip(*np.nonzero(rej), strict=True):
+        out.append({"frame": int(i), "t_ns": int(t_ns[i]), "residual": _ROWS[k],
+                    "value": float(ex["residuals"][b, i, k]), "sigmas": float(ex["residual_sigmas"][b, i, k])})
+    return out
+
+
+def fit_summary(ex: dict, b: int) -> dict:
+    """The fit checks of problem b: chi-square, its degrees of freedom and p-value, the lag-1 autocorrelations,
+    whether the model fits, the covariance inflation and, when it does not fit, a message."""
+    msg = fit_checks.describe(float(ex["chi2"][b]), float(ex["chi2_dof"][b]), float(ex["chi2_p"][b]),
+                              float(ex["autocorrelation_pixel"][b]), float(ex["autocorrelation_range"][b]),
+                              bool(ex["drift_pixel"][b]), bool(ex["drift_range"][b]),
+                              float(ex["covariance_inflation"][b]))
+    return {"consistent": bool(ex["consistent"][b]), "chi2": _f(ex["chi2"][b]), "dof": _f(ex["chi2_dof"][b]),
+            "p_value": _f(ex["chi2_p"][b]), "autocorrelation_pixel": _f(ex["autocorrelation_pixel"][b]),
+            "autocorrelation_range": _f(ex["autocorrelation_range"][b]),
+            "covariance_inflation": _f(ex["covariance_inflation"][b]), "message": msg}
+
+
+def boresight_bias(ex: dict, b: int) -> dict | None:
+    """The estimated constant boresight bias of problem b (deg, about the camera's vertical axis: u, and its
+    horizontal axis: v), its posterior sigma, the prior used and its correlation with the target (2, 3)."""
+    if "bias_deg" not in ex:
+        return None
+    bias, sd, prior = ex["bias_deg"][b], ex["bias_sigma_deg"][b], ex["bias_prior_deg"][b]
+    return {"u_deg": float(bias[0]), "v_deg": float(bias[1]), "u_sigma_deg": float(sd[0]),
+            "v_sigma_deg": float(sd[1]), "u_prior_deg": float(prior[0]), "v_prior_deg": float(prior[1]),
+            "correlation_with_target": [[_f(c) for c in row] for row in ex["bias_target_correlation"][b]]}
+
+
+def residual_vector(ex: dict, b: int, has_pix: np.ndarray, has_range: np.ndarray) -> np.ndarray:
+    """Problem b's residuals as `Estimate.residuals`: the pixels' (px, u v interleaved), then the ranges' (m)."""
+    r = ex["residuals"][b]
+    return np.concatenate([r[has_pix, :2].ravel(), r[has_range, 2]])

@@ -300,6 +300,7 @@ class _Iteration:
         self.bias_sigma_deg = None
         self.bias_factor = np.ones((B, 2))  # the bias prior variance found from the data, over the prior's
         self.common_position_m = 0.0
+        self.guard = np.ones((B, 2))  # `robust_scale`'s factors: a misfit, unlike variance components
 
     def _eval(self, pl, a, X, z, robust):
         """J, bias-corrected E, ok, z, cost, IRLS weights at X (the sub-batch of pl, a, z)."""
@@ -327,8 +328,11 @@ class _Iteration:
             with np.errstate(all="ignore"), warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
                 mad = 1.4826 * np.nanmedian(e, axis=0)
-            f = np.where((cnt >= 4) & np.isfinite(mad), np.maximum(mad, 1.0) ** 2, 1.0)
+            # only a spread the MAD shows beyond its own noise (standard error ~1.17 / sqrt(count))
+            big = np.isfinite(mad) & (cnt >= 4) & (mad > 1.0 + 2.34 / np.sqrt(np.maximum(cnt, 1)))
+            f = np.where(big, mad ** 2, 1.0)
             self._rescale_group(np.arange(E.shape[-1]), g, f)
+            self.guard[:, g] = f
 
     def _rescale_group(self, idx, g, factor):
         """Multiply the variances of group g (0 pixels, 1 ranges) of problems idx by factor (len(idx),)."""
@@ -462,7 +466,8 @@ class _Iteration:
         use = ok if wr is None else ok & (wr > 0)
         m = _sum_rows(use)
         WE = E if wr is None else wr * E
-        chi2 = _dot_rows(WE, E)
+        # against the sigmas as stated (or as variance components estimated them), before `robust_scale`
+        chi2 = _dot_rows(WE[:2], E[:2]) * self.guard[:, 0] + _dot_rows(WE[2:], E[2:]) * self.guard[:, 1]
         dof = m - 3  # a bias angle costs a degree of freedom, its prior gives one back
         if a is not None:
             chi2 = chi2 + (self.z * self.z).sum(axis=0)
@@ -478,7 +483,11 @@ class _Iteration:
         N6, _ = _normal(J, E, wr)
         if a is not None:
             hs = _bias_schur(N6, J, a, wr)
-        cov0 = _cov_from_six(N6)[0]
+        g = np.sqrt(np.stack([self.guard[:, 0], self.guard[:, 0], self.guard[:, 1]]))[:, None, :]
+        N60, _ = _normal(J * g, E, wr)
+        if a is not None:
+            _bias_schur(N60, J * g, a * g, wr)
+        cov0 = _cov_from_six(N60)[0]  # the covariance the model as stated gives
         # inflate: the drifting groups' variances by their autocorrelation factor, then everything by the
         # chi-square's variance factor when the test fails
         s = np.stack([1.0 / np.sqrt(infl_pix)] * 2 + [1.0 / np.sqrt(infl_rng)])[:, None, :]
@@ -489,6 +498,7 @@ class _Iteration:
             hs = _bias_schur(N6s, Js, a * s, wr)
         chi2_s = _dot_rows(Es if wr is None else wr * Es, Es) + (0.0 if a is None else (self.z ** 2).sum(axis=0))
         p_fail = np.isfinite(p) & (p < fit_checks.CHI2_ALPHA)
+        # what `robust_scale` already folded in counts towards the chi-square's variance factor
         with np.errstate(divide="ignore", invalid="ignore"):
             vf_chi = np.where(p_fail & (dof > 0), np.maximum(chi2_s / dof, 1.0), 1.0)
         cov, singular = _cov_from_six(N6s)

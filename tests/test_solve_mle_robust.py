@@ -1,0 +1,111 @@
+"""The MLE on error models nobody stated (issue 12): the redescending default, rejected observations, the
+boresight bias and the fit checks."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from pipeline.solve import fit_checks, solve, solve_batch
+from pipeline.solve.mle import REDESCEND_B, _redescending
+from pipeline.solve.observations import Observations
+from pipeline.solve.scenes import PAPER_SIGMA, paper_batch, paper_problem
+
+
+def test_redescending_loss_is_quadratic_then_flat():
+    e = np.linspace(-12.0, 12.0, 4801)
+    rho, w = _redescending(e)
+    core = np.abs(e) <= 3.0
+    np.testing.assert_allclose(rho[core], 0.5 * e[core] ** 2)
+    assert (w[core] == 1).all() and (w[np.abs(e) >= REDESCEND_B] == 0).all()
+    # rho' = w e: the derivative of rho matches the weight everywhere (continuous, no kink)
+    np.testing.assert_allclose(np.gradient(rho, e)[1:-1], (w * e)[1:-1], atol=2e-3)
+    assert np.ptp(rho[np.abs(e) >= REDESCEND_B]) == 0
+
+
+def test_default_costs_nothing_on_clean_data():
+    """Gaussian noise, model known (no bias): the default's median error within 5 % of the squared loss's."""
+    batch = paper_batch(1500, n=10, gamma_deg=30.0, seed=5)
+    default = solve_batch("mle", batch, bias_prior_deg=0.0)
+    plain = solve_batch("mle", batch, robust=None, bias_prior_deg=0.0)
+    ratio = np.median(default.errors_m(batch.truth_m)) / np.median(plain.errors_m(batch.truth_m))
+    assert ratio < 1.05
+    assert default.extras["rejected"].sum() < 0.001 * default.extras["rejected"].size
+
+
+def test_gross_range_outliers_get_zero_weight_and_are_listed():
+    obs = paper_problem(n=20, gamma_deg=40.0, seed=2)
+    bad = [3, 11]
+    rng = obs.range_m.copy()
+    rng[bad] += [300.0, -280.0]
+    dirty = dataclasses.replace(obs, range_m=rng)
+    est = solve("mle", dirty)
+    rej = est.extras["rejected"]
+    assert [(r["frame"], r["residual"]) for r in rej] == [(3, "range"), (11, "range")]
+    assert rej[0]["t_ns"] == int(obs.t_ns[3]) and rej[0]["value"] == pytest.approx(300.0, abs=30.0)
+    assert abs(rej[1]["sigmas"]) > REDESCEND_B
+    # zero weight: the answer is the fit without those two shots
+    rng_clean = rng.copy()
+    rng_clean[bad] = np.nan
+    clean = solve("mle", dataclasses.replace(obs, range_m=rng_clean))
+    np.testing.assert_allclose(est.position_m, clean.position_m, atol=0.05)
+    # the Huber loss bounds their pull but keeps it
+    huber = solve("mle", dirty, robust="huber")
+    assert np.linalg.norm(huber.position_m - clean.position_m) > 10 * np.linalg.norm(est.position_m - clean.position_m)
+
+
+def _biased(obs: Observations, du_px: float, dv_px: float) -> Observations:
+    return dataclasses.replace(obs, pixel=obs.pixel + np.array([du_px, dv_px]))
+
+
+def test_boresight_bias_is_estimated_and_keeps_the_ellipsoid_honest():
+    """A constant pixel offset (a boresight bias of the camera) on a wide arc with ranges: estimated with a
+    posterior sigma well below the prior, and the truth stays inside the 95 % ellipsoid, unlike without it."""
+    sigma = dataclasses.replace(PAPER_SIGMA, attitude_deg=0.05)
+    inside, inside_nobias, errs = [], [], []
+    for seed in range(30):
+        obs = dataclasses.replace(paper_problem(n=30, gamma_deg=90.0, seed=seed, sigma=sigma), sigma=sigma)
+        biased = _biased(obs, 1000 * np.deg2rad(0.15), -1000 * np.deg2rad(0.1))  # f = 1000 px
+        est = solve("mle", biased, bias_prior_deg=0.2)
+        b = est.extras["boresight_bias"]
+        errs.append((b["u_deg"] - 0.15, b["v_deg"] + 0.1))
+        assert b["u_sigma_deg"] < 0.1
+        for est_, out in ((est, inside), (solve("mle", biased, bias_prior_deg=0.0), inside_nobias)):
+            e = est_.position_m - obs.truth_m
+            out.append(e @ np.linalg.solve(est_.covariance_m2, e) < 7.81)
+    assert np.mean(inside) >= 0.85 and np.mean(inside_nobias) < 0.5
+    assert abs(np.mean(errs, axis=0)[0]) < 0.03
+
+
+def test_lag1_autocorrelation_finds_drift_and_not_white_noise():
+    rng = np.random.default_rng(0)
+    n, b = 40, 500
+    white = rng.normal(size=(3, n, b))
+    ar = np.empty_like(white)
+    ar[:, 0] = white[:, 0]
+    for i in range(1, n):
+        ar[:, i] = 0.8 * ar[:, i - 1] + 0.6 * white[:, i]
+    use = np.ones((3, n, b), dtype=bool)
+    rho_w, pairs = fit_checks.lag1_autocorrelation(white, use, slice(0, 2))
+    rho_a, _ = fit_checks.lag1_autocorrelation(ar, use, slice(0, 2))
+    assert abs(np.mean(rho_w)) < 0.03 and np.mean(fit_checks.acf_significant(rho_w, pairs)) < 0.05
+    assert np.mean(rho_a) == pytest.approx(0.8, abs=0.05) and fit_checks.acf_significant(rho_a, pairs).all()
+    assert fit_checks.acf_inflation(np.array([0.8]), np.array([True]))[0] == pytest.approx(9.0)
+
+
+def test_misfit_is_said_in_words_and_inflates_the_covariance():
+    """Pixel noise 3x what the sigma says, variance components off: the chi-square test fails, the message
+    says so and the covariance grows."""
+    told = dataclasses.replace(PAPER_SIGMA, attitude_deg=0.0, position_m=0.5, pixel_px=1.0)
+    obs = paper_problem(n=30, gamma_deg=60.0, seed=4, sigma=dataclasses.replace(told, pixel_px=3.0))
+    obs = dataclasses.replace(obs, sigma=told)
+    est = solve("mle", obs, estimate_variance_components=False, bias_prior_deg=0.0)
+    fit = est.extras["fit"]
+    assert not fit["consistent"] and fit["p_value"] < 0.01
+    assert "larger than the error model says" in fit["message"] and "inflated" in fit["message"]
+    assert fit["covariance_inflation"] > 2
+    clean = paper_problem(n=30, gamma_deg=60.0, seed=4, sigma=told)
+    fit = solve("mle", clean, estimate_variance_components=False, bias_prior_deg=0.0).extras["fit"]
+    assert fit["consistent"] and fit["message"] is None and fit["covariance_inflation"] == pytest.approx(1.0)

@@ -31,6 +31,7 @@ from pipeline.geometry.frames import ellipsoid_from_amsl_m, enu_from_lla
 from pipeline.ingest.model import FlightLog, FrameSeries
 from pipeline.intrinsics import resolve_camera
 from pipeline.results import GroupResult
+from pipeline.solve import mle_outputs
 from pipeline.solve.estimate import Estimate
 from pipeline.solve.observations import Observations, Sigma
 from pipeline.sync.assemble import assemble_observations, frame_states
@@ -299,6 +300,8 @@ def process_group(config: FlightConfig) -> GroupResult:
     cpu["solve"] = time.process_time() - c3
     if not estimates:
         raise InputError(f"no estimator could solve the flight: {failures}", config.path)
+    if "mle" in estimates:  # its fit message, boresight bias and rejected observations
+        notes.extend(mle_outputs.notes(estimates["mle"].extras))
 
     reference = truth_m
     if reference is None:

@@ -88,6 +88,9 @@ def main(args) -> int:
         state = "reused" if r.name in reused else f"{sum(r.timings_s.values()):.2f} s"
         if not args.quiet:
             print(f"{r.name}: {r.n_observations} observations, {state}" + (f", error {shown}" if shown else ""))
+            for note in r.settings.get("notes") or []:  # the mle's words when its model does not fit
+                if str(note).startswith("mle: the error model does not fit"):
+                    print(f"  {note}")
     for f in failures:  # one line each on stderr; the count goes to stdout with the rest of the summary
         print(f"ridgeloc: {f.name}: failed: {f.message}", file=sys.stderr)
     if not args.quiet:

@@ -15,7 +15,7 @@ import sys
 import numpy as np
 
 from pipeline.errors import GeometryError, ObservationError, RidgelocError, SolverError
-from pipeline.solve import METHODS, solve
+from pipeline.solve import METHODS, mle_outputs, solve
 from pipeline.solve.observations import Observations
 
 HELP = "Locate the target in an observations file with one or more estimators (docs/solvers.md)."
@@ -44,23 +44,6 @@ def unsolved_status(exc: RidgelocError) -> str:
     return "diverged"
 
 
-def _mle_notes(m: dict) -> list[str]:
-    """The mle's fit message, boresight bias and rejected observations in words."""
-    notes = []
-    fit = m.get("fit") or {}
-    if fit.get("message"):
-        notes.append(f"mle: {fit['message']}")
-    bias = m.get("boresight_bias")
-    if bias:
-        notes.append(f"mle: boresight bias {bias['u_deg']:+.3f} +/- {bias['u_sigma_deg']:.3f} deg (u), "
-                     f"{bias['v_deg']:+.3f} +/- {bias['v_sigma_deg']:.3f} deg (v), estimated from the flight")
-    for r in m.get("rejected", []):
-        unit = "m" if r["residual"] == "range" else "px"
-        notes.append(f"mle: rejected frame {r['frame']} (t {r['t_ns']} ns) {r['residual']} residual "
-                     f"{r['value']:+.2f} {unit} ({r['sigmas']:+.1f} sigma)")
-    return notes
-
-
 def _table(results: dict, failures: dict, truth) -> str:
     head = f"{'method':<11}{'x_m':>12}{'y_m':>12}{'z_m':>11}{'iter':>6}  {'status':<15}{'cond':>10}"
     if truth is not None:
@@ -84,7 +67,7 @@ def _table(results: dict, failures: dict, truth) -> str:
         ax = m["ellipsoid"]["semi_axes_1sigma_m"]
         notes.append(f"mle: CEP50 {m['cep50_m']:.3f} m, CEP90 {m['cep90_m']:.3f} m (horizontal); 1-sigma "
                      f"ellipsoid semi-axes {ax[0]:.3f} {ax[1]:.3f} {ax[2]:.3f} m; robust {m['robust']}")
-        notes += _mle_notes(m)
+        notes += mle_outputs.notes(m)
     if "ridge" in results and "k" in results["ridge"]:
         notes.append(f"ridge: last k = {results['ridge']['k']:.4g}")
     return "\n".join(lines + notes)

@@ -56,3 +56,21 @@ def residual_vector(ex: dict, b: int, has_pix: np.ndarray, has_range: np.ndarray
     """Problem b's residuals as `Estimate.residuals`: the pixels' (px, u v interleaved), then the ranges' (m)."""
     r = ex["residuals"][b]
     return np.concatenate([r[has_pix, :2].ravel(), r[has_range, 2]])
+
+
+def notes(extras: dict) -> list[str]:
+    """The mle's fit message, boresight bias and rejected observations in words, from `Estimate.extras` (for
+    the console and the report's notes)."""
+    out = []
+    fit = extras.get("fit") or {}
+    if fit.get("message"):
+        out.append(f"mle: {fit['message']}")
+    bias = extras.get("boresight_bias")
+    if bias:
+        out.append(f"mle: boresight bias {bias['u_deg']:+.3f} +/- {bias['u_sigma_deg']:.3f} deg (u), "
+                   f"{bias['v_deg']:+.3f} +/- {bias['v_sigma_deg']:.3f} deg (v), estimated from the flight")
+    for r in extras.get("rejected", []):
+        unit = "m" if r["residual"] == "range" else "px"
+        out.append(f"mle: rejected frame {r['frame']} (t {r['t_ns']} ns) {r['residual']} residual "
+                   f"{r['value']:+.2f} {unit} ({r['sigmas']:+.1f} sigma): zero weight")
+    return out

@@ -20,7 +20,8 @@ def test_mle_with_equal_weights_equals_fusion_raw():
     obs = paper_problem(gamma_deg=20.0, seed=7)
     x0 = solve("vision", obs).position_m
     raw = solve("fusion-raw", obs, initial_m=x0, tol_m=1e-9)
-    mle = solve("mle", obs, initial_m=x0, sigma=UNIT, robust=None, estimate_variance_components=False, tol_m=1e-9)
+    mle = solve("mle", obs, initial_m=x0, sigma=UNIT, robust=None, estimate_variance_components=False, tol_m=1e-9,
+                bias_prior_deg=0.0)
     np.testing.assert_allclose(mle.position_m, raw.position_m, atol=1e-7)
 
 
@@ -40,7 +41,8 @@ def test_mle_matches_scipy_least_squares_on_the_same_weighted_problem(robust, lo
     pixel[4] += [25.0, -30.0]  # one mis-tracked frame, so that the robust losses matter
     obs = dataclasses.replace(obs, pixel=pixel)
     x0 = solve("dlt", obs).position_m
-    est = solve("mle", obs, robust=robust, estimate_variance_components=False, initial_m=x0, tol_m=1e-9)
+    est = solve("mle", obs, robust=robust, estimate_variance_components=False, initial_m=x0, tol_m=1e-9,
+                bias_prior_deg=0.0)
     # the a priori sigmas, written out independently of base_variances
     s = PAPER_SIGMA
     D = np.linalg.norm(x0 - obs.platform_m, axis=1)  # camera centre = platform in these scenes
@@ -127,10 +129,10 @@ def test_cep_of_a_circular_gaussian_is_analytic():
 
 def test_single_mle_reports_covariance_ellipsoid_and_cep():
     obs = paper_problem(gamma_deg=30.0, seed=2)
-    est = solve("mle", obs)
+    est = solve("mle", obs, bias_prior_deg=0.0)
     d = est.to_dict(obs.truth_m)
     assert np.array(d["covariance_m2"]).shape == (3, 3)
     ax = np.array(d["ellipsoid"]["semi_axes_1sigma_m"])
     np.testing.assert_allclose(np.sort(ax ** 2), np.linalg.eigvalsh(est.covariance_m2), rtol=1e-9)
     assert d["cep50_m"] < d["cep90_m"]
-    assert d["robust"] == "huber"
+    assert d["robust"] == "redescending"

@@ -31,6 +31,8 @@ REDESCEND_B = 8.0
 CHI2_3_95 = 7.814727903251178
 #: the range of the bias prior's variance estimated from the flight, relative to the stated prior's
 BIAS_FACTOR_RANGE = (1e-4, 1.0)
+#: the bias prior is revised from the flight where the flight tells at least this fraction of what is known
+BIAS_MIN_REDUNDANCY = 0.2
 #: the boresight bias prior when the sigma gives no attitude accuracy (deg)
 DEFAULT_BIAS_PRIOR_DEG = 0.5
 VCE_MAX_ROUNDS = 10
@@ -593,8 +595,8 @@ def _vce_factors(J, E, ok, robust, a=None, z=None):
     redescending loss rejected do not count), h_i the leverage of row i in the joint problem (target, and the
     bias columns a when given), from the standardized J (3,3,n,b), E (3,n,b); and a (b, 2) flag 'usable'
     (redundancy of the group >= 0.5). With the bias: also (b, 2) factors z^2 / r_z of the bias priors (r_z =
-    1 - posterior variance of z, the prior's redundancy) and their 'usable' flags (r_z >= 0.2: the flight tells
-    at least a fifth of what is known about the bias)."""
+    1 - posterior variance of z, the prior's redundancy) and their 'usable' flags (r_z >= BIAS_MIN_REDUNDANCY:
+    the flight tells at least that fraction of what is known about the bias)."""
     _, w = _cost_weights(E, robust)
     N, _ = _normal(J, E, w)
     hs = _bias_schur(N, J, a, w) if a is not None else None
@@ -613,7 +615,7 @@ def _vce_factors(J, E, ok, robust, a=None, z=None):
                  -(C02 * h0 + C12 * h1 + C22 * h2) / (1 + s)]
             czz = 1.0 / (1 + s) - (c[0] * h0 + c[1] * h1 + c[2] * h2) / (1 + s)
             rz = 1.0 - czz
-            zok[:, k] = np.isfinite(rz) & (rz >= 0.2)
+            zok[:, k] = np.isfinite(rz) & (rz >= BIAS_MIN_REDUNDANCY)
             with np.errstate(divide="ignore", invalid="ignore"):
                 zfac[:, k] = np.where(zok[:, k], z[k] ** 2 / rz, 1.0)
             quad[k] = quad[k] + 2.0 * a[k] * (J[0, k] * c[0] + J[1, k] * c[1] + J[2, k] * c[2]) + a[k] ** 2 * czz

@@ -65,6 +65,11 @@ def notes(extras: dict) -> list[str]:
     fit = extras.get("fit") or {}
     if fit.get("message"):
         out.append(f"mle: {fit['message']}")
+    model = extras.get("error_model")
+    if model:
+        out.append(f"mle: the residuals drift; error correlation time learned from the flight: "
+                   f"{model['attitude_tau_s']:g} s (Gauss-Markov, largest likelihood over 5-320 s), generalized "
+                   "least squares")
     bias = extras.get("boresight_bias")
     if bias:
         out.append(f"mle: boresight bias {bias['u_deg']:+.3f} +/- {bias['u_sigma_deg']:.3f} deg (u), "
@@ -73,4 +78,20 @@ def notes(extras: dict) -> list[str]:
         unit = "m" if r["residual"] == "range" else "px"
         out.append(f"mle: rejected frame {r['frame']} (t {r['t_ns']} ns) {r['residual']} residual "
                    f"{r['value']:+.2f} {unit} ({r['sigmas']:+.1f} sigma): zero weight")
+    return out
+
+
+def problem_extras(ex: dict, t_ns: np.ndarray) -> dict:
+    """The JSON-ready extras of a batch of one: fit, rejected, boresight_bias and error_model (when learned)."""
+    out = {"fit": fit_summary(ex, 0), "rejected": rejected_observations(ex, 0, t_ns)}
+    bias = boresight_bias(ex, 0)
+    if bias is not None:
+        out["boresight_bias"] = bias
+    if "error_model_tau_s" in ex:
+        from pipeline.solve.learned_tau import TAU_GRID_S
+        out["error_model"] = {
+            "attitude_tau_s": float(ex["error_model_tau_s"][0]), "position_tau_s": float(ex["error_model_tau_s"][0]),
+            "chosen_by": "likelihood",
+            "log_likelihood": {f"{t:g}": _f(v) for t, v in zip(TAU_GRID_S, ex["error_model_log_likelihoods"][0],
+                                                                 strict=True)}}
     return out

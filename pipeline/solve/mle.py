@@ -159,30 +159,21 @@ def _evaluate(pl: _Planes, X: np.ndarray):
     J = np.empty((3, 3, n, b))
     E = np.empty((3, n, b))
     ok = np.empty((3, n, b), dtype=bool)
-    Mc, p4c, isd = pl.Mc, pl.p4c, pl.isd
-    x0, x1, x2 = X[:, 0], X[:, 1], X[:, 2]
-    q0 = Mc[0, 0] * x0 + Mc[0, 1] * x1 + Mc[0, 2] * x2 + p4c[0]
-    q1 = Mc[1, 0] * x0 + Mc[1, 1] * x1 + Mc[1, 2] * x2 + p4c[1]
-    q2 = Mc[2, 0] * x0 + Mc[2, 1] * x1 + Mc[2, 2] * x2 + p4c[2]
-    okp = np.logical_and(pl.has_pix, q2 != 0, out=ok[0])
+    Mc, isd = pl.Mc, pl.isd
+    Xp = X.T[:, None, :]  # (3,1,b): broadcasts over the frames
+    q = Mc[:, 0] * Xp[0] + Mc[:, 1] * Xp[1] + Mc[:, 2] * Xp[2] + pl.p4c  # (3,n,b)
+    okp = np.logical_and(pl.has_pix, q[2] != 0, out=ok[0])
     ok[1] = okp
-    iw = 1.0 / np.where(okp, q2, np.inf)  # 1/q3, 0 on unusable rows
-    u, v = q0 * iw, q1 * iw
-    su, sv = iw * isd[0], iw * isd[1]
-    for c in range(3):
-        m2 = Mc[2, c]
-        np.multiply(Mc[0, c] - u * m2, su, out=J[c, 0])
-        np.multiply(Mc[1, c] - v * m2, sv, out=J[c, 1])
-    np.multiply(pl.pixc[0] - u, np.where(okp, isd[0], 0.0), out=E[0])
-    np.multiply(pl.pixc[1] - v, np.where(okp, isd[1], 0.0), out=E[1])
-    sc = pl.sc
-    d0, d1, d2 = x0 - sc[0], x1 - sc[1], x2 - sc[2]
-    dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    iw = 1.0 / np.where(okp, q[2], np.inf)  # 1/q3, 0 on unusable rows
+    uv = q[:2] * iw
+    s = iw * isd[:2]
+    for c in range(3):  # per coordinate, so that the temporaries stay (2,n,b) planes (in cache)
+        np.multiply(Mc[:2, c] - uv * Mc[2, c], s, out=J[c, :2])
+    np.multiply(pl.pixc - uv, np.where(okp, isd[:2], 0.0), out=E[:2])
+    d = Xp - pl.sc
+    dist = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
     okr = np.logical_and(pl.has_range, dist > 0, out=ok[2])
-    sr = isd[2] / np.where(okr, dist, np.inf)
-    np.multiply(d0, sr, out=J[0, 2])
-    np.multiply(d1, sr, out=J[1, 2])
-    np.multiply(d2, sr, out=J[2, 2])
+    np.multiply(d, isd[2] / np.where(okr, dist, np.inf), out=J[:, 2])
     np.multiply(pl.rng - dist, np.where(okr, isd[2], 0.0), out=E[2])
     return J, E, ok
 
@@ -212,12 +203,14 @@ def _cost_weights(E: np.ndarray, robust: str | None):
 def _normal(J: np.ndarray, E: np.ndarray, w, wn=None):
     """The six entries N00 N01 N02 N11 N12 N22 (b,) of J^T diag(wn) J (wn defaults to w; None = 1) and the three
     of g = J^T diag(w) E."""
+    b = E.shape[-1]
     WE = E if w is None else w * E
-    g = [_dot_rows(J[c], WE) for c in range(3)]
+    Jr = J.reshape(3, -1, b)
+    g = np.einsum("crb,rb->cb", Jr, WE.reshape(-1, b))
     wn = w if wn is None else wn
-    CJ = J if wn is None else J * wn
-    N = [_dot_rows(CJ[c], J[d]) for c, d in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))]
-    return N, g
+    CJ = Jr if wn is None else (J * wn).reshape(3, -1, b)
+    N = np.einsum("crb,drb->cdb", CJ, Jr)  # one call: as fast as six row sums on large batches, cheaper on small
+    return [N[0, 0], N[0, 1], N[0, 2], N[1, 1], N[1, 2], N[2, 2]], g
 
 
 def _solve3(N, g, lam=None):
@@ -400,11 +393,11 @@ class _Iteration:
             lam[a_idx] = np.where(lam[a_idx] / 10 < 1e-9, 0.0, lam[a_idx] / 10)
             rej = idx[~accept]
             # a rejected Newton step is retried as the IRLS step (a descent step) before damping
-            fallback = rej[newton_ok[rej]] if robust is not None else rej[:0]
+            retry = newton_ok[rej] if robust is not None else np.zeros(rej.size, dtype=bool)
             if robust in ("huber", "cauchy") and a is None:
                 newton_ok[a_idx] = True
-            newton_ok[fallback] = False
-            rej = rej[~np.isin(rej, fallback)]
+            newton_ok[rej[retry]] = False
+            rej = rej[~retry]
             lam[rej] = np.where(lam[rej] == 0, 1e-4, lam[rej] * 10)
             small = step_norm <= tol_m
             inner_done = small & ~singular & ~exploded

@@ -13,7 +13,8 @@ import numpy as np
 
 from pipeline.errors import GeometryError, ObservationError, SolverError
 from pipeline.solve import correlated as _correlated
-from pipeline.solve import least_squares, linear
+from pipeline.solve import learned_tau as _learned
+from pipeline.solve import least_squares, linear, mle_outputs
 from pipeline.solve import mle as _mle
 from pipeline.solve.estimate import BatchEstimate, Estimate, Status
 from pipeline.solve.iterate import start_status
@@ -27,7 +28,7 @@ _OPTIONS = {
     "dlt": set(), "los": set(),
     "vision": _COMMON, "range": _COMMON, "fusion-raw": _COMMON, "fusion": _COMMON,
     "ridge": _COMMON | {"hkb", "k"},
-    "mle": _COMMON | {"robust", "sigma", "estimate_variance_components"},
+    "mle": _COMMON | {"robust", "sigma", "estimate_variance_components", "bias_prior_deg"},
 }
 _USES_PIXELS = {"dlt", "vision", "fusion-raw", "fusion", "ridge", "mle"}
 
@@ -52,8 +53,11 @@ def _check_options(method: str, options: dict) -> dict:
         raise ValueError(f"hkb must be one of {least_squares.HKB_VARIANTS}, got {o['hkb']!r}")
     if o.get("k") is not None and not (np.isfinite(o["k"]) and o["k"] >= 0):
         raise ValueError(f"k must be a finite number >= 0, got {o['k']!r}")
-    if o.get("robust", "huber") not in _mle.ROBUST_LOSSES:
+    if o.get("robust", _mle.DEFAULT_ROBUST) not in _mle.ROBUST_LOSSES:
         raise ValueError(f"robust must be one of {_mle.ROBUST_LOSSES}, got {o['robust']!r}")
+    b = o.get("bias_prior_deg")
+    if b is not None and (isinstance(b, bool) or not isinstance(b, (int, float)) or not np.isfinite(b) or b < 0):
+        raise ValueError(f"bias_prior_deg must be a finite number >= 0 (0: no bias estimation), got {b!r}")
     s = o.get("sigma")
     if isinstance(s, dict):
         o["sigma"] = Sigma.from_dict(s, "sigma option")
@@ -163,7 +167,7 @@ def _mle_dispatch(st: Stacked, o: dict):
     """`mle.mle` on the batch, or `correlated.mle_gls` for one problem whose sigma has correlation times (and
     whose residual covariance is not diagonal: with vanishing correlation it is the independent problem)."""
     x0, init_status, sigma, vce = _mle_start(st, o)
-    robust, tol, itmax = o.get("robust", "huber"), o["tol_m"], o["max_iterations"]
+    robust, tol, itmax = o.get("robust", _mle.DEFAULT_ROBUST), o["tol_m"], o["max_iterations"]
     if sigma.correlated:
         if st.t_ns is None:
             raise ValueError("mle with time-correlated errors (sigma attitude_tau_s / position_tau_s) needs the "
@@ -178,7 +182,38 @@ def _mle_dispatch(st: Stacked, o: dict):
         if (C != np.diag(np.diag(C))).any():
             return _correlated.mle_gls(st, x0[0], C, robust, vce, tol, itmax)
         sigma = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
-    return _mle.mle(st, x0, sigma, robust, vce, tol, itmax, init_status)
+    bias_deg, revise = _mle.bias_prior_deg(sigma, o)
+    res = _mle.mle(st, x0, sigma, robust, vce, tol, itmax, init_status, bias_deg, revise)
+    if st.size == 1 and st.t_ns is not None and revise and _drifts(res[5]) and _real_times(st):
+        res = _learned_tau(st, res, sigma, robust, vce, tol, itmax)
+    return res
+
+
+def _drifts(ex: dict) -> bool:
+    return bool(ex["drift_pixel"][0] or ex["drift_range"][0])
+
+
+def _real_times(st: Stacked) -> bool:
+    t = st.t_ns[0]
+    return t.size > 1 and int(t.max() - t.min()) >= 1_000_000
+
+
+def _learned_tau(st: Stacked, res: tuple, sigma, robust, vce, tol, itmax) -> tuple:
+    """One problem whose residuals drift and whose sigma gives no correlation time: the GLS answer with the
+    correlation time of the largest likelihood (`learned_tau`), without the rows the first solve rejected;
+    the first answer when no tau gives one."""
+    X, ex = res[0], res[5]
+    if not np.isfinite(X[0]).all():
+        return res
+    clean = _learned.without_rejected(st, ex["rejected"][0])
+    got = _learned.learn_tau(clean, X[0], sigma, robust, vce, tol, itmax)
+    if got is None:
+        return res
+    tau, lls, (Xg, it, status, cond, cov, exg), chi2, m = got
+    out = _learned.replace_with_learned(ex, tau, lls, chi2, m)
+    out.update({k: exg[k] for k in ("variance_factor_pixel", "variance_factor_range", "sigma0_sq", "vce_rounds")})
+    cov = cov * out["covariance_inflation"][0]
+    return Xg, it + res[1], status, cond, cov, out
 
 
 def _mle_summaries(cov: np.ndarray) -> dict:
@@ -343,8 +378,10 @@ def solve(method: str, obs: Observations, **options) -> Estimate:
                                  "range": float(info["variance_factor_range"])},
             "sigma0_sq": float(info["sigma0_sq"]),
             "vce_rounds": int(info["vce_rounds"]),
-            "robust": o.get("robust", "huber"),
+            "robust": o.get("robust", _mle.DEFAULT_ROBUST),
         })
+        if "rejected" in info:  # the batched kernel's fit checks, bias, rejected rows and learned error model
+            extras.update(mle_outputs.problem_extras({k: v[None] for k, v in info.items()}, obs.t_ns))
     cov = None if be.covariance_m2 is None else be.covariance_m2[0]
     return Estimate(method=method, position_m=X, iterations=it, status=status,
                     residuals=_residuals(method, st, X), condition_number=cond, covariance_m2=cov, extras=extras)

@@ -52,12 +52,6 @@ def boresight_bias(ex: dict, b: int) -> dict | None:
             "correlation_with_target": [[_f(c) for c in row] for row in ex["bias_target_correlation"][b]]}
 
 
-def residual_vector(ex: dict, b: int, has_pix: np.ndarray, has_range: np.ndarray) -> np.ndarray:
-    """Problem b's residuals as `Estimate.residuals`: the pixels' (px, u v interleaved), then the ranges' (m)."""
-    r = ex["residuals"][b]
-    return np.concatenate([r[has_pix, :2].ravel(), r[has_range, 2]])
-
-
 def notes(extras: dict) -> list[str]:
     """The mle's fit message, boresight bias and rejected observations in words, from `Estimate.extras` (for
     the console and the report's notes)."""

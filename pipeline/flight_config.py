@@ -251,7 +251,7 @@ class FlightConfig:
 
     name: str
     files: Files
-    target: Target
+    target: Target | None = None  # None: the crosshair (principal point) of the first observation frame
     camera: Camera = field(default_factory=Camera)
     mapping: dict[str, typing.Any] | None = None
     lever_arms_m: LeverArms = field(default_factory=LeverArms)
@@ -314,7 +314,7 @@ def flight_config_from_dict(doc: dict, path: str | PathLike | None = None) -> Fl
         video=_resolve(base, cfg.files.video, "files.video", where),
         frames_csv=_resolve(base, cfg.files.frames_csv, "files.frames_csv", where))
     target = cfg.target
-    if target.template is not None:
+    if target is not None and target.template is not None:
         target = dataclasses.replace(target, template=_resolve(base, target.template, "target.template", where))
     return dataclasses.replace(cfg, files=files, target=target,
                                truth_file=_resolve(base, cfg.truth_file, "truth_file", where),
@@ -333,6 +333,20 @@ def load_flight_config(path: str | PathLike) -> FlightConfig:
     return flight_config_from_dict(_read_yaml(path), path)
 
 
+FMV_SUFFIXES = (".ts", ".m2ts", ".mts", ".mpg", ".mpeg", ".mp4", ".mkv", ".mov")
+
+
+def flight_config_for_video(path: str | PathLike) -> FlightConfig:
+    """The flight config of a full-motion video (MISB ST 0601 KLV beside the video) given alone on the command
+    line: the file is the telemetry and the video, the intrinsics come from its field of view and the target is
+    where the boresighted laser points, the crosshair of the first observation frame."""
+    path = Path(path).resolve()
+    if not path.is_file():
+        raise ConfigError("no such file", path)
+    name = "".join(c if c.isalnum() or c in "-_" else "_" for c in path.stem) or "flight"
+    return FlightConfig(name=name.lstrip("."), files=Files(telemetry=(str(path),)), path=str(path))
+
+
 @dataclass(frozen=True)
 class GroupEntry:
     """One flight group of a run: its config path, or the error that stops it from loading."""
@@ -344,7 +358,7 @@ class GroupEntry:
 
 def load_run_config(path: str | PathLike) -> list[GroupEntry]:
     """The flight groups of a run config (`groups: [flight config paths]`), a manifest (a YAML list of flight config
-    paths), a folder (every `flight.yaml` in it or below), or a single flight config.
+    paths), a folder (every `flight.yaml` in it or below), a single flight config, or a full-motion video file.
 
     A group whose flight config does not load is returned with its error (the others still run); a run config
     that is itself malformed raises ConfigError."""
@@ -353,6 +367,8 @@ def load_run_config(path: str | PathLike) -> list[GroupEntry]:
         from pipeline.batch import discover_flights
 
         return _load_groups(discover_flights(path), path)
+    if path.suffix.lower() in FMV_SUFFIXES:
+        return [GroupEntry(str(path), flight_config_for_video(path))]
     try:
         doc = yaml.safe_load(path.read_text())
     except FileNotFoundError:

@@ -29,7 +29,7 @@ from pipeline.errors import ConfigError, InputError, RidgelocError
 from pipeline.flight_config import FlightConfig
 from pipeline.geometry.frames import ellipsoid_from_amsl_m, enu_from_lla
 from pipeline.ingest.model import FlightLog, FrameSeries
-from pipeline.intrinsics import resolve_camera
+from pipeline.intrinsics import frame_K, resolve_camera
 from pipeline.results import GroupResult
 from pipeline.solve import mle_outputs
 from pipeline.solve.estimate import Estimate
@@ -77,6 +77,9 @@ def open_frames(config: FlightConfig, log: FlightLog) -> tuple[FrameSeries, _Tim
         frames = ingest.read_video(config.files.video, frames_csv=config.files.frames_csv or "auto")
         video = ingest.VideoFrames(config.files.video)
         return frames, _TimedDecoder(video.read), video
+    if log.frames is not None and "fmv" in log.formats:  # full-motion video: the frames of the telemetry file
+        video = ingest.VideoFrames(log.frames.source)
+        return log.frames, _TimedDecoder(video.read), video
     if log.frames is None:
         raise ConfigError("the flight has no video (files.video) and its logs carry no images", config.path)
     for path in config.files.telemetry:
@@ -217,7 +220,13 @@ def process_group(config: FlightConfig) -> GroupResult:
         report_stage("track")
         t1, c1 = time.perf_counter(), time.process_time()
         tracker = SiftTracker(config.tracking)
-        if config.target.template is not None:
+        if config.target is None:  # the boresighted laser's crosshair at the first observation
+            if plan.n == 0:
+                raise InputError("no observation frame to take the target from", config.path)
+            mark_index = int(plan.frame_index[0])
+            mark_px = (float(cam.cx_px), float(cam.cy_px))
+            notes.append(f"target: the image centre of frame {mark_index}, where the laser points (no mark given)")
+        elif config.target.template is not None:
             template = cv2.imread(config.target.template, cv2.IMREAD_GRAYSCALE)
             if template is None:
                 raise ConfigError("target.template: not a readable image", config.target.template)
@@ -285,7 +294,8 @@ def process_group(config: FlightConfig) -> GroupResult:
     if refusal is not None:
         raise InputError(refusal, config.path)
     sub = dataclasses.replace(states, inside=useful)
-    obs, _ = assemble_observations(sub, track.pixel_px, range_m, K=cam.K, dist=cam.dist, origin_lla=origin,
+    K_frames = frame_K(cam, cam_source, log, plan.t_ns)  # per frame when a zoom lens reports its field of view
+    obs, _ = assemble_observations(sub, track.pixel_px, range_m, K=K_frames, dist=cam.dist, origin_lla=origin,
                                        R_optical_from_gimbal=np.array(cam.R_optical_from_gimbal),
                                        lever_camera_m=config.lever_arms_m.camera,
                                        lever_rangefinder_m=config.lever_arms_m.rangefinder, sigma=sigma,

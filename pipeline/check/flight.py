@@ -289,7 +289,7 @@ def mark_checks(r: ResolvedFlight, centre_m: np.ndarray | None,
     problems, warnings = [], []
     t = r.config.target
     cam = r.camera
-    if t.pixel is None:
+    if t is None or t.pixel is None:
         return problems, warnings
     u, v = t.pixel
     w, h = cam.width_px, cam.height_px

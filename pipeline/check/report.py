@@ -63,7 +63,9 @@ def _estimate_clock(r: ResolvedFlight):
     _, decoder, closable = open_frames(cfg, r.log)
     try:
         tracker = SiftTracker(cfg.tracking)
-        if cfg.target.template is not None:
+        if cfg.target is None:  # the crosshair of the first observation frame, as `run` takes it
+            mark_index, mark_px = int(r.plan.frame_index[0]), (float(r.camera.cx_px), float(r.camera.cy_px))
+        elif cfg.target.template is not None:
             import cv2
 
             template = cv2.imread(cfg.target.template, cv2.IMREAD_GRAYSCALE)

@@ -18,7 +18,8 @@ STAGES = ("ingest", "track", "sync", "solve")
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("config", nargs="?", default=str(DEFAULT_CONFIG),
                         help="a run config listing flight configs under `groups:`, a manifest (YAML list of flight "
-                             "configs), a folder of flights (every flight.yaml below it), or one flight config "
+                             "configs), a folder of flights (every flight.yaml below it), one flight config, or a "
+                             "MISB full-motion video (.ts with KLV metadata) "
                              f"(default: {DEFAULT_CONFIG}, the bundled sample flights)")
     parser.add_argument("-o", "--outdir", default="out", help="output folder (default: out)")
     parser.add_argument("--workers", type=int, default=1, help="flights processed at once (default: 1)")
@@ -42,7 +43,8 @@ def _resolve_config(arg: str) -> Path:
 
 def _input_files(cfg: FlightConfig) -> list[Path]:
     """The files a flight's outputs depend on (for re-run skipping); folders (ROS 2 bags) contribute their files."""
-    listed = [*cfg.files.telemetry, cfg.files.video, cfg.files.frames_csv, cfg.truth_file, cfg.target.template]
+    listed = [*cfg.files.telemetry, cfg.files.video, cfg.files.frames_csv, cfg.truth_file,
+              cfg.target.template if cfg.target is not None else None]
     files: list[Path] = []
     for f in listed:
         if f is None:

@@ -18,7 +18,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, help="override the config's noise seed")
     parser.add_argument("--video", choices=("bursts", "continuous"),
                         help="override video.mode: bursts around observations, or continuous 25 Hz video")
-    parser.add_argument("--format", choices=("tlog", "ros1", "ros2-sqlite3", "ros2-mcap", "mcap"),
+    parser.add_argument("--format", choices=("tlog", "ros1", "ros2-sqlite3", "ros2-mcap", "mcap", "klv"),
                         help="override the telemetry format")
 
 

@@ -17,12 +17,13 @@ def intrinsics_matrix(fx_px: float, fy_px: float, cx_px: float, cy_px: float) ->
 
 
 def projection_matrix(K: np.ndarray, R_cam_from_world: np.ndarray, centre_m: np.ndarray) -> np.ndarray:
-    """P = K [R | -R c], shape (..., 3, 4) for broadcastable (..., 3, 3) R and (..., 3) centres."""
+    """P = K [R | -R c], shape (..., 3, 4) for broadcastable (..., 3, 3) R and (..., 3) centres; K (3, 3) or
+    (..., 3, 3) per camera (a zoom lens)."""
     R = np.asarray(R_cam_from_world, dtype=np.float64)
     c = np.asarray(centre_m, dtype=np.float64)
     t = -np.einsum("...ij,...j->...i", R, c)
     Rt = np.concatenate([R, t[..., None]], axis=-1)
-    return np.einsum("ij,...jk->...ik", K, Rt)
+    return np.einsum("...ij,...jk->...ik", np.asarray(K, dtype=np.float64), Rt)
 
 
 def project(P: np.ndarray, X_m: np.ndarray) -> np.ndarray:

@@ -7,11 +7,17 @@ import numpy as np
 
 
 def undistort_pixels(pixel_px, K: np.ndarray, dist) -> np.ndarray:
-    """(n, 2) pinhole pixels of (n, 2) distorted image pixels (NaN rows stay NaN), so P = K [R | t] applies."""
+    """(n, 2) pinhole pixels of (n, 2) distorted image pixels (NaN rows stay NaN), so P = K [R | t] applies.
+    K: (3, 3), or (n, 3, 3) per frame."""
     px = np.asarray(pixel_px, dtype=np.float64).reshape(-1, 2)
     out = np.full_like(px, np.nan)
     ok = np.isfinite(px).all(axis=1)
     d = np.asarray(dist, dtype=np.float64).ravel()
+    K = np.asarray(K, dtype=np.float64)
+    if K.ndim == 3 and d.any():  # one K per frame: OpenCV takes one camera per call
+        for i in np.flatnonzero(ok):
+            out[i] = undistort_pixels(px[i:i + 1], K[i], d)[0]
+        return out
     if ok.any():
         if not d.any():
             out[ok] = px[ok]

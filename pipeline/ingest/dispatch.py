@@ -16,12 +16,14 @@ MAGIC = (
     (b"\x89MCAP0\r\n", "mcap"),
     (b"\xa3\x95", "dataflash"),
     (b"SQLite format 3\x00", "ros2"),
+    (bytes.fromhex("060e2b34"), "klv"),  # a SMPTE Universal Key: raw KLV packets (ffmpeg -map 0:d -f data)
 )
 
 
 def detect_format(path: str | Path) -> str:
-    """One of tlog, dataflash (binary or text), ulog, ros1, ros2, mcap, video, srt, by folder layout, magic bytes
-    (an `FMT,` line for text DataFlash), then suffix."""
+    """One of tlog, dataflash (binary or text), ulog, ros1, ros2, mcap, video, srt, klv, by folder layout, magic bytes
+    (an `FMT,` line for text DataFlash), then suffix. A video with a KLV data stream (MISB full-motion video) is
+    "video" here and read as "fmv"."""
     p = Path(path)
     if not p.exists():
         raise InputError("no such file or folder", path=p)
@@ -48,7 +50,7 @@ def detect_format(path: str | Path) -> str:
     if is_text_dataflash(head):
         return "dataflash"  # text DataFlash (.log): Mission Planner's conversion, old firmware
     by_suffix = {".tlog": "tlog", ".bin": "dataflash", ".ulg": "ulog", ".bag": "ros1", ".mcap": "mcap",
-                 ".db3": "ros2", ".log": "dataflash"}
+                 ".db3": "ros2", ".log": "dataflash", ".klv": "klv"}
     if suffix in by_suffix:
         if not head:
             raise LogReadError("empty file", path=p)
@@ -81,9 +83,16 @@ def read_file(path: str | Path, mapping: dict | None = None, scan_all: bool = Fa
     if fmt == "mcap":
         from pipeline.ingest.mcap_plain import read_mcap
         return read_mcap(p, mapping_for("mcap", mapping), mapping_for("ros", mapping), scan_all=scan_all)
+    if fmt == "klv":
+        from pipeline.ingest.klv import read_klv_dump
+        return read_klv_dump(p)
     if fmt == "video":
-        from pipeline.ingest.video import read_video
-        frames = read_video(p, frames_csv=mapping_for("video", mapping)["frames_csv"])
+        from pipeline.ingest.video import demux_index, read_video
+        index = demux_index(p, data_streams=True)
+        if index.data_packets:  # MISB full-motion video: telemetry and frames from one file
+            from pipeline.ingest.klv import read_fmv
+            return read_fmv(p, index)
+        frames = read_video(p, frames_csv=mapping_for("video", mapping)["frames_csv"], index=index)
         from pipeline.ingest.model import StreamInfo
         stream = StreamInfo(p.name, "video", int(frames.t_ns.size),
                             int(frames.t_ns[0]) if frames.t_ns.size else None,

@@ -8,7 +8,8 @@ import numpy as np
 
 from pipeline.ingest.model import FlightLog
 
-QUANTITIES = ("position", "attitude", "gimbal", "range", "frames", "camera_events", "field_of_view")
+QUANTITIES = ("position", "attitude", "gimbal", "range", "frames", "camera_events", "field_of_view", "frame_centre",
+              "payload_target")
 
 
 def _concat(series_list: list, name: str, warnings: list[str]):

@@ -195,6 +195,8 @@ class FlightLog:
     camera_info: CameraInfo | None = None
     field_of_view: FieldOfViewSeries | None = None
     formats: list[str] = field(default_factory=list)  # reader format of each file read ("tlog", "ros1", ...)
+    frame_centre: PositionSeries | None = None  # where the payload says its optical axis meets the ground (KLV)
+    payload_target: PositionSeries | None = None  # the payload's own target location (KLV tags 40-42)
 
     def missing_for_localization(self) -> list[str]:
         """Quantities localization needs that this log does not supply."""

@@ -1,32 +1,49 @@
-"""Video files through OpenCV: per-frame presentation times and decoding of chosen frames only.
+"""Video files through PyAV (FFmpeg): a frame index from the packet demux alone, and decoding of chosen frames.
 
-Frame times come from `<stem>.frames.csv` (header `frame_index,pts_ns`) when present — the synthetic flights
-write one because their streams are variable-rate, which mp4v cannot express — else from the container's
-timestamp of each grabbed frame (`CAP_PROP_POS_MSEC` after `grab()`, which the FFmpeg backend takes from the
-packet's pts, so variable frame rate keeps its timing). Times are on the "video" clock, starting at the
-container's first pts.
+Indexing reads packets, never pixels: each video packet's pts (dts when it has none) and key-frame flag, sorted
+into display order, so a 10-minute 4K file is indexed in about the time of a bare demux and in constant memory
+(numpy int64 per frame). Variable frame rates keep their own times, MPEG-TS included. Times are on the "video"
+clock: 0 is the first frame's pts. `<stem>.frames.csv` (header `frame_index,pts_ns`), when present, overrides the
+container's times (the synthetic mp4v flights write one: bursts make them variable-rate, which mp4v cannot say).
+
+Decoding (`VideoFrames`) seeks to the key frame at or before a wanted frame and decodes forward to it, or simply
+decodes forward when the wanted frame is later in the same group of pictures as the last one decoded; frames on
+the way are decoded but not converted, and nothing is kept but the frames asked for.
 """
 
 from __future__ import annotations
 
+from array import array
+from dataclasses import dataclass, field
+from fractions import Fraction
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from pipeline.errors import LogReadError
 from pipeline.ingest.model import FrameSeries
 
 
-def _open(path: Path) -> cv2.VideoCapture:
+def _av():
+    import av
+
+    return av
+
+
+def _open(path: Path):
     if not path.is_file():
         raise LogReadError("no such video file", path=path)
     if path.stat().st_size == 0:
         raise LogReadError("empty video file", path=path)
-    cap = cv2.VideoCapture(str(path))
-    if not cap.isOpened():
-        raise LogReadError("OpenCV cannot open this video (not a video, or truncated)", path=path)
-    return cap
+    av = _av()
+    try:
+        container = av.open(str(path))
+    except (av.error.FFmpegError, OSError, ValueError) as exc:
+        raise LogReadError(f"cannot open this video (not a video, or truncated): {exc}", path=path) from None
+    if not container.streams.video:
+        container.close()
+        raise LogReadError("the file has no video stream", path=path)
+    return container
 
 
 def frames_csv_for(path: Path, frames_csv="auto") -> Path | None:
@@ -56,53 +73,108 @@ def _read_frames_csv(csv_path: Path) -> tuple[np.ndarray, np.ndarray]:
     return data[:, 0].copy(), data[:, 1].copy()
 
 
-def read_video(path, frames_csv="auto") -> FrameSeries:
-    """FrameSeries of a video: t_ns (n,) presentation times on the "video" clock, index (n,) frame numbers."""
+@dataclass
+class DemuxIndex:
+    """What one demux pass of a file gives. frames: FrameSeries (display order, container times);
+    pts (n,) int64 raw pts of each frame in `time_base`; keyframe (n,) bool; data_packets: [(bytes, t_ns on the
+    video clock or None)] of the data (KLV) streams when asked for."""
+
+    frames: FrameSeries
+    pts: np.ndarray
+    keyframe: np.ndarray
+    time_base: Fraction
+    data_packets: list = field(default_factory=list)
+
+
+def demux_index(path, data_streams: bool = False) -> DemuxIndex:
+    """Index the first video stream of `path` (and collect its data-stream packets) by demuxing packets only."""
     path = Path(path)
-    cap = _open(path)
+    av = _av()
+    container = _open(path)
     try:
-        width = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH))
-        height = int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
-        n_container = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
-        csv_path = frames_csv_for(path, frames_csv)
-        if csv_path is not None:
-            index, t_ns = _read_frames_csv(csv_path)
-            if n_container > 0 and index.max() >= n_container:
-                raise LogReadError(f"frames CSV {csv_path.name} lists frame {int(index.max())} but the video has "
-                                   f"{n_container} frames", path=path)
-        else:
-            ts = []
-            while cap.grab():
-                ts.append(cap.get(cv2.CAP_PROP_POS_MSEC))
-            if not ts:
-                raise LogReadError("video has no frames", path=path)
-            t_ns = np.round(np.asarray(ts) * 1e6).astype(np.int64)
-            index = np.arange(t_ns.size, dtype=np.int64)
+        vs = container.streams.video[0]
+        streams = [vs] + (list(container.streams.data) if data_streams else [])
+        pts, key = array("q"), array("b")
+        data: list[tuple[bytes, int | None, Fraction]] = []
+        try:
+            for pkt in container.demux(streams):
+                if pkt.size == 0:
+                    continue
+                if pkt.stream is vs:
+                    t = pkt.pts if pkt.pts is not None else pkt.dts
+                    if t is None:
+                        continue
+                    pts.append(t)
+                    key.append(pkt.is_keyframe)
+                else:
+                    t = pkt.pts if pkt.pts is not None else pkt.dts
+                    data.append((bytes(pkt), t, pkt.time_base or pkt.stream.time_base))
+        except av.error.FFmpegError as exc:  # damaged tail: keep what was read
+            if not pts:
+                raise LogReadError(f"cannot demux this video: {exc}", path=path) from None
+        width, height = vs.codec_context.width, vs.codec_context.height
+        tb = vs.time_base or Fraction(1, 90000)
     finally:
-        cap.release()
-    if width == 0 or height == 0:
+        container.close()
+    if not pts or not width or not height:
         raise LogReadError("video has no frames", path=path)
+    raw = np.frombuffer(pts, dtype=np.int64)
+    order = np.argsort(raw, kind="stable")
+    raw = raw[order]
+    keyframe = np.frombuffer(key, dtype=np.int8)[order].astype(bool)
+    t0 = int(raw[0])
+    t_ns = ((raw - t0) * (tb.numerator * 10**9) + tb.denominator // 2) // tb.denominator
+    origin = Fraction(t0) * tb
+    packets = [(b, None if t is None else round((Fraction(t) * dtb - origin) * 10**9)) for b, t, dtb in data]
+    frames = FrameSeries(t_ns.astype(np.int64), np.arange(raw.size, dtype=np.int64), source=str(path), clock="video",
+                         width_px=int(width), height_px=int(height))
+    return DemuxIndex(frames, raw, keyframe, tb, packets)
+
+
+def read_video(path, frames_csv="auto", index: DemuxIndex | None = None) -> FrameSeries:
+    """FrameSeries of a video: t_ns (n,) presentation times on the "video" clock, index (n,) frame numbers.
+    `index`: this file's demux index when the caller already has it."""
+    path = Path(path)
+    index = index if index is not None else demux_index(path)
+    csv_path = frames_csv_for(path, frames_csv)
+    if csv_path is None:
+        return index.frames
+    idx, t_ns = _read_frames_csv(csv_path)
+    n = index.frames.t_ns.size
+    if idx.max() >= n:
+        raise LogReadError(f"frames CSV {csv_path.name} lists frame {int(idx.max())} but the video has {n} frames",
+                           path=path)
     order = np.argsort(t_ns, kind="stable")
-    return FrameSeries(t_ns[order], index[order], source=str(path), clock="video", width_px=width,
-                       height_px=height)
+    f = index.frames
+    return FrameSeries(t_ns[order], idx[order], source=f.source, clock="video", width_px=f.width_px,
+                       height_px=f.height_px)
 
 
 class VideoFrames:
-    """Decode chosen frames of a video: `frames[i]` or `frames.read([i, j, ...])` -> BGR uint8 (h, w, 3).
+    """Decode chosen frames of a video: `frames[i]` or `frames.read([i, j, ...])` -> uint8 BGR (h, w, 3), or
+    (h, w) grayscale with gray=True. Frame i is the i-th in display order (as `read_video` numbers them).
 
-    Frames are reached by `grab()` (demux + decode, no colour conversion) from the current position; a
-    backward step reopens the file, a forward jump of more than `seek_after` frames seeks and checks that the
-    reported position is the one asked for (falling back to grabbing when it is not).
-    """
+    `seek_after`: a wanted frame more than this many frames ahead of the decoder is reached by a seek to its key
+    frame even within one group of pictures (None: only when a key frame lies in between)."""
 
-    def __init__(self, path, seek_after: int = 250):
+    def __init__(self, path, seek_after: int | None = None, gray: bool = False, index: DemuxIndex | None = None):
         self.path = Path(path)
         self.seek_after = seek_after
-        self._cap = _open(self.path)
-        self._next = 0  # index of the frame the next grab() returns
+        self.gray = gray
+        self.index = index if index is not None else demux_index(self.path)
+        self._key_pos = np.flatnonzero(self.index.keyframe)
+        if self._key_pos.size == 0 or self._key_pos[0] != 0:
+            self._key_pos = np.concatenate([[0], self._key_pos])
+        self._container = _open(self.path)
+        self._stream = self._container.streams.video[0]
+        self._stream.thread_type = "AUTO"
+        self._frames = None  # decoder generator, positioned after frame self._pos
+        self._pos = -1
+        self.decoded = 0  # frames decoded, wanted or not (for benchmarks)
 
     def close(self) -> None:
-        self._cap.release()
+        self._frames = None
+        self._container.close()
 
     def __enter__(self):
         return self
@@ -110,34 +182,53 @@ class VideoFrames:
     def __exit__(self, *exc):
         self.close()
 
-    def _goto(self, index: int) -> None:
-        if index < self._next:
-            self._cap.release()
-            self._cap = _open(self.path)
-            self._next = 0
-        if index - self._next > self.seek_after:
-            self._cap.set(cv2.CAP_PROP_POS_FRAMES, index)
-            if int(self._cap.get(cv2.CAP_PROP_POS_FRAMES)) == index:
-                self._next = index
-            else:
-                self._cap.release()
-                self._cap = _open(self.path)
-                self._next = 0
-        while self._next < index:
-            if not self._cap.grab():
-                raise LogReadError(f"video ends before frame {index} (has {self._next})", path=self.path)
-            self._next += 1
+    def _seek(self, i: int) -> None:
+        """Position the decoder at the key frame at or before display position i."""
+        k = int(self._key_pos[np.searchsorted(self._key_pos, i, side="right") - 1])
+        av = _av()
+        try:
+            self._container.seek(int(self.index.pts[k]), stream=self._stream, backward=True, any_frame=False)
+        except av.error.FFmpegError as exc:
+            raise LogReadError(f"cannot seek to frame {i}: {exc}", path=self.path) from None
+        self._frames = self._container.decode(self._stream)
+        self._pos = k - 1
 
-    def __getitem__(self, index: int) -> np.ndarray:
-        index = int(index)
-        if index < 0:
-            raise IndexError(index)
-        self._goto(index)
-        ok, img = self._cap.read()
-        if not ok:
-            raise LogReadError(f"video ends before frame {index}", path=self.path)
-        self._next += 1
-        return img
+    def _convert(self, frame) -> np.ndarray:
+        return frame.to_ndarray(format="gray" if self.gray else "bgr24")
+
+    def __getitem__(self, i: int) -> np.ndarray:
+        i = int(i)
+        n = self.index.pts.size
+        if i < 0:
+            raise IndexError(i)
+        if i >= n:
+            raise LogReadError(f"video ends before frame {i} (has {n})", path=self.path)
+        key_before = int(self._key_pos[np.searchsorted(self._key_pos, i, side="right") - 1])
+        far = self.seek_after is not None and i - self._pos > self.seek_after
+        if self._frames is None or i <= self._pos or key_before > self._pos or far:
+            self._seek(i)
+        target = int(self.index.pts[i])
+        av = _av()
+        for attempt in range(2):
+            try:
+                for frame in self._frames:
+                    self.decoded += 1
+                    p = frame.pts if frame.pts is not None else frame.dts
+                    if p is None:
+                        continue
+                    self._pos = int(np.searchsorted(self.index.pts, p))
+                    if p == target:
+                        return self._convert(frame)
+                    if p > target:
+                        break
+            except av.error.FFmpegError as exc:
+                raise LogReadError(f"cannot decode frame {i}: {exc}", path=self.path) from None
+            if attempt == 0:  # an inexact seek (some containers): decode from the start
+                self._container.seek(0, stream=self._stream, backward=True, any_frame=False)
+                self._frames = self._container.decode(self._stream)
+                self._pos = -1
+        self._frames = None
+        raise LogReadError(f"video ends before frame {i} (frame not decodable)", path=self.path)
 
     def read(self, indices) -> dict[int, np.ndarray]:
         """Decode the given frame indices (any order, duplicates allowed) -> {index: image}."""

@@ -72,8 +72,9 @@ def assemble_observations(states: FrameStates, pixel_px: np.ndarray, range_m: np
                           sigma: Sigma | None = None, truth_m=None) -> tuple[Observations, FramePoses]:
     """The synchronized observations of the frames whose state is known (states.inside).
 
-    pixel_px (m, 2) are image pixels as tracked (distorted; NaN where the target was lost): they are undistorted
-    so that P = K [R | t] is an exact pinhole model. The platform position is the rangefinder's origin."""
+    K: (3, 3), or (m, 3, 3) per frame. pixel_px (m, 2) are image pixels as tracked (distorted; NaN where the target
+    was lost): they are undistorted so that P = K [R | t] is an exact pinhole model. The platform position is the
+    rangefinder's origin."""
     keep = np.asarray(states.inside, dtype=bool)
     if not keep.any():
         raise InputError("no observation time is covered by position, attitude and gimbal data "
@@ -82,6 +83,9 @@ def assemble_observations(states: FrameStates, pixel_px: np.ndarray, range_m: np
                         states.body_quat_wxyz[keep], states.gimbal_quat_wxyz[keep],
                         states.yaw_in_vehicle_frame[keep], origin_lla, R_optical_from_gimbal=R_optical_from_gimbal,
                         lever_camera_m=lever_camera_m, lever_rangefinder_m=lever_rangefinder_m)
+    K = np.asarray(K, dtype=np.float64)
+    if K.ndim == 3:  # per-frame intrinsics (zoom): one K per state
+        K = K[keep]
     pix = undistort_pixels(np.asarray(pixel_px, dtype=np.float64)[keep], K, dist)
     obs = Observations(P=poses.projection_matrices(K), pixel=pix, platform_m=poses.laser_m,
                        range_m=np.asarray(range_m, dtype=np.float64)[keep], t_ns=states.t_ns[keep],

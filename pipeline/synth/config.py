@@ -18,7 +18,7 @@ from typing import Literal
 from pipeline.config_schema import load_dataclass, read_yaml, to_plain
 from pipeline.errors import ConfigError
 
-FORMATS = ("tlog", "ros1", "ros2-sqlite3", "ros2-mcap", "mcap")
+FORMATS = ("tlog", "ros1", "ros2-sqlite3", "ros2-mcap", "mcap", "klv")
 
 
 @dataclass(frozen=True)
@@ -76,7 +76,8 @@ class ObservationConfig:
 
 @dataclass(frozen=True)
 class CameraConfig:
-    """OpenCV pinhole + distortion (k1, k2, p1, p2, k3), 25 Hz video."""
+    """OpenCV pinhole + distortion (k1, k2, p1, p2, k3), 25 Hz video. zoom: [[seconds after the video start,
+    factor], ...], a zoom lens stepping to `factor` times the focal lengths at that time (needs dist all 0)."""
 
     width_px: int = 600
     height_px: int = 400
@@ -86,6 +87,7 @@ class CameraConfig:
     cy_px: float = 198.4
     dist: tuple[float, ...] = (-0.12, 0.08, 0.0006, -0.0004, 0.0)
     fps: int = 25
+    zoom: tuple[tuple[float, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -212,7 +214,7 @@ class SynthConfig:
     group: str = "example"
     description: str = ""
     seed: int = 1
-    format: Literal["tlog", "ros1", "ros2-sqlite3", "ros2-mcap", "mcap"] = "tlog"
+    format: Literal["tlog", "ros1", "ros2-sqlite3", "ros2-mcap", "mcap", "klv"] = "tlog"
     start_time_utc: str = "2024-05-14T02:30:00Z"
     site: SiteConfig = field(default_factory=SiteConfig)
     path: PathConfig = field(default_factory=PathConfig)
@@ -288,6 +290,11 @@ def _check(c: SynthConfig) -> None:
         raise ConfigError("'camera' needs width/height >= 16 px, positive focal lengths and 5 'dist' coefficients")
     if cam.fps < 1:
         raise ConfigError(f"'camera.fps' must be >= 1, got {cam.fps}")
+    if cam.zoom and (any(len(z) != 2 or z[1] <= 0 for z in cam.zoom) or any(cam.dist)):
+        raise ConfigError("'camera.zoom' must list [seconds, factor > 0] pairs, with 'camera.dist' all 0")
+    if c.format == "klv" and (c.gimbal.yaw_in_vehicle_frame or any(cam.dist) or c.video.images_in_bag):
+        raise ConfigError("format 'klv' (MISB ST 0601 in MPEG-TS) states the field of view only: it needs "
+                          "'camera.dist' all 0, and no gimbal.yaw_in_vehicle_frame or video.images_in_bag")
     for name in ("camera", "rangefinder"):
         if len(getattr(c.lever_arms_m, name)) != 3:
             raise ConfigError(f"'lever_arms_m.{name}' must be [x, y, z]")

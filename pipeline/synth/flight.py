@@ -48,6 +48,22 @@ def camera_matrix(cfg: SynthConfig) -> np.ndarray:
     return np.array([[c.fx_px, 0.0, c.cx_px], [0.0, c.fy_px, c.cy_px], [0.0, 0.0, 1.0]])
 
 
+def zoom_factors(cfg: SynthConfig, pts_ns: np.ndarray) -> np.ndarray:
+    """(n,) zoom factor of frames at video times pts_ns: `camera.zoom` steps, 1 before the first."""
+    z = np.ones(len(pts_ns))
+    for t_s, factor in sorted(cfg.camera.zoom):
+        z[np.asarray(pts_ns) >= round(t_s * 1e9)] = factor
+    return z
+
+
+def camera_matrices(cfg: SynthConfig, zoom: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) K of each frame: focal lengths times its zoom factor, principal point unchanged."""
+    K = np.repeat(camera_matrix(cfg)[None], len(zoom), axis=0)
+    K[:, 0, 0] *= zoom
+    K[:, 1, 1] *= zoom
+    return K
+
+
 class FrameSource:
     """Renders the written frames in order from the true camera poses (lazily: video can be long)."""
 
@@ -58,6 +74,7 @@ class FrameSource:
                                  tex, cfg.scene.texture_res_m, cfg.site.target_size_m, cfg.scene.supersample,
                                  cfg.scene.haze_km)
         self.n = len(tl.written_frames)
+        self.zoom = zoom_factors(cfg, tl.frame_pts_ns(tl.written_frames))
 
     def __iter__(self) -> Iterator[np.ndarray]:
         cfg = self.cfg
@@ -67,7 +84,7 @@ class FrameSource:
             rng = np.random.default_rng([cfg.seed, RNG_STREAMS.index("pixels"), int(self.tl.written_frames[k])])
             cloud = tuple(ft["true_target_pixel"]) if ft["occluded"] else None
             yield self.renderer.render(R_cam_from_enu, self.states.camera_enu[k], rng, cfg.noise.pixel_noise_dn,
-                                       cloud)
+                                       cloud, zoom=float(self.zoom[k]))
 
 
 def generate(cfg: SynthConfig, out_dir: str | Path, overwrite: bool = False,
@@ -88,7 +105,8 @@ def generate(cfg: SynthConfig, out_dir: str | Path, overwrite: bool = False,
     tel, laser_truth = make_telemetry(cfg, tl, flight, rngs)
     frame_t = tl.frame_time_ns(tl.written_frames)
     states = flight.state(frame_t)
-    truth_frames = frame_truth(cfg, tl, flight, states, camera_matrix(cfg))
+    truth_frames = frame_truth(cfg, tl, flight, states,
+                               camera_matrices(cfg, zoom_factors(cfg, tl.frame_pts_ns(tl.written_frames))))
     frames = FrameSource(cfg, tl, states, truth_frames)
 
     tmp = out_dir.with_name(f".tmp-{out_dir.name}")
@@ -117,6 +135,17 @@ def generate(cfg: SynthConfig, out_dir: str | Path, overwrite: bool = False,
 def _write_files(cfg: SynthConfig, tl: Timeline, tel, frames: FrameSource, folder: Path) -> dict[str, str]:
     files: dict[str, str] = {}
     home_alt_m = cfg.site.alt_m  # take-off from ground level near the target
+    if cfg.format == "klv":
+        from pipeline.synth.writers.fmv import klv_packets, write_fmv
+
+        pts = tl.frame_pts_ns(tl.written_frames)
+        c = cfg.camera
+        packets = klv_packets(tel, tl.frame_time_ns(tl.written_frames), (c.width_px, c.height_px, c.fx_px, c.fy_px),
+                              frames.zoom, cfg.site.geoid_separation_m)
+        write_fmv(folder / "flight.ts", frames, pts, list(zip(pts.tolist(), packets, strict=True)), c.fps,
+                  (c.width_px, c.height_px))
+        files["telemetry"] = "flight.ts"
+        return files
     if cfg.format == "tlog":
         write_tlog(folder / "flight.tlog", tel, cfg.site.geoid_separation_m, home_alt_m)
         files["telemetry"] = "flight.tlog"

@@ -52,12 +52,22 @@ def operator_flight_config(truth: dict, flight_dir: str | os.PathLike, relative_
         raise ValueError("the target is visible in no observation frame: no mark for a flight config")
     files_in = meta["files"]
     files: dict = {"telemetry": [_rel(flight_dir / files_in["telemetry"], relative_to)]}
-    if "frames" not in files_in:  # images in the bag: no video file
+    if "video" in files_in:  # else images in the bag, or video and telemetry in one MPEG-TS
         files["video"] = _rel(flight_dir / files_in["video"], relative_to)
         files["frames_csv"] = _rel(flight_dir / files_in["frames_csv"], relative_to)
     cam = truth["camera"]
     arms = truth["lever_arms_m"]
     mark = truth["target_mark"]
+    if meta["format"] == "klv":  # full-motion video: one file; intrinsics from its field of view, one clock
+        return {
+            "name": truth["group"],
+            "files": files,
+            "lever_arms_m": {"camera": [float(v) for v in arms["camera"]],
+                             "rangefinder": [float(v) for v in arms["rangefinder"]]},
+            "target": {"frame_index": int(mark["frame_index"]), "pixel": [float(v) for v in mark["pixel"]]},
+            "sigma": sensor_sigmas(truth),
+            "truth_file": _rel(flight_dir / "truth.json", relative_to),
+        }
     return {
         "name": truth["group"],
         "files": files,
@@ -96,6 +106,8 @@ def flight_config_text(doc: dict, title: str) -> str:
     """YAML text of `doc` (from operator_flight_config) with its explanatory comments; `title` starts the header,
     e.g. "Sample flight group1" or "Synthetic flight example"."""
     s = doc["sigma"]
+    if "camera" not in doc:
+        return _fmv_config_text(doc, title)
     cam = doc["camera"]
     paper = (s["range_m"], s["position_m"], s["attitude_deg"]) == (5.0, 2.0, 0.2)
     header = (
@@ -137,6 +149,35 @@ def flight_config_text(doc: dict, title: str) -> str:
     ]
     text = "\n".join(lines) + "\n"
     if yaml.safe_load(text) != doc:  # the layout above must not change any value
+        raise AssertionError(f"flight config text does not parse back to its values: {doc['name']}")
+    return text
+
+
+def _fmv_config_text(doc: dict, title: str) -> str:
+    s = doc["sigma"]
+    header = (
+        f"{title}: a MISB ST 0601 full-motion video (STANAG 4609 MPEG-TS: H.264 and KLV metadata in one file). "
+        "The file carries the position, attitude, sensor pointing, laser slant range and field of view, all on "
+        "the video's clock, so an operator gives only the target mark, the lever arms and the sensors' specified "
+        f"accuracies (laser {s['range_m']:g} m, position {s['position_m']:g} m, attitude {s['attitude_deg']:g} "
+        f"deg; pixel {s['pixel_px']:g} px). No camera calibration: the intrinsics of each frame come from its "
+        "field of view (tags 16/17), so a zoom changes them frame by frame. truth_file feeds the error columns "
+        "only. Written from truth.json by pipeline/synth/flight_config.py (docs/synth.md).")
+    lines = [
+        *_comment(header),
+        f"name: {_flow(doc['name'])}",
+        "files:",
+        *(f"  {k}: {_flow(v)}" for k, v in doc["files"].items()),
+        "lever_arms_m:",
+        *(f"  {k}: {_flow(v)}" for k, v in doc["lever_arms_m"].items()),
+        "target:",
+        *(f"  {k}: {_flow(v)}" for k, v in doc["target"].items()),
+        "sigma: {" + ", ".join(f"{k}: {_flow(v)}" for k, v in list(s.items())[:5]) + ",",
+        "        " + ", ".join(f"{k}: {_flow(v)}" for k, v in list(s.items())[5:]) + "}",
+        f"truth_file: {_flow(doc['truth_file'])}",
+    ]
+    text = "\n".join(lines) + "\n"
+    if yaml.safe_load(text) != doc:
         raise AssertionError(f"flight config text does not parse back to its values: {doc['name']}")
     return text
 

@@ -205,10 +205,13 @@ class Renderer:
         self.vignette = (1.0 - 0.35 * r ** 2).astype(np.float32)[..., None]
         self.shape_ss = (hs, ws)
 
-    def ground_points(self, R_cam_from_enu: np.ndarray, centre_enu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def ground_points(self, R_cam_from_enu: np.ndarray, centre_enu: np.ndarray, zoom: float = 1.0
+                      ) -> tuple[np.ndarray, np.ndarray]:
         """Ground E, N metres seen by every supersampled pixel (rows, cols) via H^-1 (NaN where the ray misses
         the ground), and the distance to that point (m)."""
         x, y = self.ray_x, self.ray_y
+        if zoom != 1.0:  # focal lengths times zoom about the same principal point: rays shrink by 1 / zoom
+            x, y = x / np.float32(zoom), y / np.float32(zoom)
         centre_enu = np.asarray(centre_enu, dtype=np.float64)
         t = -R_cam_from_enu @ centre_enu
         H = np.column_stack([R_cam_from_enu[:, 0], R_cam_from_enu[:, 1], t])  # normalised image <- ground (E, N, 1)
@@ -224,9 +227,11 @@ class Renderer:
         return e, n, np.where(hits, dist_m, np.inf)
 
     def render(self, R_cam_from_enu: np.ndarray, centre_enu: np.ndarray, rng: np.random.Generator,
-               pixel_noise_dn: float = 1.5, cloud_at_px: tuple[float, float] | None = None) -> np.ndarray:
-        """(h, w, 3) uint8 BGR frame of a camera at centre_enu (3,) with rotation R_cam_from_enu (3, 3)."""
-        e, n, dist_m = self.ground_points(R_cam_from_enu, centre_enu)
+               pixel_noise_dn: float = 1.5, cloud_at_px: tuple[float, float] | None = None,
+               zoom: float = 1.0) -> np.ndarray:
+        """(h, w, 3) uint8 BGR frame of a camera at centre_enu (3,) with rotation R_cam_from_enu (3, 3); `zoom`
+        multiplies the focal lengths (a distortion-free camera only)."""
+        e, n, dist_m = self.ground_points(R_cam_from_enu, centre_enu, zoom)
         n_tex = self.tex.shape[0]
         mx = np.nan_to_num(e / self.res + (n_tex / 2 - 0.5), nan=-1e6).astype(np.float32)
         my = np.nan_to_num(-n / self.res + (n_tex / 2 - 0.5), nan=-1e6).astype(np.float32)

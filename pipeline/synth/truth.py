@@ -25,14 +25,16 @@ def _ecef(lla: np.ndarray) -> np.ndarray:
 
 
 def project_target_px(cfg: SynthConfig, K: np.ndarray, states: TrueState) -> tuple[np.ndarray, np.ndarray]:
-    """(n, 2) distorted pixels of the target (target ENU origin) and (n,) whether it is in front of the camera."""
+    """(n, 2) distorted pixels of the target (target ENU origin) and (n,) whether it is in front of the camera.
+    K: (3, 3), or (n, 3, 3) per frame (zoom)."""
+    K = np.broadcast_to(np.asarray(K, dtype=np.float64), (len(states.camera_enu), 3, 3))
     R_cam_from_enu = np.swapaxes(states.R_enu_from_optical, -1, -2)
     t = -np.einsum("nij,nj->ni", R_cam_from_enu, states.camera_enu)
     px = np.empty((len(t), 2))
     dist = np.asarray(cfg.camera.dist, dtype=np.float64)
     for i in range(len(t)):  # cv2.projectPoints takes one pose per call
         rvec, _ = cv2.Rodrigues(R_cam_from_enu[i])
-        px[i] = cv2.projectPoints(np.zeros((1, 1, 3)), rvec, t[i], K, dist)[0].ravel()
+        px[i] = cv2.projectPoints(np.zeros((1, 1, 3)), rvec, t[i], np.ascontiguousarray(K[i]), dist)[0].ravel()
     return px, t[:, 2] > 0
 
 
@@ -120,7 +122,8 @@ def build_truth(cfg: SynthConfig, tl: Timeline, flight: Flight, laser: LaserTrut
                       "laser_m": cfg.noise.laser_m},
             "gimbal_yaw_in_vehicle_frame": cfg.gimbal.yaw_in_vehicle_frame,
             "laser_source": {"tlog": "CAMERA_TRACKING_GEO_STATUS.dist", "ros": "/uav/laser/range",
-                             "mcap": "/uav/laser"}[("ros" if cfg.format.startswith("ros") else cfg.format)],
+                             "mcap": "/uav/laser", "klv": "ST 0601 tag 21 (slant range)"
+                             }[("ros" if cfg.format.startswith("ros") else cfg.format)],
             "video_mode": cfg.video.mode,
         },
         "flight": {"path": cfg.path.kind, "speed_mps": speed, "observation_spacing_s": spacing_s,

@@ -14,7 +14,7 @@ from pipeline.run import process_group
 from pipeline.synth.flight_config import flight_config_text, operator_flight_config
 
 ROOT = Path(__file__).resolve().parents[1]
-GROUPS = ("group1", "group2", "group3", "group4", "group5", "group6", "hard_outliers", "angle10")
+GROUPS = ("group1", "group2", "group3", "group4", "group5", "group6", "hard_outliers", "angle10", "fmv")
 
 
 @pytest.mark.parametrize("group", GROUPS)

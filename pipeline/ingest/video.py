@@ -77,13 +77,14 @@ def _read_frames_csv(csv_path: Path) -> tuple[np.ndarray, np.ndarray]:
 class DemuxIndex:
     """What one demux pass of a file gives. frames: FrameSeries (display order, container times);
     pts (n,) int64 raw pts of each frame in `time_base`; keyframe (n,) bool; data_packets: [(bytes, t_ns on the
-    video clock or None)] of the data (KLV) streams when asked for."""
+    video clock or None)] of the data (KLV) streams when asked for; pos (n,) byte offsets of the packets."""
 
     frames: FrameSeries
     pts: np.ndarray
     keyframe: np.ndarray
     time_base: Fraction
     data_packets: list = field(default_factory=list)
+    pos: np.ndarray | None = None  # (n,) int64 byte offset of each frame's packet (-1: unknown)
 
 
 def demux_index(path, data_streams: bool = False) -> DemuxIndex:
@@ -94,7 +95,7 @@ def demux_index(path, data_streams: bool = False) -> DemuxIndex:
     try:
         vs = container.streams.video[0]
         streams = [vs] + (list(container.streams.data) if data_streams else [])
-        pts, key = array("q"), array("b")
+        pts, key, pos = array("q"), array("b"), array("q")
         data: list[tuple[bytes, int | None, Fraction]] = []
         try:
             for pkt in container.demux(streams):
@@ -106,6 +107,7 @@ def demux_index(path, data_streams: bool = False) -> DemuxIndex:
                         continue
                     pts.append(t)
                     key.append(pkt.is_keyframe)
+                    pos.append(-1 if pkt.pos is None else pkt.pos)
                 else:
                     t = pkt.pts if pkt.pts is not None else pkt.dts
                     data.append((bytes(pkt), t, pkt.time_base or pkt.stream.time_base))
@@ -122,13 +124,14 @@ def demux_index(path, data_streams: bool = False) -> DemuxIndex:
     order = np.argsort(raw, kind="stable")
     raw = raw[order]
     keyframe = np.frombuffer(key, dtype=np.int8)[order].astype(bool)
+    offsets = np.frombuffer(pos, dtype=np.int64)[order]
     t0 = int(raw[0])
     t_ns = ((raw - t0) * (tb.numerator * 10**9) + tb.denominator // 2) // tb.denominator
     origin = Fraction(t0) * tb
     packets = [(b, None if t is None else round((Fraction(t) * dtb - origin) * 10**9)) for b, t, dtb in data]
     frames = FrameSeries(t_ns.astype(np.int64), np.arange(raw.size, dtype=np.int64), source=str(path), clock="video",
                          width_px=int(width), height_px=int(height))
-    return DemuxIndex(frames, raw, keyframe, tb, packets)
+    return DemuxIndex(frames, raw, keyframe, tb, packets, offsets)
 
 
 def read_video(path, frames_csv="auto", index: DemuxIndex | None = None) -> FrameSeries:
@@ -168,6 +171,7 @@ class VideoFrames:
         self._container = _open(self.path)
         self._stream = self._container.streams.video[0]
         self._stream.thread_type = "AUTO"
+        self._byte_seek = "mpegts" in (self._container.format.name or "")
         self._frames = None  # decoder generator, positioned after frame self._pos
         self._pos = -1
         self.decoded = 0  # frames decoded, wanted or not (for benchmarks)
@@ -182,19 +186,58 @@ class VideoFrames:
     def __exit__(self, *exc):
         self.close()
 
-    def _seek(self, i: int) -> None:
-        """Position the decoder at the key frame at or before display position i."""
-        k = int(self._key_pos[np.searchsorted(self._key_pos, i, side="right") - 1])
+    def _seek_plans(self, i: int) -> list[tuple[str, int]]:
+        """Ways to put the decoder at or before display position i, most exact first: a byte seek to the key
+        frame's packet (MPEG-TS, where timestamp seeks can land a group of pictures late), timestamp seeks to the
+        key frame and to the two before it, and the start of the file."""
+        j = int(np.searchsorted(self._key_pos, i, side="right") - 1)
+        keys = [int(self._key_pos[max(j - b, 0)]) for b in range(3)]
+        plans: list[tuple[str, int]] = []
+        pos = self.index.pos
+        if self._byte_seek and pos is not None and pos[keys[0]] >= 0:
+            plans.append(("byte", int(pos[keys[0]])))
+        plans += [("pts", int(self.index.pts[k])) for k in dict.fromkeys(keys)]
+        plans.append(("pts", int(self.index.pts[0])))
+        return plans
+
+    def _seek(self, how: str, offset: int) -> None:
         av = _av()
         try:
-            self._container.seek(int(self.index.pts[k]), stream=self._stream, backward=True, any_frame=False)
+            if how == "byte":
+                self._container.seek(offset, unsupported_byte_offset=True)
+            else:
+                self._container.seek(offset, stream=self._stream, backward=True, any_frame=False)
         except av.error.FFmpegError as exc:
-            raise LogReadError(f"cannot seek to frame {i}: {exc}", path=self.path) from None
+            raise LogReadError(f"cannot seek in this video: {exc}", path=self.path) from None
         self._frames = self._container.decode(self._stream)
-        self._pos = k - 1
+        self._pos = -1
 
     def _convert(self, frame) -> np.ndarray:
         return frame.to_ndarray(format="gray" if self.gray else "bgr24")
+
+    def _decode_to(self, target: int, fresh: bool):
+        """Decode forward to the frame with pts `target`: the frame, or None when the decoder is already past it
+        (an inexact seek: the first frame after it is later than the target) or the stream ends."""
+        av = _av()
+        first = fresh
+        try:
+            for frame in self._frames:
+                self.decoded += 1
+                p = frame.pts if frame.pts is not None else frame.dts
+                if p is None:
+                    continue
+                self._pos = int(np.searchsorted(self.index.pts, p))
+                if p == target:
+                    return frame
+                if p > target:
+                    if not first:
+                        self._frames = None
+                    return None
+                first = False
+        except av.error.FFmpegError as exc:
+            raise LogReadError(f"cannot decode the video near pts {target}: {exc}", path=self.path) from None
+        self._frames = None
+        return None
 
     def __getitem__(self, i: int) -> np.ndarray:
         i = int(i)
@@ -203,31 +246,18 @@ class VideoFrames:
             raise IndexError(i)
         if i >= n:
             raise LogReadError(f"video ends before frame {i} (has {n})", path=self.path)
+        target = int(self.index.pts[i])
         key_before = int(self._key_pos[np.searchsorted(self._key_pos, i, side="right") - 1])
         far = self.seek_after is not None and i - self._pos > self.seek_after
-        if self._frames is None or i <= self._pos or key_before > self._pos or far:
-            self._seek(i)
-        target = int(self.index.pts[i])
-        av = _av()
-        for attempt in range(2):
-            try:
-                for frame in self._frames:
-                    self.decoded += 1
-                    p = frame.pts if frame.pts is not None else frame.dts
-                    if p is None:
-                        continue
-                    self._pos = int(np.searchsorted(self.index.pts, p))
-                    if p == target:
-                        return self._convert(frame)
-                    if p > target:
-                        break
-            except av.error.FFmpegError as exc:
-                raise LogReadError(f"cannot decode frame {i}: {exc}", path=self.path) from None
-            if attempt == 0:  # an inexact seek (some containers): decode from the start
-                self._container.seek(0, stream=self._stream, backward=True, any_frame=False)
-                self._frames = self._container.decode(self._stream)
-                self._pos = -1
-        self._frames = None
+        if self._frames is not None and self._pos < i and key_before <= self._pos and not far:
+            frame = self._decode_to(target, fresh=False)  # same group of pictures: decode on
+            if frame is not None:
+                return self._convert(frame)
+        for how, offset in self._seek_plans(i):
+            self._seek(how, offset)
+            frame = self._decode_to(target, fresh=True)
+            if frame is not None:
+                return self._convert(frame)
         raise LogReadError(f"video ends before frame {i} (frame not decodable)", path=self.path)
 
     def read(self, indices) -> dict[int, np.ndarray]:

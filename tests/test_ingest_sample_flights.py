@@ -42,9 +42,12 @@ def test_sample_flight_against_truth(folder):
     assert not [w for w in log.warnings if "truncated" in w or "skipped" in w]
 
     # frame times: video clock + offset (or bag stamps, already on the telemetry clock) = truth frame times
-    offset = meta["clock"]["video_to_telemetry_offset_ns"] if video else 0
+    fmv = meta["format"] == "klv"  # video and telemetry in one MPEG-TS, on the video clock
+    offset = meta["clock"]["video_to_telemetry_offset_ns"] if video or fmv else 0
     if video:
         frames = read_video(folder / video)
+    elif fmv:
+        frames = log.frames
     else:
         frames = BagImages(files[0]).frames
     tf = {f["frame_index"]: f for f in truth["frames"]}
@@ -65,7 +68,7 @@ def test_sample_flight_against_truth(folder):
     # optical axis: gimbal FRD x at the frame time (yaw referred to north where the log gives it relative to
     # the vehicle), NED at the vehicle -> ECEF, against truth R_ecef_from_optical's z (optical axis)
     assert bool(log.gimbal.yaw_in_vehicle_frame.any()) == bool(meta.get("gimbal_yaw_in_vehicle_frame"))
-    g = gimbal_to_earth(log.gimbal, log.attitude)
+    g = series_to_clock(gimbal_to_earth(log.gimbal, log.attitude), log.clock_links, "unix")
     j = np.clip(np.searchsorted(g.t_ns, t_obs), 0, g.t_ns.size - 1)
     axis_ned = Rotation.from_quat(g.quat_wxyz[j], scalar_first=True).apply([1.0, 0.0, 0.0])
     u_e, v_e, w_e = pymap3d.enu2uvw(axis_ned[:, 1], axis_ned[:, 0], -axis_ned[:, 2], cam[:, 0], cam[:, 1])
@@ -75,7 +78,7 @@ def test_sample_flight_against_truth(folder):
     assert ang.max() < 1.5, ang  # 0.2 deg gimbal (+ attitude) noise, jitter, up to 1/25 s between samples
 
     # laser ranges: one sample per logged shot, and the measured value at each observation
-    r = log.range
+    r = series_to_clock(log.range, log.clock_links, "unix")
     shots = truth.get("laser_shots")
     if isinstance(shots, dict) and "logged" in shots:
         assert r.t_ns.size == sum(shots["logged"])

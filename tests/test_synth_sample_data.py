@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "sample_data"
 TABLE3 = {"group1": (53.97, 16), "group2": (24.03, 17), "group3": (24.36, 34), "group4": (31.42, 11),
           "group5": (46.46, 18), "group6": (36.41, 11)}
-EXTRA = {"hard_outliers": (40.0, 14), "angle10": (10.0, 10)}
+EXTRA = {"hard_outliers": (40.0, 14), "angle10": (10.0, 10), "fmv": (30.0, 10)}
 ALL = {**TABLE3, **EXTRA}
 
 
@@ -91,6 +91,20 @@ def test_committed_files_open_in_standard_libraries(group):
         while (m := conn.recv_match(type="CAMERA_TRACKING_GEO_STATUS")) is not None:
             shots.append(round(m._timestamp * 1e6) * 1000)
         conn.close()
+    elif tel.suffix == ".ts":  # STANAG 4609: PyAV demuxes the KLV stream, stanag4609 decodes the Local Sets
+        import av
+        from stanag4609 import st0601
+
+        with av.open(str(tel)) as c:
+            assert c.streams.video[0].codec_context.name == "h264"
+            n_video, sets = 0, []
+            for p in c.demux(c.streams.video[0], c.streams.data[0]):
+                if p.size and p.stream.type == "video":
+                    n_video += 1
+                elif p.size:
+                    sets.append(st0601.decode_uas_local_set(bytes(p)))
+        assert n_video == len(sets) == len(truth["frames"])
+        shots = [s.misp_timestamp_microseconds * 1000 for s in sets if s.value(21) is not None]
     elif tel.suffix == ".mcap":
         with open(tel, "rb") as f:
             shots = [m.log_time for _, _, m in make_reader(f).iter_messages(topics=["/uav/laser"])]

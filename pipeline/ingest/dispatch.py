@@ -54,8 +54,8 @@ def detect_format(path: str | Path) -> str:
     if suffix in by_suffix:
         if not head:
             raise LogReadError("empty file", path=p)
-        if suffix in (".tlog",):
-            return "tlog"
+        if suffix in (".tlog", ".klv"):  # no magic of their own (a .klv dump may start mid-packet)
+            return by_suffix[suffix]
         what = "text DataFlash log (no FMT lines)" if suffix == ".log" else by_suffix[suffix] + " file"
         raise LogReadError(f"not a {what} (unexpected leading bytes {head[:8]!r})", path=p)
     raise LogReadError(f"unknown log type (suffix {suffix or 'none'!r}, leading bytes {head[:8]!r})", path=p)

@@ -3,6 +3,8 @@ angles into the model's frames, the MPEG-TS round trip and per-frame intrinsics 
 
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -193,3 +195,32 @@ def test_a_video_without_klv_is_refused_as_telemetry(tmp_path):
         out.mux(vs.encode(None))
     log = read_flight([p])
     assert log.frames.t_ns.size == 12 and log.position is None and log.formats == ["video"]
+
+
+@pytest.mark.parametrize("suffix", [".mp4", ".ts"])
+def test_variable_frame_rate_times_from_the_demux_and_chosen_frames(tmp_path, suffix):
+    """Irregular pts survive indexing; frames decoded by seeking equal those decoded in sequence."""
+    import av
+
+    from pipeline.ingest import VideoFrames, read_video
+
+    t_ms = [0, 40, 100, 133, 500, 540, 1000, 1040, 1080, 2000, 2040, 2080, 2120, 2160, 2200, 2240]
+    p = tmp_path / f"vfr{suffix}"
+    rng = np.random.default_rng(2)
+    with av.open(str(p), "w") as out:
+        vs = out.add_stream("libx264", rate=25)
+        vs.width, vs.height, vs.pix_fmt = 64, 48, "yuv420p"
+        vs.codec_context.time_base = vs.time_base = Fraction(1, 1000)
+        vs.options = {"g": "4", "preset": "ultrafast"}
+        for t in t_ms:
+            f = av.VideoFrame.from_ndarray(rng.integers(0, 255, (48, 64, 3), dtype=np.uint8), format="rgb24")
+            f.pts, f.time_base = t, Fraction(1, 1000)
+            out.mux(vs.encode(f))
+        out.mux(vs.encode(None))
+    fs = read_video(p)
+    np.testing.assert_array_equal(fs.t_ns, np.array(t_ms) * 1_000_000)
+    with VideoFrames(p) as v:
+        seq = v.read(range(len(t_ms)))
+    with VideoFrames(p, seek_after=1) as v:
+        for i in (13, 2, 9, 0, 15, 5):
+            np.testing.assert_array_equal(v[i], seq[i])

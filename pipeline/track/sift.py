@@ -43,6 +43,7 @@ class TrackerSettings:
     keyframe_inlier_fraction: float = 0.5
     neighbours: int = 2
     detect_scale: float = 0.5  # features are found on the image resized by this factor (speed); refinement is full-res
+    max_detect_px: int = 1280  # ... and at most this many pixels on its long side (4K: a pyramid level, not 4K)
 
     def __post_init__(self):
         if not 0 < self.ratio < 1:
@@ -55,6 +56,8 @@ class TrackerSettings:
             raise ValueError("'min_contrast_ratio' must be in (0, 1]")
         if not 0.1 <= self.detect_scale <= 1.0:
             raise ValueError("'detect_scale' must be in [0.1, 1]")
+        if self.max_detect_px < 160:
+            raise ValueError("'max_detect_px' must be at least 160")
 
 
 @dataclass
@@ -161,8 +164,10 @@ class SiftTracker:
     # ---- features and matching ---------------------------------------------------------------------------
 
     def view(self, index: int, image: np.ndarray) -> _View:
+        """Features of a frame, found on a reduced copy: `detect_scale`, and no more than `max_detect_px` on the
+        long side, so SIFT's cost does not grow with the video's resolution (the refinement stays full-res)."""
         gray = to_gray(image)
-        f = self.s.detect_scale
+        f = min(self.s.detect_scale, self.s.max_detect_px / max(gray.shape))
         small = gray if f == 1.0 else cv2.resize(gray, None, fx=f, fy=f, interpolation=cv2.INTER_AREA)
         kp, desc = self._sift.detectAndCompute(small, None)
         # keypoints back to full-resolution pixel coordinates (pixel centres at integers in both)
@@ -258,7 +263,7 @@ class SiftTracker:
         wanted = [int(i) for i in wanted]
         mark_index = int(mark_index)
         p0 = np.asarray(mark_px, dtype=np.float64)
-        images = decode(sorted(set(wanted) | {mark_index}))
+        images = decode([mark_index])  # the others one at a time as the loop reaches them: memory stays flat
         if mark_index not in images:
             raise InputError(f"the target's mark frame {mark_index} cannot be decoded")
         mark = self.view(mark_index, images[mark_index])
@@ -278,10 +283,15 @@ class SiftTracker:
             seq = sorted((i for i in set(wanted) if (i - mark_index) * direction > 0), key=lambda i: i * direction)
             key = _Key(mark, np.eye(3))
             for idx in seq:
-                if idx not in images:
-                    out[idx] = FrameTrack(idx, via="not decodable")
-                    continue
-                cur = views.setdefault(idx, self.view(idx, images.pop(idx)))
+                for j in [j for j in views if j not in (mark_index, key.view.index)]:
+                    del views[j]  # only the mark and the key frame are needed from here on
+                if idx not in views:
+                    got = decode([idx])
+                    if idx not in got:
+                        out[idx] = FrameTrack(idx, via="not decodable")
+                        continue
+                    views[idx] = self.view(idx, got[idx])
+                cur = views[idx]
                 ft, H = self._attempt(key, mark, p0, cur, "key")
                 if H is None and key.view is not mark:  # re-acquisition against the mark itself
                     ft2, H = self._attempt(_Key(mark, np.eye(3)), mark, p0, cur, "reacquired")

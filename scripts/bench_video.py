@@ -1,0 +1,254 @@
+#!/usr/bin/env python
+"""4K full-motion video at scale: generate a synthetic 3840x2160 30 fps H.264 + MISB ST 0601 KLV flight, then
+time indexing against a bare PyAV demux, and the whole `ridgeloc run` on it, with its peak memory.
+
+    nice -n 10 python scripts/bench_video.py --seconds 600          # the 10-minute flight of issue 13
+    python scripts/bench_video.py --seconds 20 --workdir /tmp/bv     # a short one while developing
+
+The flight: an arc 2 km above and 5 km from the target at 35 m/s, the camera (hfov 10 deg, 1-second GOP) kept on
+the target with a slow pointing wander, one laser shot per second (range noise 1 m) in KLV tag 21, one KLV Local
+Set per frame. Frames are a pre-rendered 4096 px ground texture (0.35 m/px, the synth's, grey) warped by each
+frame's ground-plane homography, so generation costs one warp and one libx264 (ultrafast) encode per frame.
+The flight config names only the .ts, with the target mark (the true pixel in the first observation frame) and
+the true target for the error column.
+
+Measures, in this one run: bare demux (PyAV packets of every stream, nothing kept), our index
+(`pipeline.ingest.video.demux_index`, frames only) and our full ingest (`read_flight`: index + KLV decode), each
+in a fresh subprocess; then `ridgeloc run FLIGHT.yaml` in a subprocess: wall time and peak RSS (ru_maxrss of
+the child). Prints the load average before and after; writes a JSON summary into the work folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import resource
+import subprocess
+import sys
+import time
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+W, H, FPS = 3840, 2160, 30
+HFOV_DEG = 10.0
+TARGET_LLA = (34.30, 108.90, 420.0)
+TEX_PX, TEX_RES_M = 4096, 0.35
+
+
+def _look_at(cam_enu: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) R_enu_from_optical of cameras at cam_enu (n, 3) looking at the origin (no roll)."""
+    z = -cam_enu / np.linalg.norm(cam_enu, axis=1, keepdims=True)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    y = np.cross(z, x)
+    return np.stack([x, y, z], axis=-1)
+
+
+def flight(seconds: float, seed: int = 4):
+    """Frame times and true states: t_ns (n,), camera ENU (n, 3), R_enu_from_optical (n, 3, 3), velocity (n, 3)."""
+    from scipy.spatial.transform import Rotation
+
+    n = round(seconds * FPS)
+    t_s = np.arange(n) / FPS
+    height, slant, speed = 2000.0, 5000.0, 35.0
+    radius = math.sqrt(slant ** 2 - height ** 2)
+    az = math.radians(200.0) + speed * t_s / radius
+    cam = np.column_stack([radius * np.sin(az), radius * np.cos(az), np.full(n, height)])
+    vel = np.column_stack([speed * np.cos(az), -speed * np.sin(az), np.zeros(n)])
+    R = _look_at(cam)
+    # the gimbal's pointing wanders slowly about the target (a few pixels), as a tracking loop does
+    rng = np.random.default_rng(seed)
+    k = np.arange(n) / FPS
+    wander = np.column_stack([np.sin(0.21 * k + rng.random() * 6) * 1.5e-4,
+                              np.sin(0.17 * k + rng.random() * 6) * 1.5e-4, np.zeros(n)])
+    R = R @ Rotation.from_rotvec(wander).as_matrix()
+    t_ns = 1_715_000_000_000_000_000 + np.round(t_s * 1e9).astype(np.int64)
+    return t_ns, cam, R, vel
+
+
+def _K() -> np.ndarray:
+    f = W / (2 * math.tan(math.radians(HFOV_DEG) / 2))
+    return np.array([[f, 0, (W - 1) / 2], [0, f, (H - 1) / 2], [0, 0, 1.0]])
+
+
+def _texture() -> np.ndarray:
+    import cv2
+
+    from pipeline.synth.render import TARGET_PATTERN_PX, ground_texture, target_pattern
+
+    tex = cv2.cvtColor(ground_texture(7, TEX_PX, TEX_RES_M), cv2.COLOR_BGR2GRAY)
+    size_px = round(36.0 / TEX_RES_M)  # a 36 m target at the texture's centre
+    pat = cv2.resize(target_pattern(TARGET_PATTERN_PX), (size_px, size_px), interpolation=cv2.INTER_AREA)
+    a = pat[..., 3:4]
+    grey = cv2.cvtColor(pat[..., :3].astype(np.float32), cv2.COLOR_BGR2GRAY)[..., None]
+    c0 = TEX_PX // 2 - size_px // 2
+    roi = tex[c0:c0 + size_px, c0:c0 + size_px, None].astype(np.float32)
+    tex[c0:c0 + size_px, c0:c0 + size_px] = np.clip(roi * (1 - a) + grey * a, 0, 255)[..., 0].astype(np.uint8)
+    return tex
+
+
+def _homography(K, R_enu_from_optical, cam) -> np.ndarray:
+    """Image <- texture pixel homography of one frame (ground plane z = 0, texture row 0 north)."""
+    Rco = R_enu_from_optical.T
+    t = -Rco @ cam
+    A = np.array([[TEX_RES_M, 0, -(TEX_PX / 2 - 0.5) * TEX_RES_M],
+                  [0, -TEX_RES_M, (TEX_PX / 2 - 0.5) * TEX_RES_M], [0, 0, 1.0]])  # texture px -> E, N, 1
+    return K @ np.column_stack([Rco[:, 0], Rco[:, 1], t]) @ A
+
+
+def klv_values(t_ns, cam, R_enu_from_optical, vel, laser: dict[int, float]) -> list[dict]:
+    from scipy.spatial.transform import Rotation
+
+    from pipeline.geometry.frames import R_enu0_from_ned_at, lla_from_enu
+    from pipeline.geometry.pose import R_OPTICAL_FROM_GIMBAL_DEFAULT
+
+    lla = lla_from_enu(cam, TARGET_LLA)
+    R_enu0_from_ned = R_enu0_from_ned_at(lla[:, 0], lla[:, 1], TARGET_LLA)
+    heading = np.degrees(np.arctan2(vel[:, 0], vel[:, 1])) % 360.0  # ENU velocity: atan2(E, N)
+    R_ned_from_body = Rotation.from_euler("Z", np.radians(heading)[:, None])
+    R_ned_from_gimbal = np.swapaxes(R_enu0_from_ned, -1, -2) @ R_enu_from_optical @ R_OPTICAL_FROM_GIMBAL_DEFAULT
+    aer = (R_ned_from_body.inv() * Rotation.from_matrix(R_ned_from_gimbal)).as_euler("ZYX", degrees=True)
+    out = []
+    for i, t in enumerate(t_ns.tolist()):
+        v = {2: t // 1000, 65: 19, 5: float(heading[i]), 6: 0.0, 7: 0.0, 13: float(lla[i, 0]), 14: float(lla[i, 1]),
+             75: float(lla[i, 2]), 16: HFOV_DEG, 17: float(np.degrees(2 * np.arctan(H / W * np.tan(np.radians(
+                 HFOV_DEG / 2))))), 18: float(aer[i, 0] % 360), 19: float(aer[i, 1]), 20: float(aer[i, 2] % 360)}
+        if t in laser:
+            v[21] = laser[t]
+        out.append(v)
+    return out
+
+
+def generate(folder: Path, seconds: float) -> Path:
+    import av
+    import cv2
+    from stanag4609 import st0601
+
+    folder.mkdir(parents=True, exist_ok=True)
+    ts = folder / "flight.ts"
+    t_ns, cam, R, vel = flight(seconds)
+    n = len(t_ns)
+    rng = np.random.default_rng(11)
+    shots = np.arange(15, n, FPS)  # one laser shot per second, mid-GOP
+    laser = {int(t_ns[i]): float(np.linalg.norm(cam[i]) + rng.normal(0, 1.0)) for i in shots}
+    values = klv_values(t_ns, cam, R, vel, laser)
+    K = _K()
+    tex = _texture()
+    t0 = time.perf_counter()
+    tb = Fraction(1, 90000)
+    with av.open(str(ts), "w", format="mpegts") as out:
+        vs = out.add_stream("libx264", rate=FPS)
+        vs.width, vs.height, vs.pix_fmt = W, H, "yuv420p"
+        vs.codec_context.time_base = vs.time_base = tb
+        vs.options = {"preset": "ultrafast", "crf": "28", "g": str(FPS)}
+        ds = out.add_data_stream(codec_name="klv")
+        for i in range(n):
+            img = cv2.warpPerspective(tex, _homography(K, R[i], cam[i]), (W, H), flags=cv2.INTER_LINEAR,
+                                      borderMode=cv2.BORDER_REFLECT)
+            pts = round(Fraction(int(t_ns[i] - t_ns[0]), 10**9) / tb)
+            pkt = av.Packet(st0601.encode_uas_local_set(values[i]))
+            pkt.stream, pkt.pts, pkt.dts, pkt.time_base = ds, pts, pts, tb
+            out.mux(pkt)
+            frame = av.VideoFrame.from_ndarray(img, format="gray")
+            frame.pts, frame.time_base = pts, tb
+            out.mux(vs.encode(frame))
+            if i % (10 * FPS) == 0:
+                print(f"  frame {i}/{n}, {time.perf_counter() - t0:.0f} s", flush=True)
+        out.mux(vs.encode(None))
+    gen_s = time.perf_counter() - t0
+    # the mark: the true target pixel in the first observation frame
+    i0 = int(shots[0])
+    x = K @ (R[i0].T @ (-cam[i0]))
+    mark = [round(float(x[0] / x[2]), 2), round(float(x[1] / x[2]), 2)]
+    cfg = {"name": f"bench4k_{int(seconds)}s", "files": {"telemetry": [ts.name]},
+           "target": {"frame_index": i0, "pixel": mark},
+           "truth": {"lat_deg": TARGET_LLA[0], "lon_deg": TARGET_LLA[1], "alt_m": TARGET_LLA[2]},
+           "sigma": {"pixel_px": 0.5, "range_m": 1.0, "position_m": 0.5, "attitude_deg": 0.05}}
+    import yaml
+
+    (folder / "flight.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    (folder / "generate.json").write_text(json.dumps({"seconds": seconds, "frames": n, "generate_s": gen_s,
+                                                      "bytes": ts.stat().st_size}))
+    print(f"generated {n} frames, {ts.stat().st_size / 1e6:.0f} MB in {gen_s:.0f} s", flush=True)
+    return folder / "flight.yaml"
+
+
+# Each child imports first, then times its work alone (wall and CPU seconds), and prints them as JSON.
+_TIMER = "import json,sys,time\n_t0,_c0=time.perf_counter(),time.process_time()\n{work}\n" \
+         "print(json.dumps([time.perf_counter()-_t0,time.process_time()-_c0]))"
+CHILD = {
+    "bare demux": ("import av", "c=av.open(sys.argv[1])\nfor p in c.demux():\n    pass"),
+    "index": ("from pipeline.ingest.video import demux_index", "demux_index(sys.argv[1])"),
+    "ingest (index + KLV)": ("from pipeline.ingest import read_flight\nimport stanag4609.st0601",
+                             "read_flight([sys.argv[1]])"),
+}
+
+
+def _child(imports: str, work: str, path: Path) -> tuple[float, float, float]:
+    """(wall s, CPU s) of `work` after `imports` in a fresh process, and its peak RSS (MiB)."""
+    code = imports + "\n" + _TIMER.format(work=work)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    out = subprocess.run([sys.executable, "-c", code, str(path)], check=True, cwd=ROOT, capture_output=True, text=True)
+    wall, cpu = json.loads(out.stdout.strip().splitlines()[-1])
+    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    return wall, cpu, max(peak, before) / 1024.0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seconds", type=float, default=600.0)
+    ap.add_argument("--workdir", default=None, help="where the flight is written (default: a temp folder)")
+    ap.add_argument("--reuse", action="store_true", help="reuse a flight already generated in --workdir")
+    args = ap.parse_args(argv)
+    folder = Path(args.workdir or f"/tmp/ridgeloc_bench_video_{int(args.seconds)}s")
+    load0 = os.getloadavg()
+    print(f"load average before: {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}", flush=True)
+    cfg = folder / "flight.yaml"
+    if not (args.reuse and cfg.is_file()):
+        cfg = generate(folder, args.seconds)
+    ts = folder / "flight.ts"
+    results = {"seconds": args.seconds, "load_before": load0, "mbytes": ts.stat().st_size / 1e6}
+    for name, (imports, work) in CHILD.items():  # separate processes; peak RSS is the largest child's so far
+        wall, cpu, peak = _child(imports, work, ts)
+        results[name] = {"s": wall, "cpu_s": cpu, "peak_mib": peak}
+        print(f"{name}: {wall:.2f} s wall, {cpu:.2f} s CPU", flush=True)
+    out = folder / "run"
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "pipeline", "run", str(cfg), "-o", str(out), "--force", "-q"], check=True,
+                   cwd=ROOT)
+    wall = time.perf_counter() - t
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+    peak = after.ru_maxrss / 1024.0  # this child is by far the largest
+    results["ridgeloc run"] = {"s": wall, "cpu_s": cpu, "peak_mib": peak}
+    name = [p for p in out.iterdir() if p.is_dir()]
+    res = json.loads((name[0] / "result.json").read_text()) if name else {}
+    est = json.loads((name[0] / "estimates.json").read_text())["estimates"] if name else {}
+    results["errors_m"] = {m: e.get("error_m") for m, e in est.items()}
+    results["timings_s"] = res.get("timings_s")
+    results["cpu_s"] = (res.get("settings") or {}).get("cpu_s")
+    results["n_observations"] = len(json.loads((name[0] / "tracking.json").read_text())["frame_index"]) if name \
+        else None
+    results["load_after"] = os.getloadavg()
+    ratio = results["index"]["s"] / results["bare demux"]["s"]
+    print(f"ridgeloc run: {wall:.1f} s wall, {cpu:.1f} s CPU, peak RSS {peak:.0f} MiB; "
+          f"index / bare demux = {ratio:.2f} (wall), "
+          f"{results['index']['cpu_s'] / results['bare demux']['cpu_s']:.2f} (CPU)")
+    print(f"stages wall s: {results['timings_s']}")
+    print(f"stages CPU s: {results['cpu_s']}")
+    print(f"errors m: {results['errors_m']}")
+    print(f"load average after: {' '.join(f'{v:.2f}' for v in results['load_after'])}")
+    (folder / "bench_video.json").write_text(json.dumps(results, indent=1, default=str))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

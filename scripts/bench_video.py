@@ -183,6 +183,50 @@ def generate(folder: Path, seconds: float) -> Path:
 # Each child imports first, then times its work alone (wall and CPU seconds), and prints them as JSON.
 _TIMER = "import json,sys,time\n_t0,_c0=time.perf_counter(),time.process_time()\n{work}\n" \
          "print(json.dumps([time.perf_counter()-_t0,time.process_time()-_c0]))"
+def loop(folder: Path, times: int) -> Path:
+    """A longer flight from the generated one: its packets copied `times` times (no re-encoding) with the video
+    and KLV timestamps shifted by the loop's span and each KLV packet's tag 2 re-stamped (stanag4609
+    update_uas_local_set, checksum recomputed). The video content and the flight path repeat; sizes, frame count,
+    GOP structure and per-frame KLV are those of a `times`-times longer recording."""
+    import av
+    import yaml
+    from stanag4609 import st0601
+
+    src = folder / "flight.ts"
+    dst = folder / f"flight_x{times}.ts"
+    gen = json.loads((folder / "generate.json").read_text())
+    span_ticks = gen["frames"] * (90000 // FPS)
+    span_us = gen["frames"] * 1_000_000 // FPS
+    with av.open(str(dst), "w", format="mpegts") as out:
+        vs = ds = None
+        for k in range(times):
+            with av.open(str(src)) as inp:
+                if vs is None:
+                    vs = out.add_stream_from_template(inp.streams.video[0])
+                    ds = out.add_data_stream(codec_name="klv")
+                for pkt in inp.demux():
+                    if pkt.size == 0:
+                        continue
+                    if pkt.stream.type == "video":
+                        pkt.stream = vs
+                        pkt.pts += k * span_ticks
+                        pkt.dts += k * span_ticks
+                        out.mux(pkt)
+                    else:
+                        ls = st0601.decode_uas_local_set(bytes(pkt))
+                        new = av.Packet(st0601.update_uas_local_set(
+                            ls, {2: ls.misp_timestamp_microseconds + k * span_us}))
+                        new.stream, new.time_base = ds, pkt.time_base
+                        new.pts = new.dts = pkt.pts + k * span_ticks
+                        out.mux(new)
+    cfg = yaml.safe_load((folder / "flight.yaml").read_text())
+    cfg["name"] = f"{cfg['name']}_x{times}"
+    cfg["files"]["telemetry"] = [dst.name]
+    path = folder / f"flight_x{times}.yaml"
+    path.write_text(yaml.safe_dump(cfg, sort_keys=False))
+    return path
+
+
 CHILD = {
     "bare demux": ("import av", "c=av.open(sys.argv[1])\nfor p in c.demux():\n    pass"),
     "index": ("from pipeline.ingest.video import demux_index", "demux_index(sys.argv[1])"),
@@ -201,11 +245,19 @@ def _child(imports: str, work: str, path: Path) -> tuple[float, float, float]:
     return wall, cpu, max(peak, before) / 1024.0
 
 
+def yaml_files(cfg: Path) -> str:
+    import yaml
+
+    return yaml.safe_load(cfg.read_text())["files"]["telemetry"][0]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=600.0)
     ap.add_argument("--workdir", default=None, help="where the flight is written (default: a temp folder)")
     ap.add_argument("--reuse", action="store_true", help="reuse a flight already generated in --workdir")
+    ap.add_argument("--loop", type=int, default=1,
+                    help="benchmark the generated flight copied this many times end to end (see loop())")
     args = ap.parse_args(argv)
     folder = Path(args.workdir or f"/tmp/ridgeloc_bench_video_{int(args.seconds)}s")
     load0 = os.getloadavg()
@@ -213,8 +265,13 @@ def main(argv=None) -> int:
     cfg = folder / "flight.yaml"
     if not (args.reuse and cfg.is_file()):
         cfg = generate(folder, args.seconds)
-    ts = folder / "flight.ts"
-    results = {"seconds": args.seconds, "load_before": load0, "mbytes": ts.stat().st_size / 1e6}
+    if args.loop > 1:
+        t = time.perf_counter()
+        cfg = loop(folder, args.loop)
+        print(f"looped x{args.loop} in {time.perf_counter() - t:.0f} s", flush=True)
+    ts = folder / yaml_files(cfg)
+    results = {"seconds": args.seconds * args.loop, "loop": args.loop, "load_before": load0,
+               "mbytes": ts.stat().st_size / 1e6}
     for name, (imports, work) in CHILD.items():  # separate processes; peak RSS is the largest child's so far
         wall, cpu, peak = _child(imports, work, ts)
         results[name] = {"s": wall, "cpu_s": cpu, "peak_mib": peak}
@@ -246,7 +303,7 @@ def main(argv=None) -> int:
     print(f"stages CPU s: {results['cpu_s']}")
     print(f"errors m: {results['errors_m']}")
     print(f"load average after: {' '.join(f'{v:.2f}' for v in results['load_after'])}")
-    (folder / "bench_video.json").write_text(json.dumps(results, indent=1, default=str))
+    (folder / f"bench_video_x{args.loop}.json").write_text(json.dumps(results, indent=1, default=str))
     return 0
 
 

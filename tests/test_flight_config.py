@@ -122,10 +122,12 @@ def test_the_bundled_sample_configs_load():
     entries = load_run_config(root / "configs" / "sample.yaml")
     assert [e.error for e in entries] == [None] * len(entries)
     names = [e.config.name for e in entries]
-    assert names == ["group1", "group2", "group3", "group4", "group5", "group6", "hard_outliers", "angle10"]
+    assert names == ["group1", "group2", "group3", "group4", "group5", "group6", "hard_outliers", "angle10", "fmv"]
     for e in entries:
         assert Path(e.config.truth_file).parent.name == e.config.name
-        assert e.config.observations.mode == "bursts" and e.config.sigma.range_m == 5.0
+        # fmv: continuous full-motion video, every laser shot an observation; the others: triggered bursts
+        mode = "range_times" if e.config.name == "fmv" else "bursts"
+        assert e.config.observations.mode == mode and e.config.sigma.range_m == 5.0
 
 
 def test_geoid_separation_auto_is_the_geoid_model_at_the_first_position(flight_dir):

@@ -258,7 +258,10 @@ class SynthConfig:
         return dataclasses.replace(self, **changes)
 
     def to_dict(self) -> dict:
-        return to_plain(self)
+        d = to_plain(self)
+        if not self.camera.zoom:  # a fixed lens: left out, so truth.json of flights without zoom keeps its keys
+            del d["camera"]["zoom"]
+        return d
 
 
 def _check(c: SynthConfig) -> None:

@@ -30,6 +30,11 @@ def _av():
     return av
 
 
+def _why(exc) -> str:
+    """FFmpeg's reason without the file name it appends (the message names the file once)."""
+    return getattr(exc, "strerror", None) or str(exc)
+
+
 def _open(path: Path):
     if not path.is_file():
         raise LogReadError("no such video file", path=path)
@@ -39,7 +44,7 @@ def _open(path: Path):
     try:
         container = av.open(str(path))
     except (av.error.FFmpegError, OSError, ValueError) as exc:
-        raise LogReadError(f"cannot open this video (not a video, or truncated): {exc}", path=path) from None
+        raise LogReadError(f"cannot open this video (not a video, or truncated): {_why(exc)}", path=path) from None
     if not container.streams.video:
         container.close()
         raise LogReadError("the file has no video stream", path=path)
@@ -113,7 +118,7 @@ def demux_index(path, data_streams: bool = False) -> DemuxIndex:
                     data.append((bytes(pkt), t, pkt.time_base or pkt.stream.time_base))
         except av.error.FFmpegError as exc:  # damaged tail: keep what was read
             if not pts:
-                raise LogReadError(f"cannot demux this video: {exc}", path=path) from None
+                raise LogReadError(f"cannot demux this video: {_why(exc)}", path=path) from None
         width, height = vs.codec_context.width, vs.codec_context.height
         tb = vs.time_base or Fraction(1, 90000)
     finally:
@@ -208,7 +213,7 @@ class VideoFrames:
             else:
                 self._container.seek(offset, stream=self._stream, backward=True, any_frame=False)
         except av.error.FFmpegError as exc:
-            raise LogReadError(f"cannot seek in this video: {exc}", path=self.path) from None
+            raise LogReadError(f"cannot seek in this video: {_why(exc)}", path=self.path) from None
         self._frames = self._container.decode(self._stream)
         self._pos = -1
 
@@ -235,7 +240,7 @@ class VideoFrames:
                     return None
                 first = False
         except av.error.FFmpegError as exc:
-            raise LogReadError(f"cannot decode the video near pts {target}: {exc}", path=self.path) from None
+            raise LogReadError(f"cannot decode the video near pts {target}: {_why(exc)}", path=self.path) from None
         self._frames = None
         return None
 

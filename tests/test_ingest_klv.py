@@ -11,9 +11,9 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.errors import ConfigError, InputError, LogReadError
 from pipeline.flight_config import load_run_config
-from pipeline.geometry.intrinsics import K_from_field_of_view, resolve_intrinsics
 from pipeline.ingest import detect_format, read_flight
 from pipeline.ingest.klv import ST0601_KEY, decode_packet, scan_packets
+from pipeline.intrinsics import K_from_field_of_view, frame_K, resolve_camera
 
 # ST 0601's worked example of each tag (ST 0601.14a, the "Example Value" and "Example Octets" of sections 8.x):
 # tag -> (value octets, the value the standard prints).
@@ -151,13 +151,15 @@ def test_mpegts_round_trip_and_intrinsics_from_the_field_of_view(tmp_path):
     np.testing.assert_allclose(log.range.range_m, 4000.0, atol=0.01)
     link = log.clock_links[0]
     assert (link.a, link.b) == ("video", "unix") and link.b_ns[0] == 1_700_000_000_000_000_000
-    intr = resolve_intrinsics(None, log, log.frames, log.frames.t_ns)
-    assert intr.source == "field_of_view"
-    fx = intr.K[:, 0, 0]
+    (entry,) = load_run_config(p)  # the file alone: no camera in the config
+    cam, source = resolve_camera(entry.config, log)
+    assert source.startswith("field of view") and cam.dist == (0.0,) * 5
+    K = frame_K(cam, source, log, log.frames.t_ns)
+    fx = K[:, 0, 0]
     np.testing.assert_allclose(fx[:6], 64 / (2 * np.tan(np.radians(10.0))), rtol=1e-4)  # hfov 20 deg
     np.testing.assert_allclose(fx[6:], 64 / (2 * np.tan(np.radians(5.0))), rtol=1e-4)  # zoomed in: 10 deg
-    np.testing.assert_allclose(intr.K[:, 0, 2], 31.5)
-    np.testing.assert_allclose(intr.K[:, 1, 2], 23.5)
+    np.testing.assert_allclose(K[:, 0, 2], 31.5)
+    np.testing.assert_allclose(K[:, 1, 2], 23.5)
 
 
 def test_field_of_view_intrinsics_and_their_errors():
@@ -165,10 +167,11 @@ def test_field_of_view_intrinsics_and_their_errors():
     np.testing.assert_allclose(K[0], [[500.0, 0, 499.5], [0, 500.0, 249.5], [0, 0, 1]])
     with pytest.raises(InputError, match="field of view"):
         K_from_field_of_view([0.0], [10.0], 100, 100)
+    from pipeline.flight_config import Files, FlightConfig
     from pipeline.ingest.model import FlightLog
 
     with pytest.raises(ConfigError, match="no camera intrinsics"):
-        resolve_intrinsics(None, FlightLog(path="x"), None, np.zeros(1, np.int64))
+        resolve_camera(FlightConfig(name="x", files=Files(telemetry=("x.ts",))), FlightLog(path="x"))
 
 
 def test_a_video_file_alone_is_a_flight(tmp_path):
@@ -176,7 +179,7 @@ def test_a_video_file_alone_is_a_flight(tmp_path):
     _tiny_fmv(p)
     (entry,) = load_run_config(p)
     cfg = entry.config
-    assert cfg.name == "sortie_7" and cfg.camera is None and cfg.target is None
+    assert cfg.name == "sortie_7" and not cfg.camera.has_intrinsics and cfg.target is None
     assert cfg.files.telemetry == (str(p.resolve()),)
 
 

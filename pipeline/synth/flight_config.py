@@ -172,8 +172,7 @@ def _fmv_config_text(doc: dict, title: str) -> str:
         *(f"  {k}: {_flow(v)}" for k, v in doc["lever_arms_m"].items()),
         "target:",
         *(f"  {k}: {_flow(v)}" for k, v in doc["target"].items()),
-        "sigma: {" + ", ".join(f"{k}: {_flow(v)}" for k, v in list(s.items())[:5]) + ",",
-        "        " + ", ".join(f"{k}: {_flow(v)}" for k, v in list(s.items())[5:]) + "}",
+        "sigma: {" + ", ".join(f"{k}: {_flow(v)}" for k, v in s.items()) + "}",
         f"truth_file: {_flow(doc['truth_file'])}",
     ]
     text = "\n".join(lines) + "\n"

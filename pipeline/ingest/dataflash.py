@@ -287,6 +287,8 @@ def _streams(df, types: list, scan_all: bool) -> list[StreamInfo]:
                 df.offset = df.offsets[key][-1]
                 m1 = df._parse_next()
                 t0, t1 = int(getattr(m0, tf[0])) * tf[1], int(getattr(m1, tf[0])) * tf[1]
+                if not (0 <= t0 < 2**63 and 0 <= t1 < 2**63):  # a damaged record's time
+                    t0 = t1 = None
             except Exception:
                 t0 = t1 = None
         streams.append(StreamInfo(fmt.name, fmt.name, int(n), t0, t1, SUPPLIES.get(fmt.name, ())))
@@ -300,7 +302,7 @@ def _assemble(log: FlightLog, arrays: dict[str, dict], mapping: dict, path: Path
     c = mapping["clock"]
     a = arrays.get(c["message"])
     if clock == "boot" and a is not None and "week" in a and "ms" in a:
-        ok = a["week"] > 0
+        ok = (a["week"] > 0) & (a["week"] < 5200) & (a["ms"] >= 0) & (a["ms"] < 604_800_000)  # 1980..2079
         if ok.any():
             unix = unix_ns_from_gps(a["week"][ok], a["ms"][ok], int(mapping["leap_seconds"]))
             log.clock_links.append(ClockLink("boot", "unix", a["t"][ok], unix))

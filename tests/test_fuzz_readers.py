@@ -101,7 +101,7 @@ def test_directory_where_a_file_is_expected(target, seeds, tmp_path):
 @pytest.mark.parametrize("target", TARGETS, ids=lambda t: t.name)
 def test_unreadable_file(target, seeds, tmp_path):
     """chmod 000: as root (which ignores it) the read runs as user 'nobody' in a subprocess."""
-    path, data = seeds[target.name]
+    path, _ = seeds[target.name]
     os.chmod(path, 0)
     try:
         code = ("import sys; from pathlib import Path; from pipeline.fuzz_targets import BY_NAME, check; "

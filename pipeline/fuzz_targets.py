@@ -125,6 +125,14 @@ def _seed_dataflash(folder: Path) -> Path:
     return path
 
 
+def _seed_dataflash_text(folder: Path) -> Path:
+    from pipeline.ingest.writers import dataflash_text_from_binary
+
+    path = folder / "flight.log"
+    dataflash_text_from_binary(_seed_dataflash(folder), path)
+    return path
+
+
 def _head(src: Path, folder: Path, name: str, limit: int) -> Path:
     path = folder / name
     with open(src, "rb") as f:
@@ -262,6 +270,7 @@ def _seed_observations(folder: Path) -> Path:
 TARGETS: tuple[Target, ...] = (
     Target("tlog", _seed_tlog, _read_log),
     Target("dataflash-bin", _seed_dataflash, _read_log),
+    Target("dataflash-text", _seed_dataflash_text, _read_log),
     Target("ulog", _seed_ulog, _read_log),
     Target("ros1-bag", _seed_ros1, _read_log),
     Target("ros2-sqlite3", _seed_ros2("sqlite3"), _read_log),

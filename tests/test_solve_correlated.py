@@ -73,8 +73,11 @@ def test_gls_minimizes_the_correlated_cost_and_reports_its_covariance():
         return np.linalg.solve(L, np.r_[pix, rng])
 
     ref = least_squares(f, x0, method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14)
-    # the cost is flat along the long axis (8e-5 m moves it by 3e-10): scipy stops a little early there
-    np.testing.assert_allclose(est.position_m, ref.x, atol=1e-3)
+    # The cost is flat along the long axis (8e-5 m moves it by 3e-10): where scipy stops there depends on the
+    # BLAS kernel (1.5 mm apart under OPENBLAS_CORETYPE=Prescott). So the two minimisers are compared in the
+    # metric of the estimate's own covariance (Mahalanobis distance < 1e-3 sigma), and by their costs below.
+    d = est.position_m - ref.x
+    assert d @ np.linalg.solve(est.covariance_m2, d) < 1e-6, d
     assert f(est.position_m) @ f(est.position_m) <= ref.fun @ ref.fun + 1e-9
     x, h = est.position_m, 1e-2  # central differences of the whitened residuals at the estimate
     Jw = np.stack([(f(x + h * e) - f(x - h * e)) / (2 * h) for e in np.eye(3)], axis=1)

@@ -37,9 +37,11 @@ def atomic_write_bytes(path: str | PathLike, data: bytes) -> None:
             os.fsync(f.fileno())
         os.chmod(tmp, 0o644)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(exc, OSError) and exc.filename is None:  # e.g. ENOSPC from write(): name the target
+            raise OSError(exc.errno, exc.strerror, str(path)) from exc
         raise
 
 
@@ -64,8 +66,10 @@ def atomic_dir(path: str | PathLike) -> Iterator[Path]:
     tmp.mkdir()
     try:
         yield tmp
-    except BaseException:
+    except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
+        if isinstance(exc, OSError) and exc.filename is None:  # e.g. ENOSPC from write(): name the folder
+            raise OSError(exc.errno, exc.strerror, str(path)) from exc
         raise
     old = None
     if path.exists():

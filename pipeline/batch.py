@@ -35,7 +35,7 @@ from typing import Any
 
 import yaml
 
-from pipeline.errors import ConfigError, InputError, RidgelocError
+from pipeline.errors import ConfigError, InputError, RidgelocError, environment_error_message
 from pipeline.results import GroupFailure
 
 EXECUTORS = ("local", "dask")
@@ -91,6 +91,8 @@ def _call(fn: Callable, job: Job, sink: Callable[[str, str], None] | None) -> _O
     except RidgelocError as exc:
         return _Outcome(job.name, False, message=_one_line(str(exc)), elapsed_s=time.perf_counter() - t0)
     except Exception as exc:
+        if (env := environment_error_message(exc)) is not None:  # e.g. the disk filled while writing its folder
+            return _Outcome(job.name, False, message=env, elapsed_s=time.perf_counter() - t0)
         return _Outcome(job.name, False, message=_one_line(f"internal error ({type(exc).__name__}): {exc}"),
                         detail=traceback.format_exc(), elapsed_s=time.perf_counter() - t0)
     finally:

@@ -10,7 +10,7 @@ import importlib
 import sys
 
 from pipeline import __version__
-from pipeline.errors import RidgelocError
+from pipeline.errors import RidgelocError, environment_error_message
 
 # The stage order of the product, written once.
 COMMANDS = ("run", "check", "solve", "simulate", "synth", "inspect")
@@ -52,6 +52,12 @@ def main(argv: list[str] | None = None) -> int:
         return int(modules[args.command].main(args) or 0)
     except RidgelocError as exc:
         print(f"ridgeloc: error: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:  # a full disk, a read-only folder: the machine's state, not a bug
+        message = environment_error_message(exc)
+        if message is None:
+            raise
+        print(f"ridgeloc: error: {message}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("ridgeloc: interrupted", file=sys.stderr)

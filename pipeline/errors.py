@@ -37,5 +37,19 @@ class GeometryError(ObservationError):
     """The observation geometry does not determine the target (collinear, coincident, behind camera)."""
 
 
+def environment_error_message(exc: BaseException) -> str | None:
+    """One line for an OSError the machine caused (full disk, quota, read-only file system, permissions, I/O
+    error), naming the file; None for anything else (a bug, not the user's environment)."""
+    import errno
+
+    if not isinstance(exc, OSError) or exc.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES,
+                                                         errno.EPERM, errno.EIO, errno.EMFILE, errno.ENFILE):
+        return None
+    where = f"{exc.filename}: " if exc.filename else ""
+    hint = " (free some space and run again: finished work is kept)" if exc.errno in (errno.ENOSPC, errno.EDQUOT) \
+        else ""
+    return f"{where}{exc.strerror or exc}{hint}"
+
+
 class SolverError(RidgelocError):
     """An estimator failed in a way the caller should hear about (for example divergence)."""

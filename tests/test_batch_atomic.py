@@ -105,3 +105,52 @@ def test_done_marker_and_config_hash(tmp_path):
     write_done_marker(tmp_path, h)
     assert is_done(tmp_path) and is_done(tmp_path, h) and not is_done(tmp_path, "other")
     assert not is_done(tmp_path / "missing", h)
+
+
+def test_a_full_disk_is_one_line_and_leaves_nothing_trusted(tmp_path, capsys, monkeypatch):
+    """ENOSPC from every write under the output folder (a patched writer standing in for a full tmpfs): the run
+    exits 1 with one-line messages naming the file, and leaves no group folder a re-run would trust."""
+    import errno
+    import pathlib
+
+    import yaml
+
+    from pipeline.atomic import is_done
+    from pipeline.cli import main
+
+    repo = pathlib.Path(__file__).resolve().parents[1]
+    src = repo / "configs" / "flights" / "group6.yaml"
+    doc = yaml.safe_load(src.read_text())
+    doc["files"] = {k: [str((src.parent / p).resolve()) for p in v] if isinstance(v, list)
+                    else str((src.parent / v).resolve()) for k, v in doc["files"].items()}
+    doc["truth_file"] = str((src.parent / doc["truth_file"]).resolve())
+    cfg = tmp_path / "flight.yaml"
+    cfg.write_text(yaml.safe_dump(doc))
+    out = tmp_path / "out"
+    real_open = open
+
+    def full_open(file, mode="r", *args, **kw):
+        if any(m in mode for m in "wax") and str(file).startswith(str(out)):
+            raise OSError(errno.ENOSPC, "No space left on device", str(file))
+        return real_open(file, mode, *args, **kw)
+
+    real_fdopen = os.fdopen
+
+    def full_fdopen(fd, mode="r", *args, **kw):
+        if any(m in mode for m in "wax"):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real_fdopen(fd, mode, *args, **kw)
+
+    monkeypatch.setattr("builtins.open", full_open)
+    monkeypatch.setattr(os, "fdopen", full_fdopen)
+    monkeypatch.setattr(pathlib.Path, "write_text",
+                        lambda self, *a, **k: full_open(self, "w").write(a[0]))
+    monkeypatch.setattr(pathlib.Path, "write_bytes",
+                        lambda self, *a, **k: full_open(self, "wb").write(a[0]))
+    rc = main(["run", str(cfg), "-o", str(out), "--no-figures", "-q"])
+    err = capsys.readouterr().err
+    assert rc == 1 and "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert lines and all(line.startswith("ridgeloc: ") for line in lines)
+    assert any("No space left on device" in line for line in lines), err
+    assert not any(p.is_dir() and is_done(p) for p in out.glob("*")) if out.exists() else True

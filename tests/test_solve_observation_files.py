@@ -110,9 +110,9 @@ def test_size_cap_directory_missing_and_unreadable(tmp_path, capsys, monkeypatch
     path = tmp_path / "locked.json"
     path.write_text(EXAMPLE)
 
-    def denied(self):
-        raise PermissionError(13, "Permission denied", str(self))
+    def denied(file, *args, **kw):
+        raise PermissionError(13, "Permission denied", str(file))
 
-    monkeypatch.setattr(Path, "read_bytes", denied)  # chmod 000 does not stop root, so the OS error is simulated
+    monkeypatch.setattr("builtins.open", denied)  # chmod 000 does not stop root, so the OS error is simulated
     rc, _, err = _solve(path, capsys)
     assert rc == 1 and err == f"ridgeloc: error: {path}: cannot read: Permission denied\n"

@@ -134,7 +134,7 @@ def read_dataflash(path: str | Path, mapping: dict, scan_all: bool = False) -> F
             if m in mapping["camera"]["messages"]:
                 fields[m]["idx"] = _field(fmts[m].columns, ["Img", "ImgNum", "I"]) or ""
             cols[m] = Columns(t="q", pos="q", **{k: "d" for k, v in fields[m].items() if v})
-        n_read = 0
+        n_read = n_bad = 0
         if text:
             for m in cols:
                 _text_records(df, m, fmts[m].columns, fields[m], tfield[m], cols[m])
@@ -153,9 +153,19 @@ def read_dataflash(path: str | Path, mapping: dict, scan_all: bool = False) -> F
                 name = msg.get_type()
                 if name not in cols:
                     continue
-                row = {k: getattr(msg, f) for k, f in fields[name].items() if f}
-                tf = tfield[name]
-                cols[name].add(t=int(getattr(msg, tf[0])) * tf[1] if tf else -1, pos=df.offset, **row)
+                try:
+                    row = {k: float(getattr(msg, f)) for k, f in fields[name].items() if f}
+                    tf = tfield[name]
+                    t_ns = int(getattr(msg, tf[0])) * tf[1] if tf else -1  # -1: untimed, timed below
+                except (TypeError, ValueError, AttributeError):
+                    t_ns = None
+                if t_ns is None or not -1 <= t_ns < 2**63:  # a damaged record: a time or value that cannot be one
+                    n_bad += 1
+                    continue
+                cols[name].add(t=t_ns, pos=df.offset, **row)
+        if n_bad:
+            warnings.append(f"{path}: skipped {n_bad} of {n_read} records with an impossible time or value "
+                            "(damaged)")
         arrays = {m: c.arrays() for m, c in cols.items()}
         streams = _streams(df, types, scan_all)
     finally:
@@ -277,6 +287,8 @@ def _streams(df, types: list, scan_all: bool) -> list[StreamInfo]:
                 df.offset = df.offsets[key][-1]
                 m1 = df._parse_next()
                 t0, t1 = int(getattr(m0, tf[0])) * tf[1], int(getattr(m1, tf[0])) * tf[1]
+                if not (0 <= t0 < 2**63 and 0 <= t1 < 2**63):  # a damaged record's time
+                    t0 = t1 = None
             except Exception:
                 t0 = t1 = None
         streams.append(StreamInfo(fmt.name, fmt.name, int(n), t0, t1, SUPPLIES.get(fmt.name, ())))
@@ -290,7 +302,7 @@ def _assemble(log: FlightLog, arrays: dict[str, dict], mapping: dict, path: Path
     c = mapping["clock"]
     a = arrays.get(c["message"])
     if clock == "boot" and a is not None and "week" in a and "ms" in a:
-        ok = a["week"] > 0
+        ok = (a["week"] > 0) & (a["week"] < 5200) & (a["ms"] >= 0) & (a["ms"] < 604_800_000)  # 1980..2079
         if ok.any():
             unix = unix_ns_from_gps(a["week"][ok], a["ms"][ok], int(mapping["leap_seconds"]))
             log.clock_links.append(ClockLink("boot", "unix", a["t"][ok], unix))

@@ -12,7 +12,14 @@ from pipeline.errors import LogReadError
 
 def mcap_errors():
     from mcap.exceptions import McapError
-    return (McapError, ValueError, EOFError, AssertionError, KeyError, struct.error)
+    errors = [McapError, ValueError, EOFError, AssertionError, KeyError, IndexError, struct.error, OSError,
+              OverflowError, MemoryError, RuntimeError]  # seek before the start, huge declared lengths, lz4
+    try:
+        from zstandard import ZstdError
+        errors.append(ZstdError)
+    except ImportError:
+        pass
+    return tuple(errors)
 
 
 def first_line(exc: Exception) -> str:

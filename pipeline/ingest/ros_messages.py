@@ -97,8 +97,15 @@ class RosAccumulator:
         if stamp_mode not in ("header", "record"):
             raise ConfigError(f"ros mapping: stamp must be 'header' or 'record', not {stamp_mode!r}")
         kind = "orientation" if quantity in ("attitude", "gimbal") else quantity
-        self.add = getattr(self, "_add_" + kind)  # one specialised method per message kind: no per-message branching
+        self._add_kind = getattr(self, "_add_" + kind)  # one specialised method per message kind
         self._append = self.cols.appenders()
+
+    def add(self, msg, record_ns: int) -> None:
+        """One decoded message; a message decoded by a damaged schema (missing or mistyped fields) is dropped."""
+        try:
+            self._add_kind(msg, record_ns)
+        except (AttributeError, TypeError, ValueError, OverflowError):
+            self.dropped += 1
 
     def _t(self, msg, record_ns: int) -> int:
         if self._header_stamp:
@@ -116,11 +123,12 @@ class RosAccumulator:
         if msg.status.status < 0 or not (math.isfinite(lat) and math.isfinite(lon)):
             self.dropped += 1  # STATUS_NO_FIX
             return
+        t, alt = self._t(msg, record_ns), float(msg.altitude)  # every field read before any column grows
         at, alat, alon, aalt = self._append
-        at(self._t(msg, record_ns))
+        at(t)
         alat(lat)
         alon(lon)
-        aalt(msg.altitude)
+        aalt(alt)
 
     def _add_orientation(self, msg, record_ns: int) -> None:
         self.n += 1
@@ -128,8 +136,9 @@ class RosAccumulator:
         if o is None:
             self.dropped += 1
             return
+        t, o = self._t(msg, record_ns), [float(v) for v in o]
         at, aw, ax, ay, az = self._append
-        at(self._t(msg, record_ns))
+        at(t)
         aw(o[0])
         ax(o[1])
         ay(o[2])
@@ -137,11 +146,12 @@ class RosAccumulator:
 
     def _add_range(self, msg, record_ns: int) -> None:
         self.n += 1
+        t, r, lo, hi = self._t(msg, record_ns), float(msg.range), float(msg.min_range), float(msg.max_range)
         at, ar, alo, ahi = self._append
-        at(self._t(msg, record_ns))
-        ar(msg.range)
-        alo(msg.min_range)
-        ahi(msg.max_range)
+        at(t)
+        ar(r)
+        alo(lo)
+        ahi(hi)
 
     def _add_images(self, msg, record_ns: int) -> None:
         if self.size == (0, 0):

@@ -72,10 +72,35 @@ class _McapDirect:
                     yield channel.topic, schema.name, message.log_time, decoded
 
 
+def check_metadata(path: Path) -> None:
+    """Refuses a ROS 2 bag folder whose metadata.yaml lacks, or mistypes, what the readers use (the libraries
+    take its values on trust)."""
+    import yaml
+
+    meta = path / "metadata.yaml"
+    try:
+        info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
+        files = info["relative_file_paths"]
+        topics = info["topics_with_message_count"]
+        ok = (isinstance(files, list) and files and all(isinstance(f, str) and f for f in files)
+              and isinstance(topics, list) and all(
+                  isinstance(t, dict) and isinstance(t.get("topic_metadata"), dict)
+                  and all(isinstance(t["topic_metadata"].get(k), str) for k in ("name", "type"))
+                  and isinstance(t.get("message_count"), int) for t in topics))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, TypeError, KeyError) as exc:
+        raise LogReadError(f"unreadable metadata.yaml ({type(exc).__name__}: {str(exc).splitlines()[0][:100]})",
+                           path=meta) from None
+    if not ok:
+        raise LogReadError("metadata.yaml: relative_file_paths or topics_with_message_count (topic_metadata name, "
+                           "type, message_count) missing or of the wrong type", path=meta)
+
+
 def read_rosbag(path: str | Path, mapping: dict, scan_all: bool = False) -> FlightLog:
     """Read a ROS 1 .bag or a ROS 2 bag folder into a FlightLog on the UNIX clock (mappings/ros.yaml)."""
     path = Path(path)
     fmt = "ros2" if path.is_dir() else "ros1"
+    if fmt == "ros2":
+        check_metadata(path)
     warnings: list[str] = []
     try:
         reader = _open_reader(path)

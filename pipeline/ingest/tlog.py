@@ -54,6 +54,8 @@ def _record_length(mm, pos: int, size: int) -> tuple[int, int] | None:
         return None
     magic, plen = mm[pos + 8], mm[pos + 9]
     if magic == _V2_MAGIC:
+        if pos + 18 > size:  # a v2 header cut by the end of the file
+            return None
         msgid = mm[pos + 15] | (mm[pos + 16] << 8) | (mm[pos + 17] << 16)
         if mm[pos + 10] & ~0x01:
             return None

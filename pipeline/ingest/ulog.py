@@ -77,6 +77,35 @@ def _position(name: str, d: dict, cfg: dict):
     return t[ok], np.asarray(lat, float)[ok], np.asarray(lon, float)[ok], np.asarray(alt, float)[ok], datum
 
 
+class _ReadBudget(Exception):
+    pass
+
+
+class _BudgetedFile:
+    """The file as pyulog reads it, failing once it has read `factor` times the file's size: on some damaged
+    files pyulog seeks back further than it read and loops forever."""
+
+    def __init__(self, path: Path, factor: int = 20):
+        self._f = open(path, "rb")
+        self._left = factor * path.stat().st_size + (1 << 20)
+
+    def read(self, n: int = -1) -> bytes:
+        data = self._f.read(n)
+        self._left -= len(data) + 1
+        if self._left < 0:
+            raise _ReadBudget("the parser does not advance (damaged message sizes)")
+        return data
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        return self._f.seek(offset, whence)
+
+    def tell(self) -> int:
+        return self._f.tell()
+
+    def close(self) -> None:
+        self._f.close()
+
+
 def read_ulog(path: str | Path, mapping: dict, scan_all: bool = False) -> FlightLog:
     """Read a .ulg into a FlightLog (mappings/ulog.yaml)."""
     try:
@@ -88,7 +117,11 @@ def read_ulog(path: str | Path, mapping: dict, scan_all: bool = False) -> Flight
     err = io.StringIO()
     try:
         with contextlib.redirect_stdout(err), contextlib.redirect_stderr(err):
-            ulog = ULog(str(path), message_name_filter_list=None if scan_all else sorted(set(topics)))
+            fh = _BudgetedFile(path)
+            try:
+                ulog = ULog(fh, message_name_filter_list=None if scan_all else sorted(set(topics)))
+            finally:
+                fh.close()
     except Exception as exc:  # pyulog raises bare Exception / struct.error / IndexError on bad files
         text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise LogReadError(f"not a readable ULog: {text}", path=path) from None

@@ -75,6 +75,8 @@ def _read_frames_csv(csv_path: Path) -> tuple[np.ndarray, np.ndarray]:
         raise LogReadError(f"malformed frames CSV: {exc}", path=csv_path) from None
     if data.size == 0:
         raise LogReadError("frames CSV has no rows", path=csv_path)
+    if data.shape[1] < 2:
+        raise LogReadError("malformed frames CSV: rows need frame_index,pts_ns", path=csv_path)
     return data[:, 0].copy(), data[:, 1].copy()
 
 

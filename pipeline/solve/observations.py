@@ -281,7 +281,12 @@ class Observations:
             if size > MAX_FILE_BYTES:
                 raise ObservationError(f"is {size / 2**20:.1f} MB, over the {MAX_FILE_BYTES / 2**20:g} MB limit for "
                                        f"an observations file (split the problem)", path)
-            text = path.read_bytes()[:MAX_FILE_BYTES + 1].decode("utf-8")
+            with open(path, "rb") as f:  # bounded even for a device or a pipe, whose size stat() does not know
+                data = f.read(MAX_FILE_BYTES + 1)
+            if len(data) > MAX_FILE_BYTES:
+                raise ObservationError(f"is over the {MAX_FILE_BYTES / 2**20:g} MB limit for an observations file",
+                                       path)
+            text = data.decode("utf-8")
         except FileNotFoundError:
             raise ObservationError("file not found", path) from None
         except OSError as exc:

@@ -1,0 +1,426 @@
+"""The readers that take user files, as a table for fuzzing (tests/test_fuzz_readers.py, scripts/fuzz.py).
+
+Each `Target` is a seed (a small valid input built by `make_seed(folder) -> path`) and a `read(path)` that goes
+through the same code a user's command does. Fuzzing mutates the seed's bytes (or, for YAML/JSON documents,
+its parsed tree) and checks the promise of docs/damaged_input.md: every input either reads (warnings allowed)
+or raises a `RidgelocError` whose message is one line naming the file; any other exception is a failure.
+
+To add a reader: write a `_seed_<name>` that builds a small valid file in the given folder (a few KB: fuzzing
+speed is proportional to it) and add one `Target(...)` line to `TARGETS`. If the input is a folder (a ROS 2
+bag), `make_seed` returns the file inside it to mutate; `read` is called with that file's path.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import random
+import struct
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from pipeline.errors import RidgelocError
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED = ROOT.parent / "shared"
+T0_NS = 1_700_000_000_000_000_000
+
+
+@dataclass(frozen=True)
+class Target:
+    """One reader: `make_seed(folder) -> path of the file to mutate`, `read(path)` raises RidgelocError or
+    returns; `tree` is "json" or "yaml" for documents that also get structural (parsed-tree) mutations."""
+
+    name: str
+    make_seed: Callable[[Path], Path]
+    read: Callable[[Path], object]
+    tree: str | None = None
+
+
+# ---- read functions: the user's code paths --------------------------------------------------------------
+
+def _read_log(path: Path) -> None:
+    """`ridgeloc inspect` (every stream timed, summary rendered) and `ridgeloc run`'s read of the same file."""
+    from pipeline.ingest.dispatch import detect_format, read_file
+    from pipeline.ingest.inspect import InspectResult, format_result, result_as_dict
+
+    target = path.parent if (path.parent / "metadata.yaml").is_file() else path
+    log = read_file(target, scan_all=True)
+    result = InspectResult(str(target), detect_format(target), log)
+    format_result(result)
+    json.dumps(result_as_dict(result))
+    read_file(target, scan_all=False)  # `run` reads fewer streams: a different path through some readers
+
+
+def _read_video(path: Path) -> None:
+    """The video reader (frame times from frames.csv or the container) and decoding the first and last frame."""
+    from pipeline.ingest.video import VideoFrames, read_video
+
+    frames = read_video(path)
+    with VideoFrames(path) as vf:
+        vf.read([int(frames.index.min()), int(frames.index.max())])
+
+
+def _read_frames_csv(path: Path) -> None:
+    video = path.parent / "video.mp4"
+    from pipeline.ingest.video import read_video
+
+    read_video(video, frames_csv=path)
+
+
+def _read_flight_config(path: Path) -> None:
+    from pipeline.flight_config import load_flight_config
+
+    load_flight_config(path)
+
+
+def _read_run_config(path: Path) -> None:
+    from pipeline.flight_config import load_run_config
+
+    load_run_config(path)
+
+
+def _read_observations(path: Path) -> None:
+    from pipeline.solve.observations import Observations
+
+    Observations.load(path)
+
+
+# ---- seeds -------------------------------------------------------------------------------------------------
+
+def _tlog_records(data: bytes, limit: int) -> bytes:
+    """The leading whole records (8-byte time + MAVLink 1/2 packet) of a tlog, up to `limit` bytes."""
+    pos = 0
+    while pos + 10 < len(data):
+        stx, n = data[pos + 8], data[pos + 9]
+        size = 8 + (12 + n + (13 if data[pos + 10] & 1 else 0) if stx == 0xFD else 8 + n)
+        if pos + size > limit:
+            break
+        pos += size
+    return data[:pos]
+
+
+def _seed_tlog(folder: Path) -> Path:
+    path = folder / "flight.tlog"
+    path.write_bytes(_tlog_records((ROOT / "sample_data" / "group6" / "flight.tlog").read_bytes(), 12_000))
+    return path
+
+
+def _seed_dataflash(folder: Path) -> Path:
+    from pipeline.ingest.writers import DataFlashWriter
+
+    path = folder / "flight.bin"
+    with DataFlashWriter(path) as w:
+        w.fmt("GPS", "QBIHLLe", "TimeUS,Status,GMS,GWk,Lat,Lng,Alt")
+        w.fmt("ATT", "QccC", "TimeUS,Roll,Pitch,Yaw")
+        w.fmt("MNT", "Qfffff", "TimeUS,Roll,Pitch,YawB,YawE,Dist")
+        w.fmt("RFND", "QBCBB", "TimeUS,Instance,Dist,Stat,Orient")
+        for i in range(12):
+            t_us = 1_000_000 + i * 200_000
+            w.write("GPS", t_us, 1 if i == 0 else 3, 100_000 + i * 200, 2300, 473977419, 85455939, 48812)
+            w.write("ATT", t_us + 10, 500, -250, 27000)
+            w.write("MNT", t_us + 20, 0.0, -30.0, 15.0, 285.0, 1234.5 if i % 2 else 0.0)
+            w.write("RFND", t_us + 30, 0, 1234 + i, 4 if i % 3 else 2, 25)
+    return path
+
+
+def _seed_dataflash_text(folder: Path) -> Path:
+    from pipeline.ingest.writers import dataflash_text_from_binary
+
+    path = folder / "flight.log"
+    dataflash_text_from_binary(_seed_dataflash(folder), path)
+    return path
+
+
+def _head(src: Path, folder: Path, name: str, limit: int) -> Path:
+    path = folder / name
+    with open(src, "rb") as f:
+        path.write_bytes(f.read(limit))
+    return path
+
+
+def _seed_ulog(folder: Path) -> Path:
+    return _head(SHARED / "logs" / "foxglove_mcap_test_ulog.ulg", folder, "flight.ulg", 48_000)
+
+
+def _bag_rows(n: int = 6) -> list:
+    from pipeline.ingest.writers import ros_message
+
+    rows = []
+    s45 = math.sin(math.pi / 4)
+    for i in range(n):
+        t = T0_NS + i * 100_000_000
+        rows.append(("/uav/gps/fix", t + 50, *ros_message("navsat", t, lat=47.0 + i * 1e-5, lon=8.5, alt=512.25)))
+        rows.append(("/uav/imu", t + 51, *ros_message("imu", t + 1, q_xyzw=[0, 0, s45, s45])))
+        rows.append(("/uav/gimbal/attitude", t + 52, *ros_message("quat", t + 2, q_xyzw=[0, 0.13, 0, 0.99])))
+        rows.append(("/uav/laser/range", t + 53, *ros_message("range", t + 3, range=812.5 + i)))
+    jpeg = _tiny_jpeg()
+    rows.append(("/uav/camera/image/compressed", T0_NS + 54, *ros_message("compressed", T0_NS + 4, data=jpeg)))
+    return rows
+
+
+def _tiny_jpeg() -> bytes:
+    import cv2
+    import numpy as np
+
+    img = np.zeros((16, 24, 3), np.uint8)
+    img[4:12, 6:18] = 200
+    return cv2.imencode(".jpg", img)[1].tobytes()
+
+
+def _seed_ros1(folder: Path) -> Path:
+    from pipeline.ingest.writers import write_ros_bag
+
+    path = folder / "flight.bag"
+    write_ros_bag(path, _bag_rows(), "ros1")
+    return path
+
+
+def _seed_ros2(storage: str) -> Callable[[Path], Path]:
+    def make(folder: Path) -> Path:
+        from pipeline.ingest.writers import write_ros_bag
+
+        bag = folder / "flight_ros2"
+        write_ros_bag(bag, _bag_rows(), storage)
+        return next(p for p in bag.iterdir() if p.suffix in (".db3", ".mcap"))
+
+    return make
+
+
+def _seed_ros2_metadata(folder: Path) -> Path:
+    return _seed_ros2("mcap")(folder).parent / "metadata.yaml"
+
+
+def _seed_mcap(folder: Path) -> Path:
+    from pipeline.ingest.writers import write_json_mcap
+
+    path = folder / "flight.mcap"
+    msgs = {
+        "/uav/gps": [{"t_ns": T0_NS + i * 10**8, "latitude_deg": 46.5 + i * 1e-6, "longitude_deg": 7.25,
+                      "altitude_m": 1500.5, "altitude_datum": "ellipsoid"} for i in range(6)],
+        "/uav/attitude": [{"t_ns": T0_NS + i * 10**8 + 1, "q_wxyz": [0.94, 0, 0, 0.34], "frame": "body_frd_to_ned"}
+                          for i in range(6)],
+        "/uav/gimbal": [{"t_ns": T0_NS + i * 10**8 + 2, "q_wxyz": [1, 0, 0, 0], "frame": "gimbal_frd_to_ned",
+                         "yaw_in_vehicle_frame": False} for i in range(6)],
+        "/uav/laser": [{"t_ns": T0_NS + i * 10**8 + 3, "range_m": 1234.5 if i % 3 else None, "valid": i % 3 != 0}
+                       for i in range(6)],
+    }
+    write_json_mcap(path, msgs, chunk_size=2048)
+    return path
+
+
+def _seed_srt(folder: Path) -> Path:
+    path = folder / "flight.SRT"
+    path.write_bytes((SHARED / "srt" / "ruz76_DJI_M300RTK.SRT").read_bytes())
+    return path
+
+
+def _seed_video(folder: Path) -> Path:
+    import cv2
+    import numpy as np
+
+    path = folder / "video.mp4"
+    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 10.0, (32, 24))
+    for i in range(6):
+        img = np.zeros((24, 32, 3), np.uint8)
+        img[4:20, 2 + i:10 + i] = 255
+        w.write(img)
+    w.release()
+    return path
+
+
+def _seed_frames_csv(folder: Path) -> Path:
+    _seed_video(folder)
+    path = folder / "video.frames.csv"
+    path.write_text("frame_index,pts_ns\n" + "".join(f"{i},{5_560_000_000 + i * 40_000_000}\n" for i in range(6)))
+    return path
+
+
+def _seed_flight_config(folder: Path) -> Path:
+    import yaml
+
+    doc = yaml.safe_load((ROOT / "configs" / "flights" / "group6.yaml").read_text())
+    base = ROOT / "configs" / "flights"
+    doc["files"] = {k: ([str((base / p).resolve()) for p in v] if isinstance(v, list) else str((base / v).resolve()))
+                    for k, v in doc["files"].items()}
+    doc["truth_file"] = str((base / doc["truth_file"]).resolve())
+    path = folder / "flight.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def _seed_run_config(folder: Path) -> Path:
+    flight = _seed_flight_config(folder)
+    path = folder / "run.yaml"
+    path.write_text(f"description: fuzz seed\ngroups:\n  - {flight.name}\n")
+    return path
+
+
+def _seed_observations(folder: Path) -> Path:
+    doc = json.loads((ROOT / "configs" / "example_observations.json").read_text())
+    doc["observations"] = doc["observations"][:4]
+    doc["observations"][1]["pixel"] = None
+    doc["observations"][2]["range_m"] = None
+    path = folder / "obs.json"
+    path.write_text(json.dumps(doc, indent=1))
+    return path
+
+
+TARGETS: tuple[Target, ...] = (
+    Target("tlog", _seed_tlog, _read_log),
+    Target("dataflash-bin", _seed_dataflash, _read_log),
+    Target("dataflash-text", _seed_dataflash_text, _read_log),
+    Target("ulog", _seed_ulog, _read_log),
+    Target("ros1-bag", _seed_ros1, _read_log),
+    Target("ros2-sqlite3", _seed_ros2("sqlite3"), _read_log),
+    Target("ros2-mcap", _seed_ros2("mcap"), _read_log),
+    Target("ros2-metadata", _seed_ros2_metadata, _read_log, tree="yaml"),
+    Target("mcap", _seed_mcap, _read_log),
+    Target("srt", _seed_srt, _read_log),
+    Target("video", _seed_video, _read_video),
+    Target("frames-csv", _seed_frames_csv, _read_frames_csv),
+    Target("flight-config", _seed_flight_config, _read_flight_config, tree="yaml"),
+    Target("run-config", _seed_run_config, _read_run_config, tree="yaml"),
+    Target("observations", _seed_observations, _read_observations, tree="json"),
+)
+BY_NAME = {t.name: t for t in TARGETS}
+
+
+# ---- mutations ----------------------------------------------------------------------------------------------
+
+HUGE = (b"\xff\xff\xff\xff", b"\xff\xff\xff\x7f", b"\x7f\xff\xff\xff", b"\x00\x00\x00\x80", b"\x00\x00\x00\x00",
+        b"\xff\xff\xff\xff\xff\xff\xff\xff", b"\xff\xff\xff\xff\xff\xff\xff\x7f")
+BYTE_OPS = ("truncate", "bitflip", "overwrite", "huge_length", "insert", "delete", "duplicate", "magic_random")
+
+
+def mutate_bytes(data: bytes, rng: random.Random, n_ops: int | None = None) -> tuple[bytes, list[str]]:
+    """1-3 random byte-level damages of `data` (truncation at every length class, bit flips, overwrites, huge
+    declared lengths, inserted/deleted/duplicated runs, random bytes after the right magic). Returns the bytes
+    and a description of what was done."""
+    done = []
+    buf = bytearray(data)
+    for _ in range(n_ops or rng.choice((1, 1, 2, 3))):
+        op = rng.choice(BYTE_OPS)
+        n = len(buf)
+        at = rng.randrange(n) if n else 0
+        if op == "truncate":
+            cls = rng.choice(("zero", "tiny", "header", "fraction", "minus"))
+            keep = {"zero": 0, "tiny": rng.randrange(1, 9), "header": rng.randrange(8, 256),
+                    "fraction": int(n * rng.random()), "minus": max(0, n - rng.randrange(1, 16))}[cls]
+            del buf[min(keep, n):]
+            done.append(f"truncate to {min(keep, n)} ({cls})")
+        elif op == "bitflip" and n:
+            for _ in range(rng.choice((1, 1, 2, 8))):
+                i = rng.randrange(n)
+                buf[i] ^= 1 << rng.randrange(8)
+            done.append(f"bitflip near {at}")
+        elif op == "overwrite" and n:
+            k = rng.randrange(1, 9)
+            buf[at:at + k] = bytes(rng.randrange(256) for _ in range(k))[: max(0, n - at)]
+            done.append(f"overwrite {k} at {at}")
+        elif op == "huge_length" and n:
+            v = rng.choice((*HUGE, struct.pack("<I", rng.randrange(2**32))))
+            buf[at:at + len(v)] = v[: max(0, n - at)]
+            done.append(f"huge length {v.hex()} at {at}")
+        elif op == "insert":
+            k = rng.choice((1, 4, 64, 1024))
+            buf[at:at] = bytes(rng.randrange(256) for _ in range(k))
+            done.append(f"insert {k} at {at}")
+        elif op == "delete" and n:
+            k = rng.choice((1, 4, 64, 1024))
+            del buf[at:at + k]
+            done.append(f"delete {k} at {at}")
+        elif op == "duplicate" and n:
+            k = rng.choice((8, 64, 512))
+            buf[at:at] = buf[at:at + k]
+            done.append(f"duplicate {k} at {at}")
+        elif op == "magic_random":
+            keep = min(n, rng.choice((2, 4, 8, 13, 16)))
+            buf = bytearray(buf[:keep] + bytes(rng.randrange(256) for _ in range(rng.choice((0, 16, 256, 4096)))))
+            done.append(f"magic {keep} + random")
+    return bytes(buf), done
+
+
+WRONG_VALUES = (None, True, -1, 0, 2**63, 1e308, -1e-300, "x", "", [], {}, [1, 2], {"a": 1}, "nan", ".inf",
+                [[[[[[[[[[[]]]]]]]]]]], "../../../../etc/passwd", "/nonexistent/file.tlog")
+
+
+def mutate_tree(text: str, kind: str, rng: random.Random) -> tuple[str, list[str]]:
+    """Replace, delete or add a node of a parsed JSON/YAML document with a wrong-typed or extreme value."""
+    import yaml
+
+    doc = json.loads(text) if kind == "json" else yaml.safe_load(text)
+    nodes = []  # (container, key) pairs
+
+    def walk(v):
+        if isinstance(v, dict):
+            for k in list(v):
+                nodes.append((v, k))
+                walk(v[k])
+        elif isinstance(v, list):
+            for i in range(len(v)):
+                nodes.append((v, i))
+                walk(v[i])
+
+    walk(doc)
+    done = []
+    for _ in range(rng.choice((1, 1, 2))):
+        if not nodes:
+            break
+        container, key = rng.choice(nodes)
+        action = rng.choice(("replace", "replace", "delete", "add"))
+        try:
+            if action == "replace":
+                value = rng.choice(WRONG_VALUES)
+                container[key] = value
+                done.append(f"{key!r} = {value!r}")
+            elif action == "delete":
+                del container[key]
+                done.append(f"delete {key!r}")
+            elif isinstance(container, dict):
+                container["unknown_" + str(rng.randrange(99))] = 1
+                done.append("add unknown key")
+        except (IndexError, KeyError):
+            pass
+    if kind == "json":
+        out = json.dumps(doc, allow_nan=True)
+        if rng.random() < 0.2:  # non-finite tokens are not JSON but json.dumps writes them
+            out = out.replace("1e+308", rng.choice(("NaN", "Infinity", "-Infinity", "1e999")), 1)
+        return out, done
+    return yaml.safe_dump(doc, sort_keys=False), done
+
+
+def mutate(target: Target, seed: bytes, rng: random.Random) -> tuple[bytes, list[str]]:
+    """A damaged variant of `seed`: byte-level, or for documents a structural change half of the time."""
+    if target.tree and rng.random() < 0.5:
+        text, done = mutate_tree(seed.decode(), target.tree, rng)
+        return text.encode(), done
+    return mutate_bytes(seed, rng)
+
+
+# ---- the check ------------------------------------------------------------------------------------------------
+
+def check(target: Target, path: Path) -> str | None:
+    """Run `target.read(path)`. None if it read or refused properly; otherwise what was wrong (a traceback summary
+    or a badly formed error message)."""
+    try:
+        target.read(path)
+    except RidgelocError as exc:
+        msg = str(exc)
+        if "\n" in msg.strip():
+            return f"multi-line error: {msg[:300]!r}"
+        names = {path.name, path.parent.name, str(path.parent)}
+        if not any(n and n in msg for n in names):
+            return f"error does not name the file: {msg[:300]!r}"
+        return None
+    except RecursionError:
+        return "RecursionError"
+    except Exception as exc:  # anything else reaching the user is a traceback
+        import traceback
+
+        tb = traceback.extract_tb(exc.__traceback__)
+        where = next((f"{Path(f.filename).name}:{f.lineno}" for f in reversed(tb) if "pipeline" in f.filename),
+                     f"{Path(tb[-1].filename).name}:{tb[-1].lineno}" if tb else "?")
+        return f"{type(exc).__name__} at {where}: {str(exc).splitlines()[0][:200] if str(exc) else ''}"
+    return None

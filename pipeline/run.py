@@ -152,15 +152,15 @@ def _methods(config: FlightConfig) -> list[str]:
 
 
 def solve_all(obs: Observations, methods: Sequence[str], options: dict) -> tuple[dict[str, Estimate], dict]:
-    """Every method on one problem: (estimates, {method: error message} for those that could not run)."""
-    from pipeline.solve import solve
+    """Every method on one problem: (estimates, {method: {"status", "reason"}} for those that could not run)."""
+    from pipeline.solve import solve, unsolved_status
 
     estimates, failures = {}, {}
     for m in methods:
         try:
             estimates[m] = solve(m, obs, **dict(options.get(m) or {}))
         except (RidgelocError, ValueError, np.linalg.LinAlgError) as exc:
-            failures[m] = str(exc)
+            failures[m] = {"status": unsolved_status(exc), "reason": str(exc)}
     return estimates, failures
 
 
@@ -309,7 +309,8 @@ def process_group(config: FlightConfig) -> GroupResult:
     timings["solve"] = time.perf_counter() - t3
     cpu["solve"] = time.process_time() - c3
     if not estimates:
-        raise InputError(f"no estimator could solve the flight: {failures}", config.path)
+        reasons = "; ".join(f"{m}: {f['reason']}" for m, f in failures.items())
+        raise InputError(f"no estimator could solve the flight: {reasons}", config.path)
     if "mle" in estimates:  # its fit message, boresight bias and rejected observations
         notes.extend(mle_outputs.notes(estimates["mle"].extras))
 
@@ -344,11 +345,12 @@ def process_group(config: FlightConfig) -> GroupResult:
 
 def estimates_document(result: GroupResult) -> dict:
     """The `ridgeloc solve OBS.json --method all --json` document of the group's observations:
-    {"estimates": {method: Estimate.to_dict(truth)}, "failures": {method: message} (only when some failed)}."""
+    {"estimates": {method: Estimate.to_dict(truth)}, "unsolved": {method: {"status", "reason"}} (only when some
+    could not run)}."""
     doc: dict = {"estimates": {m: e.to_dict(result.truth_m) for m, e in result.estimates.items()}}
     failures = result.settings.get("solve_failures") or {}
     if failures:
-        doc["failures"] = dict(failures)
+        doc["unsolved"] = dict(failures)
     return doc
 
 

@@ -14,8 +14,8 @@ import sys
 
 import numpy as np
 
-from pipeline.errors import GeometryError, ObservationError, RidgelocError, SolverError
-from pipeline.solve import METHODS, mle_outputs, solve
+from pipeline.errors import RidgelocError, SolverError
+from pipeline.solve import METHODS, mle_outputs, solve, unsolved_status
 from pipeline.solve.observations import Observations
 
 HELP = "Locate the target in an observations file with one or more estimators (docs/solvers.md)."
@@ -32,16 +32,6 @@ def _methods(chosen: list[str] | None) -> list[str]:
     if not chosen or "all" in chosen:
         return list(METHODS)
     return list(dict.fromkeys(chosen))
-
-
-def unsolved_status(exc: RidgelocError) -> str:
-    """The status of an estimator that did not solve, from its error: degenerate (the geometry does not
-    determine the target), insufficient_data (too few or unusable observations), diverged."""
-    if isinstance(exc, GeometryError):
-        return "degenerate"
-    if isinstance(exc, ObservationError):
-        return "insufficient_data"
-    return "diverged"
 
 
 def _table(results: dict, failures: dict, truth) -> str:

@@ -14,6 +14,6 @@ ridge: hkb ("paper" | "textbook"), k (a fixed ridge parameter; k=0 is `fusion`);
 """
 
 from pipeline.solve.estimate import BatchEstimate, Estimate, Status
-from pipeline.solve.methods import METHODS, solve, solve_batch
+from pipeline.solve.methods import METHODS, solve, solve_batch, unsolved_status
 
-__all__ = ["METHODS", "BatchEstimate", "Estimate", "Status", "solve", "solve_batch"]
+__all__ = ["METHODS", "BatchEstimate", "Estimate", "Status", "solve", "solve_batch", "unsolved_status"]

@@ -400,3 +400,13 @@ def _residuals(method: str, st: Stacked, X: np.ndarray) -> np.ndarray:
         _, r, _ = range_model(st, X[None])
         parts.append(r[0, st.has_range[0]])
     return np.concatenate(parts)
+
+
+def unsolved_status(exc: Exception) -> str:
+    """The status of an estimator that did not solve, from its error: degenerate (the geometry does not
+    determine the target), insufficient_data (too few or unusable observations), diverged."""
+    if isinstance(exc, GeometryError):
+        return "degenerate"
+    if isinstance(exc, ObservationError):
+        return "insufficient_data"
+    return "diverged"

@@ -68,6 +68,18 @@ class _TimedDecoder:
         return out
 
 
+def read_flight_logs(config: FlightConfig) -> FlightLog:
+    """The flight's telemetry files read into one FlightLog; InputError when it lacks position, attitude or gimbal."""
+    from pipeline.ingest import read_flight
+
+    log = read_flight(list(config.files.telemetry), mapping=config.mapping)
+    missing = [q for q in ("position", "attitude", "gimbal") if getattr(log, q) is None]
+    if missing:
+        raise InputError(f"the flight's logs supply no {', '.join(missing)}: check `mapping:` "
+                         "(see `ridgeloc inspect`)", config.path)
+    return log
+
+
 def open_frames(config: FlightConfig, log: FlightLog) -> tuple[FrameSeries, _TimedDecoder, object]:
     """The flight's frame index and a decoder of chosen frames: the video file when the config names one,
     else the image topic of a bag the telemetry came from. Returns (frames, decoder, closable)."""
@@ -195,18 +207,12 @@ def _estimate_clock(config, log, frames, cam, cam_source, plan, origin, decoder,
 
 def process_group(config: FlightConfig) -> GroupResult:
     """Ingest, track, synchronize and solve one flight group (see the module docstring)."""
-    from pipeline.ingest import read_flight
-
     report_stage("ingest")
     timings: dict[str, float] = {}
     notes: list[str] = []
     cpu: dict[str, float] = {}  # process CPU seconds per stage (all threads): the wall times' counterpart under load
     t0, c0 = time.perf_counter(), time.process_time()
-    log = read_flight(list(config.files.telemetry), mapping=config.mapping)
-    missing = [q for q in ("position", "attitude", "gimbal") if getattr(log, q) is None]
-    if missing:
-        raise InputError(f"the flight's logs supply no {', '.join(missing)}: check `mapping:` "
-                         "(see `ridgeloc inspect`)", config.path)
+    log = read_flight_logs(config)
     frames, decoder, closable = open_frames(config, log)
     cam, cam_source = resolve_camera(config, log if log.frames is not None else dataclasses.replace(log, frames=frames))
     notes.extend(log.warnings)

@@ -50,15 +50,10 @@ class ResolvedFlight:
 def resolve_flight(config: FlightConfig) -> ResolvedFlight:
     """Read the flight's logs and frame index (no pixels decoded) and resolve every role; raises RidgelocError for
     what makes the flight unreadable."""
-    from pipeline.ingest import read_flight
     from pipeline.intrinsics import resolve_camera
-    from pipeline.run import _origin, geoid_separation_m, open_frames, plan_flight_observations
+    from pipeline.run import _origin, geoid_separation_m, open_frames, plan_flight_observations, read_flight_logs
 
-    log = read_flight(list(config.files.telemetry), mapping=config.mapping)
-    missing = [q for q in ("position", "attitude", "gimbal") if getattr(log, q) is None]
-    if missing:
-        raise InputError(f"the flight's logs supply no {', '.join(missing)}: check `mapping:` (see `ridgeloc "
-                         "inspect`)", config.path)
+    log = read_flight_logs(config)
     frames, _, closable = open_frames(config, log)
     close = getattr(closable, "close", None)
     if close is not None:

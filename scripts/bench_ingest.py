@@ -1,17 +1,20 @@
 """Ingest throughput and peak memory per reader, next to the underlying library's raw iteration in the same run.
 
-    python scripts/bench_ingest.py [--messages 1200000] [--only tlog,mcap,ros2,dflog,srt,real] [--out FILE]
+    python scripts/bench_ingest.py [--messages 1200000] [--only tlog,mcap,ros2,dflog,srt,klv,real] [--out FILE]
 
 Generates (in a temp dir) a MAVLink 2 .tlog with >= 1 M messages (position 10 Hz, attitude 50 Hz, gimbal 50 Hz,
 laser 10 Hz, SYSTEM_TIME 1 Hz, and 16 other common message types that our reader only counts), a plain MCAP
 with JSON channels, a ROS 2 bag (MCAP storage) of the synthetic-flight layout, a text DataFlash log (.log, GPS
 10 Hz, ATT/MNT 50 Hz, RFND 10 Hz, IMU/BARO 50 Hz only counted) and a DJI SRT of a 30 fps video in the Mavic 3
-layout (focal length and zoom changing), then times each in a fresh
+layout (focal length and zoom changing), a STANAG 4609 MPEG-TS (tiny H.264 frames, one MISB ST 0601 Local Set per
+frame, by pipeline.synth.writers.fmv) and the same packets as a raw .klv dump, then times each in a fresh
 subprocess (peak RSS = VmHWM, reset through /proc/self/clear_refs after all imports, minus the RSS then) for:
 - ours:  pipeline.ingest.read_flight (full conversion into the model);
 - raw:   the library alone: pymavlink mavutil recv_msg() over every message, mcap iter_messages + json.loads,
          rosbags AnyReader.messages + deserialize, DFReader recv_msg (binary and text), pyulog ULog(...),
-         srt.parse (cues only: the library that splits our SRT cues, without the telemetry in them);
+         srt.parse (cues only: the library that splits our SRT cues, without the telemetry in them), PyAV demux
+         of the .ts data stream / stanag4609 iter_klv over the .klv, each packet decoded by stanag4609's
+         st0601.decode_uas_local_set (checksum verified);
 and the same on every file in ../shared/logs and ../shared/srt, and on ../shared/logs' .BIN converted to text.
 msgs/s = messages in the file / wall time. Each child first runs
 its reader once on a small file of the same format (untimed), so one-time costs (type stores, generated
@@ -210,6 +213,37 @@ def gen_srt(path: Path, n_cues: int) -> int:
     return n_cues
 
 
+def gen_klv(path: Path, n_packets: int) -> int:
+    """A STANAG 4609 MPEG-TS (`.ts`: 64x48 H.264 frames at 30 fps, one ST 0601 Local Set per frame with a laser
+    range every 30th, written by the synth's FMV writer) or, for a `.klv` path, the same packets as a raw dump."""
+    import types
+
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    from pipeline.synth.writers.fmv import klv_packets, write_fmv
+
+    t = T0_NS + np.arange(n_packets, dtype=np.int64) * 10**9 // 30
+    s = (t - T0_NS) / 1e9
+    q_body = Rotation.from_euler("ZYX", np.column_stack([s % 360, 2 + 0 * s, 1 + 0 * s]), degrees=True)
+    q_gim = q_body * Rotation.from_euler("ZYX", [[30.0, -20.0, 0.0]] * n_packets, degrees=True)
+    tel = types.SimpleNamespace(
+        gps_t_ns=t, gps_lla=np.column_stack([45.0 + s * 1e-5, 9.0 + s * 1e-5, 500.0 + 0 * s]),
+        att_t_ns=t, att_quat_wxyz=q_body.as_quat(scalar_first=True),
+        gimbal_t_ns=t, gimbal_quat_wxyz=q_gim.as_quat(scalar_first=True),
+        laser_t_ns=t[::30], laser_range_m=1500.0 + s[::30])
+    zoom = 1.0 + (np.arange(n_packets) // 300) % 4
+    packets = klv_packets(tel, t, (64, 48, 60.0, 60.0), zoom, geoid_separation_m=47.0)
+    if path.suffix == ".klv":
+        path.write_bytes(b"".join(packets))
+        return n_packets
+    pts = t - T0_NS
+    frame = np.full((48, 64, 3), 128, np.uint8)
+    write_fmv(path, (frame for _ in range(n_packets)), pts, list(zip(pts.tolist(), packets, strict=True)), 30,
+              (64, 48), preset="ultrafast")
+    return n_packets
+
+
 CHILD = r'''
 import json, sys, time
 sys.path.insert(0, {repo!r})
@@ -217,6 +251,7 @@ kind, path, warm_path = sys.argv[1], sys.argv[2], sys.argv[3]
 import pipeline.ingest, pymavlink.mavutil, pymavlink.DFReader, mcap.reader, rosbags.highlevel, pyulog, numpy, scipy, srt
 import pipeline.ingest.tlog, pipeline.ingest.ulog, pipeline.ingest.dataflash, pipeline.ingest.rosbag
 import pipeline.ingest.mcap_plain, pipeline.ingest.srt, pipeline.ingest.video, mcap_ros2.decoder
+import pipeline.ingest.klv, av, stanag4609.st0601
 from rosbags.typesys import Stores, get_typestore
 for fmt in pipeline.ingest.mapping.FORMATS:
     pipeline.ingest.mapping_for(fmt)  # imports and package data loaded before timing, for both sides
@@ -246,6 +281,21 @@ def run(path):
         import srt
         with open(path, encoding="utf-8", errors="replace") as f:
             n = sum(1 for _ in srt.parse(f.read(), ignore_errors=True))
+    elif kind == "raw-klv-ts":  # PyAV demux of the data stream + stanag4609 decode of each packet
+        import av
+        from stanag4609 import st0601
+        with av.open(path) as c:
+            for pkt in c.demux(c.streams.data[0]):
+                if pkt.size:
+                    st0601.decode_uas_local_set(bytes(pkt), verify_checksum=True, require_version=False)
+                    n += 1
+    elif kind == "raw-klv":  # stanag4609's KLV stream splitter + decode of each packet
+        import stanag4609
+        from stanag4609 import st0601
+        with open(path, "rb") as f:
+            for p in stanag4609.iter_klv(f):
+                st0601.decode_uas_local_set(p.raw, verify_checksum=True, require_version=False)
+                n += 1
     elif kind == "raw-ulog":
         pyulog.ULog(path)
     elif kind == "raw-mcap":
@@ -292,13 +342,16 @@ def count_messages(path: Path) -> int:
 
 
 RAW = {"tlog": "raw-tlog", "dataflash": "raw-dataflash", "ulog": "raw-ulog", "mcap": "raw-mcap",
-       "ros1": "raw-rosbags", "ros2": "raw-rosbags", "dataflash-text": "raw-dataflash-text", "srt": "raw-srt"}
+       "ros1": "raw-rosbags", "ros2": "raw-rosbags", "dataflash-text": "raw-dataflash-text", "srt": "raw-srt",
+       "klv": "raw-klv"}
 
 
 def raw_kind(fmt: str, path: Path) -> str:
     """The raw-library baseline of a file: text DataFlash is read by DFReader_text."""
     if fmt == "dataflash" and path.is_file() and not path.read_bytes()[:2] == b"\xa3\x95":
         return RAW["dataflash-text"]
+    if path.suffix == ".ts":
+        return "raw-klv-ts"
     return RAW[fmt]
 
 
@@ -309,8 +362,10 @@ def main() -> int:
     ap.add_argument("--ros2-messages", type=int, default=300_000)
     ap.add_argument("--dflog-messages", type=int, default=600_000, help="records in the generated text DataFlash")
     ap.add_argument("--srt-cues", type=int, default=54_000, help="cues in the generated SRT (30 min at 30 fps)")
-    ap.add_argument("--only", default="tlog,mcap,ros2,dflog,srt,real",
-                    help="comma-separated subset of: tlog, mcap, ros2, dflog (text DataFlash), srt, real")
+    ap.add_argument("--klv-packets", type=int, default=5_400,
+                    help="ST 0601 packets (= frames, 30 fps) in the generated FMV .ts and .klv dump")
+    ap.add_argument("--only", default="tlog,mcap,ros2,dflog,srt,klv,real",
+                    help="comma-separated subset of: tlog, mcap, ros2, dflog (text DataFlash), srt, klv, real")
     ap.add_argument("--out", type=Path, default=None, help="also write the table (markdown) here")
     args = ap.parse_args()
     only = set(args.only.split(","))
@@ -326,10 +381,12 @@ def main() -> int:
                 "mcap": ("large.mcap", gen_mcap, args.mcap_messages, 2000),
                 "ros2": ("large_ros2", gen_ros2, args.ros2_messages, 2000),
                 "dflog": ("large_text_dataflash.log", gen_dataflash_text, args.dflog_messages, 2000),
-                "srt": ("large_30min_30fps.SRT", gen_srt, args.srt_cues, 300)}
+                "srt": ("large_30min_30fps.SRT", gen_srt, args.srt_cues, 300),
+                "klv": ("fmv_30fps.ts", gen_klv, args.klv_packets, 60),
+                "klv-dump": ("fmv_30fps.klv", gen_klv, args.klv_packets, 60)}
         files, warm = [], {}
         for key, (name, gen, n_target, n_warm) in gens.items():
-            if key in only:
+            if key in only or (key == "klv-dump" and "klv" in only):
                 files.append((tmp / name, gen(tmp / name, n_target)))
                 warm[name] = tmp / ("warm_" + name)
                 gen(warm[name], n_warm)

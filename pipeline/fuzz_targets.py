@@ -216,6 +216,40 @@ def _seed_srt(folder: Path) -> Path:
     return path
 
 
+def _klv_packets(n: int) -> list[bytes]:
+    """n ST 0601 packets 40 ms apart, encoded by the stanag4609 library (not by our reader's own code)."""
+    from stanag4609 import st0601
+
+    return [st0601.encode_uas_local_set({
+        2: T0_NS // 1000 + k * 40_000, 65: 19, 5: 45.0 + k, 6: 1.5, 7: -2.0, 13: 47.0 + k * 1e-5, 14: 8.5,
+        15: 1450.0, 75: 1500.0, 16: 20.0, 17: 15.0, 18: 10.0, 19: -30.0, 20: 0.0,
+        **({21: 4000.0 + k} if k % 3 == 0 else {})}) for k in range(n)]
+
+
+def _seed_klv_dump(folder: Path) -> Path:
+    path = folder / "flight.klv"
+    path.write_bytes(b"".join(_klv_packets(6)))
+    return path
+
+
+def _seed_fmv(folder: Path) -> Path:
+    """A 6-frame 32x24 H.264 MPEG-TS with a KLV data stream (the synth's MISB writer), ~6 KB."""
+    import numpy as np
+
+    from pipeline.synth.writers.fmv import write_fmv
+
+    path = folder / "flight.ts"
+    frames = []
+    for i in range(6):
+        img = np.zeros((24, 32, 3), np.uint8)
+        img[4:20, 2 + i:10 + i] = 255
+        frames.append(img)
+    pts = np.arange(6, dtype=np.int64) * 40_000_000 + 1_000_000_000
+    write_fmv(path, frames, pts, list(zip(pts.tolist(), _klv_packets(6), strict=True)), 25, (32, 24),
+              preset="ultrafast")
+    return path
+
+
 def _seed_video(folder: Path) -> Path:
     import cv2
     import numpy as np
@@ -278,6 +312,8 @@ TARGETS: tuple[Target, ...] = (
     Target("ros2-metadata", _seed_ros2_metadata, _read_log, tree="yaml"),
     Target("mcap", _seed_mcap, _read_log),
     Target("srt", _seed_srt, _read_log),
+    Target("klv-dump", _seed_klv_dump, _read_log),
+    Target("fmv-ts", _seed_fmv, _read_log),
     Target("video", _seed_video, _read_video),
     Target("frames-csv", _seed_frames_csv, _read_frames_csv),
     Target("flight-config", _seed_flight_config, _read_flight_config, tree="yaml"),

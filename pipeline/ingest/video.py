@@ -121,7 +121,8 @@ def demux_index(path, data_streams: bool = False) -> DemuxIndex:
         except av.error.FFmpegError as exc:  # damaged tail: keep what was read
             if not pts:
                 raise LogReadError(f"cannot demux this video: {_why(exc)}", path=path) from None
-        width, height = vs.codec_context.width, vs.codec_context.height
+        cc = vs.codec_context  # None when damage leaves the stream without a decoder
+        width, height = (cc.width, cc.height) if cc is not None else (0, 0)
         tb = vs.time_base or Fraction(1, 90000)
     finally:
         container.close()

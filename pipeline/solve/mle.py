@@ -10,7 +10,7 @@ import warnings
 import numpy as np
 from scipy.special import erf, erfinv
 
-from pipeline.solve import fit_checks
+from pipeline.solve import bias_mixture, fit_checks
 from pipeline.solve import iterate as _iterate
 from pipeline.solve.estimate import Status
 from pipeline.solve.iterate import problem_scale_m, start_status
@@ -29,12 +29,12 @@ REDESCEND_A = 3.0
 REDESCEND_B = 8.0
 #: 95 % quantile of chi-square with 3 degrees of freedom, for the 95 % ellipsoid
 CHI2_3_95 = 7.814727903251178
-#: the range of the bias prior's variance estimated from the flight, relative to the stated prior's
-BIAS_FACTOR_RANGE = (1e-4, 1.0)
-#: the bias prior is revised from the flight where the flight tells at least this fraction of what is known
-BIAS_MIN_REDUNDANCY = 0.2
 #: the boresight bias prior when the sigma gives no attitude accuracy (deg)
 DEFAULT_BIAS_PRIOR_DEG = 0.5
+#: told no error model, a constant GNSS offset shared by the segment is assumed with this share of the stated
+#: position variance: its prior mean when the constant share is uniform on [0, 1], as for the attitude's bias
+#: (`bias_mixture`); unlike the bias, a shared offset moves the target exactly and the flight cannot tell it
+COMMON_POSITION_SHARE = 1.0 / 3.0
 VCE_MAX_ROUNDS = 10
 VCE_TOL = 0.01
 
@@ -78,10 +78,10 @@ def _redescending(e: np.ndarray):
 
 
 def bias_prior_deg(sigma: Sigma, options: dict) -> tuple[float | None, bool]:
-    """The prior standard deviation (deg) of the constant boresight bias `mle` estimates, and whether the flight
-    may revise it: the option bias_prior_deg when given (0: no bias; kept as given), none when the sigma gives
-    correlation times (the configured error model wins), else the attitude sigma, else
-    DEFAULT_BIAS_PRIOR_DEG, revised from the flight."""
+    """The prior standard deviation (deg) of the constant boresight bias `mle` estimates, and whether its size is
+    unknown: the option bias_prior_deg when given (0: no bias; used as given), none when the sigma gives
+    correlation times (the configured error model wins), else the attitude sigma (else DEFAULT_BIAS_PRIOR_DEG)
+    as the largest bias, its size learned from the flight (`bias_mixture`)."""
     b = options.get("bias_prior_deg")
     if b is not None:
         return float(b) or None, False
@@ -231,7 +231,7 @@ def _solve3(N, g, lam=None):
 
 def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
         max_iterations: int, init_status: np.ndarray | None = None, bias_deg: float | None = None,
-        estimate_bias_prior: bool = True):
+        bias_size_unknown: bool = True):
     """Returns X (B,3), iterations (B,), status (B,) int8, cond (B,) of the weighted design W^1/2 J,
     covariance (B,3,3) m^2, and extras (B, ...) arrays: variance_factor_pixel, variance_factor_range, sigma0_sq,
     vce_rounds, rejected (B,n,3) bool (u, v, range rows with zero weight), residual_sigmas (B,n,3) (the
@@ -241,7 +241,10 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     redescending loss from there. bias_deg > 0 estimates a constant boresight bias (two camera-frame angles,
     seen as constant pixel offsets f * angle in u and v) jointly with the target, with a zero-mean Gaussian
     prior of that standard deviation; it is eliminated from the normal equations (Schur complement), so the
-    target covariance is the marginal one.
+    target covariance is the marginal one. With bias_size_unknown, bias_deg is the largest bias: the answer is
+    then averaged over the bias's size (`bias_mixture`, the stated attitude variance split between the bias and
+    the frame-to-frame part unless the residuals drift), and a GNSS offset shared by the segment
+    (COMMON_POSITION_SHARE of the position variance) is added to the covariance.
 
     Works on planes (`_Planes`): the normal equations as six (B,) entries, the 3x3 steps in closed form.
     Converged problems are frozen once fewer than all are active.
@@ -262,9 +265,11 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
         a = None
     it = _Iteration(st, pl, a, X, status, bad, X0, tol_m, max_iterations, vce)
     it.bias_sigma_deg = bias_deg
-    it.estimate_bias_prior = estimate_bias_prior
-    if bias_deg and estimate_bias_prior:  # no error model configured: a GNSS offset shared by the segment, too
-        it.common_position_m = sigma.position_m or 0.0
+    if a is not None and bias_size_unknown and sigma.attitude_deg:  # the attitude's share of each row's variance
+        it.attitude_share = (a[:2] * (sigma.attitude_deg / bias_deg)) ** 2
+    it.bias_size_unknown = bias_size_unknown
+    if bias_deg and bias_size_unknown:  # no error model configured: a GNSS offset shared by the segment, too
+        it.common_position_m = (sigma.position_m or 0.0) * np.sqrt(COMMON_POSITION_SHARE)
     if robust == "redescending":
         it.run("huber")
         it.robust_scale()
@@ -293,8 +298,8 @@ class _Iteration:
         self.bad = bad
         self.active = ~bad
         self.bias_sigma_deg = None
-        self.bias_factor = np.ones((B, 2))  # the bias prior variance found from the data, over the prior's
         self.common_position_m = 0.0
+        self.attitude_share = None
         self.guard = np.ones((B, 2))  # `robust_scale`'s factors: a misfit, unlike variance components
 
     def _eval(self, pl, a, X, z, robust):
@@ -409,21 +414,12 @@ class _Iteration:
             stuck = ~accept & (lam[idx] > 1e12)
             inner_done |= stuck & still
             still &= ~stuck
-            if (vce or (a is not None and self.estimate_bias_prior)) and inner_done.any():
+            if vce and inner_done.any():
                 d_idx = idx[inner_done]
                 J, E, ok = self.J, self.E, self.ok
-                factors, usable, zf, zuse = _vce_factors(J[..., d_idx], E[..., d_idx], ok[..., d_idx], robust,
-                                                         None if a is None else a[..., d_idx],
-                                                         None if a is None else self.z[:, d_idx])
-                if not vce:
-                    usable[:] = False
+                factors, usable = _vce_factors(J[..., d_idx], E[..., d_idx], ok[..., d_idx], robust,
+                                               None if a is None else a[..., d_idx])
                 more = (np.abs(factors - 1) > VCE_TOL) & usable
-                if a is not None and self.estimate_bias_prior:
-                    # the bias prior's variance from the flight, within BIAS_FACTOR_RANGE of the stated one
-                    bf = self.bias_factor[d_idx]
-                    zf = np.clip(zf * bf, BIAS_FACTOR_RANGE[0], BIAS_FACTOR_RANGE[1]) / bf
-                    zuse &= np.abs(zf - 1) > VCE_TOL
-                    more |= zuse.any(axis=1)[:, None]
                 again = more.any(axis=1) & (self.vce_rounds[d_idx] < VCE_MAX_ROUNDS)
                 change = np.where(usable & again[:, None], factors, 1.0)
                 self.vce_rounds[d_idx] += again
@@ -432,11 +428,6 @@ class _Iteration:
                     ch = change[again]
                     self._rescale_group(rd, 0, ch[:, 0])
                     self._rescale_group(rd, 1, ch[:, 1])
-                    if a is not None and self.estimate_bias_prior:
-                        zc = np.where(zuse[again], zf[again], 1.0)
-                        self.bias_factor[rd] *= zc
-                        a[:2, :, rd] *= np.sqrt(zc.T)[:, None, :]
-                        self.z[:2, rd] /= np.sqrt(zc.T)
                     J, E, ok, z, cost, w_rd = self._eval(pl.take(rd), None if a is None else a[..., rd], X[rd],
                                                          self.z[:, rd], robust)
                     self.J[..., rd], self.E[..., rd], self.z[:, rd], self.cost[rd] = J, E, z, cost
@@ -497,6 +488,10 @@ class _Iteration:
         with np.errstate(divide="ignore", invalid="ignore"):
             vf_chi = np.where(p_fail & (dof > 0), np.maximum(chi2_s / dof, 1.0), 1.0)
         cov, singular = _cov_from_six(N6s)
+        mix = None
+        if a is not None and self.bias_size_unknown:
+            mix = self._mixture(s, failed, acf_pix)
+            cov = np.where(failed[:, None, None], cov, mix["covariance"])
         cov = cov * vf_chi[:, None, None] + self.common_position_m ** 2 * np.eye(3)
         cond = condition_numbers(_full3(N6))
         status[singular & ~failed] = Status.DEGENERATE
@@ -517,9 +512,30 @@ class _Iteration:
                   "drift_pixel": acf_pix, "drift_range": acf_rng,
                   "consistent": ~(p_fail | acf_pix | acf_rng),
                   "covariance_inflation": np.where(np.isfinite(inflation), inflation, 1.0)}
-        if a is not None:
+        if mix is not None:
+            extras.update(_mixture_summary(self, mix, cov, vf_chi))
+        elif a is not None:
             extras.update(_bias_summary(self, cov, hs, vf_chi))
         return X, self.iterations, status, cond, cov, extras
+
+    def _mixture(self, s, failed, drift):
+        """`bias_mixture.mixture` at the solution, twice (the second at the first's step), with the final IRLS
+        weights and the autocorrelation scaling s (3,1,B); moves X to the mixture's estimate."""
+        wr = self.wr
+        keep = ~failed
+        base = self.a[:2]
+        a0 = np.zeros_like(self.a)
+        J, E, ok = self.J, self.E + self.a * self.z[:, None, :], self.ok
+        for rnd in range(2):
+            a0[:2] = np.where(ok[:2], base, 0.0)
+            w = ok if wr is None else np.where(ok, wr, 0.0)
+            share = None if self.attitude_share is None else np.where(drift, 0.0, self.attitude_share)
+            mix = bias_mixture.mixture(J * s, E * s, a0 * s, w, share)
+            step = np.where(keep[:, None] & np.isfinite(mix["step"]), mix["step"], 0.0)
+            self.X += step
+            if rnd == 0:
+                J, E, ok = _evaluate(self.pl, self.X)
+        return mix
 
 
 def _full3(N6):
@@ -562,8 +578,8 @@ def _bias_schur(N, J, a, w):
 def _bias_summary(it: _Iteration, cov, hs, vf_chi) -> dict:
     """The bias estimate (B,2) deg (u: about the camera's vertical axis, v: about its horizontal axis, as
     pixel offsets / f), its posterior standard deviation and its correlation with the target (B,2,3)."""
-    sb = it.bias_sigma_deg * np.sqrt(it.bias_factor)  # (B, 2) the prior in use
     B = cov.shape[0]
+    sb = np.full((B, 2), it.bias_sigma_deg)
     bias = it.z[:2].T * sb
     sd = np.empty((B, 2))
     corr = np.empty((B, 2, 3))
@@ -577,19 +593,31 @@ def _bias_summary(it: _Iteration, cov, hs, vf_chi) -> dict:
     return {"bias_deg": bias, "bias_sigma_deg": sd, "bias_target_correlation": corr, "bias_prior_deg": sb}
 
 
+def _mixture_summary(it: _Iteration, mix: dict, cov, vf_chi) -> dict:
+    """`_bias_summary` from the bias mixture: the posterior mean bias (B,2) deg, its standard deviation, its
+    correlation with the target (B,2,3), and the bias size the flight supports (the posterior rms of the prior
+    scale, deg)."""
+    sb = it.bias_sigma_deg
+    sd = np.sqrt(mix["bias_var"] * vf_chi[:, None]) * sb
+    sx = np.sqrt(np.einsum("bii->bi", cov))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        corr = mix["bias_cross"] * vf_chi[:, None, None] * sb / (sx[:, None, :] * sd[..., None])
+    phi_rms = np.sqrt(mix["posterior"] @ bias_mixture.PHI_GRID ** 2)
+    return {"bias_deg": mix["bias"] * sb, "bias_sigma_deg": sd, "bias_target_correlation": corr,
+            "bias_prior_deg": np.repeat((phi_rms * sb)[:, None], 2, axis=1)}
+
+
 def _inverse_spd(N: np.ndarray):
     inv, singular = inverse3(N)
     return 0.5 * (inv + np.swapaxes(inv, 1, 2)), singular
 
 
-def _vce_factors(J, E, ok, robust, a=None, z=None):
+def _vce_factors(J, E, ok, robust, a=None):
     """Helmert/Foerstner variance component factors (b, 2) = (sum_g w e^2) / r_g with the redundancy numbers
     r_g = sum_g (1 - w_i h_i) over the usable rows of each group (pixels: the u and v rows, ranges; rows a
     redescending loss rejected do not count), h_i the leverage of row i in the joint problem (target, and the
     bias columns a when given), from the standardized J (3,3,n,b), E (3,n,b); and a (b, 2) flag 'usable'
-    (redundancy of the group >= 0.5). With the bias: also (b, 2) factors z^2 / r_z of the bias priors (r_z =
-    1 - posterior variance of z, the prior's redundancy) and their 'usable' flags (r_z >= BIAS_MIN_REDUNDANCY:
-    the flight tells at least that fraction of what is known about the bias)."""
+    (redundancy of the group >= 0.5)."""
     _, w = _cost_weights(E, robust)
     N, _ = _normal(J, E, w)
     hs = _bias_schur(N, J, a, w) if a is not None else None
@@ -598,8 +626,6 @@ def _vce_factors(J, E, ok, robust, a=None, z=None):
     j0, j1, j2 = J
     quad = (inv[0] * j0 * j0 + inv[3] * j1 * j1 + inv[5] * j2 * j2
             + 2.0 * (inv[1] * j0 * j1 + inv[2] * j0 * j2 + inv[4] * j1 * j2))
-    zfac = np.ones((E.shape[-1], 2))
-    zok = np.zeros((E.shape[-1], 2), dtype=bool)
     if hs is not None:
         C00, C01, C02, C11, C12, C22 = inv
         for k, (h, s) in enumerate(hs):
@@ -607,10 +633,6 @@ def _vce_factors(J, E, ok, robust, a=None, z=None):
             c = [-(C00 * h0 + C01 * h1 + C02 * h2) / (1 + s), -(C01 * h0 + C11 * h1 + C12 * h2) / (1 + s),
                  -(C02 * h0 + C12 * h1 + C22 * h2) / (1 + s)]
             czz = 1.0 / (1 + s) - (c[0] * h0 + c[1] * h1 + c[2] * h2) / (1 + s)
-            rz = 1.0 - czz
-            zok[:, k] = np.isfinite(rz) & (rz >= BIAS_MIN_REDUNDANCY)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                zfac[:, k] = np.where(zok[:, k], z[k] ** 2 / rz, 1.0)
             quad[k] = quad[k] + 2.0 * a[k] * (J[0, k] * c[0] + J[1, k] * c[1] + J[2, k] * c[2]) + a[k] ** 2 * czz
     lev = quad if w is None else w * quad
     q = E * E if w is None else w * E * E
@@ -627,7 +649,7 @@ def _vce_factors(J, E, ok, robust, a=None, z=None):
             out[:, g] = np.where(usable[:, g], qs / red, 1.0)
         usable[:, g] &= np.isfinite(out[:, g]) & (out[:, g] > 0)
         out[:, g] = np.where(usable[:, g], out[:, g], 1.0)
-    return out, usable, zfac, zok
+    return out, usable
 
 
 # ---- accuracy summaries from the covariance ----------------------------------------------------------------

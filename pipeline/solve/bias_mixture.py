@@ -1,0 +1,118 @@
+"""How large is the constant part of the attitude error? Bayesian averaging over the boresight bias's prior
+scale, for `mle` when nobody states the error model.
+
+Told only "attitude 0.2 deg", nothing says how much of that error is constant over the flight (a boresight
+bias: shared by every frame) and how much changes from frame to frame. The two call for different estimates:
+a bias makes the frames' common pixel offset worthless for the target, white errors make it the best
+information there is. So `mle` does not pick one; it averages over the bias's prior standard deviation
+phi * sigma_att, phi on PHI_GRID (0: no bias, 1: a bias as large as the whole stated attitude error), equally
+likely a priori, weighted by the evidence of the flight (the restricted likelihood: the target integrated out
+with a flat prior). Where the bias is observable the evidence picks its size; where it cannot be told from a
+target offset the evidence is flat, the estimate does not depend on phi (the bias and the target move the
+frames alike), and the covariance carries the prior's mean bias variance (a third of sigma_att^2).
+
+The model is linear at the solve's solution: standardized residual rows r (3,n,b) (u, v, range of n frames of
+b problems), Jacobian J (3,3,n,b) of the rows in the target, bias columns a (3,n,b) (the u and v rows' pixel
+offset per unit bias at the stated prior; range rows 0), IRLS weights w. With p = phi^2, s_k = a_k' W a_k,
+h_k = J' W a_k, t_k = a_k' W r for the u and v biases (disjoint rows), the bias integrated out:
+
+    N_p = J'WJ - sum_k p h_k h_k' / (1 + p s_k)     g_p = J'Wr - sum_k p h_k t_k / (1 + p s_k)
+    step d_p = N_p^-1 g_p, covariance N_p^-1,
+    log L(p) = -1/2 (r'Wr - sum_k p t_k^2 / (1 + p s_k) - g_p' d_p + sum_k log(1 + p s_k) + log det N_p)
+
+and the answer is the posterior mixture: step sum pi_p d_p, covariance sum pi_p (N_p^-1 + d_p d_p') - d d'.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.solve.stacked import inverse3
+
+#: the bias's prior standard deviation over the stated attitude sigma: the candidates, equally likely a priori
+PHI_GRID = np.linspace(0.0, 1.0, 9)
+#: the smallest share of a pixel row's variance left when the bias takes the whole attitude error
+RATIO_FLOOR = 1e-3
+
+
+def _rows(A: np.ndarray, Bm: np.ndarray) -> np.ndarray:
+    """(b,) sum over the rows of A * B, (n,b) or (3,n,b) planes."""
+    return (A * Bm).reshape(-1, A.shape[-1]).sum(axis=0)
+
+
+def _det3(N: np.ndarray) -> np.ndarray:
+    """(b,) determinants of (b,3,3) matrices by cofactors."""
+    return (N[:, 0, 0] * (N[:, 1, 1] * N[:, 2, 2] - N[:, 1, 2] * N[:, 2, 1])
+            - N[:, 0, 1] * (N[:, 1, 0] * N[:, 2, 2] - N[:, 1, 2] * N[:, 2, 0])
+            + N[:, 0, 2] * (N[:, 1, 0] * N[:, 2, 1] - N[:, 1, 1] * N[:, 2, 0]))
+
+
+def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None,
+            share: np.ndarray | None = None) -> dict:
+    """The bias-averaged linear step and covariance of b problems (module docstring).
+
+    J (3,3,n,b), r (3,n,b), a (3,n,b) (rows 0 and 1 used), w (3,n,b) or None (unit weights); rows that are not
+    in use must be zero in J and r and have zero weight (or zero a). Returns step (b,3) m, covariance (b,3,3)
+    m^2, posterior (b,G) over PHI_GRID, bias (b,2) and bias_var (b,2) in units of the stated prior (u, v),
+    bias_cross (b,2,3) the covariance of each bias with the target, singular (b,) where no candidate solves.
+    """
+    W1 = np.ones_like(r) if w is None else w
+    b = r.shape[-1]
+    G = len(PHI_GRID)
+    steps = np.empty((G, b, 3))
+    covs = np.empty((G, b, 3, 3))
+    logL = np.empty((G, b))
+    bias = np.zeros((G, b, 2))
+    bvar = np.zeros((G, b, 2))
+    cross = np.zeros((G, b, 2, 3))
+    singular_all = np.ones(b, dtype=bool)
+    for j, phi in enumerate(PHI_GRID):
+        p = phi * phi
+        W = W1.copy()
+        logdet_rows = 0.0
+        if share is not None:  # the white attitude variance is what the bias leaves of the stated one
+            ratio = np.maximum(1.0 - p * share, RATIO_FLOOR)
+            W[:2] = W1[:2] / ratio
+            logdet_rows = _rows(np.where(W1[:2] > 0, np.log(ratio), 0.0), np.ones_like(ratio))
+        WJ = J * W
+        N0 = np.einsum("cknb,dknb->bcd", WJ, J)
+        g0 = np.einsum("cknb,knb->bc", WJ, r)
+        c0 = _rows(W * r, r)
+        s = np.stack([_rows(W[k] * a[k], a[k]) for k in (0, 1)], axis=1)  # (b,2)
+        h = np.stack([np.einsum("cnb,nb->bc", WJ[:, k], a[k]) for k in (0, 1)], axis=1)  # (b,2,3)
+        t = np.stack([_rows(W[k] * a[k], r[k]) for k in (0, 1)], axis=1)  # (b,2)
+        f = p / (1.0 + p * s)  # (b,2)
+        N = N0 - np.einsum("bk,bkc,bkd->bcd", f, h, h)
+        g = g0 - np.einsum("bk,bkc->bc", f * t, h)
+        q = c0 - (f * t * t).sum(axis=1)
+        C, singular = inverse3(N)
+        d = np.einsum("bcd,bd->bc", C, g)
+        det = _det3(N)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ll = -0.5 * (q - (g * d).sum(axis=1) + np.log1p(p * s).sum(axis=1) + np.log(det)
+                         + logdet_rows)
+        logL[j] = np.where(singular | ~np.isfinite(ll), -np.inf, ll)
+        singular_all &= singular
+        steps[j], covs[j] = d, C
+        Ch = np.einsum("bcd,bkd->bkc", C, h)  # (b,2,3)
+        bias[j] = f * (t - np.einsum("bkc,bc->bk", h, d))
+        bvar[j] = f + f * f * np.einsum("bkc,bkc->bk", h, Ch)
+        cross[j] = -f[..., None] * Ch
+    top = logL.max(axis=0)
+    with np.errstate(invalid="ignore"):
+        pi = np.exp(logL - np.where(np.isfinite(top), top, 0.0))
+    pi = np.where(np.isfinite(pi), pi, 0.0)
+    total = pi.sum(axis=0)
+    pi = np.where(total > 0, pi / np.where(total > 0, total, 1.0), 1.0 / G)
+    steps = np.where(np.isfinite(steps), steps, 0.0)
+    covs = np.where(np.isfinite(covs), covs, 0.0)
+    step = np.einsum("gb,gbc->bc", pi, steps)
+    dev = steps - step
+    cov = np.einsum("gb,gbcd->bcd", pi, covs + dev[..., :, None] * dev[..., None, :])
+    bias_mean = np.einsum("gb,gbk->bk", pi, bias)
+    bdev = bias - bias_mean
+    bias_var = np.einsum("gb,gbk->bk", pi, bvar + bdev * bdev)
+    bias_cross = np.einsum("gb,gbkc->bkc", pi, cross + bdev[..., None] * dev[:, :, None, :])
+    cov[singular_all] = np.nan
+    return {"step": step, "covariance": cov, "posterior": pi.T, "bias": bias_mean, "bias_var": bias_var,
+            "bias_cross": bias_cross, "singular": singular_all}

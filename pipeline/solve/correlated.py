@@ -30,7 +30,7 @@ from scipy.linalg.lapack import dpotrf, dtrtrs
 
 from pipeline.solve.estimate import Status
 from pipeline.solve.iterate import DIVERGENCE_FACTOR, problem_scale_m
-from pipeline.solve.mle import VCE_MAX_ROUNDS, VCE_TOL, _rho_and_weight
+from pipeline.solve.mle import VCE_MAX_ROUNDS, VCE_TOL, _rho_and_weight, pixel_pair_redescending
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import Stacked, condition_numbers, inverse3, pixel_model, range_model, solve_spd
 
@@ -167,7 +167,10 @@ def mle_gls(st: Stacked, X0: np.ndarray, C: np.ndarray, robust: str | None, vce:
 
     def whitened(A):
         scale = np.r_[np.full(npix, vf[0]), np.full(m - npix, vf[1])]
-        w = np.ones(m) if robust is None else _rho_and_weight(A[:, 3] / (sd * np.sqrt(scale)), robust)[1]
+        z = A[:, 3] / (sd * np.sqrt(scale))
+        w = np.ones(m) if robust is None else _rho_and_weight(z, robust)[1]
+        if robust == "redescending":  # the pixel rows (u, v interleaved) weighted in pairs
+            w[:npix] = np.repeat(pixel_pair_redescending(z[:npix:2], z[1:npix:2])[1], 2)
         return inflated_whiten(C, w, A) / np.sqrt(scale)[:, None]
 
     X = np.array(X0, dtype=np.float64)

@@ -24,9 +24,12 @@ DEFAULT_ROBUST = "redescending"
 HUBER_C = 1.345
 CAUCHY_C = 2.3849
 #: the redescending loss: quadratic up to REDESCEND_A (full weight: ~100 % Gaussian efficiency), the weight
-#: falling smoothly (biweight-shaped) to zero at REDESCEND_B, zero beyond: a gross outlier has no pull at all
+#: falling smoothly (biweight-shaped) to zero at REDESCEND_B, zero beyond: a gross outlier has no pull at all.
+#: A frame's pixel is one 2-D residual, weighted (or rejected) whole by its length: full weight up to
+#: REDESCEND_A_PIXEL, the length a 2-D Gaussian exceeds as rarely (0.27 %) as a 1-D one exceeds REDESCEND_A
 REDESCEND_A = 3.0
-REDESCEND_B = 8.0
+REDESCEND_A_PIXEL = 3.44
+REDESCEND_B = 6.0
 #: 95 % quantile of chi-square with 3 degrees of freedom, for the 95 % ellipsoid
 CHI2_3_95 = 7.814727903251178
 #: the boresight bias prior when the sigma gives no attitude accuracy (deg)
@@ -65,16 +68,22 @@ def _rho_and_weight(e: np.ndarray, robust: str | None):
     return 0.5 * CAUCHY_C ** 2 * np.log1p(z), 1.0 / (1.0 + z)
 
 
-def _redescending(e: np.ndarray):
+def _redescending(e: np.ndarray, A: float = REDESCEND_A):
     """rho and weight of the redescending loss: w = 1 for |e| <= A, (1 - t^2)^2 with t = (|e| - A) / (B - A)
-    up to B, 0 beyond; rho = integral of w e de (continuous, constant beyond B)."""
-    A, D = REDESCEND_A, REDESCEND_B - REDESCEND_A
+    up to B = REDESCEND_B, 0 beyond; rho = integral of w e de (continuous, constant beyond B)."""
+    D = REDESCEND_B - A
     a = np.abs(e)
     t = np.clip((a - A) / D, 0.0, 1.0)
     u = 1.0 - t * t
     w = np.where(a <= A, 1.0, u * u)
     tail = 0.5 * A * A + D * (A * (t - 2.0 * t ** 3 / 3.0 + t ** 5 / 5.0) + D * (1.0 - u ** 3) / 6.0)
     return np.where(a <= A, 0.5 * e * e, tail), w
+
+
+def pixel_pair_redescending(e_u: np.ndarray, e_v: np.ndarray):
+    """rho and weight (shaped as e_u) of the redescending loss of the pixel residuals (e_u, e_v), standardized,
+    by their length: a mistracked frame moves the pixel in 2-D, and both coordinates go (or stay) together."""
+    return _redescending(np.sqrt(e_u * e_u + e_v * e_v), REDESCEND_A_PIXEL)
 
 
 def bias_prior_deg(sigma: Sigma, options: dict) -> tuple[float | None, bool]:
@@ -196,6 +205,10 @@ def _cost_weights(E: np.ndarray, robust: str | None):
         mx = np.maximum(np.abs(E), HUBER_C)
         w = HUBER_C / mx
         return 0.5 * (_dot_rows(w * E, E) + HUBER_C * _sum_rows(mx - HUBER_C)), w
+    if robust == "redescending":
+        rho_p, w_p = pixel_pair_redescending(E[0], E[1])
+        rho_r, w_r = _redescending(E[2])
+        return rho_p.sum(axis=0) + rho_r.sum(axis=0), np.stack([w_p, w_p, w_r])
     rho, w = _rho_and_weight(E, robust)
     return _sum_rows(rho), w
 
@@ -551,12 +564,9 @@ def _profile_bias(E, a, robust, z):
     """The bias-corrected residuals E - a z (3,n,b) and z (3,b): the bias (in prior standard deviations) that
     minimizes sum rho(E - a z) + |z|^2 / 2 for the u and v rows (a few IRLS rounds from the previous z)."""
     for _ in range(1 if robust is None else 4):
+        w = 1.0 if robust is None else _cost_weights(E - a * z[:, None, :], robust)[1]
         for k in (0, 1):
-            if robust is None:
-                w = 1.0
-            else:
-                w = _rho_and_weight(E[k] - a[k] * z[k], robust)[1]
-            wa = w * a[k]
+            wa = a[k] if robust is None else w[k] * a[k]
             z[k] = (wa * E[k]).sum(axis=0) / (1.0 + (wa * a[k]).sum(axis=0))
     return E - a * z[:, None, :], z
 

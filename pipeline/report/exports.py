@@ -84,6 +84,12 @@ def failure_status_reason(failure) -> tuple[str, str]:
     return "failed", str(failure)
 
 
+def unsolved_methods(r: GroupResult) -> dict[str, tuple[str, str]]:
+    """{method: (status, reason)} of the methods a group asked for that gave no estimate."""
+    failures = r.settings.get("solve_failures") or {}
+    return {m: failure_status_reason(f) for m, f in failures.items() if m not in r.estimates}
+
+
 def _status_reason(r: GroupResult, method: str) -> tuple[str, str | None]:
     """(status, reason) of a method: `failed` with its message when it could not run, else the estimate's status
     and the reason the solver gives (`reason`/`message` in its extras), if any."""

@@ -91,13 +91,18 @@ def unsolved_methods(r: GroupResult) -> dict[str, tuple[str, str]]:
 
 
 def _status_reason(r: GroupResult, method: str) -> tuple[str, str | None]:
-    """(status, reason) of a method: `failed` with its message when it could not run, else the estimate's status
-    and the reason the solver gives (`reason`/`message` in its extras), if any."""
+    """(status, reason) of a method: its status and reason when it could not run, else the estimate's status
+    and the reason the solver gives (`reason`/`message` in its extras, or the mle's fit message when its error
+    model does not fit the flight: the covariance was inflated and is not to be trusted blindly), if any."""
     failures = r.settings.get("solve_failures") or {}
     e = r.estimates.get(method)
     if e is None:
         return failure_status_reason(failures.get(method, "not solved"))
-    reason = e.extras.get("reason", e.extras.get("message")) if isinstance(e.extras, dict) else None
+    extras = e.extras if isinstance(e.extras, dict) else {}
+    reason = extras.get("reason", extras.get("message"))
+    fit = extras.get("fit")
+    if reason is None and isinstance(fit, dict) and fit.get("message"):
+        reason = fit["message"]
     return e.status.name.lower(), (None if reason is None else str(reason))
 
 

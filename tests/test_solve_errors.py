@@ -40,6 +40,28 @@ def test_vision_needs_two_pixels(obs):
     assert est.converged
 
 
+def test_ranges_without_pixels_still_give_range_and_mle(obs):
+    """Issue 12: a file with laser ranges but no pixels. range-only (the paper's start is vision's estimate)
+    and mle start from the ranges along the optical axes (the rangefinder is boresighted) and solve; range
+    reaches the same point as from vision's start, and mle's covariance says how poorly ranges alone fix it."""
+    blind = _drop(obs, pixels=range(obs.n))
+    est = solve("range", blind)
+    assert est.converged
+    np.testing.assert_allclose(est.position_m, solve("range", obs).position_m, atol=1e-3)
+    mle = solve("mle", blind)
+    assert mle.converged and mle.extras["rejected"] == []
+    e = mle.position_m - obs.truth_m
+    assert e @ np.linalg.solve(mle.covariance_m2, e) < 7.81  # inside its 95 % ellipsoid
+    assert np.sqrt(np.linalg.eigvalsh(mle.covariance_m2)[-1]) > 10 * np.sqrt(
+        np.linalg.eigvalsh(solve("mle", obs).covariance_m2)[-1])
+    # the batched path takes the same start
+    be = solve_batch("range", ObservationBatch.stack([blind, blind]))
+    np.testing.assert_allclose(be.position_m, np.stack([est.position_m] * 2), atol=1e-6)
+    for method in ("dlt", "vision", "fusion"):
+        with pytest.raises(ObservationError, match="at least two frames with a target pixel, got 0"):
+            solve(method, blind)
+
+
 def test_range_only_needs_three_ranges(obs):
     with pytest.raises(ObservationError, match="at least three laser ranges, got 2"):
         solve("range", _drop(obs, ranges=range(2, obs.n)))
@@ -58,7 +80,7 @@ def test_fusion_needs_ranges(obs):
 
 def test_mle_needs_a_start_and_three_observations(obs):
     with pytest.raises(ObservationError, match="mle starts from"):
-        solve("mle", _drop(obs, pixels=range(1, obs.n), ranges=[0]))
+        solve("mle", _drop(obs, pixels=range(1, obs.n), ranges=range(obs.n)))
     with pytest.raises(ObservationError, match="at least three observations"):
         solve("mle", _drop(obs, pixels=range(obs.n), ranges=range(2, obs.n)), initial_m=[0.0, 0.0, 0.0])
 

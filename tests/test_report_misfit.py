@@ -59,3 +59,14 @@ def test_report_html_marks_a_misfit_mle_and_names_an_unsolved_methods_status():
     misfit, fits = html.split('id="group-misfit"')[1].split('id="group-fits"')
     assert "converged ‡ (model does not fit)" in misfit and "‡" not in fits.split("<h2>Run settings")[0]
     assert "<b>Laser ranging algorithm</b> (degenerate): range: the ranges are collinear" in misfit
+
+
+def test_geojson_lines_of_sight_mark_the_observations_the_mle_rejected():
+    r = _group("g", consistent=True)
+    r.estimates["mle"].extras["rejected"] = [
+        {"frame": 1, "t_ns": 1, "residual": "range", "value": 400.0, "sigmas": 80.0},
+        {"frame": 2, "t_ns": 2, "residual": "u", "value": 60.0, "sigmas": 17.0},
+        {"frame": 2, "t_ns": 2, "residual": "v", "value": 50.0, "sigmas": 14.0}]
+    lines = {f["properties"]["frame"]: f["properties"] for f in targets_geojson([r])["features"]
+             if f["properties"]["kind"] == "line_of_sight"}
+    assert [lines[i]["mle_rejected"] for i in (0, 1, 2)] == [None, "range", "u, v"]

@@ -92,12 +92,9 @@ def test_missing_run_config_is_one_line_error(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
-def test_console_summary_says_misfit_rejections_and_unsolved_methods():
-    """Issue 12 in `ridgeloc run`'s console: under a group's line, the mle's misfit sentence, how many
-    observations it rejected, and the methods that did not solve with their status."""
+def _misfit_result():
     import numpy as np
 
-    from pipeline.commands.run import group_summary
     from pipeline.results import GroupResult
     from pipeline.solve.estimate import Estimate, Status
     from pipeline.solve.observations import Observations
@@ -114,6 +111,15 @@ def test_console_summary_says_misfit_rejections_and_unsolved_methods():
                     settings={"notes": ["target lost in 1 of 4 frames", misfit],
                               "solve_failures": {"range": {"status": "degenerate", "reason": "collinear"},
                                                  "vision": "needs two pixels"}})
+    return r, misfit
+
+
+def test_console_summary_says_misfit_rejections_and_unsolved_methods():
+    """Issue 12 in `ridgeloc run`'s console: under a group's line, the mle's misfit sentence, how many
+    observations it rejected, and the methods that did not solve with their status."""
+    from pipeline.commands.run import group_summary
+
+    r, misfit = _misfit_result()
     assert group_summary(r) == [
         "g: 3 observations, 0.50 s, error mle 5.00 m",
         f"  {misfit}",
@@ -123,3 +129,13 @@ def test_console_summary_says_misfit_rejections_and_unsolved_methods():
     r.estimates["mle"].extras["rejected"] = []
     r.settings = {"notes": []}
     assert group_summary(r, reused=True) == ["g: 3 observations, reused, error mle 5.00 m"]
+
+
+def test_quiet_run_still_says_when_the_mle_model_does_not_fit(tmp_path, capsys, monkeypatch):
+    """`ridgeloc run -q` prints only the summary and errors, and the mle's misfit sentence per group."""
+    import pipeline.batch
+
+    r, misfit = _misfit_result()
+    monkeypatch.setattr(pipeline.batch, "run_groups", lambda *a, **k: ([r], [], []))
+    assert main(["run", str(SAMPLE), "-o", str(tmp_path / "out"), "--no-figures", "-q"]) == 0
+    assert capsys.readouterr().out.splitlines() == [f"g: {misfit}", "all 1 flight(s) finished"]

@@ -108,8 +108,13 @@ def main(args) -> int:
     md, tab = write_table4(args.outdir, results, failures)
     t2 = time.perf_counter()
     for r in results:
+        lines = group_summary(r, reused=r.name in reused)
         if not args.quiet:
-            print("\n".join(group_summary(r, reused=r.name in reused)))
+            print("\n".join(lines))
+        else:  # -q still says when an mle's error model does not fit: never a silently overconfident ellipse
+            for ln in lines[1:]:
+                if ln.strip().startswith("mle: the error model does not fit"):
+                    print(f"{r.name}: {ln.strip()}")
     for f in failures:  # one line each on stderr; the count goes to stdout with the rest of the summary
         print(f"ridgeloc: {f.name}: failed: {f.message}", file=sys.stderr)
     if not args.quiet:

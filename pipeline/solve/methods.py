@@ -173,8 +173,7 @@ def _mle_start(st: Stacked, o: dict):
     """Initial values (B,3) and their status, the sigmas and whether to estimate variance components.
 
     The start is the DLT point; where there are fewer than two pixels, or the DLT point is not in front of
-    every camera with a pixel (no baseline: it is then a camera centre, or behind), the line-of-sight median;
-    where no frame has both a pixel and a range either (ranges only), the boresight start of `range`.
+    every camera with a pixel (no baseline: it is then a camera centre, or behind), the line-of-sight median.
     """
     x0 = _initial(o, st.size)
     init_status = None
@@ -186,11 +185,6 @@ def _mle_start(st: Stacked, o: dict):
         if need.any():
             Xl, sl, _, _ = linear.los(st.take(np.flatnonzero(need)))
             x0[need], init_status[need] = Xl, sl
-            need &= ~np.isfinite(x0).all(axis=1)
-            if need.any():
-                x0[need] = _boresight_start(st.take(np.flatnonzero(need)))
-                init_status[need] = np.where(np.isfinite(x0[need]).all(axis=1), Status.CLOSED_FORM,
-                                             Status.DEGENERATE)
     sigma = o.get("sigma") or st.sigma
     vce = o.get("estimate_variance_components")
     if vce is None:
@@ -327,10 +321,12 @@ def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
             raise ObservationError(f"mle: the sigma gives correlation times (attitude_tau_s, position_tau_s) but "
                                    f"the frames' t_ns span only {span_ns} ns: they need real timestamps (without "
                                    "t_ns the frames are numbered 0, 1, 2, ... ns)")
-        if not has_init and npix < 2 and nboth == 0 and nrng == 0:
-            raise ObservationError(f"mle starts from the linear intersection (two or more pixels), a line of "
-                                   f"sight (a pixel and a range in one frame) or the laser ranges along the "
-                                   f"optical axes; there are {npix} pixel(s) and no range")
+        if not has_init and npix < 2 and nboth == 0:
+            # ranges alone do fix a point (range does), but so poorly along one axis that the problem is far from
+            # linear there and the linearized covariance is no honest ellipse (docs/solvers.md, range)
+            raise ObservationError(f"mle starts from the linear intersection (two or more pixels) or a line of "
+                                   f"sight (a pixel and a range in one frame); there are {npix} pixel(s) and "
+                                   f"no frame with both (ranges alone: see range, which gives no covariance)")
         if 2 * npix + nrng < 3:
             raise ObservationError(f"mle needs at least three observations (2 per pixel, 1 per range), got "
                                    f"{2 * npix + nrng}")

@@ -318,7 +318,7 @@ def process_group(config: FlightConfig) -> GroupResult:
         reasons = "; ".join(f"{m}: {f['reason']}" for m, f in failures.items())
         raise InputError(f"no estimator could solve the flight: {reasons}", config.path)
     if "mle" in estimates:  # its fit message, boresight bias and rejected observations
-        notes.extend(mle_outputs.notes(estimates["mle"].extras))
+        notes.extend(mle_outputs.notes(estimates["mle"].extras, obs.t_ns, plan.frame_index[useful]))
 
     reference = truth_m
     if reference is None:

@@ -90,3 +90,52 @@ def test_missing_run_config_is_one_line_error(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "nope.yaml" in err[0] and "not found" in err[0]
     assert not (tmp_path / "out").exists()
+
+
+def _misfit_result():
+    import numpy as np
+
+    from pipeline.results import GroupResult
+    from pipeline.solve.estimate import Estimate, Status
+    from pipeline.solve.observations import Observations
+
+    P = np.tile(np.hstack([np.eye(3), np.zeros((3, 1))]), (3, 1, 1))
+    obs = Observations(P=P, pixel=np.zeros((3, 2)), platform_m=np.eye(3) * 1000.0,
+                       range_m=np.array([1200.0, 1250.0, 1300.0]), truth_m=np.zeros(3))
+    rejected = [{"frame": 1, "t_ns": 1, "residual": "range", "value": 400.0, "sigmas": 80.0},
+                {"frame": 2, "t_ns": 2, "residual": "u", "value": 60.0, "sigmas": 17.0}]
+    mle = Estimate("mle", np.array([3.0, 4.0, 0.0]), 7, Status.CONVERGED, extras={"rejected": rejected})
+    misfit = "mle: the error model does not fit this flight: the residuals drift; the covariance was inflated"
+    r = GroupResult(name="g", origin_lla=(34.0, 108.0, 400.0), observations=obs, estimates={"mle": mle},
+                    truth_m=np.zeros(3), intersection_angle_deg=30.0, timings_s={"solve": 0.5}, tracking={},
+                    settings={"notes": ["target lost in 1 of 4 frames", misfit],
+                              "solve_failures": {"range": {"status": "degenerate", "reason": "collinear"},
+                                                 "vision": "needs two pixels"}})
+    return r, misfit
+
+
+def test_console_summary_says_misfit_rejections_and_unsolved_methods():
+    """Issue 12 in `ridgeloc run`'s console: under a group's line, the mle's misfit sentence, how many
+    observations it rejected, and the methods that did not solve with their status."""
+    from pipeline.commands.run import group_summary
+
+    r, misfit = _misfit_result()
+    assert group_summary(r) == [
+        "g: 3 observations, 0.50 s, error mle 5.00 m",
+        f"  {misfit}",
+        "  mle: 2 range and pixel residual(s) rejected as gross outliers (zero weight; listed in the report and "
+        "estimates.json)",
+        "  not solved: range (degenerate), vision (failed)"]
+    r.estimates["mle"].extras["rejected"] = []
+    r.settings = {"notes": []}
+    assert group_summary(r, reused=True) == ["g: 3 observations, reused, error mle 5.00 m"]
+
+
+def test_quiet_run_still_says_when_the_mle_model_does_not_fit(tmp_path, capsys, monkeypatch):
+    """`ridgeloc run -q` prints only the summary and errors, and the mle's misfit sentence per group."""
+    import pipeline.batch
+
+    r, misfit = _misfit_result()
+    monkeypatch.setattr(pipeline.batch, "run_groups", lambda *a, **k: ([r], [], []))
+    assert main(["run", str(SAMPLE), "-o", str(tmp_path / "out"), "--no-figures", "-q"]) == 0
+    assert capsys.readouterr().out.splitlines() == [f"g: {misfit}", "all 1 flight(s) finished"]

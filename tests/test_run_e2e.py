@@ -161,3 +161,18 @@ def test_hard_outliers_tracking_lists_every_frame_with_its_reason():
         if not used:
             assert "dropped" in reason
     assert "target lost in 2 of 14" in " ".join(r.settings["notes"])
+    # issue 12: its three gross range outliers (-424, +311, -650 m) get zero weight and are listed per
+    # observation in estimates.json, and in the notes with their video frame and time in the flight
+    doc = json.loads(group_files(r)["estimates.json"])
+    rejected = doc["estimates"]["mle"]["rejected"]
+    assert [x["residual"] for x in rejected] == ["range"] * 3 and all(abs(x["value"]) > 300 for x in rejected)
+    assert doc["unsolved"]["range"]["status"] == "degenerate"
+    video = [f for f, used in zip(t["frame_index"], t["used"], strict=True) if used]
+    t0 = min(r.observations.t_ns)
+    notes = [n for n in r.settings["notes"] if n.startswith("mle: rejected")]
+    assert len(notes) == 3
+    for x, note in zip(rejected, notes, strict=True):
+        assert x["t_ns"] == r.observations.t_ns[x["frame"]]
+        assert (f"mle: rejected the laser range of observation {x['frame']} (video frame {video[x['frame']]}, "
+                f"t = {(x['t_ns'] - t0) / 1e9:.2f} s after the first observation): residual {x['value']:+.2f} m"
+                ) in note

@@ -90,3 +90,31 @@ def test_a_failure_given_as_status_and_reason_keeps_both():
     assert (targets[0]["method"], targets[0]["status"], targets[0]["reason"]) == ("range", "degenerate",
                                                                                   "ranges collinear")
     assert "| range | — | — | — | — |  | degenerate | — |" in report_markdown([a])
+
+
+def test_table4_csv_gives_an_unsolved_methods_status_and_reason():
+    """Issue 12: an unsolved method keeps its row in table4.csv with empty values, and its status and reason
+    per group (rows status:<method>, reason:<method>, after the numeric rows; empty where it solved)."""
+    a = _result("group1", [0.0, 0.0, 0.0], {"mle": [3.0, 4.0, 0.0]})
+    a.settings["solve_failures"] = {"range": {"status": "degenerate", "reason": "range: the ranges are collinear"}}
+    b = _result("group2", [0.0, 0.0, 0.0], {"mle": [1.0, 0.0, 0.0], "range": [0.0, 2.0, 0.0]})
+    rows = list(csv.reader(io.StringIO(table4_csv_text([a, b]))))
+    assert [r[0] for r in rows[1:]] == ["range", "mle", "intersection_angle_deg", "observations", "status:range",
+                                        "reason:range"]
+    body = {r[0]: r[1:] for r in rows[1:]}
+    assert body["range"] == ["", "2.000"]
+    assert body["status:range"] == ["degenerate", ""]
+    assert body["reason:range"] == ["range: the ranges are collinear", ""]
+    # nothing unsolved: no status rows
+    assert [r[0] for r in csv.reader(io.StringIO(table4_csv_text([b])))][-1] == "observations"
+
+
+def test_report_md_says_an_unsolved_methods_status_and_reason_in_words():
+    """The group's notes give `range not solved (degenerate): <reason>`, not the Python repr of a mapping."""
+    a = _result("group1", [0.0, 0.0, 0.0], {"mle": [3.0, 4.0, 0.0]})
+    a.settings["solve_failures"] = {"range": {"status": "degenerate", "reason": "range: the ranges are collinear"},
+                                    "los": "no frame with both a pixel and a range"}
+    md = report_markdown([a])
+    assert "- range not solved (degenerate): the ranges are collinear" in md
+    assert "- los not solved (failed): no frame with both a pixel and a range" in md
+    assert "{'status'" not in md and "'reason'" not in md

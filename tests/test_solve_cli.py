@@ -121,3 +121,41 @@ def test_unknown_method_is_rejected_by_argparse(capsys):
     with pytest.raises(SystemExit) as info:
         main(["solve", str(EXAMPLE), "--method", "magic"])
     assert info.value.code == 2
+
+
+def test_a_gross_pixel_outlier_is_listed_with_its_time_in_the_table_and_json(tmp_path, capsys):
+    """Issue 12: a mis-tracked pixel (60 px off, ~17 sigma) gets zero weight in mle; the console names the
+    observation, which residual, its time in the flight and its size; --json lists it under `rejected`."""
+    from pipeline.solve.scenes import paper_problem
+
+    doc = paper_problem(n=20, gamma_deg=30.0, seed=5).to_dict()  # frames 1 s apart
+    doc["observations"][6]["pixel"][0] += 60.0
+    path = _write(tmp_path, doc)
+    assert main(["solve", str(path), "--method", "mle"]) == 0
+    out = capsys.readouterr().out
+    assert ("mle: rejected the pixel u of observation 6 (t = 6.00 s after the first observation): residual +6"
+            in out) and "zero weight" in out
+    assert main(["solve", str(path), "--method", "mle", "--json"]) == 0
+    rejected = json.loads(capsys.readouterr().out)["estimates"]["mle"]["rejected"]
+    assert [(r["frame"], r["residual"], r["t_ns"]) for r in rejected] == [(6, "u", 6_000_000_000)]
+    assert rejected[0]["value"] == pytest.approx(60.0, abs=3.0) and rejected[0]["sigmas"] > 8
+    # without timestamps (t_ns defaults to the frame's index) there is no time in the flight to give
+    for row in doc["observations"]:
+        del row["t_ns"]
+    assert main(["solve", str(_write(tmp_path, doc)), "--method", "mle"]) == 0
+    assert "mle: rejected the pixel u of observation 6 (t_ns 6): residual" in capsys.readouterr().out
+
+
+def test_method_all_on_a_file_without_pixels_solves_what_ranges_can(tmp_path, capsys):
+    """Issue 12: a file with no pixels. range solves from the laser ranges; the methods that need pixels (mle
+    among them: no honest covariance from ranges alone) are listed as insufficient_data with their reason;
+    exit 0."""
+    doc = json.loads(EXAMPLE.read_text())
+    for row in doc["observations"]:
+        row["pixel"] = None
+    assert main(["solve", str(_write(tmp_path, doc)), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert sorted(out["estimates"]) == ["range"]
+    assert sorted(out["unsolved"]) == ["dlt", "fusion", "fusion-raw", "los", "mle", "ridge", "vision"]
+    assert {u["status"] for u in out["unsolved"].values()} == {"insufficient_data"}
+    assert all("pixel" in u["reason"] for u in out["unsolved"].values())

@@ -40,6 +40,25 @@ def test_vision_needs_two_pixels(obs):
     assert est.converged
 
 
+def test_ranges_without_pixels_still_give_range(obs):
+    """Issue 12: a file with laser ranges but no pixels. range-only (the paper's start is vision's estimate)
+    starts from the ranges along the optical axes (the rangefinder is boresighted) and solves, reaching the
+    same point as from vision's start; mle, whose linearized covariance would not be honest on ranges alone,
+    says so."""
+    blind = _drop(obs, pixels=range(obs.n))
+    est = solve("range", blind)
+    assert est.converged
+    np.testing.assert_allclose(est.position_m, solve("range", obs).position_m, atol=1e-3)
+    with pytest.raises(ObservationError, match=r"mle starts from .*\(ranges alone: see range"):
+        solve("mle", blind)
+    # the batched path takes the same start
+    be = solve_batch("range", ObservationBatch.stack([blind, blind]))
+    np.testing.assert_allclose(be.position_m, np.stack([est.position_m] * 2), atol=1e-6)
+    for method in ("dlt", "vision", "fusion"):
+        with pytest.raises(ObservationError, match="at least two frames with a target pixel, got 0"):
+            solve(method, blind)
+
+
 def test_range_only_needs_three_ranges(obs):
     with pytest.raises(ObservationError, match="at least three laser ranges, got 2"):
         solve("range", _drop(obs, ranges=range(2, obs.n)))
@@ -58,7 +77,7 @@ def test_fusion_needs_ranges(obs):
 
 def test_mle_needs_a_start_and_three_observations(obs):
     with pytest.raises(ObservationError, match="mle starts from"):
-        solve("mle", _drop(obs, pixels=range(1, obs.n), ranges=[0]))
+        solve("mle", _drop(obs, pixels=range(1, obs.n), ranges=range(obs.n)))
     with pytest.raises(ObservationError, match="at least three observations"):
         solve("mle", _drop(obs, pixels=range(obs.n), ranges=range(2, obs.n)), initial_m=[0.0, 0.0, 0.0])
 

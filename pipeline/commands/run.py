@@ -54,6 +54,29 @@ def _input_files(cfg: FlightConfig) -> list[Path]:
     return files
 
 
+def group_summary(r, reused: bool = False) -> list[str]:
+    """A finished group's console lines: observations, time and errors; then, indented, the mle's words when its
+    error model does not fit the flight, how many observations it rejected, and the methods that did not solve
+    (the report has the details)."""
+    from pipeline.report.exports import unsolved_methods
+
+    errs = r.errors_m()
+    shown = ", ".join(f"{m} {errs[m]:.2f} m" for m in ("ridge", "mle") if errs.get(m) is not None)
+    state = "reused" if reused else f"{sum(r.timings_s.values()):.2f} s"
+    lines = [f"{r.name}: {r.n_observations} observations, {state}" + (f", error {shown}" if shown else "")]
+    lines += [f"  {n}" for n in r.settings.get("notes") or [] if str(n).startswith("mle: the error model does not fit")]
+    mle = r.estimates.get("mle")
+    rejected = mle.extras.get("rejected") if mle is not None and isinstance(mle.extras, dict) else None
+    if rejected:
+        kinds = sorted({"range" if x["residual"] == "range" else "pixel" for x in rejected}, reverse=True)
+        lines.append(f"  mle: {len(rejected)} {' and '.join(kinds)} residual(s) rejected as gross outliers (zero "
+                     "weight; listed in the report and estimates.json)")
+    unsolved = unsolved_methods(r)
+    if unsolved:
+        lines.append("  not solved: " + ", ".join(f"{m} ({status})" for m, (status, _) in unsolved.items()))
+    return lines
+
+
 def main(args) -> int:
     from pipeline import __version__
     from pipeline.batch import Job, job_digest, run_groups, summarize_failures
@@ -85,14 +108,13 @@ def main(args) -> int:
     md, tab = write_table4(args.outdir, results, failures)
     t2 = time.perf_counter()
     for r in results:
-        errs = r.errors_m()
-        shown = ", ".join(f"{m} {errs[m]:.2f} m" for m in ("ridge", "mle") if errs.get(m) is not None)
-        state = "reused" if r.name in reused else f"{sum(r.timings_s.values()):.2f} s"
+        lines = group_summary(r, reused=r.name in reused)
         if not args.quiet:
-            print(f"{r.name}: {r.n_observations} observations, {state}" + (f", error {shown}" if shown else ""))
-            for note in r.settings.get("notes") or []:  # the mle's words when its model does not fit
-                if str(note).startswith("mle: the error model does not fit"):
-                    print(f"  {note}")
+            print("\n".join(lines))
+        else:  # -q still says when an mle's error model does not fit: never a silently overconfident ellipse
+            for ln in lines[1:]:
+                if ln.strip().startswith("mle: the error model does not fit"):
+                    print(f"{r.name}: {ln.strip()}")
     for f in failures:  # one line each on stderr; the count goes to stdout with the rest of the summary
         print(f"ridgeloc: {f.name}: failed: {f.message}", file=sys.stderr)
     if not args.quiet:

@@ -34,7 +34,7 @@ def _methods(chosen: list[str] | None) -> list[str]:
     return list(dict.fromkeys(chosen))
 
 
-def _table(results: dict, failures: dict, truth) -> str:
+def _table(results: dict, failures: dict, truth, t_ns=None) -> str:
     head = f"{'method':<11}{'x_m':>12}{'y_m':>12}{'z_m':>11}{'iter':>6}  {'status':<15}{'cond':>10}"
     if truth is not None:
         head += f"{'error_m':>10}"
@@ -57,7 +57,7 @@ def _table(results: dict, failures: dict, truth) -> str:
         ax = m["ellipsoid"]["semi_axes_1sigma_m"]
         notes.append(f"mle: CEP50 {m['cep50_m']:.3f} m, CEP90 {m['cep90_m']:.3f} m (horizontal); 1-sigma "
                      f"ellipsoid semi-axes {ax[0]:.3f} {ax[1]:.3f} {ax[2]:.3f} m; robust {m['robust']}")
-        notes += mle_outputs.notes(m)
+        notes += mle_outputs.notes(m, t_ns)
     if "ridge" in results and "k" in results["ridge"]:
         notes.append(f"ridge: last k = {results['ridge']['k']:.4g}")
     return "\n".join(lines + notes)
@@ -81,7 +81,7 @@ def main(args) -> int:
             doc["unsolved"] = failures
         print(json.dumps(doc, indent=1, default=_json_default))
     else:
-        print(_table(results, failures, obs.truth_m))
+        print(_table(results, failures, obs.truth_m, obs.t_ns))
     sys.stdout.flush()
     if failures and (not every or not results):
         names = ", ".join(failures)

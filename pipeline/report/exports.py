@@ -84,14 +84,25 @@ def failure_status_reason(failure) -> tuple[str, str]:
     return "failed", str(failure)
 
 
+def unsolved_methods(r: GroupResult) -> dict[str, tuple[str, str]]:
+    """{method: (status, reason)} of the methods a group asked for that gave no estimate."""
+    failures = r.settings.get("solve_failures") or {}
+    return {m: failure_status_reason(f) for m, f in failures.items() if m not in r.estimates}
+
+
 def _status_reason(r: GroupResult, method: str) -> tuple[str, str | None]:
-    """(status, reason) of a method: `failed` with its message when it could not run, else the estimate's status
-    and the reason the solver gives (`reason`/`message` in its extras), if any."""
+    """(status, reason) of a method: its status and reason when it could not run, else the estimate's status
+    and the reason the solver gives (`reason`/`message` in its extras, or the mle's fit message when its error
+    model does not fit the flight: the covariance was inflated and is not to be trusted blindly), if any."""
     failures = r.settings.get("solve_failures") or {}
     e = r.estimates.get(method)
     if e is None:
         return failure_status_reason(failures.get(method, "not solved"))
-    reason = e.extras.get("reason", e.extras.get("message")) if isinstance(e.extras, dict) else None
+    extras = e.extras if isinstance(e.extras, dict) else {}
+    reason = extras.get("reason", extras.get("message"))
+    fit = extras.get("fit")
+    if reason is None and isinstance(fit, dict) and fit.get("message"):
+        reason = fit["message"]
     return e.status.name.lower(), (None if reason is None else str(reason))
 
 
@@ -208,12 +219,25 @@ def group_features(r: GroupResult, max_lines_of_sight: int | None = 200) -> list
             "kind": "flight_path", "group": r.name, "n_positions": obs.n, "alt_datum": ALT_DATUM,
             "t_start_ns": int(obs.t_ns[0]), "t_end_ns": int(obs.t_ns[-1])}))
     seg, idx = lines_of_sight_m(obs, best_reference_m(r), max_lines_of_sight)
+    rejected = _mle_rejected(r)
     for s, i in zip(seg, idx, strict=True):
         feats.append(_feature({"type": "LineString", "coordinates": _positions(geodetic_from_enu(s, r.origin_lla))},
                               {"kind": "line_of_sight", "group": r.name, "frame": int(i), "t_ns": int(obs.t_ns[i]),
                                "has_pixel": bool(obs.has_pixel[i]),
-                               "range_m": _num(obs.range_m[i]) if obs.has_range[i] else None}))
+                               "range_m": _num(obs.range_m[i]) if obs.has_range[i] else None,
+                               "mle_rejected": rejected.get(int(i))}))
     return feats
+
+
+def _mle_rejected(r: GroupResult) -> dict[int, str]:
+    """{observation row: "range" | "u" | "v" | "u, v" ...}: the residuals the mle gave zero weight (gross
+    outliers), from its extras' `rejected` list."""
+    e = r.estimates.get("mle")
+    listed = e.extras.get("rejected") if e is not None and isinstance(e.extras, dict) else None
+    out: dict[int, list[str]] = {}
+    for x in listed or []:
+        out.setdefault(int(x["frame"]), []).append(str(x["residual"]))
+    return {i: ", ".join(v) for i, v in out.items()}
 
 
 def _truth_props(r: GroupResult, lla: np.ndarray) -> dict:

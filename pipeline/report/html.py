@@ -104,9 +104,9 @@ def _summary_table(results: Sequence[GroupResult]) -> str:
         cells = []
         for r in results:
             if m not in r.estimates:
-                why = failure_status_reason((r.settings.get("solve_failures") or {}).get(
-                    m, "the estimator gave no answer"))[1]
-                cells.append(f'<td class="na" title="{escape(why)}">no estimate</td>')
+                status, why = failure_status_reason((r.settings.get("solve_failures") or {}).get(
+                    m, "the estimator gave no answer"))
+                cells.append(f'<td class="na" title="{escape(why)}">no estimate ({escape(status)})</td>')
                 continue
             e = errors[r.name][m]
             if r.truth_m is None:
@@ -115,14 +115,26 @@ def _summary_table(results: Sequence[GroupResult]) -> str:
                 cells.append(f'<td class="na">{escape(r.estimates[m].status.name.lower())}</td>')
             else:
                 flag = "" if r.estimates[m].converged else " †"
+                misfit = _misfit(r.estimates[m])
+                if misfit:
+                    flag += " ‡"
                 cls = ' class="best"' if best[r.name] == m else ""
-                cells.append(f"<td{cls}>{_fmt(e)}{flag}{_paper(r.name, PAPER_TABLE4_M, m)}</td>")
+                title = f' title="{escape(misfit)}"' if misfit else ""
+                cells.append(f"<td{cls}{title}>{_fmt(e)}{flag}{_paper(r.name, PAPER_TABLE4_M, m)}</td>")
         rows.append(f'<tr><td class="l"><span class="swatch" style="background:{color}"></span>'
                     f'{escape(method_label(m))} /m</td>{"".join(cells)}</tr>')
     return ("<table>" + "".join(rows) + "</table>"
             '<p class="note">3D localization error against the known target position (m); the lowest per group is '
-            "highlighted. † the estimator stopped without converging (iteration limit or divergence). In grey, the "
-            "paper's value for the group of the same name (its Tables 3 and 4), where there is one.</p>")
+            "highlighted. † the estimator stopped without converging (iteration limit or divergence). ‡ its error "
+            "model does not fit the flight (the group's notes say how): its covariance was inflated and its ellipse "
+            "is less reliable. In grey, the paper's value for the group of the same name (its Tables 3 and 4), "
+            "where there is one.</p>")
+
+
+def _misfit(e) -> str | None:
+    """The mle's fit message when its error model does not fit the flight, else None."""
+    fit = e.extras.get("fit") if isinstance(e.extras, dict) else None
+    return fit.get("message") if isinstance(fit, dict) and not fit.get("consistent", True) else None
 
 
 def _estimates_table(r: GroupResult) -> str:
@@ -138,6 +150,8 @@ def _estimates_table(r: GroupResult) -> str:
             v = row[key]
             text = _fmt(v, 7) if key in ("lat_deg", "lon_deg") else _fmt(v)
             title = f' title="{escape(row["reason"])}"' if key == "status" and row.get("reason") else ""
+            if key == "status" and row["method"] in r.estimates and _misfit(r.estimates[row["method"]]):
+                text += " ‡ (model does not fit)"
             cells.append(f'<td class="{c}"{title}>{text}</td>')
         body.append("<tr>" + "".join(cells) + "</tr>")
     return (f"<div class=\"scroll\"><table style=\"font-size: 13px\"><tr>{head}</tr>{''.join(body)}</table></div>"
@@ -201,8 +215,8 @@ def _group_section(r: GroupResult, figures: Mapping[str, bytes], interactive: bo
     failed = r.settings.get("solve_failures") or {}
     if isinstance(failed, dict) and failed:
         parts.append('<p class="note">Estimators that gave no answer: ' + "; ".join(
-            f"<b>{escape(method_label(m))}</b>: {escape(failure_status_reason(msg)[1])}" for m, msg in failed.items())
-            + "</p>")
+            "<b>{}</b> ({}): {}".format(escape(method_label(m)), *map(escape, failure_status_reason(msg)))
+            for m, msg in failed.items()) + "</p>")
     notes = r.settings.get("notes") or []
     if isinstance(notes, list) and notes:
         parts.append("<h3>Notes</h3><ul class=\"note\">" + "".join(f"<li>{escape(str(n))}</li>" for n in notes)

@@ -2,9 +2,10 @@
 
 table4.csv: columns `method,<group>,<group>,...`; one row per method named as in `ridgeloc solve` with the
 localization error in metres (empty when there is no truth or the method did not run: a method asked for that
-failed keeps its row), then the rows
-`intersection_angle_deg` and `observations`. report.md: the same tables with the paper's figures beside ours
-(never used for anything but display), the estimates as WGS84 coordinates, tracking and timing figures.
+failed keeps its row), then the rows `intersection_angle_deg` and `observations`, then for each method that did
+not solve in some group the rows `status:<method>` and `reason:<method>` (its status, e.g. `degenerate`, and
+the reason in those groups; empty where it solved). report.md: the same tables with the paper's figures beside
+ours (never used for anything but display), the estimates as WGS84 coordinates, tracking and timing figures.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.geometry.frames import lla_from_enu
+from pipeline.report.exports import unsolved_methods
 from pipeline.results import GroupFailure, GroupResult
 
 # Table-4 order, then ours.
@@ -49,6 +51,11 @@ def _methods(results: Sequence[GroupResult]) -> list[str]:
     return [m for m in METHOD_ROWS if m in present] + sorted(present - set(METHOD_ROWS))
 
 
+def _without_prefix(reason: str, method: str) -> str:
+    """The reason without a leading "<method>: " (the note names the method already)."""
+    return reason[len(method) + 2:] if reason.startswith(f"{method}: ") else reason
+
+
 def _fmt(x, nd=2) -> str:
     return "" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{nd}f}"
 
@@ -60,6 +67,11 @@ def table4_rows(results: Sequence[GroupResult]) -> list[list[str]]:
         rows.append([m, *[_fmt(r.errors_m().get(m), 3) for r in results]])
     rows.append(["intersection_angle_deg", *[_fmt(r.intersection_angle_deg, 2) for r in results]])
     rows.append(["observations", *[str(r.n_observations) for r in results]])
+    unsolved = [unsolved_methods(r) for r in results]
+    for m in _methods(results):
+        if any(m in u for u in unsolved):
+            rows.append([f"status:{m}", *[u[m][0] if m in u else "" for u in unsolved]])
+            rows.append([f"reason:{m}", *[u[m][1] if m in u else "" for u in unsolved]])
     return rows
 
 
@@ -131,13 +143,12 @@ def report_markdown(results: Sequence[GroupResult], failures: Sequence[GroupFail
             out += [f"### {r.name}", "",
                     f"Origin (lat, lon, h): {r.origin_lla[0]:.7f}, {r.origin_lla[1]:.7f}, {r.origin_lla[2]:.2f} m", ""]
             rows = []
-            failed = r.settings.get("solve_failures") or {}
+            failed = unsolved_methods(r)
             for m in methods:
                 e = r.estimates.get(m)
                 if e is None:
                     if m in failed:
-                        status = failed[m].get("status", "failed") if isinstance(failed[m], dict) else "failed"
-                        rows.append([m, "—", "—", "—", "—", "", str(status), "—"])
+                        rows.append([m, "—", "—", "—", "—", "", failed[m][0], "—"])
                     continue
                 p = np.asarray(e.position_m, dtype=np.float64)
                 if np.isfinite(p).all():
@@ -155,8 +166,8 @@ def report_markdown(results: Sequence[GroupResult], failures: Sequence[GroupFail
                              "", "", ""])
             out += [_md_table(["method", "lat_deg", "lon_deg", "h_m", "ENU m", "1-sigma m", "status", "error m"], rows),
                     ""]
-            notes = list(r.settings.get("notes", [])) + [f"{m} not solved: {msg}" for m, msg in
-                                                          r.settings.get("solve_failures", {}).items()]
+            notes = list(r.settings.get("notes", [])) + [
+                f"{m} not solved ({status}): {_without_prefix(reason, m)}" for m, (status, reason) in failed.items()]
             if notes:
                 out += ["Notes:", *[f"- {n}" for n in notes], ""]
         out += ["## Tracking and timing", ""]

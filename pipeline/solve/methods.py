@@ -88,6 +88,35 @@ def _vision_init(st: Stacked, o: dict):
     return X, status
 
 
+def _boresight_start(st: Stacked) -> np.ndarray:
+    """(B,3) a start for range-only without pixels: per ranged frame the point at the laser range along the
+    camera's optical axis (the rangefinder is boresighted with the camera; the axis is M's third row, pointed to
+    the front by the sign of det M), the component-wise median over the frames; NaN without a range."""
+    m3 = st.M[..., 2, :] * st.depth_sign()[..., None]
+    axis = m3 / np.linalg.norm(m3, axis=-1, keepdims=True)
+    pts = np.where(st.has_range[..., None], st.platform_m + np.where(st.has_range, st.range_m, 0.0)[..., None] * axis,
+                   np.nan)
+    X = np.full((st.size, 3), np.nan)
+    some = st.has_range.any(axis=1)
+    X[some] = np.nanmedian(pts[some], axis=1)
+    return X
+
+
+def _range_init(st: Stacked, o: dict):
+    """The range-only start: vision's estimate (the paper's), or where fewer than two frames have a pixel (no
+    vision estimate) the boresight start. (Where vision fails on two or more pixels, range keeps its status:
+    the simulation's figures count those trials as flagged.)"""
+    x0, init_status = _vision_init(st, o)
+    if init_status is None:  # initial_m given
+        return x0, init_status
+    few = st.has_pix.sum(axis=1) < 2
+    if few.any():
+        x0[few] = _boresight_start(st.take(np.flatnonzero(few)))
+        init_status = np.asarray(init_status).copy()
+        init_status[few] = np.where(np.isfinite(x0[few]).all(axis=1), Status.CLOSED_FORM, Status.DEGENERATE)
+    return x0, init_status
+
+
 def _solve_stacked(method: str, st: Stacked, o: dict) -> BatchEstimate:
     B = st.size
     tol, itmax = o["tol_m"], o["max_iterations"]
@@ -108,7 +137,7 @@ def _solve_stacked(method: str, st: Stacked, o: dict) -> BatchEstimate:
             x0, init_status, _ = linear.dlt(st, with_condition=False)
         X, it, status, cond = least_squares.vision(st, x0, tol, itmax, init_status)
     elif method == "range":
-        x0, init_status = _vision_init(st, o)
+        x0, init_status = _range_init(st, o)
         X, it, status, cond, flat = least_squares.range_only(st, x0, tol, itmax, init_status)
         extras = {"collinear_platforms": flat}
     elif method == "fusion-raw":
@@ -293,19 +322,21 @@ def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
                                    f"the frames' t_ns span only {span_ns} ns: they need real timestamps (without "
                                    "t_ns the frames are numbered 0, 1, 2, ... ns)")
         if not has_init and npix < 2 and nboth == 0:
+            # ranges alone do fix a point (range does), but so poorly along one axis that the problem is far from
+            # linear there and the linearized covariance is no honest ellipse (docs/solvers.md, range)
             raise ObservationError(f"mle starts from the linear intersection (two or more pixels) or a line of "
                                    f"sight (a pixel and a range in one frame); there are {npix} pixel(s) and "
-                                   f"no frame with both")
+                                   f"no frame with both (ranges alone: see range, which gives no covariance)")
         if 2 * npix + nrng < 3:
             raise ObservationError(f"mle needs at least three observations (2 per pixel, 1 per range), got "
                                    f"{2 * npix + nrng}")
         return
     needs_pixels = method in ("dlt", "vision") or not has_init
-    if needs_pixels and npix < 2:
+    if needs_pixels and npix < 2 and method != "range":  # range without pixels starts from the ranges
         what = method if method in ("dlt", "vision") else f"{method} (initialised from vision)"
         raise ObservationError(f"{what} needs at least two frames with a target pixel, got {npix}"
                                + ("" if method in ("dlt", "vision") else "; or pass initial_m"))
-    if needs_pixels:
+    if needs_pixels and npix >= 2:
         centres = -np.linalg.solve(st.M[0, has_pix], st.p4[0, has_pix][:, :, None])[:, :, 0]
         spread = np.sqrt(((centres - centres.mean(axis=0)) ** 2).sum(axis=1).max())
         if spread <= 1e-6 * (1.0 + np.abs(centres).max()):

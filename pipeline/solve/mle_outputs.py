@@ -52,9 +52,24 @@ def boresight_bias(ex: dict, b: int) -> dict | None:
             "correlation_with_target": [[_f(c) for c in row] for row in ex["bias_target_correlation"][b]]}
 
 
-def notes(extras: dict) -> list[str]:
+def _where(r: dict, t_ns: np.ndarray | None, video_frames) -> str:
+    """Observation r["frame"] in words: its row, its video frame when known, its time from the first
+    observation when the frames carry real timestamps (else the raw t_ns)."""
+    i = r["frame"]
+    where = [f"video frame {int(video_frames[i])}"] if video_frames is not None else []
+    if t_ns is not None and t_ns.size > 1 and int(t_ns.max() - t_ns.min()) >= 1_000_000:
+        where.append(f"t = {(r['t_ns'] - int(t_ns.min())) / 1e9:.2f} s after the first observation")
+    else:
+        where.append(f"t_ns {r['t_ns']}")
+    return f"observation {i} ({', '.join(where)})"
+
+
+def notes(extras: dict, t_ns: np.ndarray | None = None, video_frames=None) -> list[str]:
     """The mle's fit message, boresight bias and rejected observations in words, from `Estimate.extras` (for
-    the console and the report's notes)."""
+    the console and the report's notes). t_ns (n,): the observations' times, to say when a rejected one was
+    taken; video_frames (n,): their video frame numbers (a run knows them, an observations file does not)."""
+    if t_ns is not None:
+        t_ns = np.asarray(t_ns, dtype=np.int64)
     out = []
     fit = extras.get("fit") or {}
     if fit.get("message"):
@@ -70,8 +85,9 @@ def notes(extras: dict) -> list[str]:
                    f"{bias['v_deg']:+.3f} +/- {bias['v_sigma_deg']:.3f} deg (v), estimated from the flight")
     for r in extras.get("rejected", []):
         unit = "m" if r["residual"] == "range" else "px"
-        out.append(f"mle: rejected frame {r['frame']} (t {r['t_ns']} ns) {r['residual']} residual "
-                   f"{r['value']:+.2f} {unit} ({r['sigmas']:+.1f} sigma): zero weight")
+        what = "laser range" if r["residual"] == "range" else f"pixel {r['residual']}"
+        out.append(f"mle: rejected the {what} of {_where(r, t_ns, video_frames)}: residual {r['value']:+.2f} "
+                   f"{unit} ({r['sigmas']:+.1f} sigma), zero weight")
     return out
 
 

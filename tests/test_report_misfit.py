@@ -17,7 +17,8 @@ from pipeline.solve.observations import Observations
 
 MISFIT = ("the error model does not fit this flight: the residuals are 3.9 times larger than the error model says "
           "(chi-square 1308 on 87 degrees of freedom, p = 4e-217); the covariance was inflated (ellipse axes x3.9) "
-          "to stay honest")
+          "by what the residuals show, which cannot show an error that stays constant over the flight: the ellipse "
+          "may still be too small")
 
 
 def _group(name: str, consistent: bool) -> GroupResult:

@@ -7,9 +7,10 @@ import dataclasses
 
 import numpy as np
 
-from pipeline.solve import solve_batch
+from pipeline.solve import solve, solve_batch
 from pipeline.solve.bias_mixture import PHI_GRID, RATIO_FLOOR, mixture
-from pipeline.solve.scenes import PAPER_SIGMA, paper_batch
+from pipeline.solve.mle_outputs import DETERMINED_BELOW, notes
+from pipeline.solve.scenes import PAPER_SIGMA, paper_batch, paper_problem
 
 
 def _dense(J, r, a, w, share):
@@ -60,7 +61,7 @@ def test_closed_form_matches_dense_linear_algebra():
 
 
 def _posterior_phi_rms(est) -> np.ndarray:
-    return est.extras["bias_prior_deg"][:, 0] / PAPER_SIGMA.attitude_deg
+    return est.extras["bias_size_deg"] / PAPER_SIGMA.attitude_deg
 
 
 def test_white_attitude_errors_cost_nothing_and_a_real_bias_is_found():
@@ -93,3 +94,29 @@ def test_white_attitude_errors_cost_nothing_and_a_real_bias_is_found():
     e2 = w2.position_m - batch.truth_m
     nees2 = np.einsum("bi,bi->b", e2, np.linalg.solve(w2.covariance_m2, e2[..., None])[..., 0])
     assert np.mean(nees2 < 7.81) < 0.5
+
+
+def test_a_bias_the_flight_cannot_see_is_said_to_be_the_prior():
+    """Five frames over 5 deg: the bias cannot be told from the target; the notes must not claim it was
+    estimated. Thirty frames over 90 deg: both angles are determined."""
+    sigma = dataclasses.replace(PAPER_SIGMA, pixel_px=0.5)
+    narrow = solve("mle", paper_problem(n=5, gamma_deg=5.0, sigma=sigma, seed=1)).extras
+    b = narrow["boresight_bias"]
+    assert not b["u_determined"] and not b["v_determined"]
+    assert b["u_sigma_deg"] > DETERMINED_BELOW * b["u_prior_deg"]
+    text = " ".join(notes(narrow))
+    assert text.count("not determined by this flight") == 2 and "constant part" not in text
+    wide = solve("mle", paper_problem(n=30, gamma_deg=90.0, sigma=sigma, seed=1)).extras
+    assert wide["boresight_bias"]["u_determined"] and wide["boresight_bias"]["v_determined"]
+    assert "not determined" not in " ".join(notes(wide))
+
+
+def test_covariance_inflation_is_one_exactly_when_the_fit_is_consistent():
+    """The shared GNSS offset and the bias mixture are the model, not a misfit: a consistent fit reports no
+    inflation; an inconsistent one reports more than 1."""
+    batch = paper_batch(300, n=20, gamma_deg=40.0, sigma=dataclasses.replace(PAPER_SIGMA, pixel_px=0.5), seed=1)
+    ex = solve_batch("mle", batch).extras
+    ok = ex["consistent"]
+    assert 0.8 < ok.mean() < 1.0
+    np.testing.assert_allclose(ex["covariance_inflation"][ok], 1.0, atol=1e-12)
+    assert (ex["covariance_inflation"][~ok] > 1.0).all()

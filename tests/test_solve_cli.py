@@ -133,17 +133,20 @@ def test_a_gross_pixel_outlier_is_listed_with_its_time_in_the_table_and_json(tmp
     path = _write(tmp_path, doc)
     assert main(["solve", str(path), "--method", "mle"]) == 0
     out = capsys.readouterr().out
-    assert ("mle: rejected the pixel u of observation 6 (t = 6.00 s after the first observation): residual +6"
-            in out) and "zero weight" in out
+    # a frame's pixel is rejected whole (u and v), said once
+    assert ("mle: rejected the pixel of observation 6 (t = 6.00 s after the first observation): residual (+6"
+            in out) and "zero weight" in out and out.count("rejected the pixel") == 1
     assert main(["solve", str(path), "--method", "mle", "--json"]) == 0
     rejected = json.loads(capsys.readouterr().out)["estimates"]["mle"]["rejected"]
-    assert [(r["frame"], r["residual"], r["t_ns"]) for r in rejected] == [(6, "u", 6_000_000_000)]
+    assert [(r["frame"], r["residual"], r["t_ns"]) for r in rejected] == [(6, "u", 6_000_000_000),
+                                                                         (6, "v", 6_000_000_000)]
     assert rejected[0]["value"] == pytest.approx(60.0, abs=3.0) and rejected[0]["sigmas"] > 8
+    assert abs(rejected[1]["value"]) < 3.0
     # without timestamps (t_ns defaults to the frame's index) there is no time in the flight to give
     for row in doc["observations"]:
         del row["t_ns"]
     assert main(["solve", str(_write(tmp_path, doc)), "--method", "mle"]) == 0
-    assert "mle: rejected the pixel u of observation 6 (t_ns 6): residual" in capsys.readouterr().out
+    assert "mle: rejected the pixel of observation 6 (t_ns 6): residual" in capsys.readouterr().out
 
 
 def test_method_all_on_a_file_without_pixels_solves_what_ranges_can(tmp_path, capsys):

@@ -56,9 +56,13 @@ def chi_square_p(chi2: np.ndarray, dof: np.ndarray) -> np.ndarray:
 
 
 def describe(chi2: float, dof: float, p: float, rho_pix: float, rho_rng: float, acf_pix: bool, acf_rng: bool,
-             inflation: float) -> str | None:
-    """One sentence for the console and the report when the model does not fit; None when it does."""
+             inflation: float, spread: float = 1.0) -> str | None:
+    """One sentence for the console and the report when the model does not fit; None when it does. spread: the
+    largest robust spread (1.4826 median |e|) of a group's standardized residuals, when the loss's rejection
+    thresholds were widened by it (else 1)."""
     parts = []
+    if spread > 1.0:
+        parts.append(f"the residuals are spread {spread:.1f} times wider than the stated sigmas (robust scale)")
     if np.isfinite(p) and p < CHI2_ALPHA:
         parts.append(f"the residuals are {np.sqrt(chi2 / dof):.1f} times larger than the error model says "
                      f"(chi-square {chi2:.0f} on {dof:.0f} degrees of freedom, p = {p:.1g})")
@@ -69,4 +73,5 @@ def describe(chi2: float, dof: float, p: float, rho_pix: float, rho_rng: float, 
     if not parts:
         return None
     return ("the error model does not fit this flight: " + "; ".join(parts)
-            + f"; the covariance was inflated (ellipse axes x{np.sqrt(inflation):.1f}) to stay honest")
+            + f"; the covariance was inflated (ellipse axes x{np.sqrt(inflation):.1f}) by what the residuals show,"
+            " which cannot show an error that stays constant over the flight: the ellipse may still be too small")

@@ -85,7 +85,7 @@ def replace_with_learned(ex: dict, tau: float, lls: dict, chi2: float, m: int) -
     fail = bool(np.isfinite(p[0]) and p[0] < fit_checks.CHI2_ALPHA)
     out.update({"chi2": np.array([chi2]), "chi2_dof": np.array([dof]), "chi2_p": p,
                 "drift_pixel": np.zeros(1, dtype=bool), "drift_range": np.zeros(1, dtype=bool),
-                "consistent": np.array([not fail]),
+                "consistent": np.array([not fail]), "robust_spread": np.ones((1, 2)),
                 "covariance_inflation": np.array([max(chi2 / dof, 1.0) if fail and dof > 0 else 1.0]),
                 "error_model_tau_s": np.array([tau]),
                 "error_model_log_likelihoods": np.array([[lls.get(t, np.nan) for t in TAU_GRID_S]])})

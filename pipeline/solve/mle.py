@@ -503,9 +503,12 @@ class _Iteration:
         cov, singular = _cov_from_six(N6s)
         mix = None
         if a is not None and self.bias_size_unknown:
-            mix = self._mixture(s, failed, acf_pix)
+            mix, mix_cov0 = self._mixture(s, g, failed, acf_pix)
             cov = np.where(failed[:, None, None], cov, mix["covariance"])
-        cov = cov * vf_chi[:, None, None] + self.common_position_m ** 2 * np.eye(3)
+            cov0 = np.where(failed[:, None, None], cov0, mix_cov0)
+        common = self.common_position_m ** 2 * np.eye(3)
+        cov = cov * vf_chi[:, None, None] + common
+        cov0 = cov0 + common
         cond = condition_numbers(_full3(N6))
         status[singular & ~failed] = Status.DEGENERATE
         failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
@@ -523,7 +526,8 @@ class _Iteration:
                   "chi2": chi2, "chi2_dof": dof.astype(np.float64), "chi2_p": p,
                   "autocorrelation_pixel": rho_pix, "autocorrelation_range": rho_rng,
                   "drift_pixel": acf_pix, "drift_range": acf_rng,
-                  "consistent": ~(p_fail | acf_pix | acf_rng),
+                  "consistent": ~(p_fail | acf_pix | acf_rng | (self.guard > 1).any(axis=1)),
+                  "robust_spread": np.sqrt(self.guard),
                   "covariance_inflation": np.where(np.isfinite(inflation), inflation, 1.0)}
         if mix is not None:
             extras.update(_mixture_summary(self, mix, cov, vf_chi))
@@ -531,9 +535,10 @@ class _Iteration:
             extras.update(_bias_summary(self, cov, hs, vf_chi))
         return X, self.iterations, status, cond, cov, extras
 
-    def _mixture(self, s, failed, drift):
+    def _mixture(self, s, g, failed, drift):
         """`bias_mixture.mixture` at the solution, twice (the second at the first's step), with the final IRLS
-        weights and the autocorrelation scaling s (3,1,B); moves X to the mixture's estimate."""
+        weights and the autocorrelation scaling s (3,1,B); moves X to the mixture's estimate. Returns the
+        mixture and its covariance (B,3,3) with the sigmas as stated (scaled by g instead of s: no inflation)."""
         wr = self.wr
         keep = ~failed
         base = self.a[:2]
@@ -548,7 +553,7 @@ class _Iteration:
             self.X += step
             if rnd == 0:
                 J, E, ok = _evaluate(self.pl, self.X)
-        return mix
+        return mix, bias_mixture.mixture(J * g, E * g, a0 * g, w, share)["covariance"]
 
 
 def _full3(N6):
@@ -605,7 +610,8 @@ def _bias_summary(it: _Iteration, cov, hs, vf_chi) -> dict:
 
 def _mixture_summary(it: _Iteration, mix: dict, cov, vf_chi) -> dict:
     """`_bias_summary` from the bias mixture: the posterior mean bias (B,2) deg, its standard deviation, its
-    correlation with the target (B,2,3), and the bias size the flight supports (the posterior rms of the prior
+    correlation with the target (B,2,3), the prior's standard deviation (B,2) (the mixture's: the largest bias
+    times the rms of PHI_GRID) and the bias size the flight supports (B,) (the posterior rms of the prior's
     scale, deg)."""
     sb = it.bias_sigma_deg
     sd = np.sqrt(mix["bias_var"] * vf_chi[:, None]) * sb
@@ -613,8 +619,9 @@ def _mixture_summary(it: _Iteration, mix: dict, cov, vf_chi) -> dict:
     with np.errstate(divide="ignore", invalid="ignore"):
         corr = mix["bias_cross"] * vf_chi[:, None, None] * sb / (sx[:, None, :] * sd[..., None])
     phi_rms = np.sqrt(mix["posterior"] @ bias_mixture.PHI_GRID ** 2)
+    prior = sb * np.sqrt(np.mean(bias_mixture.PHI_GRID ** 2))
     return {"bias_deg": mix["bias"] * sb, "bias_sigma_deg": sd, "bias_target_correlation": corr,
-            "bias_prior_deg": np.repeat((phi_rms * sb)[:, None], 2, axis=1)}
+            "bias_prior_deg": np.full(sd.shape, prior), "bias_size_deg": phi_rms * sb}
 
 
 def _inverse_spd(N: np.ndarray):

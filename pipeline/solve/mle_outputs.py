@@ -34,22 +34,48 @@ def fit_summary(ex: dict, b: int) -> dict:
     msg = fit_checks.describe(float(ex["chi2"][b]), float(ex["chi2_dof"][b]), float(ex["chi2_p"][b]),
                               float(ex["autocorrelation_pixel"][b]), float(ex["autocorrelation_range"][b]),
                               bool(ex["drift_pixel"][b]), bool(ex["drift_range"][b]),
-                              float(ex["covariance_inflation"][b]))
+                              float(ex["covariance_inflation"][b]),
+                              float(np.max(ex["robust_spread"][b])) if "robust_spread" in ex else 1.0)
     return {"consistent": bool(ex["consistent"][b]), "chi2": _f(ex["chi2"][b]), "dof": _f(ex["chi2_dof"][b]),
             "p_value": _f(ex["chi2_p"][b]), "autocorrelation_pixel": _f(ex["autocorrelation_pixel"][b]),
             "autocorrelation_range": _f(ex["autocorrelation_range"][b]),
             "covariance_inflation": _f(ex["covariance_inflation"][b]), "message": msg}
 
 
+#: a bias angle counts as determined by the flight when its posterior sigma is below this fraction of the
+#: prior's (the flight told at least half of what is known about it)
+DETERMINED_BELOW = 0.7
+
+
 def boresight_bias(ex: dict, b: int) -> dict | None:
     """The estimated constant boresight bias of problem b (deg, about the camera's vertical axis: u, and its
-    horizontal axis: v), its posterior sigma, the prior used and its correlation with the target (2, 3)."""
+    horizontal axis: v), its posterior sigma, the prior's sigma, whether the flight determined it, its
+    correlation with the target (2, 3) and, when its size was learned, the size the flight supports."""
     if "bias_deg" not in ex:
         return None
     bias, sd, prior = ex["bias_deg"][b], ex["bias_sigma_deg"][b], ex["bias_prior_deg"][b]
-    return {"u_deg": float(bias[0]), "v_deg": float(bias[1]), "u_sigma_deg": float(sd[0]),
-            "v_sigma_deg": float(sd[1]), "u_prior_deg": float(prior[0]), "v_prior_deg": float(prior[1]),
-            "correlation_with_target": [[_f(c) for c in row] for row in ex["bias_target_correlation"][b]]}
+    out = {"u_deg": float(bias[0]), "v_deg": float(bias[1]), "u_sigma_deg": float(sd[0]),
+           "v_sigma_deg": float(sd[1]), "u_prior_deg": float(prior[0]), "v_prior_deg": float(prior[1]),
+           "u_determined": bool(sd[0] < DETERMINED_BELOW * prior[0]),
+           "v_determined": bool(sd[1] < DETERMINED_BELOW * prior[1]),
+           "correlation_with_target": [[_f(c) for c in row] for row in ex["bias_target_correlation"][b]]}
+    if "bias_size_deg" in ex:
+        out["size_deg"] = float(ex["bias_size_deg"][b])
+    return out
+
+
+def _bias_words(bias: dict) -> str:
+    """The `boresight_bias` dict in words: each angle with its sigma, or that the flight did not determine it."""
+    parts = []
+    for k, axis in (("u", "about the camera's vertical axis"), ("v", "about its horizontal axis")):
+        if bias[f"{k}_determined"]:
+            parts.append(f"{bias[f'{k}_deg']:+.3f} +/- {bias[f'{k}_sigma_deg']:.3f} deg {axis} ({k})")
+        else:
+            parts.append(f"not determined by this flight {axis} ({k}: +/- {bias[f'{k}_sigma_deg']:.3f} deg, "
+                         f"the prior's {bias[f'{k}_prior_deg']:.3f})")
+    if "size_deg" in bias and (bias["u_determined"] or bias["v_determined"]):
+        parts.append(f"the flight puts the constant part of the attitude error at about {bias['size_deg']:.2f} deg")
+    return "; ".join(parts)
 
 
 def _where(r: dict, t_ns: np.ndarray | None, video_frames) -> str:
@@ -81,13 +107,26 @@ def notes(extras: dict, t_ns: np.ndarray | None = None, video_frames=None) -> li
                    "least squares")
     bias = extras.get("boresight_bias")
     if bias:
-        out.append(f"mle: boresight bias {bias['u_deg']:+.3f} +/- {bias['u_sigma_deg']:.3f} deg (u), "
-                   f"{bias['v_deg']:+.3f} +/- {bias['v_sigma_deg']:.3f} deg (v), estimated from the flight")
-    for r in extras.get("rejected", []):
-        unit = "m" if r["residual"] == "range" else "px"
-        what = "laser range" if r["residual"] == "range" else f"pixel {r['residual']}"
-        out.append(f"mle: rejected the {what} of {_where(r, t_ns, video_frames)}: residual {r['value']:+.2f} "
-                   f"{unit} ({r['sigmas']:+.1f} sigma), zero weight")
+        out.append(f"mle: boresight bias {_bias_words(bias)}")
+    rejected = extras.get("rejected", [])
+    pixel = {}  # frame -> {"u": entry, "v": entry}: a pixel is rejected whole, said once
+    for r in rejected:
+        if r["residual"] != "range":
+            pixel.setdefault(r["frame"], {})[r["residual"]] = r
+    for r in rejected:
+        if r["residual"] == "range":
+            out.append(f"mle: rejected the laser range of {_where(r, t_ns, video_frames)}: residual "
+                       f"{r['value']:+.2f} m ({r['sigmas']:+.1f} sigma), zero weight")
+        elif r["frame"] in pixel:
+            uv = pixel.pop(r["frame"])
+            if len(uv) == 2:
+                size = float(np.hypot(uv["u"]["sigmas"], uv["v"]["sigmas"]))
+                out.append(f"mle: rejected the pixel of {_where(r, t_ns, video_frames)}: residual "
+                           f"({uv['u']['value']:+.2f}, {uv['v']['value']:+.2f}) px (u, v; {size:.1f} sigma), "
+                           "zero weight")
+            else:
+                out.append(f"mle: rejected the pixel {r['residual']} of {_where(r, t_ns, video_frames)}: residual "
+                           f"{r['value']:+.2f} px ({r['sigmas']:+.1f} sigma), zero weight")
     return out
 
 

@@ -502,13 +502,20 @@ class _Iteration:
             vf_chi = np.where(p_fail & (dof > 0), np.maximum(chi2_s / dof, 1.0), 1.0)
         cov, singular = _cov_from_six(N6s)
         mix = None
-        if a is not None and self.bias_size_unknown:
-            mix, mix_cov0 = self._mixture(s, g, failed, acf_pix)
-            cov = np.where(failed[:, None, None], cov, mix["covariance"])
-            cov0 = np.where(failed[:, None, None], cov0, mix_cov0)
         common = self.common_position_m ** 2 * np.eye(3)
-        cov = cov * vf_chi[:, None, None] + common
         cov0 = cov0 + common
+        cov = cov * vf_chi[:, None, None]
+        if a is not None and self.bias_size_unknown:
+            # a misfit (the robust scale guard, the chi-square's variance factor) scales every stated sigma:
+            # the bias's and the shared GNSS offset's too (told wrong by that factor, they are likely all
+            # wrong alike)
+            mix, mix_cov0 = self._mixture(s / np.sqrt(vf_chi), s * g, g, failed, acf_pix)
+            cov = np.where(failed[:, None, None], cov, mix["covariance"])
+            cov0 = np.where(failed[:, None, None], cov0, mix_cov0 + common)
+            misfit = vf_chi * self.guard.max(axis=1)
+            cov = cov + common * misfit[:, None, None]
+        else:
+            cov = cov + common
         cond = condition_numbers(_full3(N6))
         status[singular & ~failed] = Status.DEGENERATE
         failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
@@ -530,15 +537,16 @@ class _Iteration:
                   "robust_spread": np.sqrt(self.guard),
                   "covariance_inflation": np.where(np.isfinite(inflation), inflation, 1.0)}
         if mix is not None:
-            extras.update(_mixture_summary(self, mix, cov, vf_chi))
+            extras.update(_mixture_summary(self, mix, cov))
         elif a is not None:
             extras.update(_bias_summary(self, cov, hs, vf_chi))
         return X, self.iterations, status, cond, cov, extras
 
-    def _mixture(self, s, g, failed, drift):
+    def _mixture(self, s, s_bias, g, failed, drift):
         """`bias_mixture.mixture` at the solution, twice (the second at the first's step), with the final IRLS
-        weights and the autocorrelation scaling s (3,1,B); moves X to the mixture's estimate. Returns the
-        mixture and its covariance (B,3,3) with the sigmas as stated (scaled by g instead of s: no inflation)."""
+        weights, the standardized rows scaled by s (3,1,B) (their sigmas divided by s) and the bias columns by
+        s_bias (3,1,B); moves X to the mixture's estimate. Returns the mixture and its covariance (B,3,3) with
+        the sigmas as stated (rows and bias columns scaled by g: no inflation)."""
         wr = self.wr
         keep = ~failed
         base = self.a[:2]
@@ -548,7 +556,7 @@ class _Iteration:
             a0[:2] = np.where(ok[:2], base, 0.0)
             w = ok if wr is None else np.where(ok, wr, 0.0)
             share = None if self.attitude_share is None else np.where(drift, 0.0, self.attitude_share)
-            mix = bias_mixture.mixture(J * s, E * s, a0 * s, w, share)
+            mix = bias_mixture.mixture(J * s, E * s, a0 * s_bias, w, share)
             step = np.where(keep[:, None] & np.isfinite(mix["step"]), mix["step"], 0.0)
             self.X += step
             if rnd == 0:
@@ -608,16 +616,16 @@ def _bias_summary(it: _Iteration, cov, hs, vf_chi) -> dict:
     return {"bias_deg": bias, "bias_sigma_deg": sd, "bias_target_correlation": corr, "bias_prior_deg": sb}
 
 
-def _mixture_summary(it: _Iteration, mix: dict, cov, vf_chi) -> dict:
+def _mixture_summary(it: _Iteration, mix: dict, cov) -> dict:
     """`_bias_summary` from the bias mixture: the posterior mean bias (B,2) deg, its standard deviation, its
     correlation with the target (B,2,3), the prior's standard deviation (B,2) (the mixture's: the largest bias
     times the rms of PHI_GRID) and the bias size the flight supports (B,) (the posterior rms of the prior's
     scale, deg)."""
     sb = it.bias_sigma_deg
-    sd = np.sqrt(mix["bias_var"] * vf_chi[:, None]) * sb
+    sd = np.sqrt(mix["bias_var"]) * sb
     sx = np.sqrt(np.einsum("bii->bi", cov))
     with np.errstate(divide="ignore", invalid="ignore"):
-        corr = mix["bias_cross"] * vf_chi[:, None, None] * sb / (sx[:, None, :] * sd[..., None])
+        corr = mix["bias_cross"] * sb / (sx[:, None, :] * sd[..., None])
     phi_rms = np.sqrt(mix["posterior"] @ bias_mixture.PHI_GRID ** 2)
     prior = sb * np.sqrt(np.mean(bias_mixture.PHI_GRID ** 2))
     return {"bias_deg": mix["bias"] * sb, "bias_sigma_deg": sd, "bias_target_correlation": corr,

@@ -23,7 +23,8 @@ Per family: coverage of the 95 % ellipsoid (e^T C^-1 e <= 7.81) and median error
                  correlation time (`solve` per problem); bias: squared loss with the bias prior set to the bias
                  rms and the white attitude sigma; outliers / mistracked: squared loss without the bad rows.
 
-    python scripts/calibration.py [--trials 100] [--seed 0] [--families a,b]   (a few minutes)
+    python scripts/calibration.py [--trials 100] [--seed 0] [--families a,b] [--by-n] [--understated K]
+                                                                               (about a minute)
 
 The table measures `solve_batch` (no timestamps: the bias model). `--per-problem` adds the coverage and median
 error of `solve("mle", obs)` per problem with the frames' timestamps, which learns a correlation time where the
@@ -178,6 +179,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--families", default=",".join(FAMILIES))
     ap.add_argument("--per-problem", action="store_true", help="also solve() per problem with timestamps")
+    ap.add_argument("--by-n", action="store_true", help="also a row per geometry and n (coverage, median ratio)")
     ap.add_argument("--understated", type=float, default=1.0, metavar="K",
                     help="the attitude and position errors are K times the told sigmas (default 1)")
     args = ap.parse_args(argv)
@@ -194,6 +196,7 @@ def main(argv: list[str] | None = None) -> int:
         rej = [0, 0, 0]
         flagged = []
         p_all, e_p = [], []
+        by_n = []
         for geometry in GEOMETRIES:
             for n in NS:
                 batch, bad_pix, bad_rng, ref_sigma, taus, t_s = make_family(rng, family, args.trials, n, geometry,
@@ -208,6 +211,9 @@ def main(argv: list[str] | None = None) -> int:
                 e_d.append(d.errors_m(truth))
                 e_i.append(i.errors_m(truth))
                 e_r.append(np.linalg.norm(rp - truth, axis=1))
+                by_n.append(f"|   {family}, {geometry}, n = {n} | {np.mean(d_all[-1] <= CHI2_3_95):.1%} | | "
+                            f"{np.mean(r_all[-1] <= CHI2_3_95):.1%} | {np.nanmedian(e_d[-1]):.2f} | | "
+                            f"{np.nanmedian(e_r[-1]):.2f} | {np.nanmedian(e_d[-1]) / np.nanmedian(e_r[-1]):.2f} | | |")
                 if args.per_problem:
                     p_all.append(per_problem(batch, t_s))
                     e_p.append(np.linalg.norm(p_all[-1][0] - truth, axis=1))
@@ -223,6 +229,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {family} | {cov[0]:.1%} | {cov[1]:.1%} | {cov[2]:.1%} | {med[0]:.2f} | {med[1]:.2f} | {med[2]:.2f} "
               f"| {med[0] / med[2]:.2f} | {rej[0]} ({rej[1]} of {rej[2]} bad) "
               f"| {np.mean(np.concatenate(flagged)):.0%} |", flush=True)
+        if args.by_n:
+            print("\n".join(by_n), flush=True)
         if args.per_problem:
             print(f"|   {family}, solve() per problem with timestamps | "
                   f"{np.mean(np.concatenate(p_all) <= CHI2_3_95):.1%} | | | "

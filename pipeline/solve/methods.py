@@ -335,7 +335,8 @@ def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
     if needs_pixels and npix < 2 and method != "range":  # range without pixels starts from the ranges
         what = method if method in ("dlt", "vision") else f"{method} (initialised from vision)"
         raise ObservationError(f"{what} needs at least two frames with a target pixel, got {npix}"
-                               + ("" if method in ("dlt", "vision") else "; or pass initial_m"))
+                               + ("" if method in ("dlt", "vision")
+                                  else "; from Python, solve(..., initial_m=...) starts it elsewhere"))
     if needs_pixels and npix >= 2:
         centres = -np.linalg.solve(st.M[0, has_pix], st.p4[0, has_pix][:, :, None])[:, :, 0]
         spread = np.sqrt(((centres - centres.mean(axis=0)) ** 2).sum(axis=1).max())

@@ -7,10 +7,11 @@ and its residuals drift from frame to frame (`fit_checks`), it then fits the gen
 (`correlated.mle_gls`) with one correlation time for the attitude and the position errors, for each tau of
 TAU_GRID_S, without the rows the first solve rejected, and keeps the tau of the largest Gaussian likelihood
 
-    log L(tau) = -1/2 (r^T C_tau^-1 r + log det C_tau)        (r the residuals at that tau's estimate)
+    log L(tau) = -1/2 (r^T C_tau^-1 r / k + m log k + log det C_tau),   k = max(r^T C_tau^-1 r / m, 1)
 
-(the profile likelihood: the same data under each model, the covariance's size charged by log det). The
-chosen model's estimate and covariance are the answer; its chi-square is checked again.
+(r the m residuals at that tau's estimate; the profile likelihood: the same data under each model, the
+covariance's size charged by log det, its overall scale k at its maximum likelihood but never below the stated
+sigmas). The chosen model's estimate and covariance are the answer; its chi-square is checked again.
 """
 
 from __future__ import annotations
@@ -39,7 +40,9 @@ def without_rejected(st: Stacked, rejected: np.ndarray) -> Stacked:
 
 def log_likelihood(st: Stacked, X: np.ndarray, sigma: Sigma, vf: tuple[float, float]) -> tuple[float, float, int]:
     """(log L, chi-square r^T C^-1 r, rows m) of one problem at X (3,) under sigma, the pixel and range blocks of
-    C scaled by the variance factors vf."""
+    C scaled by the variance factors vf; C's overall scale k >= 1 at its maximum likelihood, max(chi2 / m, 1)
+    (the stated sigmas a lower bound: with sigmas stated too small, a tau is not chosen for hiding the misfit
+    in the target)."""
     C = _correlated.problem_covariance(st, X, sigma)
     npix = 2 * int(np.count_nonzero(st.has_pix[0]))
     s = np.r_[np.full(npix, vf[0]), np.full(len(C) - npix, vf[1])]
@@ -48,7 +51,9 @@ def log_likelihood(st: Stacked, X: np.ndarray, sigma: Sigma, vf: tuple[float, fl
     L = np.linalg.cholesky(C)
     z = np.linalg.solve(L, r)
     chi2 = float(z @ z)
-    return -0.5 * (chi2 + 2.0 * float(np.log(np.diag(L)).sum())), chi2, len(C)
+    m = len(C)
+    k = max(chi2 / m, 1.0)
+    return -0.5 * (chi2 / k + m * np.log(k) + 2.0 * float(np.log(np.diag(L)).sum())), chi2, m
 
 
 def learn_tau(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from pipeline.solve import fit_checks, solve, solve_batch
-from pipeline.solve.mle import REDESCEND_B, _redescending
+from pipeline.solve.mle import REDESCEND_A_PIXEL, REDESCEND_B, _redescending, pixel_pair_redescending
 from pipeline.solve.observations import Observations
 from pipeline.solve.scenes import PAPER_SIGMA, paper_batch, paper_problem
 
@@ -127,3 +127,35 @@ def test_drifting_errors_get_a_correlation_time_learned_from_the_flight():
             assert est.extras["fit"]["autocorrelation_pixel"] is not None
     assert len(taus) >= 20 and 10.0 <= np.median(taus) <= 80.0
     assert np.mean(inside) >= 0.85
+
+
+def test_a_pixel_is_weighted_whole_by_its_2d_length():
+    """The pixel pair's loss is rho(|e|) of the 2-D residual: its gradient is w(|e|) e in both coordinates, full
+    weight inside REDESCEND_A_PIXEL, none from REDESCEND_B; a frame far off in u alone loses v too."""
+    rng = np.random.default_rng(3)
+    eu, ev = rng.normal(0.0, 3.0, 500), rng.normal(0.0, 3.0, 500)
+    w = pixel_pair_redescending(eu, ev)[1]
+    h = 1e-6
+    grad_u = (pixel_pair_redescending(eu + h, ev)[0] - pixel_pair_redescending(eu - h, ev)[0]) / (2 * h)
+    np.testing.assert_allclose(grad_u, w * eu, atol=1e-5)
+    length = np.hypot(eu, ev)
+    assert (w[length <= REDESCEND_A_PIXEL] == 1).all() and (w[length >= REDESCEND_B] == 0).all()
+    assert ((w > 0) & (w < 1)).any()
+    obs = paper_problem(n=20, gamma_deg=40.0, seed=4, sigma=dataclasses.replace(PAPER_SIGMA, pixel_px=0.5))
+    pixel = obs.pixel.copy()
+    pixel[5, 0] += 60.0  # far off in u only: ~17 sigma of the ~3.5 px pixel scatter
+    est = solve("mle", dataclasses.replace(obs, pixel=pixel))
+    assert sorted((r["frame"], r["residual"]) for r in est.extras["rejected"]) == [(5, "u"), (5, "v")]
+
+
+def test_the_bias_is_reported_in_degrees_when_the_sigmas_were_stated_too_small():
+    """Frame-to-frame attitude error 0.3 deg told as 0.2 deg (the fit checks flag it and scale the model) and a
+    0.3 deg bias about the camera's vertical axis: the reported bias is that angle, not one shrunk by the
+    misfit's scale."""
+    told = dataclasses.replace(PAPER_SIGMA, pixel_px=0.5)
+    batch = paper_batch(200, n=40, gamma_deg=90.0, sigma=dataclasses.replace(told, attitude_deg=0.3), seed=6)
+    b = np.deg2rad(0.3) * 1000.0  # f = 1000 px
+    biased = dataclasses.replace(batch, pixel=batch.pixel + np.array([b, 0.0]), sigma=told)
+    ex = solve_batch("mle", biased).extras
+    assert np.mean(~ex["consistent"]) > 0.8
+    assert abs(np.median(ex["bias_deg"][:, 0]) - 0.3) < 0.08  # measured 0.25 (shrunk to the prior); 0.17 unscaled

@@ -7,18 +7,24 @@ a bias makes the frames' common pixel offset worthless for the target, white err
 information there is. So `mle` does not pick one; it averages over the bias's prior standard deviation
 phi * sigma_att, phi on PHI_GRID (0: no bias, 1: a bias as large as the whole stated attitude error), equally
 likely a priori, weighted by the evidence of the flight (the restricted likelihood: the target integrated out
-with a flat prior). Where the bias is observable the evidence picks its size; where it cannot be told from a
-target offset the evidence is flat, the estimate does not depend on phi (the bias and the target move the
-frames alike), and the covariance carries the prior's mean bias variance (a third of sigma_att^2).
+with a flat prior). The stated attitude variance is the total: for each phi the frame-to-frame part keeps
+(1 - phi^2) of it (`share`), so the residuals' scatter from frame to frame tells how much can be constant even
+where the bias itself cannot be told from a target offset. Where the bias is observable the evidence also sees
+the bias; where it is not, the estimate does not depend on phi (the bias and the target move the frames alike)
+and the covariance carries the posterior's mean bias variance (the prior's: mean(PHI_GRID^2) = 0.35 of
+sigma_att^2, when the flight tells nothing).
 
 The model is linear at the solve's solution: standardized residual rows r (3,n,b) (u, v, range of n frames of
 b problems), Jacobian J (3,3,n,b) of the rows in the target, bias columns a (3,n,b) (the u and v rows' pixel
-offset per unit bias at the stated prior; range rows 0), IRLS weights w. With p = phi^2, s_k = a_k' W a_k,
-h_k = J' W a_k, t_k = a_k' W r for the u and v biases (disjoint rows), the bias integrated out:
+offset per unit bias at the largest prior; range rows 0), IRLS weights w, and each pixel row's attitude share
+c of its variance. With p = phi^2 the rows' variances are (1 - p c) / w (W = w / (1 - p c)) plus the bias's;
+with s_k = a_k' W a_k, h_k = J' W a_k, t_k = a_k' W r for the u and v biases (disjoint rows), the bias
+integrated out:
 
     N_p = J'WJ - sum_k p h_k h_k' / (1 + p s_k)     g_p = J'Wr - sum_k p h_k t_k / (1 + p s_k)
     step d_p = N_p^-1 g_p, covariance N_p^-1,
-    log L(p) = -1/2 (r'Wr - sum_k p t_k^2 / (1 + p s_k) - g_p' d_p + sum_k log(1 + p s_k) + log det N_p)
+    log L(p) = -1/2 (r'Wr - sum_k p t_k^2 / (1 + p s_k) - g_p' d_p + sum_k log(1 + p s_k) + log det N_p
+                     + sum_rows log(1 - p c))
 
 and the answer is the posterior mixture: step sum pi_p d_p, covariance sum pi_p (N_p^-1 + d_p d_p') - d d'.
 """
@@ -52,11 +58,13 @@ def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None,
     """The bias-averaged linear step and covariance of b problems (module docstring).
 
     J (3,3,n,b), r (3,n,b), a (3,n,b) (rows 0 and 1 used), w (3,n,b) or None (unit weights); rows that are not
-    in use must be zero in J and r and have zero weight (or zero a). Returns step (b,3) m, covariance (b,3,3)
-    m^2, posterior (b,G) over PHI_GRID, bias (b,2) and bias_var (b,2) in units of the stated prior (u, v),
-    bias_cross (b,2,3) the covariance of each bias with the target, singular (b,) where no candidate solves.
+    in use must be zero in J and r and have zero weight (or zero a); share (2,n,b) or None: the attitude's
+    share c in [0, 1] of each u and v row's variance (None: the frame-to-frame part keeps it all, the bias adds
+    to it). Returns step (b,3) m, covariance (b,3,3) m^2, posterior (b,G) over PHI_GRID, bias (b,2) and
+    bias_var (b,2) in units of a's prior (u, v), bias_cross (b,2,3) m the covariance of each bias with the
+    target, singular (b,) where no candidate solves.
     """
-    W1 = np.ones_like(r) if w is None else w
+    W1 = np.ones(r.shape) if w is None else np.asarray(w, dtype=np.float64)
     b = r.shape[-1]
     G = len(PHI_GRID)
     steps = np.empty((G, b, 3))
@@ -68,12 +76,12 @@ def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None,
     singular_all = np.ones(b, dtype=bool)
     for j, phi in enumerate(PHI_GRID):
         p = phi * phi
-        W = W1.copy()
-        logdet_rows = 0.0
-        if share is not None:  # the white attitude variance is what the bias leaves of the stated one
-            ratio = np.maximum(1.0 - p * share, RATIO_FLOOR)
-            W[:2] = W1[:2] / ratio
-            logdet_rows = _rows(np.where(W1[:2] > 0, np.log(ratio), 0.0), np.ones_like(ratio))
+        # the frame-to-frame attitude variance is what the bias leaves of the stated one
+        ratio = np.ones(r.shape)
+        if share is not None:
+            ratio[:2] = np.maximum(1.0 - p * share, RATIO_FLOOR)
+        W = W1 / ratio
+        logdet_rows = _rows(np.where(W1 > 0, np.log(ratio), 0.0), np.ones_like(ratio))
         WJ = J * W
         N0 = np.einsum("cknb,dknb->bcd", WJ, J)
         g0 = np.einsum("cknb,knb->bc", WJ, r)
@@ -104,8 +112,8 @@ def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None,
     pi = np.where(np.isfinite(pi), pi, 0.0)
     total = pi.sum(axis=0)
     pi = np.where(total > 0, pi / np.where(total > 0, total, 1.0), 1.0 / G)
-    steps = np.where(np.isfinite(steps), steps, 0.0)
-    covs = np.where(np.isfinite(covs), covs, 0.0)
+    # a singular candidate has no weight (pi = 0); keep its NaNs out of the sums
+    steps, covs, bias, bvar, cross = (np.where(np.isfinite(x), x, 0.0) for x in (steps, covs, bias, bvar, cross))
     step = np.einsum("gb,gbc->bc", pi, steps)
     dev = steps - step
     cov = np.einsum("gb,gbcd->bcd", pi, covs + dev[..., :, None] * dev[..., None, :])

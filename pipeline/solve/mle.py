@@ -34,10 +34,6 @@ REDESCEND_B = 6.0
 CHI2_3_95 = 7.814727903251178
 #: the boresight bias prior when the sigma gives no attitude accuracy (deg)
 DEFAULT_BIAS_PRIOR_DEG = 0.5
-#: told no error model, a constant GNSS offset shared by the segment is assumed with this share of the stated
-#: position variance: its prior mean when the constant share is uniform on [0, 1], as for the attitude's bias
-#: (`bias_mixture`); unlike the bias, a shared offset moves the target exactly and the flight cannot tell it
-COMMON_POSITION_SHARE = 1.0 / 3.0
 VCE_MAX_ROUNDS = 10
 VCE_TOL = 0.01
 
@@ -256,8 +252,8 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     prior of that standard deviation; it is eliminated from the normal equations (Schur complement), so the
     target covariance is the marginal one. With bias_size_unknown, bias_deg is the largest bias: the answer is
     then averaged over the bias's size (`bias_mixture`, the stated attitude variance split between the bias and
-    the frame-to-frame part unless the residuals drift), and a GNSS offset shared by the segment
-    (COMMON_POSITION_SHARE of the position variance) is added to the covariance.
+    the frame-to-frame part unless the residuals drift), and position_m^2 I, a GNSS offset shared by the
+    segment, is added to the covariance.
 
     Works on planes (`_Planes`): the normal equations as six (B,) entries, the 3x3 steps in closed form.
     Converged problems are frozen once fewer than all are active.
@@ -278,11 +274,14 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
         a = None
     it = _Iteration(st, pl, a, X, status, bad, X0, tol_m, max_iterations, vce)
     it.bias_sigma_deg = bias_deg
-    if a is not None and bias_size_unknown and sigma.attitude_deg:  # the attitude's share of each row's variance
-        it.attitude_share = (a[:2] * (sigma.attitude_deg / bias_deg)) ** 2
     it.bias_size_unknown = bias_size_unknown
-    if bias_deg and bias_size_unknown:  # no error model configured: a GNSS offset shared by the segment, too
-        it.common_position_m = (sigma.position_m or 0.0) * np.sqrt(COMMON_POSITION_SHARE)
+    # the stated attitude sigma is split between the bias and the frame-to-frame error (it is the largest bias)
+    it.split_attitude = bool(a is not None and bias_size_unknown and sigma.attitude_deg)
+    if bias_deg and bias_size_unknown and sigma.position_m:
+        # GNSS errors wander over minutes: over a segment much of them is an offset shared by every frame, which
+        # moves the target exactly as the platforms and shows in no residual; the covariance carries all of the
+        # stated position variance as that offset (the rows keep it too, as frame-to-frame: the safe side)
+        it.position_m = sigma.position_m
     if robust == "redescending":
         it.run("huber")
         it.robust_scale()
@@ -311,8 +310,9 @@ class _Iteration:
         self.bad = bad
         self.active = ~bad
         self.bias_sigma_deg = None
-        self.common_position_m = 0.0
-        self.attitude_share = None
+        self.position_m = 0.0  # the stated position sigma, when the GNSS error is taken as a shared offset
+        self.bias_size_unknown = False
+        self.split_attitude = False
         self.guard = np.ones((B, 2))  # `robust_scale`'s factors: a misfit, unlike variance components
 
     def _eval(self, pl, a, X, z, robust):
@@ -502,20 +502,18 @@ class _Iteration:
             vf_chi = np.where(p_fail & (dof > 0), np.maximum(chi2_s / dof, 1.0), 1.0)
         cov, singular = _cov_from_six(N6s)
         mix = None
-        common = self.common_position_m ** 2 * np.eye(3)
-        cov0 = cov0 + common
         cov = cov * vf_chi[:, None, None]
+        E_report = E
         if a is not None and self.bias_size_unknown:
             # a misfit (the robust scale guard, the chi-square's variance factor) scales every stated sigma:
-            # the bias's and the shared GNSS offset's too (told wrong by that factor, they are likely all
-            # wrong alike)
-            mix, mix_cov0 = self._mixture(s / np.sqrt(vf_chi), s * g, g, failed, acf_pix)
-            cov = np.where(failed[:, None, None], cov, mix["covariance"])
-            cov0 = np.where(failed[:, None, None], cov0, mix_cov0 + common)
+            # the bias prior's and the shared GNSS offset's too (told wrong by that factor, they are likely all
+            # wrong alike); the shared offset takes the larger of the two groups' factors
+            mix, mix0, E_report = self._mixture(s / np.sqrt(vf_chi), s * g, g, failed, acf_pix)
             misfit = vf_chi * self.guard.max(axis=1)
-            cov = cov + common * misfit[:, None, None]
-        else:
-            cov = cov + common
+            eye = self.position_m ** 2 * np.eye(3)
+            cov = np.where(failed[:, None, None], cov, mix["covariance"] + misfit[:, None, None] * eye)
+            cov0 = np.where(failed[:, None, None], cov0, mix0["covariance"] + eye)
+            singular |= mix["singular"]
         cond = condition_numbers(_full3(N6))
         status[singular & ~failed] = Status.DEGENERATE
         failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
@@ -528,8 +526,8 @@ class _Iteration:
                   "sigma0_sq": sigma0_sq, "vce_rounds": self.vce_rounds,
                   "rejected": (ok & (wr == 0)).transpose(2, 1, 0) if wr is not None else np.zeros((B, ok.shape[1], 3),
                                                                                                     dtype=bool),
-                  "residual_sigmas": E.transpose(2, 1, 0).copy(),
-                  "residuals": (E / self.pl.isd).transpose(2, 1, 0),
+                  "residual_sigmas": E_report.transpose(2, 1, 0).copy(),
+                  "residuals": (E_report / self.pl.isd).transpose(2, 1, 0),
                   "chi2": chi2, "chi2_dof": dof.astype(np.float64), "chi2_p": p,
                   "autocorrelation_pixel": rho_pix, "autocorrelation_range": rho_rng,
                   "drift_pixel": acf_pix, "drift_range": acf_rng,
@@ -542,26 +540,40 @@ class _Iteration:
             extras.update(_bias_summary(self, cov, hs, vf_chi))
         return X, self.iterations, status, cond, cov, extras
 
-    def _mixture(self, s, s_bias, g, failed, drift):
+    def _mixture(self, s, s_bias, g, failed, drift_pix):
         """`bias_mixture.mixture` at the solution, twice (the second at the first's step), with the final IRLS
         weights, the standardized rows scaled by s (3,1,B) (their sigmas divided by s) and the bias columns by
-        s_bias (3,1,B); moves X to the mixture's estimate. Returns the mixture and its covariance (B,3,3) with
-        the sigmas as stated (rows and bias columns scaled by g: no inflation)."""
-        wr = self.wr
+        s_bias (3,1,B); moves X to the mixture's estimate. Returns the mixture (its bias, bias_var, bias_cross
+        in units of the stated prior), its covariance (B,3,3) with the sigmas as stated (rows and bias columns
+        scaled by g: no inflation) and the standardized residuals (3,n,B) at the final X, the posterior mean
+        bias removed (the rows' sigmas as in the iteration). drift_pix (B,): no attitude variance split there (a
+        drift is neither constant nor frame-to-frame)."""
         keep = ~failed
-        base = self.a[:2]
         a0 = np.zeros_like(self.a)
         J, E, ok = self.J, self.E + self.a * self.z[:, None, :], self.ok
         for rnd in range(2):
-            a0[:2] = np.where(ok[:2], base, 0.0)
-            w = ok if wr is None else np.where(ok, wr, 0.0)
-            share = None if self.attitude_share is None else np.where(drift, 0.0, self.attitude_share)
-            mix = bias_mixture.mixture(J * s, E * s, a0 * s_bias, w, share)
+            if rnd:
+                J, E, ok = _evaluate(self.pl, self.X)
+            a0[:2] = np.where(ok[:2], self.a[:2], 0.0)
+            w = np.where(ok, 1.0 if self.wr is None else self.wr, 0.0)
+            a_mix = a0 * s_bias
+            # the attitude's share of each row's variance, as the columns passed weigh it (a bias at the
+            # largest prior is the whole attitude error); none where the residuals drift
+            share = np.where(drift_pix, 0.0, np.minimum(a_mix[:2] ** 2, 1.0)) if self.split_attitude else None
+            mix = bias_mixture.mixture(J * s, E * s, a_mix, w, share)
             step = np.where(keep[:, None] & np.isfinite(mix["step"]), mix["step"], 0.0)
             self.X += step
-            if rnd == 0:
-                J, E, ok = _evaluate(self.pl, self.X)
-        return mix, bias_mixture.mixture(J * g, E * g, a0 * g, w, share)["covariance"]
+        share0 = np.where(drift_pix, 0.0, np.minimum((a0 * g)[:2] ** 2, 1.0)) if self.split_attitude else None
+        mix0 = bias_mixture.mixture(J * g, E * g, a0 * g, w, share0)  # the same point, as stated
+        # the bias in units of the stated prior: the columns passed carry the misfit's scaling s_bias / s
+        unit = (s_bias / s)[0, 0]
+        mix["bias"] = mix["bias"] * unit[:, None]
+        mix["bias_var"] = mix["bias_var"] * (unit * unit)[:, None]
+        mix["bias_cross"] = mix["bias_cross"] * unit[:, None, None]
+        mix["prior_scale"] = unit
+        E_report = _evaluate(self.pl, self.X)[1]
+        E_report[:2] -= a0[:2] * mix["bias"].T[:, None, :]
+        return mix, mix0, E_report
 
 
 def _full3(N6):
@@ -618,18 +630,19 @@ def _bias_summary(it: _Iteration, cov, hs, vf_chi) -> dict:
 
 def _mixture_summary(it: _Iteration, mix: dict, cov) -> dict:
     """`_bias_summary` from the bias mixture: the posterior mean bias (B,2) deg, its standard deviation, its
-    correlation with the target (B,2,3), the prior's standard deviation (B,2) (the mixture's: the largest bias
-    times the rms of PHI_GRID) and the bias size the flight supports (B,) (the posterior rms of the prior's
-    scale, deg)."""
+    correlation with the target (B,2,3), the prior's standard deviation (B,2) (the mixture's: the largest bias,
+    scaled by a misfit, times the rms of PHI_GRID) and the bias size the flight supports (B,) (the posterior
+    rms of the prior's scale, deg)."""
     sb = it.bias_sigma_deg
     sd = np.sqrt(mix["bias_var"]) * sb
     sx = np.sqrt(np.einsum("bii->bi", cov))
     with np.errstate(divide="ignore", invalid="ignore"):
         corr = mix["bias_cross"] * sb / (sx[:, None, :] * sd[..., None])
+    largest = sb * mix["prior_scale"]
     phi_rms = np.sqrt(mix["posterior"] @ bias_mixture.PHI_GRID ** 2)
-    prior = sb * np.sqrt(np.mean(bias_mixture.PHI_GRID ** 2))
+    prior = largest * np.sqrt(np.mean(bias_mixture.PHI_GRID ** 2))
     return {"bias_deg": mix["bias"] * sb, "bias_sigma_deg": sd, "bias_target_correlation": corr,
-            "bias_prior_deg": np.full(sd.shape, prior), "bias_size_deg": phi_rms * sb}
+            "bias_prior_deg": np.repeat(prior[:, None], 2, axis=1), "bias_size_deg": phi_rms * largest}
 
 
 def _inverse_spd(N: np.ndarray):

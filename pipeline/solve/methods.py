@@ -197,7 +197,7 @@ def _mle_dispatch(st: Stacked, o: dict):
     whose residual covariance is not diagonal: with vanishing correlation it is the independent problem)."""
     x0, init_status, sigma, vce = _mle_start(st, o)
     robust, tol, itmax = o.get("robust", _mle.DEFAULT_ROBUST), o["tol_m"], o["max_iterations"]
-    bias_deg, revise = _mle.bias_prior_deg(sigma, o)  # configured correlation times win, even vanishing ones
+    bias_deg, size_unknown = _mle.bias_prior_deg(sigma, o)  # configured correlation times win, even vanishing ones
     if sigma.correlated:
         if st.t_ns is None:
             raise ValueError("mle with time-correlated errors (sigma attitude_tau_s / position_tau_s) needs the "
@@ -212,8 +212,8 @@ def _mle_dispatch(st: Stacked, o: dict):
         if (C != np.diag(np.diag(C))).any():
             return _correlated.mle_gls(st, x0[0], C, robust, vce, tol, itmax)
         sigma = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
-    res = _mle.mle(st, x0, sigma, robust, vce, tol, itmax, init_status, bias_deg, revise)
-    if st.size == 1 and st.t_ns is not None and revise and _drifts(res[5]) and _real_times(st):
+    res = _mle.mle(st, x0, sigma, robust, vce, tol, itmax, init_status, bias_deg, size_unknown)
+    if st.size == 1 and st.t_ns is not None and size_unknown and _drifts(res[5]) and _real_times(st):
         res = _learned_tau(st, res, sigma, robust, vce, tol, itmax)
     return res
 

@@ -244,7 +244,10 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     """Returns X (B,3), iterations (B,), status (B,) int8, cond (B,) of the weighted design W^1/2 J,
     covariance (B,3,3) m^2, and extras (B, ...) arrays: variance_factor_pixel, variance_factor_range, sigma0_sq,
     vce_rounds, rejected (B,n,3) bool (u, v, range rows with zero weight), residual_sigmas (B,n,3) (the
-    standardized residuals), the fit checks (`fit_checks`) and, with bias_deg, the boresight bias.
+    standardized residuals, at the final X), the fit checks (`fit_checks`: chi2, chi2_dof, chi2_p, the
+    autocorrelations and drift flags, consistent, robust_spread (B,2), covariance_inflation) and, with bias_deg,
+    the boresight bias (bias_deg, bias_sigma_deg, bias_prior_deg, bias_target_correlation; bias_size_deg when
+    its size is averaged). The fit checks are taken at the iteration's solution, before the averaging.
 
     robust "redescending" (the default of `solve`) runs Huber to convergence first (a convex start), then the
     redescending loss from there. bias_deg > 0 estimates a constant boresight bias (two camera-frame angles,

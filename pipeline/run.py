@@ -86,8 +86,13 @@ def open_frames(config: FlightConfig, log: FlightLog) -> tuple[FrameSeries, _Tim
     from pipeline import ingest
 
     if config.files.video is not None:
-        frames = ingest.read_video(config.files.video, frames_csv=config.files.frames_csv or "auto")
-        video = ingest.VideoFrames(config.files.video)
+        video = ingest.VideoFrames(config.files.video)  # demuxes the file once: its index serves both
+        try:
+            frames = ingest.read_video(config.files.video, frames_csv=config.files.frames_csv or "auto",
+                                       index=video.index)
+        except BaseException:
+            video.close()
+            raise
         return frames, _TimedDecoder(video.read), video
     if log.frames is not None and "fmv" in log.formats:  # full-motion video: the frames of the telemetry file
         video = ingest.VideoFrames(log.frames.source)

@@ -15,10 +15,10 @@ from pipeline.ingest.mapping import default_mapping, mapping_for
 from pipeline.ingest.model import FlightLog
 
 
-def read_video(path, frames_csv="auto"):
+def read_video(path, frames_csv="auto", index=None):
     """Per-frame presentation times of a video (see `pipeline.ingest.video.read_video`)."""
     from pipeline.ingest.video import read_video as _read_video
-    return _read_video(path, frames_csv=frames_csv)
+    return _read_video(path, frames_csv=frames_csv, index=index)
 
 
 def __getattr__(name):

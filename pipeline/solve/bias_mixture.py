@@ -76,12 +76,12 @@ def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None,
     singular_all = np.ones(b, dtype=bool)
     for j, phi in enumerate(PHI_GRID):
         p = phi * phi
-        # the frame-to-frame attitude variance is what the bias leaves of the stated one
-        ratio = np.ones(r.shape)
-        if share is not None:
-            ratio[:2] = np.maximum(1.0 - p * share, RATIO_FLOOR)
-        W = W1 / ratio
-        logdet_rows = _rows(np.where(W1 > 0, np.log(ratio), 0.0), np.ones_like(ratio))
+        W, logdet_rows = W1, 0.0
+        if share is not None:  # the frame-to-frame attitude variance is what the bias leaves of the stated one
+            ratio = np.maximum(1.0 - p * share, RATIO_FLOOR)
+            W = W1.copy()
+            W[:2] = W1[:2] / ratio
+            logdet_rows = np.where(W1[:2] > 0, np.log(ratio), 0.0).reshape(-1, b).sum(axis=0)
         WJ = J * W
         N0 = np.einsum("cknb,dknb->bcd", WJ, J)
         g0 = np.einsum("cknb,knb->bc", WJ, r)

@@ -251,7 +251,7 @@ def estimate_clock(r: ResolvedFlight, decoder, tracker, mark_index: int, mark_px
     """Track the frames around each observation and estimate the video offset (see the module
     docstring). `decoder(indices)` -> {index: image}; `tracker` a SiftTracker."""
     if r.plan is None:
-        return ClockEstimate(None, None)
+        return ClockEstimate(None)
     search_s = r.config.clock.search_s
     pos, groups = estimation_frames(r)
     idx = np.asarray(r.frames.index)[pos]

@@ -91,13 +91,11 @@ def _read_observations(path: Path) -> None:
 
 def _tlog_records(data: bytes, limit: int) -> bytes:
     """The leading whole records (8-byte time + MAVLink 1/2 packet) of a tlog, up to `limit` bytes."""
+    from pipeline.ingest.tlog import _record_length
+
     pos = 0
-    while pos + 10 < len(data):
-        stx, n = data[pos + 8], data[pos + 9]
-        size = 8 + (12 + n + (13 if data[pos + 10] & 1 else 0) if stx == 0xFD else 8 + n)
-        if pos + size > limit:
-            break
-        pos += size
+    while (rec := _record_length(data, pos, len(data))) is not None and pos + 8 + rec[1] <= limit:
+        pos += 8 + rec[1]
     return data[:pos]
 
 

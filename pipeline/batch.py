@@ -2,7 +2,7 @@
 
     run_jobs(jobs, fn, workers=1, executor="local" | "dask", scheduler=None) -> (results, failures)
     report_stage("track")          called by a job function to show the stage it has entered
-    discover_flights(path)         flight configs in a folder, or listed in a manifest
+    discover_flights(path)         flight configs in a folder, or listed in a manifest (pipeline.flight_config's)
     run_groups(jobs, process, outdir, digests=..., force=False, ...)
                                    run_jobs + each group's output folder, finished groups reused on a re-run
 
@@ -33,10 +33,12 @@ from os import PathLike
 from pathlib import Path
 from typing import Any
 
-import yaml
-
-from pipeline.errors import ConfigError, InputError, RidgelocError, environment_error_message
+from pipeline.errors import ConfigError, RidgelocError, environment_error_message
+from pipeline.flight_config import discover_flights
 from pipeline.results import GroupFailure
+
+__all__ = ["EXECUTORS", "Job", "discover_flights", "itemised_timings", "job_digest", "report_stage", "run_groups",
+           "run_jobs", "summarize_failures"]
 
 EXECUTORS = ("local", "dask")
 STAGE_TOPIC = "ridgeloc-stage"
@@ -494,38 +496,3 @@ def run_groups(jobs: Sequence[Job], process: Callable[[Any], Any], outdir: str |
     by_name = {**reused, **{r.name: r for r in new}}
     results = [by_name[j.name] for j in jobs if j.name in by_name]
     return results, failures, [j.name for j in jobs if j.name in reused]
-
-
-# ---- finding flights -------------------------------------------------------------------------------------------
-
-def discover_flights(path: str | PathLike, config_name: str = "flight.yaml") -> list[Path]:
-    """Flight config files to run, from:
-
-    - a folder: every `config_name` file in it or below (hidden folders skipped), sorted by path;
-    - a manifest YAML file: a list of flight config paths, or a mapping with such a list under `groups`
-      (a run config); relative paths are relative to the manifest's folder;
-    - any other YAML file: that one flight config.
-
-    Listed files are not opened or checked here: a missing or broken one fails as its own job.
-    """
-    path = Path(path)
-    if path.is_dir():
-        found = sorted(p for p in path.rglob(config_name)
-                       if p.is_file() and not any(part.startswith(".") for part in p.relative_to(path).parts[:-1]))
-        if not found:
-            raise InputError(f"no flight configs named {config_name} in this folder or below", path)
-        return [p.resolve() for p in found]
-    if not path.is_file():
-        raise InputError("no such file or folder", path)
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read: {exc}", path) from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"not valid YAML: {exc}", path) from None
-    listed = doc if isinstance(doc, list) else doc.get("groups") if isinstance(doc, dict) else None
-    if listed is None:
-        return [path.resolve()]
-    if not isinstance(listed, list) or not listed or not all(isinstance(p, str) and p for p in listed):
-        raise ConfigError("a manifest must be a non-empty list of flight config paths", path)
-    return [(path.resolve().parent / p).resolve() for p in listed]

@@ -13,6 +13,7 @@ import copy
 import dataclasses
 import difflib
 import functools
+import re
 import types
 import typing
 from os import PathLike
@@ -31,6 +32,8 @@ _CONFIG = pydantic.ConfigDict(strict=True, extra="forbid", allow_inf_nan=False)
 _UNKNOWN = ("extra_forbidden", "unexpected_keyword_argument")
 _NUMBER = {"int_type": "an integer", "int_parsing": "an integer", "int_from_float": "an integer",
            "float_type": "a finite number", "float_parsing": "a finite number", "finite_number": "a finite number"}
+_BOUND = {"greater_than_equal": (">=", "ge", lambda v, b: v >= b), "greater_than": (">", "gt", lambda v, b: v > b),
+          "less_than_equal": ("<=", "le", lambda v, b: v <= b), "less_than": ("<", "lt", lambda v, b: v < b)}
 _KIND = {"bool_type": "true or false", "bool_parsing": "true or false", "string_type": "a string",
          "tuple_type": "a list", "list_type": "a list", "dict_type": "a mapping",
          "dataclass_type": "a mapping of keys", "dataclass_args_type": "a mapping of keys"}
@@ -122,13 +125,24 @@ def format_error(exc: pydantic.ValidationError, doc, cls: type, *, style: str = 
         keys = [_key_path(e, doc) for e in unknown]
         keys = [k for k in keys if k[:-1] == keys[0][:-1]]  # one section: the first's
         return _unknown_keys(keys, _field_names(cls, keys[0][:-1]), style)
-    err = errors[0]
-    keys = _key_path(err, doc)
+    err, keys = _deepest(errors, doc)
     if err["loc"][-1:] == ("[key]",):  # a mapping's key, not its value
         return _sentence(keys[:-1], f"has a key that is not a string: {_show(err['input'])}", style)
     if err["type"] in ("value_error", "assertion_error") and "error" in err.get("ctx", {}):
         return f"{_render(keys)}: {err['ctx']['error']}" if keys else str(err["ctx"]["error"])
     return _sentence(keys, _problem(err, errors, style), style)
+
+
+def _deepest(errors: list[dict], doc) -> tuple[dict, list]:
+    """The first error, or where a union's members fail below it (a list of methods with one misspelt), the
+    deepest of those: the user's key that is wrong, not the union member that does not fit at all."""
+    keys = _key_path(errors[0], doc)
+    best = (errors[0], keys)
+    for e in errors[1:]:
+        k = _key_path(e, doc)
+        if k[:len(keys)] == keys and len(k) > len(best[1]):
+            best = (e, k)
+    return best
 
 
 def _key_path(err: dict, doc) -> list[str | int]:
@@ -172,8 +186,18 @@ def _problem(err: dict, errors: list[dict], style: str) -> str:
         return f"must be {_NUMBER[kind]}, {got}"
     if kind in _KIND:
         return f"must be {_KIND[kind]}, {got}"
-    if kind == "literal_error":
-        return f"must be one of {err['ctx']['expected']}, got {_show(value)}"
+    if kind == "literal_error":  # with the other literal members of a union at the same key
+        expected = [x for e in errors if e["type"] == "literal_error" and e["loc"][:-1] == err["loc"][:-1]
+                    and e["input"] is value for x in re.findall(r"'([^']*)'", e["ctx"]["expected"])] \
+            or re.findall(r"'([^']*)'", err["ctx"]["expected"])
+        near = _near(value, expected) if isinstance(value, str) else None
+        hint = f" (did you mean {near!r}?)" if near else ""
+        return f"must be one of {', '.join(map(repr, expected))}, got {_show(value)}{hint}"
+    if kind in _BOUND:
+        bound = err["ctx"][_BOUND[kind][1]]
+        fixed = -value if isinstance(value, (int, float)) and value < 0 and _BOUND[kind][2](-value, bound) else None
+        hint = f" (did you mean {fixed!r}?)" if fixed is not None else ""
+        return f"must be {_BOUND[kind][0]} {bound:g}, got {_show(value)}{hint}"
     if kind == "missing":
         if isinstance(value, (list, tuple)):  # a fixed-length list: pydantic names each missing item
             n_missing = sum(e["type"] == "missing" and e["loc"][:-1] == err["loc"][:-1] for e in errors)
@@ -181,7 +205,9 @@ def _problem(err: dict, errors: list[dict], style: str) -> str:
         return "is required"
     if kind in ("too_long", "too_short"):
         ctx = err.get("ctx", {})
-        return f"must have {ctx.get('max_length', ctx.get('min_length'))} elements, got {ctx.get('actual_length')}"
+        if kind == "too_short":
+            return f"must have at least {ctx.get('min_length')} element(s), got {ctx.get('actual_length')}"
+        return f"must have {ctx.get('max_length')} elements, got {ctx.get('actual_length')}"
     return f"{err['msg'][0].lower()}{err['msg'][1:]}, {got}"
 
 
@@ -214,7 +240,22 @@ def _field_names(cls: type, keys) -> list[str] | None:
                 continue
             tp = next(m for m in members if dataclasses.is_dataclass(m))
             if key is not None:
-                tp = typing.get_type_hints(tp)[key]
+                tp = _keys(tp)[key]
     except (StopIteration, KeyError, IndexError):
         return None
-    return [f.name for f in dataclasses.fields(tp) if f.init]
+    return list(_keys(tp))
+
+
+def _keys(cls: type) -> dict[str, type]:
+    """The keys a dataclass accepts (a field's pydantic alias, else its name) and their types."""
+    hints = typing.get_type_hints(cls, include_extras=True)
+    out = {}
+    for f in dataclasses.fields(cls):
+        if not f.init:
+            continue
+        tp, alias = hints[f.name], None
+        while typing.get_origin(tp) is typing.Annotated:
+            alias = next((m.alias for m in tp.__metadata__ if isinstance(m, pydantic.fields.FieldInfo)), alias)
+            tp = tp.__origin__
+        out[alias or f.name] = tp
+    return out

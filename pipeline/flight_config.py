@@ -4,7 +4,11 @@ A YAML file is read into typed, frozen dataclasses. Every section rejects unknow
 near miss such as `fx` for `fx_px`), checks types, shapes and ranges, resolves paths relative to the config
 file and names missing files. Units are in the key names (`_px`, `_m`, `_ns`, `_s`, `_deg`).
 
-A run config (configs/sample.yaml) lists flight configs under `groups:`; `load_run_config` accepts either.
+A run config (configs/sample.yaml) lists flight configs under `groups:`, a manifest is a YAML list of them;
+`discover_flights` is the one parser of both (and of a folder of flights), `load_run_config` loads what it lists.
+Validation is declarative (pydantic, `pipeline.config_schema`): bounds are annotations on the fields, the
+estimators' names and options come from the registry `pipeline.solve.options`, and a mistake is one
+`ConfigError` naming the file, the dotted key and, for a near miss, "did you mean".
 """
 
 from __future__ import annotations
@@ -16,13 +20,18 @@ import typing
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
+from typing import Annotated
 
 import numpy as np
-import yaml
+import pydantic
+from annotated_types import Ge, Gt, Le, Lt
 
 from pipeline.config_schema import load_dataclass, read_yaml
-from pipeline.errors import ConfigError
-from pipeline.track.sift import TrackerSettings
+from pipeline.errors import ConfigError, InputError
+from pipeline.solve_options import Method, SolveOptions, given_options
+
+NonNegative = Annotated[float, Ge(0)]
+Positive = Annotated[float, Gt(0)]
 
 # ---- the flight configuration ------------------------------------------------------------------------------
 
@@ -44,10 +53,10 @@ class Camera:
     centre of the top-left pixel) and the camera's mounting in the gimbal. The intrinsics may be left out
     together (all of width_px .. cy_px, and dist): they then come from the logs (`pipeline.intrinsics`)."""
 
-    width_px: int | None = None
-    height_px: int | None = None
-    fx_px: float | None = None
-    fy_px: float | None = None
+    width_px: Annotated[int, Gt(0)] | None = None
+    height_px: Annotated[int, Gt(0)] | None = None
+    fx_px: Positive | None = None
+    fy_px: Positive | None = None
     cx_px: float | None = None
     cy_px: float | None = None
     dist: tuple[float, ...] | None = None
@@ -60,8 +69,6 @@ class Camera:
             missing = [k for k in INTRINSIC_KEYS if getattr(self, k) is None]
             raise ValueError(f"give all of {', '.join(INTRINSIC_KEYS)} or none (to take them from the logs' "
                              f"CameraInfo); missing: {', '.join(missing)}")
-        if given and (self.width_px <= 0 or self.height_px <= 0 or self.fx_px <= 0 or self.fy_px <= 0):
-            raise ValueError("image size and focal lengths must be positive")
         if self.dist is not None and len(self.dist) not in (4, 5, 8):
             raise ValueError(f"'dist' must be [k1, k2, p1, p2] or [k1, k2, p1, p2, k3] (or 8), got {len(self.dist)}")
         if self.dist is not None and not given:
@@ -95,6 +102,25 @@ class LeverArms:
     rangefinder: Vec3 = (0.0, 0.0, 0.0)
 
 
+@dataclass(frozen=True)
+class TrackerSettings:
+    """Thresholds of the tracker (`pipeline.track.sift`; flight config `tracking:` keys of the same names)."""
+
+    n_features: Annotated[int, Ge(50)] = 1000
+    ratio: Annotated[float, Gt(0), Lt(1)] = 0.75
+    ransac_reproj_px: Positive = 3.0
+    min_inliers: Annotated[int, Ge(4)] = 12  # a homography needs 4 points
+    min_inlier_ratio: Annotated[float, Ge(0), Le(1)] = 0.25
+    min_correlation: Annotated[float, Ge(-1), Le(1)] = 0.5
+    min_contrast_ratio: Annotated[float, Gt(0), Le(1)] = 0.6
+    patch_half_px: Annotated[int, Ge(3)] = 15
+    search_half_px: Annotated[int, Ge(1)] = 6
+    keyframe_inlier_fraction: Annotated[float, Ge(0), Le(1)] = 0.5
+    neighbours: Annotated[int, Ge(0)] = 2
+    detect_scale: Annotated[float, Ge(0.1), Le(1)] = 0.5  # features found on the image resized by this factor
+    max_detect_px: Annotated[int, Ge(160)] = 1280  # ... and at most this many pixels on its long side
+
+
 CLOCK_SOURCES = ("video", "range", "position", "attitude", "gimbal")
 
 
@@ -126,7 +152,7 @@ class Clock:
     attitude_latency_s: float = 0.0
     gimbal_latency_s: float = 0.0
     estimate: bool = False
-    search_s: float = 2.0
+    search_s: Annotated[float, Gt(0), Le(600)] = 2.0
 
     def __post_init__(self):
         for src in CLOCK_SOURCES:
@@ -136,8 +162,6 @@ class Clock:
                 given.append("video_start")
             if len(given) > 1:
                 raise ValueError(f"give one of {' and '.join(given)}: both set the {src} offset")
-        if not 0 < self.search_s <= 600:
-            raise ValueError(f"'search_s' must be in (0, 600] seconds, got {self.search_s}")
         self.video_start_ns  # noqa: B018 (validates the time)
 
     @property
@@ -187,7 +211,7 @@ class Altitude:
 class Target:
     """Where the operator marked the target: a pixel in a frame, or a template image."""
 
-    frame_index: int | None = None
+    frame_index: Annotated[int, Ge(0)] | None = None
     pixel: tuple[float, float] | None = None
     template: str | None = None
     template_pixel: tuple[float, float] | None = None
@@ -202,28 +226,22 @@ class Target:
 @dataclass(frozen=True)
 class ObservationSelection:
     mode: typing.Literal["range_times", "frames", "bursts"] = "range_times"
-    frame_tolerance_s: float = 0.1
-    max_range_gap_s: float = 0.1
-    frame_indices: tuple[int, ...] = ()
-    max_laser_offset_px: float | None = 50.0
-    burst_gap_s: float = 0.5
+    frame_tolerance_s: Positive = 0.1
+    max_range_gap_s: NonNegative = 0.1
+    frame_indices: tuple[Annotated[int, Ge(0)], ...] = ()
+    max_laser_offset_px: Positive | None = 50.0
+    burst_gap_s: Positive = 0.5
 
     def __post_init__(self):
-        if self.frame_tolerance_s <= 0 or self.max_range_gap_s < 0:
-            raise ValueError("tolerances must be positive")
         if self.mode == "frames" and not self.frame_indices:
             raise ValueError("mode 'frames' needs 'frame_indices'")
 
 
 @dataclass(frozen=True)
 class Geodetic:
-    lat_deg: float
-    lon_deg: float
+    lat_deg: Annotated[float, Ge(-90), Le(90)]
+    lon_deg: Annotated[float, Ge(-180), Le(360)]
     alt_m: float
-
-    def __post_init__(self):
-        if not (-90 <= self.lat_deg <= 90 and -180 <= self.lon_deg <= 360):
-            raise ValueError(f"latitude/longitude out of range: {self.lat_deg}, {self.lon_deg}")
 
     def as_tuple(self) -> tuple[float, float, float]:
         return (self.lat_deg, self.lon_deg, self.alt_m)
@@ -231,18 +249,24 @@ class Geodetic:
 
 @dataclass(frozen=True)
 class Solve:
-    methods: tuple[str, ...] | str = "all"
-    options: dict[str, typing.Any] = field(default_factory=dict)
+    """methods: "all", one name or a list of names of `pipeline.solve.options.METHODS`. options: per method, the
+    options of `pipeline.solve.options.OPTIONS` (validated against that table at load; read as a plain
+    `{method: {option: value}}` dict of the options given)."""
+
+    methods: tuple[Method, ...] | Method | typing.Literal["all"] = "all"
+    options: Annotated[SolveOptions, pydantic.AfterValidator(given_options)] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
 class SigmaPriors:
-    pixel_px: float | None = None
-    range_m: float | None = None
-    position_m: float | None = None
-    attitude_deg: float | None = None
-    attitude_tau_s: float | None = None  # correlation times of the attitude and position errors (None: white)
-    position_tau_s: float | None = None
+    """The sensors' standard deviations (>= 0; None: unknown, the mle estimates them)."""
+
+    pixel_px: NonNegative | None = None
+    range_m: NonNegative | None = None
+    position_m: NonNegative | None = None
+    attitude_deg: NonNegative | None = None
+    attitude_tau_s: NonNegative | None = None  # correlation times of the attitude and position errors (None: white)
+    position_tau_s: NonNegative | None = None
 
 
 @dataclass(frozen=True)
@@ -356,38 +380,56 @@ class GroupEntry:
     error: str | None = None
 
 
-def load_run_config(path: str | PathLike) -> list[GroupEntry]:
-    """The flight groups of a run config (`groups: [flight config paths]`), a manifest (a YAML list of flight config
-    paths), a folder (every `flight.yaml` in it or below), a single flight config, or a full-motion video file.
+@dataclass(frozen=True)
+class RunConfig:
+    """A run config: the flight configs of a run (paths relative to the run config's folder)."""
 
-    A group whose flight config does not load is returned with its error (the others still run); a run config
-    that is itself malformed raises ConfigError."""
+    groups: Annotated[tuple[Annotated[str, pydantic.StringConstraints(min_length=1)], ...],
+                      pydantic.Field(min_length=1)]
+    description: str = ""
+
+
+def discover_flights(path: str | PathLike, config_name: str = "flight.yaml") -> list[Path]:
+    """The flight config files a run processes (absolute paths), from:
+
+    - a folder: every `config_name` file in it or below (hidden folders skipped), sorted by path;
+    - a manifest: a YAML list of flight config paths;
+    - a run config: a mapping with such a list under `groups` (RunConfig);
+    - any other YAML file: that one flight config.
+    Listed paths are relative to the listing file's folder; the listed files are not opened here."""
     path = Path(path)
     if path.is_dir():
-        from pipeline.batch import discover_flights
+        found = sorted(p for p in path.rglob(config_name)
+                       if p.is_file() and not any(part.startswith(".") for part in p.relative_to(path).parts[:-1]))
+        if not found:
+            raise InputError(f"no flight configs named {config_name} in this folder or below", path)
+        return [p.resolve() for p in found]
+    if not path.is_file():
+        raise InputError("no such file or folder", path)
+    doc = read_yaml(path)
+    if isinstance(doc, list):
+        doc = {"groups": doc}
+    elif not isinstance(doc, dict) or "groups" not in doc:
+        return [path.resolve()]
+    run = load_dataclass(RunConfig, doc, source=path)
+    return [(path.resolve().parent / g).resolve() for g in run.groups]
 
-        return _load_groups(discover_flights(path), path)
-    if path.suffix.lower() in FMV_SUFFIXES:
+
+def load_run_config(path: str | PathLike) -> list[GroupEntry]:
+    """The flight groups of a run config, a manifest, a folder (see `discover_flights`), a single flight config,
+    or a full-motion video file.
+
+    A listed group whose flight config does not load is returned with its error (the others still run); a run
+    config that is itself malformed, or a single flight config that does not load, raises ConfigError."""
+    path = Path(path)
+    if path.suffix.lower() in FMV_SUFFIXES and not path.is_dir():
         return [GroupEntry(str(path), flight_config_for_video(path))]
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise ConfigError("config file not found", path) from None
-    except (OSError, UnicodeDecodeError, yaml.YAMLError):
-        doc = None  # _read_yaml below reports it
-    if isinstance(doc, list):  # a manifest: a plain list of flight config paths
-        groups = doc
-    else:
-        doc = _read_yaml(path)
-        if "groups" not in doc:
-            return [GroupEntry(str(path), load_flight_config(path))]
-        unknown = sorted(set(doc) - {"groups", "description"})
-        if unknown:
-            raise ConfigError(f"{unknown[0]}: unknown key in a run config (known: groups, description)", path)
-        groups = doc["groups"]
-    if not isinstance(groups, list) or not groups or not all(isinstance(g, str) for g in groups):
-        raise ConfigError("'groups' must be a non-empty list of flight config paths", path)
-    return _load_groups([(path.resolve().parent / g).resolve() for g in groups], path)
+    if not path.exists():
+        raise ConfigError("config file not found", path)
+    listed = discover_flights(path)
+    if not path.is_dir() and listed == [path.resolve()]:
+        return [GroupEntry(str(path), load_flight_config(path))]
+    return _load_groups(listed, path)
 
 
 def _load_groups(paths: list[Path], source: Path) -> list[GroupEntry]:

@@ -183,7 +183,7 @@ def test_discover_flights(tmp_path):
         discover_flights(tmp_path / "nowhere")
     bad = tmp_path / "bad.yaml"
     bad.write_text("groups: []\n")
-    with pytest.raises(ConfigError, match="non-empty list"):
+    with pytest.raises(ConfigError, match=r"groups: must have at least 1 element"):
         discover_flights(bad)
 
 

@@ -18,10 +18,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args) -> int:
-    from pipeline.check.report import check_flight, format_check
     from pipeline.flight_config import load_flight_config
 
-    result = check_flight(load_flight_config(args.config), clock=not args.no_clock)
+    config = load_flight_config(args.config)  # a mistake in the config is refused before the heavy imports below
+    from pipeline.check.report import check_flight, format_check
+
+    result = check_flight(config, clock=not args.no_clock)
     if args.json:
         print(json.dumps(result.to_dict(), indent=1))
     else:

@@ -8,7 +8,6 @@ import time
 from pathlib import Path
 
 from pipeline.flight_config import FlightConfig, load_run_config
-from pipeline.results import GroupFailure
 
 HELP = "process flights (video, telemetry, ranges) into target positions, a Table-4-like report and GIS exports"
 DEFAULT_CONFIG = Path("configs/sample.yaml")
@@ -78,14 +77,15 @@ def group_summary(r, reused: bool = False) -> list[str]:
 
 
 def main(args) -> int:
+    config = _resolve_config(args.config)
+    entries = load_run_config(config)  # a malformed run config is refused before the heavy imports below
     from pipeline import __version__
     from pipeline.batch import Job, job_digest, run_groups, summarize_failures
     from pipeline.report.outputs import write_run_outputs
     from pipeline.report.table4 import write_table4
+    from pipeline.results import GroupFailure
     from pipeline.run import group_files, process_group
 
-    config = _resolve_config(args.config)
-    entries = load_run_config(config)
     config_failures: list[GroupFailure] = []
     loaded: list[tuple[str, FlightConfig]] = []
     for entry in entries:

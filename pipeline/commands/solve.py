@@ -15,8 +15,7 @@ import sys
 import numpy as np
 
 from pipeline.errors import RidgelocError, SolverError
-from pipeline.solve import METHODS, mle_outputs, solve, unsolved_status
-from pipeline.solve.observations import Observations
+from pipeline.solve_options import METHODS
 
 HELP = "Locate the target in an observations file with one or more estimators (docs/solvers.md)."
 
@@ -35,6 +34,8 @@ def _methods(chosen: list[str] | None) -> list[str]:
 
 
 def _table(results: dict, failures: dict, truth, t_ns=None) -> str:
+    from pipeline.solve import mle_outputs
+
     head = f"{'method':<11}{'x_m':>12}{'y_m':>12}{'z_m':>11}{'iter':>6}  {'status':<15}{'cond':>10}"
     if truth is not None:
         head += f"{'error_m':>10}"
@@ -64,6 +65,9 @@ def _table(results: dict, failures: dict, truth, t_ns=None) -> str:
 
 
 def main(args) -> int:
+    from pipeline.solve import solve, unsolved_status  # the CLI builds every command's parser: solve loads scipy
+    from pipeline.solve.observations import Observations
+
     obs = Observations.load(args.observations)
     results: dict = {}
     failures: dict = {}

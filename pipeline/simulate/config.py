@@ -12,12 +12,16 @@ import math
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
+
+from annotated_types import Ge, Gt, MinLen
 
 from pipeline.config_schema import load_dataclass, read_yaml, to_plain
 from pipeline.errors import ConfigError
+from pipeline.solve_options import METHODS, Method
 
-ALL_METHODS = ("dlt", "vision", "range", "los", "fusion-raw", "fusion", "ridge", "mle")
+NonNegative = Annotated[float, Ge(0)]
+Positive = Annotated[float, Gt(0)]
 
 
 @dataclass(frozen=True)
@@ -31,9 +35,9 @@ class GeometryConfig:
     """
 
     path: Literal["arc", "straight"] = "arc"
-    n_observations: int = 10
-    height_m: float = 2000.0
-    slant_distance_m: float = 5000.0
+    n_observations: Annotated[int, Ge(2)] = 10
+    height_m: Positive = 2000.0
+    slant_distance_m: Positive = 5000.0
 
 
 @dataclass(frozen=True)
@@ -44,10 +48,10 @@ class CameraConfig:
         pixel is not always the principal point (0 = the target locked at the centre, as in the paper).
     """
 
-    image_width_px: int = 600
-    image_height_px: int = 400
-    focal_length_px: float = 1000.0
-    pointing_jitter_deg: float = 0.0
+    image_width_px: Annotated[int, Gt(0)] = 600
+    image_height_px: Annotated[int, Gt(0)] = 400
+    focal_length_px: Positive = 1000.0
+    pointing_jitter_deg: NonNegative = 0.0
 
 
 @dataclass(frozen=True)
@@ -62,11 +66,11 @@ class NoiseConfig:
     pixel_px: per axis, on the target pixel, which is projected through the true camera.
     """
 
-    platform_position_m: float = 5.0
-    range_m: float = 2.5
-    attitude_deg: float = 0.2
+    platform_position_m: NonNegative = 5.0
+    range_m: NonNegative = 2.5
+    attitude_deg: NonNegative = 0.2
     attitude_model: Literal["independent", "accumulating", "constant"] = "independent"
-    pixel_px: float = 0.1
+    pixel_px: NonNegative = 0.1
 
 
 @dataclass(frozen=True)
@@ -83,8 +87,8 @@ class SolverConfig:
         Gaussian noise simulated here; "huber" / "cauchy" = the robust losses meant for real data with outliers.
     """
 
-    tol_m: float = 1e-4
-    max_iterations: int = 100
+    tol_m: Positive = 1e-4
+    max_iterations: Annotated[int, Ge(1)] = 100
     ridge_hkb: Literal["paper", "textbook"] = "paper"
     mle_sigma: Literal["given", "estimated"] = "given"
     mle_robust: Literal["none", "huber", "cauchy"] = "none"
@@ -97,9 +101,9 @@ class SimulationConfig:
     name: str = "table2"
     description: str = ""
     seed: int = 20240601
-    trials: int = 1000
-    angles_deg: tuple[float, ...] = (10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0)
-    methods: tuple[str, ...] = ALL_METHODS
+    trials: Annotated[int, Ge(1)] = 1000
+    angles_deg: Annotated[tuple[float, ...], MinLen(1)] = (10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0)
+    methods: Annotated[tuple[Method, ...], MinLen(1)] = METHODS
     geometry: GeometryConfig = field(default_factory=GeometryConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
@@ -127,42 +131,20 @@ class SimulationConfig:
 
 
 def _check_config(cfg: SimulationConfig) -> None:
-    g, c, nz, s = cfg.geometry, cfg.camera, cfg.noise, cfg.solver
-    if cfg.trials < 1:
-        raise ConfigError(f"'trials' must be >= 1, got {cfg.trials}")
-    if not cfg.angles_deg:
-        raise ConfigError("'angles_deg' must list at least one intersection angle")
-    if len(set(cfg.angles_deg)) != len(cfg.angles_deg):
-        raise ConfigError(f"'angles_deg' has duplicates: {list(cfg.angles_deg)}")
-    if not cfg.methods:
-        raise ConfigError("'methods' must list at least one estimator")
-    unknown = [m for m in cfg.methods if m not in ALL_METHODS]
-    if unknown:
-        raise ConfigError(f"unknown method(s) in 'methods': {', '.join(unknown)} (known: {', '.join(ALL_METHODS)})")
-    if len(set(cfg.methods)) != len(cfg.methods):
-        raise ConfigError(f"'methods' has duplicates: {list(cfg.methods)}")
-    if g.n_observations < 2:
-        raise ConfigError(f"'geometry.n_observations' must be >= 2, got {g.n_observations}")
-    if not 0 < g.height_m < g.slant_distance_m:
-        raise ConfigError(f"'geometry.height_m' ({g.height_m}) must be > 0 and below 'geometry.slant_distance_m' "
+    """What the field annotations cannot say: no duplicates, a reachable geometry."""
+    g = cfg.geometry
+    for name in ("angles_deg", "methods"):
+        values = list(getattr(cfg, name))
+        if len(set(values)) != len(values):
+            raise ConfigError(f"'{name}' has duplicates: {values}")
+    if not g.height_m < g.slant_distance_m:
+        raise ConfigError(f"'geometry.height_m' ({g.height_m}) must be below 'geometry.slant_distance_m' "
                           f"({g.slant_distance_m})")
     max_angle = max_intersection_angle_deg(g)
     too_wide = [a for a in cfg.angles_deg if not 0 < a < max_angle]
     if too_wide:
         raise ConfigError(f"'angles_deg' {too_wide} not reachable: the {g.path} path at this height and slant distance "
                           f"allows intersection angles in (0, {max_angle:.1f}) deg")
-    for name in ("image_width_px", "image_height_px", "focal_length_px"):
-        if getattr(c, name) <= 0:
-            raise ConfigError(f"'camera.{name}' must be > 0, got {getattr(c, name)}")
-    if c.pointing_jitter_deg < 0:
-        raise ConfigError(f"'camera.pointing_jitter_deg' must be >= 0, got {c.pointing_jitter_deg}")
-    for f in ("platform_position_m", "range_m", "attitude_deg", "pixel_px"):
-        if getattr(nz, f) < 0:
-            raise ConfigError(f"'noise.{f}' must be >= 0, got {getattr(nz, f)}")
-    if s.tol_m <= 0:
-        raise ConfigError(f"'solver.tol_m' must be > 0, got {s.tol_m}")
-    if s.max_iterations < 1:
-        raise ConfigError(f"'solver.max_iterations' must be >= 1, got {s.max_iterations}")
 
 
 def max_intersection_angle_deg(g: GeometryConfig) -> float:

@@ -20,8 +20,7 @@ from pipeline.solve.estimate import BatchEstimate, Estimate, Status
 from pipeline.solve.iterate import start_status
 from pipeline.solve.observations import ObservationBatch, Observations, Sigma
 from pipeline.solve.stacked import Stacked, pixel_model, range_model
-
-METHODS = ("dlt", "vision", "range", "los", "fusion-raw", "fusion", "ridge", "mle")
+from pipeline.solve_options import METHODS
 
 _COMMON = {"tol_m", "max_iterations", "initial_m"}
 _OPTIONS = {

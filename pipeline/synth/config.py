@@ -13,12 +13,20 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from os import PathLike
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
+
+from annotated_types import Ge, Gt, Le, Lt
 
 from pipeline.config_schema import load_dataclass, read_yaml, to_plain
 from pipeline.errors import ConfigError
 
 FORMATS = ("tlog", "ros1", "ros2-sqlite3", "ros2-mcap", "mcap", "klv")
+
+NonNegative = Annotated[float, Ge(0)]
+Positive = Annotated[float, Gt(0)]
+Index = Annotated[int, Ge(0)]
+Vec3 = tuple[float, float, float]
+Rate = Annotated[float, Gt(0), Le(200)]
 
 
 @dataclass(frozen=True)
@@ -52,13 +60,13 @@ class PathConfig:
     """
 
     kind: Literal["arc", "straight", "waypoints"] = "arc"
-    height_m: float = 2000.0
+    height_m: Positive = 2000.0
     slant_distance_m: float = 5000.0
     intersection_angle_deg: float = 40.0
     start_azimuth_deg: float = 200.0
     direction: Literal["cw", "ccw"] = "ccw"
-    speed_mps: float = 35.0
-    waypoints_enu_m: tuple[tuple[float, ...], ...] = ()
+    speed_mps: Annotated[float, Ge(5), Le(120)] = 35.0
+    waypoints_enu_m: tuple[Vec3, ...] = ()
     pitch_deg: float = 2.0
 
 
@@ -68,10 +76,10 @@ class ObservationConfig:
     the path length and speed; waypoints need it). lead_in_s / lead_out_s: flight time before the first and
     after the last observation."""
 
-    count: int = 10
-    spacing_s: int = 0
-    lead_in_s: float = 8.0
-    lead_out_s: float = 4.0
+    count: Annotated[int, Ge(2)] = 10
+    spacing_s: Annotated[int, Ge(0)] = 0
+    lead_in_s: Annotated[float, Ge(1)] = 8.0
+    lead_out_s: Annotated[float, Ge(1)] = 4.0
 
 
 @dataclass(frozen=True)
@@ -79,15 +87,15 @@ class CameraConfig:
     """OpenCV pinhole + distortion (k1, k2, p1, p2, k3), 25 Hz video. zoom: [[seconds after the video start,
     factor], ...], a zoom lens stepping to `factor` times the focal lengths at that time (needs dist all 0)."""
 
-    width_px: int = 600
-    height_px: int = 400
-    fx_px: float = 1800.0
-    fy_px: float = 1800.0
+    width_px: Annotated[int, Ge(16)] = 600
+    height_px: Annotated[int, Ge(16)] = 400
+    fx_px: Positive = 1800.0
+    fy_px: Positive = 1800.0
     cx_px: float = 301.7
     cy_px: float = 198.4
-    dist: tuple[float, ...] = (-0.12, 0.08, 0.0006, -0.0004, 0.0)
-    fps: int = 25
-    zoom: tuple[tuple[float, float], ...] = ()
+    dist: tuple[float, float, float, float, float] = (-0.12, 0.08, 0.0006, -0.0004, 0.0)
+    fps: Annotated[int, Ge(1)] = 25
+    zoom: tuple[tuple[float, Positive], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -110,19 +118,19 @@ class GimbalConfig:
 class LeverArmConfig:
     """Camera and rangefinder origins relative to the GNSS antenna, body FRD metres."""
 
-    camera: tuple[float, ...] = (0.35, 0.0, 0.42)
-    rangefinder: tuple[float, ...] = (0.35, 0.06, 0.42)
+    camera: Vec3 = (0.35, 0.0, 0.42)
+    rangefinder: Vec3 = (0.35, 0.06, 0.42)
 
 
 @dataclass(frozen=True)
 class RatesConfig:
     """Logging rates, Hz. The laser fires on video frames (a multiple of the frame period)."""
 
-    gps_hz: float = 5.0
-    attitude_hz: float = 25.0
-    gimbal_hz: float = 25.0
-    laser_hz: float = 1.0
-    system_time_hz: float = 1.0
+    gps_hz: Rate = 5.0
+    attitude_hz: Rate = 25.0
+    gimbal_hz: Rate = 25.0
+    laser_hz: Rate = 1.0
+    system_time_hz: Rate = 1.0
 
 
 @dataclass(frozen=True)
@@ -139,18 +147,18 @@ class NoiseConfig:
     pixel_noise_dn: sensor noise on rendered frames (8-bit digital numbers).
     """
 
-    gnss_drift_m: float = 1.7
-    gnss_white_m: float = 1.0
+    gnss_drift_m: NonNegative = 1.7
+    gnss_white_m: NonNegative = 1.0
     gnss_tau_s: float = 60.0
-    attitude_deg: float = 0.2
-    gimbal_deg: float = 0.2
+    attitude_deg: NonNegative = 0.2
+    gimbal_deg: NonNegative = 0.2
     attitude_tau_s: float = 20.0
-    laser_m: float = 5.0
-    laser_dropout: float = 0.05
+    laser_m: NonNegative = 5.0
+    laser_dropout: Annotated[float, Ge(0), Lt(1)] = 0.05
     laser_dropout_at_observations: bool = False
-    vehicle_wobble_deg: float = 0.6
+    vehicle_wobble_deg: NonNegative = 0.6
     vehicle_wobble_tau_s: float = 1.5
-    pixel_noise_dn: float = 1.5
+    pixel_noise_dn: NonNegative = 1.5
 
 
 @dataclass(frozen=True)
@@ -165,9 +173,9 @@ class LaserConfig:
     min_range_m: float = 50.0
     max_range_m: float = 12000.0
     aim: Literal["target", "beam"] = "target"
-    outlier_observations: tuple[int, ...] = ()
+    outlier_observations: tuple[Index, ...] = ()
     outlier_offset_m: tuple[float, ...] = (-420.0, 310.0, -650.0)
-    dropped_observations: tuple[int, ...] = ()
+    dropped_observations: tuple[Index, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -175,8 +183,8 @@ class LostTargetConfig:
     """Observations whose frames do not show the target: occluded (a cloud drifts over it) or slipped (the
     gimbal loses lock and points slip_px to the side: the target leaves the image, the laser hits ground)."""
 
-    occluded_observations: tuple[int, ...] = ()
-    slipped_observations: tuple[int, ...] = ()
+    occluded_observations: tuple[Index, ...] = ()
+    slipped_observations: tuple[Index, ...] = ()
     slip_px: float = 420.0
 
 
@@ -189,10 +197,10 @@ class VideoConfig:
     jpeg_quality: for CompressedImage frames."""
 
     mode: Literal["bursts", "continuous"] = "bursts"
-    burst_frames: int = 9
+    burst_frames: Annotated[int, Ge(1)] = 9
     start_delay_s: float = 2.316
     images_in_bag: bool = False
-    jpeg_quality: int = 85
+    jpeg_quality: Annotated[int, Ge(1), Le(100)] = 85
 
 
 @dataclass(frozen=True)
@@ -201,9 +209,9 @@ class SceneConfig:
     supersample: rendering factor before the anti-aliasing downsample; haze_km: visibility scale."""
 
     seed: int = 7
-    texture_px: int = 4096
-    texture_res_m: float = 1.5
-    supersample: int = 2
+    texture_px: Annotated[int, Ge(256)] = 4096
+    texture_res_m: Positive = 1.5
+    supersample: Annotated[int, Ge(1)] = 2
     haze_km: float = 16.0
 
 
@@ -265,14 +273,11 @@ class SynthConfig:
 
 
 def _check(c: SynthConfig) -> None:
+    """What the field annotations cannot say: checks across keys."""
     p, o, cam = c.path, c.observations, c.camera
     c.start_time_ns  # noqa: B018 (validates the time string)
-    if o.count < 2:
-        raise ConfigError(f"'observations.count' must be >= 2, got {o.count}")
-    if o.spacing_s < 0 or o.lead_in_s < 1 or o.lead_out_s < 1:
-        raise ConfigError("'observations.spacing_s' must be >= 0 and lead_in_s, lead_out_s >= 1")
-    if not 0 < p.height_m < p.slant_distance_m:
-        raise ConfigError(f"'path.height_m' ({p.height_m}) must be > 0 and below 'path.slant_distance_m'")
+    if not p.height_m < p.slant_distance_m:
+        raise ConfigError(f"'path.height_m' ({p.height_m}) must be below 'path.slant_distance_m'")
     if p.kind == "arc":
         theta = math.asin(math.sqrt(p.slant_distance_m ** 2 - p.height_m ** 2) / p.slant_distance_m)
         max_deg = math.degrees(2 * theta)
@@ -283,52 +288,26 @@ def _check(c: SynthConfig) -> None:
         if not 0 < p.intersection_angle_deg < 170:
             raise ConfigError(f"'path.intersection_angle_deg' must be in (0, 170), got {p.intersection_angle_deg}")
     else:
-        if len(p.waypoints_enu_m) < 2 or any(len(w) != 3 for w in p.waypoints_enu_m):
+        if len(p.waypoints_enu_m) < 2:
             raise ConfigError("'path.waypoints_enu_m' must list at least two [E, N, Up] points")
         if o.spacing_s < 1:
             raise ConfigError("a waypoints path needs 'observations.spacing_s' >= 1")
-    if not 5 <= p.speed_mps <= 120:
-        raise ConfigError(f"'path.speed_mps' must be in [5, 120], got {p.speed_mps}")
-    if cam.width_px < 16 or cam.height_px < 16 or cam.fx_px <= 0 or cam.fy_px <= 0 or len(cam.dist) != 5:
-        raise ConfigError("'camera' needs width/height >= 16 px, positive focal lengths and 5 'dist' coefficients")
-    if cam.fps < 1:
-        raise ConfigError(f"'camera.fps' must be >= 1, got {cam.fps}")
-    if cam.zoom and (any(len(z) != 2 or z[1] <= 0 for z in cam.zoom) or any(cam.dist)):
-        raise ConfigError("'camera.zoom' must list [seconds, factor > 0] pairs, with 'camera.dist' all 0")
+    if cam.zoom and any(cam.dist):
+        raise ConfigError("'camera.zoom' needs 'camera.dist' all 0")
     if c.format == "klv" and (c.gimbal.yaw_in_vehicle_frame or any(cam.dist) or c.video.images_in_bag):
         raise ConfigError("format 'klv' (MISB ST 0601 in MPEG-TS) states the field of view only: it needs "
                           "'camera.dist' all 0, and no gimbal.yaw_in_vehicle_frame or video.images_in_bag")
-    for name in ("camera", "rangefinder"):
-        if len(getattr(c.lever_arms_m, name)) != 3:
-            raise ConfigError(f"'lever_arms_m.{name}' must be [x, y, z]")
-    r = c.rates
-    for name in ("gps_hz", "attitude_hz", "gimbal_hz", "laser_hz", "system_time_hz"):
-        if not 0 < getattr(r, name) <= 200:
-            raise ConfigError(f"'rates.{name}' must be in (0, 200], got {getattr(r, name)}")
-    frames_per_shot = cam.fps / r.laser_hz
+    frames_per_shot = cam.fps / c.rates.laser_hz
     if abs(frames_per_shot - round(frames_per_shot)) > 1e-9:
         raise ConfigError(f"'rates.laser_hz' must divide the frame rate {cam.fps} (the laser fires on frames)")
-    for name in ("gnss_drift_m", "gnss_white_m", "attitude_deg", "gimbal_deg", "laser_m", "vehicle_wobble_deg",
-                 "pixel_noise_dn"):
-        if getattr(c.noise, name) < 0:
-            raise ConfigError(f"'noise.{name}' must be >= 0")
-    if not 0 <= c.noise.laser_dropout < 1:
-        raise ConfigError(f"'noise.laser_dropout' must be in [0, 1), got {c.noise.laser_dropout}")
     for name, idx in (("laser.outlier_observations", c.laser.outlier_observations),
                       ("laser.dropped_observations", c.laser.dropped_observations),
                       ("lost_target.occluded_observations", c.lost_target.occluded_observations),
                       ("lost_target.slipped_observations", c.lost_target.slipped_observations)):
-        bad = [i for i in idx if not 0 <= i < o.count]
+        bad = [i for i in idx if not i < o.count]
         if bad:
             raise ConfigError(f"'{name}' has indices outside 0..{o.count - 1}: {bad}")
     if c.laser.outlier_observations and not c.laser.outlier_offset_m:
         raise ConfigError("'laser.outlier_offset_m' must list at least one offset")
-    if c.video.burst_frames < 1:
-        raise ConfigError("'video.burst_frames' must be >= 1")
     if c.video.images_in_bag and c.format in ("tlog", "mcap"):
         raise ConfigError("'video.images_in_bag' needs a bag format (ros1, ros2-sqlite3, ros2-mcap)")
-    if not 1 <= c.video.jpeg_quality <= 100:
-        raise ConfigError("'video.jpeg_quality' must be in [1, 100]")
-    s = c.scene
-    if s.texture_px < 256 or s.texture_res_m <= 0 or s.supersample < 1:
-        raise ConfigError("'scene' needs texture_px >= 256, texture_res_m > 0, supersample >= 1")

@@ -25,39 +25,7 @@ import cv2
 import numpy as np
 
 from pipeline.errors import InputError
-
-
-@dataclass(frozen=True)
-class TrackerSettings:
-    """Thresholds of the tracker (flight config `tracking:` keys of the same names)."""
-
-    n_features: int = 1000
-    ratio: float = 0.75
-    ransac_reproj_px: float = 3.0
-    min_inliers: int = 12
-    min_inlier_ratio: float = 0.25
-    min_correlation: float = 0.5
-    min_contrast_ratio: float = 0.6
-    patch_half_px: int = 15
-    search_half_px: int = 6
-    keyframe_inlier_fraction: float = 0.5
-    neighbours: int = 2
-    detect_scale: float = 0.5  # features are found on the image resized by this factor (speed); refinement is full-res
-    max_detect_px: int = 1280  # ... and at most this many pixels on its long side (4K: a pyramid level, not 4K)
-
-    def __post_init__(self):
-        if not 0 < self.ratio < 1:
-            raise ValueError("'ratio' must be in (0, 1)")
-        if self.min_inliers < 4:
-            raise ValueError("'min_inliers' must be at least 4 (a homography needs 4 points)")
-        if self.patch_half_px < 3 or self.search_half_px < 1 or self.n_features < 50:
-            raise ValueError("'patch_half_px' >= 3, 'search_half_px' >= 1 and 'n_features' >= 50 required")
-        if not 0 < self.min_contrast_ratio <= 1:
-            raise ValueError("'min_contrast_ratio' must be in (0, 1]")
-        if not 0.1 <= self.detect_scale <= 1.0:
-            raise ValueError("'detect_scale' must be in [0.1, 1]")
-        if self.max_detect_px < 160:
-            raise ValueError("'max_detect_px' must be at least 160")
+from pipeline.flight_config import TrackerSettings
 
 
 @dataclass

@@ -135,12 +135,14 @@ def format_error(exc: pydantic.ValidationError, doc, cls: type, *, style: str = 
 
 def _deepest(errors: list[dict], doc) -> tuple[dict, list]:
     """The first error, or where a union's members fail below it (a list of methods with one misspelt), the
-    deepest of those: the user's key that is wrong, not the union member that does not fit at all."""
+    deepest of those: the user's key that is wrong, not the union member that does not fit at all; at one key, a
+    union's literal members ("must be one of") before its type members ("must be a list")."""
     keys = _key_path(errors[0], doc)
     best = (errors[0], keys)
     for e in errors[1:]:
         k = _key_path(e, doc)
-        if k[:len(keys)] == keys and len(k) > len(best[1]):
+        deeper = k[:len(keys)] == keys and len(k) > len(best[1])
+        if deeper or (k == best[1] and e["type"] == "literal_error" != best[0]["type"]):  # "must be one of" a value
             best = (e, k)
     return best
 

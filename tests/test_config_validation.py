@@ -1,0 +1,140 @@
+"""Declarative validation at load: a config mistake is one line naming the file, the dotted key and a suggestion,
+raised before any data is read; the estimators' option table agrees with what `solve` accepts."""
+
+from __future__ import annotations
+
+import copy
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from pipeline.errors import ConfigError
+from pipeline.flight_config import load_flight_config, load_run_config
+from pipeline.solve_options import METHODS, OPTIONS, given_options
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _flight(tmp_path) -> dict:
+    (tmp_path / "flight.tlog").write_bytes(b"x")
+    return {"name": "g1", "files": {"telemetry": ["flight.tlog"]},
+            "target": {"frame_index": 0, "pixel": [300.0, 200.0]},
+            "sigma": {"pixel_px": 0.5, "range_m": 5.0, "position_m": 2.0, "attitude_deg": 0.2}}
+
+
+def _write(path: Path, doc) -> Path:
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+MISTAKES = [  # (change, the whole message after "<file>: ")
+    (lambda d: d.update(solve={"options": {"mle": {"robst": "huber"}}}),
+     "solve.options.mle.robst: unknown key (did you mean 'robust'?)"),
+    (lambda d: d["sigma"].update(range_m=-1),
+     "sigma.range_m: must be >= 0, got -1 (did you mean 1?)"),
+    (lambda d: d.update(sigmas=d.pop("sigma")),
+     "sigmas: unknown key (did you mean 'sigma'?)"),
+    (lambda d: d.update(solve={"methods": ["fusion", "rigde"]}),
+     "solve.methods[1]: must be one of 'dlt', 'vision', 'range', 'los', 'fusion-raw', 'fusion', 'ridge', 'mle', "
+     "got 'rigde' (did you mean 'ridge'?)"),
+    (lambda d: d.update(solve={"methods": "mel"}),
+     "solve.methods: must be one of 'dlt', 'vision', 'range', 'los', 'fusion-raw', 'fusion', 'ridge', 'mle', 'all', "
+     "got 'mel' (did you mean 'mle'?)"),
+    (lambda d: d.update(solve={"options": {"mel": {"robust": "huber"}}}),
+     "solve.options.mel: unknown key (did you mean 'mle'?)"),
+    (lambda d: d.update(solve={"options": {"ridge": {"hkb": "papr"}}}),
+     "solve.options.ridge.hkb: must be one of 'paper', 'textbook', got 'papr' (did you mean 'paper'?)"),
+    (lambda d: d.update(solve={"options": {"fusion-raw": {"tol": 0.001}}}),
+     "solve.options.fusion-raw.tol: unknown key (did you mean 'tol_m'?)"),
+    (lambda d: d.update(solve={"options": {"mle": {"sigma": {"range_m": -2.0}}}}),
+     "solve.options.mle.sigma.range_m: must be >= 0, got -2.0 (did you mean 2.0?)"),
+    (lambda d: d.update(solve={"options": {"dlt": {"tol_m": 0.001}}}),
+     "solve.options.dlt.tol_m: unknown key (known: )"),
+    (lambda d: d.update(observations={"frame_tolerance_s": 0}),
+     "observations.frame_tolerance_s: must be > 0, got 0"),
+    (lambda d: d.update(tracking={"ratio": 1.5}),
+     "tracking.ratio: must be < 1, got 1.5"),
+]
+
+
+@pytest.mark.parametrize(("change", "message"), MISTAKES)
+def test_a_mistake_is_one_line_naming_file_key_and_suggestion(tmp_path, change, message):
+    doc = _flight(tmp_path)
+    change(doc)
+    path = _write(tmp_path / "bad.yaml", doc)
+    with pytest.raises(ConfigError) as info:
+        load_flight_config(path)
+    assert str(info.value) == f"{path}: {message}"
+
+
+def test_check_and_run_refuse_a_mistake_before_reading_data(tmp_path):
+    doc = _flight(tmp_path)
+    doc["solve"] = {"options": {"mle": {"robst": "huber"}}}
+    path = _write(tmp_path / "bad.yaml", doc)
+    for cmd in (["check", str(path)], ["run", str(path), "-q", "-o", str(tmp_path / "out")]):
+        proc = subprocess.run([sys.executable, "-m", "pipeline", *cmd], cwd=ROOT, capture_output=True, text=True)
+        assert proc.returncode != 0
+        assert proc.stderr.splitlines() == [
+            f"ridgeloc: error: {path}: solve.options.mle.robst: unknown key (did you mean 'robust'?)"]
+        assert proc.stdout == ""
+        assert not (tmp_path / "out").exists()
+
+
+def test_good_options_are_read_as_a_plain_dict_of_the_given_keys(tmp_path):
+    doc = _flight(tmp_path)
+    doc["solve"] = {"methods": ["ridge", "mle"],
+                    "options": {"ridge": {"hkb": "textbook", "k": 0},
+                                "mle": {"robust": None, "sigma": {"range_m": 3}, "bias_prior_deg": 0.5},
+                                "fusion-raw": {"initial_m": [1, 2, 3]}}}
+    cfg = load_flight_config(_write(tmp_path / "ok.yaml", doc))
+    assert cfg.solve.methods == ("ridge", "mle")
+    # robust: null (the squared loss) is a given value, not "left out"; sigma keeps only its given keys
+    assert cfg.solve.options == {"fusion-raw": {"initial_m": (1.0, 2.0, 3.0)},
+                                 "ridge": {"hkb": "textbook", "k": 0.0},
+                                 "mle": {"robust": None, "sigma": {"range_m": 3.0}, "bias_prior_deg": 0.5}}
+    assert cfg.to_dict()["solve"]["options"]["mle"] == {"robust": None, "sigma": {"range_m": 3.0},
+                                                        "bias_prior_deg": 0.5}
+    assert load_flight_config(_write(tmp_path / "none.yaml", _flight(tmp_path))).solve.options == {}
+
+
+def test_the_option_table_is_what_solve_accepts():
+    from pipeline.solve import METHODS as SOLVE_METHODS
+    from pipeline.solve.methods import _OPTIONS, _check_options
+    from pipeline.solve.observations import Sigma
+
+    assert SOLVE_METHODS is METHODS and set(OPTIONS) == set(METHODS)
+    for m in METHODS:
+        assert {o.name for o in OPTIONS[m]} == _OPTIONS[m], m
+    # every literal value the table allows is one solve accepts, and the sigma option's keys are Sigma's
+    _check_options("ridge", {"hkb": "textbook"})
+    for robust in ("redescending", "huber", "cauchy", None):
+        _check_options("mle", {"robust": robust})
+    sigma = next(o.type for o in OPTIONS["mle"] if o.name == "sigma")
+    import dataclasses
+    assert [f.name for f in dataclasses.fields(sigma)] == [f.name for f in dataclasses.fields(Sigma)]
+    assert given_options({"mle": {"robust": "huber"}}) == {"mle": {"robust": "huber"}}
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "configs" / "flights").glob("*.yaml")), ids=lambda p: p.stem)
+def test_every_shipped_flight_config_loads(path):
+    if not (ROOT / "sample_data" / path.stem).is_dir():
+        pytest.skip("sample_data/ is not present")
+    assert load_flight_config(path).name == path.stem
+
+
+def test_a_manifest_and_a_run_config_are_one_parser(tmp_path):
+    _write(tmp_path / "a.yaml", _flight(tmp_path))
+    b = copy.deepcopy(_flight(tmp_path))
+    b["name"] = "g2"
+    _write(tmp_path / "b.yaml", b)
+    manifest = _write(tmp_path / "manifest.yaml", ["a.yaml", "b.yaml"])
+    run = _write(tmp_path / "run.yaml", {"description": "two", "groups": ["a.yaml", "b.yaml"]})
+    assert [e.config.name for e in load_run_config(manifest)] == ["g1", "g2"]
+    assert [e.config.name for e in load_run_config(run)] == ["g1", "g2"]
+    with pytest.raises(ConfigError, match=r"run\.yaml: descripton: unknown key \(did you mean 'description'\?\)"):
+        load_run_config(_write(tmp_path / "run.yaml", {"descripton": "two", "groups": ["a.yaml"]}))
+    with pytest.raises(ConfigError, match=r"manifest\.yaml: groups\[1\]: must be a string, got int 3"):
+        load_run_config(_write(tmp_path / "manifest.yaml", ["a.yaml", 3]))

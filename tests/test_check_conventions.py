@@ -17,9 +17,10 @@ from pipeline.errors import InputError
 from pipeline.flight_config import Clock, load_flight_config
 from pipeline.ingest.frames import (
     ORIENTATION_FRAMES,
-    frame_quat_from_ned_frd,
+    euler_zyx_from_quat_wxyz,
     quat_ned_frd_from_enu_flu,
     quat_ned_frd_from_frame,
+    quat_ned_from_frd_euler,
     rotation_from_quat_wxyz,
 )
 from pipeline.run import process_group
@@ -83,21 +84,82 @@ def test_a_batch_goes_on_past_a_refused_flight(flights, tmp_path, capsys):
 # ---- the pieces ------------------------------------------------------------------------------------------------
 
 
-def test_orientation_frames_known_values():
-    # a camera looking north, level: optical z = north, x = east, y = down. In optical_enu its orientation maps
-    # (x, y, z) -> (E, -U, N); as gimbal FRD -> NED that is the identity (forward north, right east, down down).
-    R_enu_from_optical = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])
+# A gimbal looking east and 30 deg below the horizon (ZYX yaw 90 deg, pitch -30 deg, roll 0), by hand. With
+# c = cos 30 = sqrt(3)/2 and s = sin 30 = 1/2 its FRD axes in NED (north, east, down):
+#   forward f = (0, c, s)   (east, tilted down);   right r = (-1, 0, 0)   (south);
+#   down    d = f x r = (0, -s, c)   (tilted back, west).
+# An orientation `<body>_<world>` rotates body axes into world axes: its matrix's columns are the body axes in
+# world coordinates. FLU = (f, -r, -d); REP-103 optical = (r, d, f); ENU coordinates of a NED vector
+# (n, e, d) are (e, n, -d).
+C, S = math.sqrt(3) / 2, 0.5
+R_NED_FROM_FRD = np.array([[0.0, -1, 0], [C, 0, -S], [S, 0, C]])
+HAND = {  # frame -> R_world_from_body, columns written from the axes above
+    "frd_ned": [[0.0, -1, 0], [C, 0, -S], [S, 0, C]],  # f, r, d
+    "frd_enu": [[C, 0, -S], [0, -1, 0], [-S, 0, -C]],  # f = (c, 0, -s), r = (0, -1, 0), d = (-s, 0, -c)
+    "flu_ned": [[0.0, 1, 0], [C, 0, S], [S, 0, -C]],  # f, -r = (1, 0, 0), -d = (0, s, -c)
+    "flu_enu": [[C, 0, S], [0, 1, 0], [-S, 0, C]],  # f, -r = (0, 1, 0), -d = (s, 0, c)
+    "optical_ned": [[-1.0, 0, 0], [0, -S, C], [0, C, S]],  # r, d, f
+    "optical_enu": [[0.0, -S, C], [-1, 0, 0], [0, -C, -S]],  # r, d, f in ENU
+}
+# The same FRD -> NED rotation as a quaternion, by hand: q_yaw(90) * q_pitch(-30) with q_yaw = (cos 45, 0, 0,
+# sin 45), q_pitch = (cos 15, 0, -sin 15, 0); their product (w1 w2, -z1 y2, w1 y2, w2 z1) is
+# sqrt(1/2) (cos 15, sin 15, -sin 15, cos 15).
+Q_NED_FROM_FRD = math.sqrt(0.5) * np.array([math.cos(math.radians(15)), math.sin(math.radians(15)),
+                                            -math.sin(math.radians(15)), math.cos(math.radians(15))])
+
+
+def test_hand_written_rotations_are_rotations():
+    for frame, R in HAND.items():
+        R = np.array(R)
+        np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12, err_msg=frame)
+        assert np.linalg.det(R) == pytest.approx(1.0), frame
+
+
+def test_euler_and_quaternion_conventions_known_values():
+    q = quat_ned_from_frd_euler(0.0, math.radians(-30), math.radians(90))
+    np.testing.assert_allclose(q[0], Q_NED_FROM_FRD, atol=1e-12)
+    np.testing.assert_allclose(rotation_from_quat_wxyz(Q_NED_FROM_FRD).as_matrix()[0], R_NED_FROM_FRD, atol=1e-12)
+    # a pure yaw of 90 deg: forward -> east, right -> south
+    np.testing.assert_allclose(quat_ned_from_frd_euler(0.0, 0.0, math.pi / 2)[0],
+                               [math.sqrt(0.5), 0, 0, math.sqrt(0.5)], atol=1e-12)
+    np.testing.assert_allclose(euler_zyx_from_quat_wxyz(Q_NED_FROM_FRD[None])[0],
+                               [0.0, math.radians(-30), math.radians(90)], atol=1e-12)
+
+
+@pytest.mark.parametrize("frame", ORIENTATION_FRAMES)
+def test_every_ros_frame_is_read_as_the_hand_computed_rotation(frame):
+    from scipy.spatial.transform import Rotation  # the library turns the hand matrix into the file's numbers
+
+    q_file = Rotation.from_matrix(HAND[frame]).as_quat(scalar_first=True)[None]
+    got = rotation_from_quat_wxyz(quat_ned_frd_from_frame(q_file, frame)).as_matrix()[0]
+    np.testing.assert_allclose(got, R_NED_FROM_FRD, atol=1e-12)
+    if frame == "flu_enu":  # REP-103, also read by the dedicated function
+        got = rotation_from_quat_wxyz(quat_ned_frd_from_enu_flu(q_file)).as_matrix()[0]
+        np.testing.assert_allclose(got, R_NED_FROM_FRD, atol=1e-12)
+
+
+@pytest.mark.parametrize("frame", ORIENTATION_FRAMES)
+def test_the_synthetic_bag_writer_writes_the_hand_computed_rotation(frame):
     from scipy.spatial.transform import Rotation
-    q = Rotation.from_matrix(R_enu_from_optical).as_quat(scalar_first=True)[None]
-    np.testing.assert_allclose(rotation_from_quat_wxyz(quat_ned_frd_from_frame(q, "optical_enu")).as_matrix()[0],
-                               np.eye(3), atol=1e-12)
-    rng = np.random.default_rng(3)
-    raw = rng.normal(size=(20, 4))
-    np.testing.assert_allclose(quat_ned_frd_from_frame(raw, "flu_enu"), quat_ned_frd_from_enu_flu(raw), atol=1e-12)
-    for f in ORIENTATION_FRAMES:
-        back = frame_quat_from_ned_frd(quat_ned_frd_from_frame(raw, f), f)
-        dots = np.abs(np.sum(back * raw / np.linalg.norm(raw, axis=1, keepdims=True), axis=1))
-        np.testing.assert_allclose(dots, 1.0, atol=1e-12)
+
+    from pipeline.synth.writers.rosbag import frame_quat_xyzw
+
+    q_xyzw = frame_quat_xyzw(Q_NED_FROM_FRD[None], frame)
+    np.testing.assert_allclose(Rotation.from_quat(q_xyzw).as_matrix()[0], HAND[frame], atol=1e-12)
+
+
+def test_gimbal_yaw_relative_to_the_vehicle_known_values():
+    from pipeline.ingest.frames import gimbal_to_earth
+    from pipeline.ingest.model import AttitudeSeries, GimbalSeries
+
+    # the vehicle heads east (yaw 90 deg); the gimbal, relative to the vehicle heading, pitches 30 deg down:
+    # on the earth that is the hand-computed pose above
+    t = np.array([0, 1_000_000_000], dtype=np.int64)
+    vehicle = AttitudeSeries(t, np.tile([math.sqrt(0.5), 0, 0, math.sqrt(0.5)], (2, 1)))
+    pitch = [math.cos(math.radians(15)), 0.0, -math.sin(math.radians(15)), 0.0]
+    gimbal = GimbalSeries(t, np.tile(pitch, (2, 1)), np.array([True, True]))
+    np.testing.assert_allclose(gimbal_to_earth(gimbal, vehicle).quat_wxyz, np.tile(Q_NED_FROM_FRD, (2, 1)),
+                               atol=1e-12)
 
 
 def test_clock_keys_in_human_units():

@@ -20,11 +20,21 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 from scipy.spatial.transform import Rotation
 
-from pipeline.ingest.frames import frame_quat_from_ned_frd
 from pipeline.synth.telemetry import Telemetry
 
-FLU_FROM_FRD = np.diag([1.0, -1.0, -1.0])
-R_ENU_FROM_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+# The conventions written out here from their definitions, independently of pipeline.ingest.frames (which reads
+# them back: a wrong entry there must not be undone by the same entry here). Columns: a body frame's axes in FRD
+# (x forward, y right, z down). FLU: forward, left, up. REP-103 `_optical`: x right, y down, z forward.
+FRD_FROM_BODY = {
+    "frd": np.eye(3),
+    "flu": np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]),
+    "optical": np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
+}
+# Rows: a world frame's axes in NED. ENU: east, north, up.
+WORLD_FROM_NED = {
+    "ned": np.eye(3),
+    "enu": np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]),
+}
 TOPICS = {
     "gps": ("/uav/gps/fix", "sensor_msgs/msg/NavSatFix"),
     "imu": ("/uav/imu", "sensor_msgs/msg/Imu"),
@@ -35,10 +45,17 @@ TOPICS = {
 }
 
 
+def frame_quat_xyzw(quat_wxyz_frd_to_ned: np.ndarray, frame: str = "flu_enu") -> np.ndarray:
+    """(n, 4) x, y, z, w quaternions of `frame` = <body>_<world> (body -> world, e.g. flu_enu: FLU -> ENU) from
+    (n, 4) w, x, y, z quaternions of FRD -> NED."""
+    body, _, world = frame.partition("_")
+    R = Rotation.from_quat(quat_wxyz_frd_to_ned, scalar_first=True).as_matrix()
+    return Rotation.from_matrix(WORLD_FROM_NED[world] @ R @ FRD_FROM_BODY[body]).as_quat(canonical=True)
+
+
 def enu_flu_quat_xyzw(quat_wxyz_frd_to_ned: np.ndarray) -> np.ndarray:
     """(n, 4) x, y, z, w quaternions of FLU -> ENU from (n, 4) w, x, y, z quaternions of FRD -> NED."""
-    R = Rotation.from_quat(quat_wxyz_frd_to_ned, scalar_first=True).as_matrix()
-    return Rotation.from_matrix(R_ENU_FROM_NED @ R @ FLU_FROM_FRD).as_quat(canonical=True)
+    return frame_quat_xyzw(quat_wxyz_frd_to_ned, "flu_enu")
 
 
 class _Msgs:
@@ -89,10 +106,7 @@ def _streams(m: _Msgs, tel: Telemetry, camera: dict, gps_sigma_m: float, att_sig
                 linear_acceleration_covariance=acov)
 
     def gimbal():
-        if gimbal_frame == "flu_enu":
-            q = enu_flu_quat_xyzw(tel.gimbal_quat_wxyz)
-        else:  # another vehicle's convention (synth gimbal.ros_frame)
-            q = frame_quat_from_ned_frd(tel.gimbal_quat_wxyz, gimbal_frame)[:, [1, 2, 3, 0]]
+        q = frame_quat_xyzw(tel.gimbal_quat_wxyz, gimbal_frame)  # synth gimbal.ros_frame, REP-103 flu_enu by default
         for t, qi in zip(tel.gimbal_t_ns, q, strict=True):
             yield int(t), "gimbal", lambda t=t, qi=qi: T["geometry_msgs/msg/QuaternionStamped"](
                 header=m.header(t, "gimbal"), quaternion=Quat(x=qi[0], y=qi[1], z=qi[2], w=qi[3]))

@@ -102,11 +102,11 @@ def test_size_cap_directory_missing_and_unreadable(tmp_path, capsys, monkeypatch
     monkeypatch.setattr(observations_mod, "MAX_FILE_BYTES", 1000)
     _refused(tmp_path, capsys, EXAMPLE, "MB, over the 0.000953674 MB limit for an observations file")
     monkeypatch.undo()
-    for path, expected in ((tmp_path / "a_dir.json", "is a directory"), (tmp_path / "none.json", "file not found")):
-        if expected == "is a directory":
-            path.mkdir()
+    (tmp_path / "a_dir.json").mkdir()
+    for path, expected in ((tmp_path / "a_dir.json", "is a directory, expected an observations JSON file"),
+                           (tmp_path / "none.json", "file not found")):
         rc, _, err = _solve(path, capsys)
-        assert rc == 1 and err == f"ridgeloc: error: {path}: {err.split(': ', 3)[-1]}" and expected in err
+        assert rc == 1 and err == f"ridgeloc: error: {path}: {expected}\n"
     path = tmp_path / "locked.json"
     path.write_text(EXAMPLE)
 

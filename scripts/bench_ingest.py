@@ -138,8 +138,8 @@ def gen_ros2(path: Path, n_target: int) -> int:
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
-    sys.path.insert(0, str(REPO))
-    from pipeline.ingest.writers import ros_message
+    sys.path.insert(0, str(REPO / "tests"))
+    from support.writers import ros_message
 
     ts = get_typestore(Stores.ROS2_HUMBLE)
     kinds = {"/uav/gps/fix": (10, "navsat"), "/uav/imu": (50, "imu"), "/uav/gimbal/attitude": (50, "quat"),
@@ -370,8 +370,9 @@ def main() -> int:
     args = ap.parse_args()
     only = set(args.only.split(","))
     sys.path.insert(0, str(REPO))
+    sys.path.insert(0, str(REPO / "tests"))
     from pipeline.ingest import detect_format
-    from pipeline.ingest.writers import dataflash_text_from_binary
+    from support.writers import dataflash_text_from_binary
 
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

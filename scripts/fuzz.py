@@ -1,4 +1,4 @@
-"""Fuzz every reader in pipeline/fuzz_targets.py for a while and report inputs tried and failures found.
+"""Fuzz every reader in tests/support/fuzz_targets.py for a while and report inputs tried and failures found.
 
     nice -n 10 python scripts/fuzz.py --minutes 2                 # every reader, 2 minutes each
     nice -n 10 python scripts/fuzz.py --minutes 5 --targets tlog,mcap --seed 7
@@ -26,8 +26,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))  # test support: support.fuzz_targets
 
-from pipeline.fuzz_targets import BY_NAME, TARGETS, check, mutate  # noqa: E402
+from support.fuzz_targets import BY_NAME, TARGETS, check, mutate  # noqa: E402
 
 
 class _Timeout(Exception):

@@ -1,7 +1,7 @@
 """Every reader survives hostile bytes: a mutated input reads (warnings allowed) or is refused with one line that
 names the file, never a traceback (docs/damaged_input.md).
 
-The readers, their seeds and the mutations live in pipeline/fuzz_targets.py, one `Target(...)` line per reader.
+The readers, their seeds and the mutations live in tests/support/fuzz_targets.py, one `Target(...)` line per reader.
 To cover a new reader, add a `_seed_<name>(folder) -> path` building a small valid input and one line in
 `TARGETS` there: this file and scripts/fuzz.py (long runs, inputs tried and failures per reader) pick it up.
 
@@ -19,7 +19,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from pipeline.fuzz_targets import TARGETS, check, mutate, mutate_bytes
+from support.fuzz_targets import TARGETS, check, mutate, mutate_bytes
 
 ROOT = Path(__file__).resolve().parents[1]
 SLOW = {"ros1-bag", "ros2-sqlite3", "ros2-mcap", "ros2-metadata"}  # ~0.2-0.5 s per input (rosbags' type compiler)
@@ -104,7 +104,7 @@ def test_unreadable_file(target, seeds, tmp_path):
     path, _ = seeds[target.name]
     os.chmod(path, 0)
     try:
-        code = ("import sys; from pathlib import Path; from pipeline.fuzz_targets import BY_NAME, check; "
+        code = ("import sys; from pathlib import Path; from support.fuzz_targets import BY_NAME, check; "
                 f"print(check(BY_NAME[{target.name!r}], Path({str(path)!r})))")
         if os.geteuid() != 0:
             result = check(target, path)
@@ -112,7 +112,8 @@ def test_unreadable_file(target, seeds, tmp_path):
             return
         try:
             proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, user=65534,
-                                  cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120)
+                                  cwd=tmp_path, timeout=120,
+                                  env={**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{ROOT / 'tests'}"})
         except PermissionError:
             pytest.skip("cannot switch to user nobody")
         if "Permission denied" in proc.stderr and "pipeline" not in proc.stderr:

@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 from pipeline.errors import LogReadError
 from pipeline.ingest import read_flight
 from pipeline.ingest.dispatch import detect_format
-from pipeline.ingest.writers import dataflash_text_from_binary
+from support.writers import dataflash_text_from_binary
 
 REAL_BIN = "../shared/logs/ardupilot_pymavlink_test.BIN"
 GPS_EPOCH_S, LEAP_S = 315964800, 18

@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from pipeline.ingest import read_flight
-from pipeline.ingest.writers import DataFlashWriter
+from support.writers import DataFlashWriter
 
 WEEK, MS0 = 2300, 100_000_000  # GPS week 2300, 100000 s into the week
 

@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.errors import LogReadError
 from pipeline.ingest import read_flight
-from pipeline.ingest.writers import ros_message, write_json_mcap
+from support.writers import ros_message, write_json_mcap
 
 T0 = 1_700_000_000_000_000_000
 

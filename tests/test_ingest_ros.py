@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.errors import ConfigError, LogReadError
 from pipeline.ingest import BagImages, read_flight
-from pipeline.ingest.writers import ros_message, write_ros_bag
+from support.writers import ros_message, write_ros_bag
 
 LOGS = Path(__file__).resolve().parents[1] / ".." / "shared" / "logs"
 T0 = 1_700_000_000_000_000_000

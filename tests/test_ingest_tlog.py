@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.errors import ConfigError, LogReadError
 from pipeline.ingest import read_flight
-from pipeline.ingest.writers import TlogWriter
+from support.writers import TlogWriter
 
 LOGS = Path(__file__).resolve().parents[1] / ".." / "shared" / "logs"
 T0_US = 1_700_000_000_000_000

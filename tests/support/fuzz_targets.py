@@ -22,7 +22,7 @@ from pathlib import Path
 
 from pipeline.errors import RidgelocError
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]  # the checkout: seeds come from its sample data
 SHARED = ROOT.parent / "shared"
 T0_NS = 1_700_000_000_000_000_000
 
@@ -106,7 +106,7 @@ def _seed_tlog(folder: Path) -> Path:
 
 
 def _seed_dataflash(folder: Path) -> Path:
-    from pipeline.ingest.writers import DataFlashWriter
+    from support.writers import DataFlashWriter
 
     path = folder / "flight.bin"
     with DataFlashWriter(path) as w:
@@ -124,7 +124,7 @@ def _seed_dataflash(folder: Path) -> Path:
 
 
 def _seed_dataflash_text(folder: Path) -> Path:
-    from pipeline.ingest.writers import dataflash_text_from_binary
+    from support.writers import dataflash_text_from_binary
 
     path = folder / "flight.log"
     dataflash_text_from_binary(_seed_dataflash(folder), path)
@@ -143,7 +143,7 @@ def _seed_ulog(folder: Path) -> Path:
 
 
 def _bag_rows(n: int = 6) -> list:
-    from pipeline.ingest.writers import ros_message
+    from support.writers import ros_message
 
     rows = []
     s45 = math.sin(math.pi / 4)
@@ -168,7 +168,7 @@ def _tiny_jpeg() -> bytes:
 
 
 def _seed_ros1(folder: Path) -> Path:
-    from pipeline.ingest.writers import write_ros_bag
+    from support.writers import write_ros_bag
 
     path = folder / "flight.bag"
     write_ros_bag(path, _bag_rows(), "ros1")
@@ -177,7 +177,7 @@ def _seed_ros1(folder: Path) -> Path:
 
 def _seed_ros2(storage: str) -> Callable[[Path], Path]:
     def make(folder: Path) -> Path:
-        from pipeline.ingest.writers import write_ros_bag
+        from support.writers import write_ros_bag
 
         bag = folder / "flight_ros2"
         write_ros_bag(bag, _bag_rows(), storage)
@@ -191,7 +191,7 @@ def _seed_ros2_metadata(folder: Path) -> Path:
 
 
 def _seed_mcap(folder: Path) -> Path:
-    from pipeline.ingest.writers import write_json_mcap
+    from support.writers import write_json_mcap
 
     path = folder / "flight.mcap"
     msgs = {

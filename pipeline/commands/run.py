@@ -7,6 +7,7 @@ import sys
 import time
 from pathlib import Path
 
+from pipeline.errors import InputError
 from pipeline.flight_config import FlightConfig, load_run_config
 
 HELP = "process flights (video, telemetry, ranges) into target positions, a Table-4-like report and GIS exports"
@@ -32,11 +33,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _resolve_config(arg: str) -> Path:
+    """The config to run. With none given, configs/sample.yaml of the current folder: the sample flights are in
+    the source checkout, not in the installed package (which makes no guess about where a checkout is)."""
     config = Path(arg)
     if arg == str(DEFAULT_CONFIG) and not config.exists():
-        # The bundled sample config of this checkout, when ridgeloc runs from another folder.
-        bundled = Path(__file__).resolve().parents[2] / DEFAULT_CONFIG
-        config = bundled if bundled.exists() else config
+        raise InputError(f"no config given and no {DEFAULT_CONFIG} here: name a run config, a flight config or a "
+                         "folder of flights (the bundled sample flights: run from the source checkout)")
     return config
 
 

@@ -23,8 +23,6 @@ from pipeline.simulate.scenario import generate
 from pipeline.simulate.statistics import answered_mask
 from pipeline.solve.estimate import Status
 
-DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "simulation_table2.yaml"
-
 
 def range_diagnostics(cfg: SimulationConfig, angle_deg: float) -> dict[str, float]:
     """Statistics of `range` at one angle (see the module docstring); shares in %, distances in m."""
@@ -52,12 +50,13 @@ def range_diagnostics(cfg: SimulationConfig, angle_deg: float) -> dict[str, floa
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("config", nargs="?", type=Path, default=DEFAULT_CONFIG)
+    parser.add_argument("config", nargs="?", type=Path, default=None,
+                        help="a simulation config (default: the built-in defaults, = configs/simulation_table2.yaml)")
     parser.add_argument("--angles", type=float, nargs="+", default=[10.0, 20.0])
     parser.add_argument("--trials", type=int)
     args = parser.parse_args(argv)
     try:
-        cfg = SimulationConfig.load(args.config)
+        cfg = SimulationConfig() if args.config is None else SimulationConfig.load(args.config)
         if args.trials is not None:
             cfg = cfg.replace(trials=args.trials)
         for angle in args.angles:

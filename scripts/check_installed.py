@@ -41,17 +41,19 @@ def main() -> int:
     src = work / "src"
     archive = subprocess.run(["git", "-C", str(ROOT), "archive", "HEAD"], check=True, capture_output=True).stdout
     tarfile.open(fileobj=io.BytesIO(archive)).extractall(src, filter="data")
+    python = args.venv / "bin" / "python"
+    fresh = not args.reuse or not python.exists()
+    if fresh:
+        _run([sys.executable, "-m", "venv", "--clear", args.venv])
     wheels = work / "wheels"
-    _run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "-w", wheels, src])
+    _run([python, "-m", "pip", "wheel", "-q", "--no-deps", "-w", wheels, src])
     wheel = next(wheels.glob("ridgeloc-*.whl"))
     import zipfile
 
     names = zipfile.ZipFile(wheel).namelist()
     support = [n for n in names if n.endswith(("fuzz_targets.py", "ingest/writers.py")) or n.startswith("tests/")]
     print(f"wheel {wheel.name}: {wheel.stat().st_size / 1e6:.1f} MB, {len(names)} files, test support: {support}")
-    python = args.venv / "bin" / "python"
-    if not args.reuse or not python.exists():
-        _run([sys.executable, "-m", "venv", args.venv])
+    if fresh:
         _run([python, "-m", "pip", "install", "-q", wheel])
     else:
         _run([python, "-m", "pip", "install", "-q", "--no-deps", "--force-reinstall", wheel])

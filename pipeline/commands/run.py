@@ -20,7 +20,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="a run config listing flight configs under `groups:`, a manifest (YAML list of flight "
                              "configs), a folder of flights (every flight.yaml below it), one flight config, or a "
                              "MISB full-motion video (.ts with KLV metadata) "
-                             f"(default: {DEFAULT_CONFIG}, the bundled sample flights)")
+                             f"(default: {DEFAULT_CONFIG} in the current folder: the sample flights of the source "
+                             "checkout)")
     parser.add_argument("-o", "--outdir", default="out", help="output folder (default: out)")
     parser.add_argument("--workers", type=int, default=1, help="flights processed at once (default: 1)")
     parser.add_argument("--executor", choices=("local", "dask"), default="local",

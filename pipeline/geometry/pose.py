@@ -65,6 +65,11 @@ class FramePoses:
         """(n, 3, 4) pinhole projection matrices P = K [R | -R c] (world = ENU at the origin)."""
         return projection_matrix(np.asarray(K, dtype=np.float64), self.R_optical_from_enu0, self.camera_m)
 
+    def subset(self, keep: np.ndarray) -> FramePoses:
+        """The poses of the frames selected by `keep` (a boolean mask or indices)."""
+        return FramePoses(self.origin_lla, self.R_enu0_from_optical[keep], self.camera_m[keep], self.laser_m[keep],
+                          self.antenna_m[keep])
+
     def optical_axis_enu(self) -> np.ndarray:
         """(n, 3) unit viewing directions (camera +z) in ENU."""
         return self.R_enu0_from_optical[..., :, 2]

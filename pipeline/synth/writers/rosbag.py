@@ -20,11 +20,11 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 from scipy.spatial.transform import Rotation
 
+from pipeline.geometry.frames import R_ENU_FROM_NED
 from pipeline.ingest.frames import frame_quat_from_ned_frd
 from pipeline.synth.telemetry import Telemetry
 
 FLU_FROM_FRD = np.diag([1.0, -1.0, -1.0])
-R_ENU_FROM_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 TOPICS = {
     "gps": ("/uav/gps/fix", "sensor_msgs/msg/NavSatFix"),
     "imu": ("/uav/imu", "sensor_msgs/msg/Imu"),

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import contextlib
-import contextvars
 import multiprocessing
 import queue as queue_mod
 import signal
@@ -35,6 +34,7 @@ from typing import Any
 
 from pipeline.errors import ConfigError, RidgelocError, environment_error_message
 from pipeline.flight_config import discover_flights
+from pipeline.progress import _reporter, report_stage
 from pipeline.results import GroupFailure
 
 __all__ = ["EXECUTORS", "Job", "discover_flights", "itemised_timings", "job_digest", "report_stage", "run_groups",
@@ -43,9 +43,6 @@ __all__ = ["EXECUTORS", "Job", "discover_flights", "itemised_timings", "job_dige
 EXECUTORS = ("local", "dask")
 STAGE_TOPIC = "ridgeloc-stage"
 _POLL_S = 0.1
-
-_reporter: contextvars.ContextVar[Callable[[str], None] | None] = contextvars.ContextVar("ridgeloc_stage",
-                                                                                          default=None)
 
 
 @dataclass(frozen=True)
@@ -56,14 +53,6 @@ class Job:
     name: str
     source: str
     payload: Any
-
-
-def report_stage(stage: str) -> None:
-    """Announce that the current job entered `stage` (e.g. "ingest", "track", "solve"). No-op outside run_jobs."""
-    reporter = _reporter.get()
-    if reporter is not None:
-        with contextlib.suppress(Exception):  # progress display must never fail a flight
-            reporter(stage)
 
 
 # ---- what a worker runs ------------------------------------------------------------------------------------

@@ -133,7 +133,7 @@ class Clock:
         + video_start (video only: the first frame's time on the telemetry clock, UNIX seconds or ISO 8601)
         - <source>_latency_s (how long after the measurement its timestamp was taken).
     estimate: estimate the video-to-telemetry offset from the flight itself, within +-search_s of the configured
-    one (`pipeline.sync.clock_estimate`)."""
+    one (`pipeline.clock_estimate`)."""
 
     video_to_telemetry_offset_ns: int = 0
     range_offset_ns: int = 0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -54,3 +55,36 @@ class GroupFailure:
     source: str
     message: str
     detail: str = ""
+
+
+# ---- the files of one group -----------------------------------------------------------------------------------
+
+
+def estimates_document(result: GroupResult) -> dict:
+    """The `ridgeloc solve OBS.json --method all --json` document of the group's observations:
+    {"estimates": {method: Estimate.to_dict(truth)}, "unsolved": {method: {"status", "reason"}} (only when some
+    could not run)}."""
+    doc: dict = {"estimates": {m: e.to_dict(result.truth_m) for m, e in result.estimates.items()}}
+    failures = result.settings.get("solve_failures") or {}
+    if failures:
+        doc["unsolved"] = dict(failures)
+    return doc
+
+
+def _json_default(o):
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.floating, np.integer, np.bool_)):
+        return o.item()
+    raise TypeError(f"not JSON-serialisable: {type(o).__name__}")
+
+
+def group_files(result: GroupResult) -> dict[str, str]:
+    """The per-group files `ridgeloc run` writes, name -> text: observations.json (the `ridgeloc solve` input,
+    to re-solve without re-processing video), estimates.json (its --json output) and tracking.json (per-frame
+    tracking quality). The report stage can pass them on as extra files of the group's folder."""
+    return {
+        "observations.json": json.dumps(result.observations.to_dict(), indent=1) + "\n",
+        "estimates.json": json.dumps(estimates_document(result), indent=1, default=_json_default) + "\n",
+        "tracking.json": json.dumps(result.tracking, indent=1, default=_json_default) + "\n",
+    }

@@ -2,158 +2,59 @@
 
 `process_group(config)` is a pure top-level function of a `FlightConfig` (picklable both ways), so a batch can
 run groups in worker processes. It returns a `GroupResult` with the wall time of each stage:
-  ingest  reading telemetry and the frame index (no pixels decoded),
+  ingest  reading telemetry and the frame index (no pixels decoded): the `pipeline.flight.Flight`,
   decode  decoding the frames the tracker asked for,
-  track   SIFT, matching, homographies and refinement,
-  sync    interpolation of the vehicle state, poses, projection matrices, undistortion,
+  track   the target mark, the clock estimate (clock.estimate), SIFT, matching, homographies and refinement,
+  sync    interpolation of the vehicle state, poses, projection matrices, undistortion, the geometry check,
   solve   every estimator.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
-import json
-import math
 import time
 from collections.abc import Sequence
-from os import PathLike
-from pathlib import Path
 
-import cv2
 import numpy as np
 
-from pipeline.batch import report_stage
-from pipeline.check.conventions import current_reading
-from pipeline.check.flight import ResolvedFlight, outside_telemetry, refusal_reason
+from pipeline.check.flight import outside_telemetry, refusal_reason
+from pipeline.clock_estimate import ClockEstimate, estimate_clock
 from pipeline.errors import ConfigError, InputError, RidgelocError
+from pipeline.flight import Flight, TargetMark, acquire_mark
 from pipeline.flight_config import FlightConfig
-from pipeline.geometry.frames import ellipsoid_from_amsl_m, enu_from_lla
-from pipeline.ingest.model import FlightLog, FrameSeries
-from pipeline.intrinsics import frame_K, resolve_camera
+from pipeline.geometry.frames import enu_from_lla
+from pipeline.geometry.rays import intersection_angle_deg
+from pipeline.intrinsics import frame_K
+from pipeline.progress import report_stage
 from pipeline.results import GroupResult
 from pipeline.solve import mle_outputs
 from pipeline.solve.estimate import Estimate
 from pipeline.solve.observations import Observations, Sigma
-from pipeline.sync.assemble import assemble_observations, frame_states
-from pipeline.sync.select import plan_observations
-from pipeline.track.sift import SiftTracker
+from pipeline.sync.assemble import assemble_observations
+from pipeline.sync.select import ObservationPlan
+from pipeline.track.sift import SiftTracker, TrackResult
 
 
-class _TimedDecoder:
-    """Decodes chosen frame numbers to grayscale and accumulates the time spent."""
+class _StageTimes:
+    """Wall and process-CPU seconds (all threads: the wall times' counterpart under load) of each stage; a stage
+    is entered with `with times("track", decoder):` (the decoder's time is booked as "decode")."""
 
-    def __init__(self, read):
-        self._read = read
-        self.seconds = 0.0
-        self.cpu_seconds = 0.0
-        self.decoded = 0
-        self.failed: list[int] = []
+    def __init__(self):
+        self.wall: dict[str, float] = {}
+        self.cpu: dict[str, float] = {}
 
-    def __call__(self, indices: Sequence[int]) -> dict[int, np.ndarray]:
+    @contextlib.contextmanager
+    def __call__(self, stage: str, decoder=None):
+        report_stage(stage)
         t, c = time.perf_counter(), time.process_time()
-        wanted = sorted(set(int(i) for i in indices))
-        try:
-            images = self._read(wanted)
-        except RidgelocError:  # a truncated or damaged stream: keep the frames that decode, the others are lost
-            images = {}
-            for i in wanted:
-                try:
-                    images.update(self._read([i]))
-                except RidgelocError:
-                    self.failed.append(i)
-        out = {i: (img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)) for i, img in images.items()}
-        self.seconds += time.perf_counter() - t
-        self.cpu_seconds += time.process_time() - c
-        self.decoded += len(out)
-        return out
-
-
-def read_flight_logs(config: FlightConfig) -> FlightLog:
-    """The flight's telemetry files read into one FlightLog; InputError when it lacks position, attitude or gimbal."""
-    from pipeline.ingest import read_flight
-
-    log = read_flight(list(config.files.telemetry), mapping=config.mapping)
-    missing = [q for q in ("position", "attitude", "gimbal") if getattr(log, q) is None]
-    if missing:
-        raise InputError(f"the flight's logs supply no {', '.join(missing)}: check `mapping:` "
-                         "(see `ridgeloc inspect`)", config.path)
-    return log
-
-
-def open_frames(config: FlightConfig, log: FlightLog) -> tuple[FrameSeries, _TimedDecoder, object]:
-    """The flight's frame index and a decoder of chosen frames: the video file when the config names one,
-    else the image topic of a bag the telemetry came from. Returns (frames, decoder, closable)."""
-    from pipeline import ingest
-
-    if config.files.video is not None:
-        video = ingest.VideoFrames(config.files.video)  # demuxes the file once: its index serves both
-        try:
-            frames = ingest.read_video(config.files.video, frames_csv=config.files.frames_csv or "auto",
-                                       index=video.index)
-        except BaseException:
-            video.close()
-            raise
-        return frames, _TimedDecoder(video.read), video
-    if log.frames is not None and "fmv" in log.formats:  # full-motion video: the frames of the telemetry file
-        video = ingest.VideoFrames(log.frames.source)
-        return log.frames, _TimedDecoder(video.read), video
-    if log.frames is None:
-        raise ConfigError("the flight has no video (files.video) and its logs carry no images", config.path)
-    for path in config.files.telemetry:
-        try:
-            images = ingest.BagImages(path, None, mapping=config.mapping, frames=log.frames)
-        except (RidgelocError, ValueError, KeyError):
-            continue
-        return images.frames, _TimedDecoder(images.read), None
-    raise ConfigError(f"cannot open the image stream {log.frames.source!r} of the flight's logs", config.path)
-
-
-def plan_flight_observations(config: FlightConfig, frames: FrameSeries, log: FlightLog,
-                             video_offset_ns: int | None = None):
-    """Which frames are observations, with their laser shots, as the flight config's `observations:` and
-    `clock:` say, or with `video_offset_ns` when given (`pipeline.sync.select.plan_observations`; needs only
-    timestamps)."""
-    c, sel = config.clock, config.observations
-    video_offset_ns = c.offset_ns("video") if video_offset_ns is None else video_offset_ns
-    return plan_observations(frames, log.range, mode=sel.mode, video_offset_ns=video_offset_ns,
-                             range_offset_ns=c.offset_ns("range"), frame_tolerance_s=sel.frame_tolerance_s,
-                             max_range_gap_s=sel.max_range_gap_s, frame_indices=sel.frame_indices,
-                             burst_gap_s=sel.burst_gap_s)
-
-
-def geoid_separation_m(config: FlightConfig, log: FlightLog) -> float | None:
-    """altitude.geoid_separation_m as a number: `auto` -> the EGM2008 undulation at the first finite position."""
-    value = config.altitude.geoid_separation_m
-    if value != "auto":
-        return value
-    from pipeline.geometry.geoid import patch_around
-
-    pos = log.position
-    ok = np.zeros(0, bool) if pos is None else np.isfinite(pos.lat_deg) & np.isfinite(pos.lon_deg)
-    if not ok.any():
-        raise InputError("altitude.geoid_separation_m: auto needs a position in the logs", config.path)
-    i = int(np.flatnonzero(ok)[0])
-    lat, lon = float(pos.lat_deg[i]), float(pos.lon_deg[i])
-    return float(patch_around(lat, lon)(lat, lon))  # cached per flight: check and the clock estimate ask again
-
-
-def _origin(config: FlightConfig, log: FlightLog, separation_m: float | None) -> tuple[float, float, float]:
-    if config.origin != "auto":
-        return config.origin.as_tuple()
-    pos = log.position
-    alt = float(pos.alt_m[0])
-    if pos.alt_datum == "amsl":
-        if separation_m is None:
-            raise ConfigError("altitudes are AMSL: set altitude.geoid_separation_m (a number, or auto)", config.path)
-        alt = float(ellipsoid_from_amsl_m(alt, separation_m))
-    return float(pos.lat_deg[0]), float(pos.lon_deg[0]), alt
-
-
-def intersection_angle_deg(platform_m: np.ndarray, target_m: np.ndarray) -> float:
-    """Angle between the first and last lines of sight to target_m (the paper's gamma), degrees."""
-    u = np.asarray(target_m, dtype=np.float64) - np.asarray(platform_m, dtype=np.float64)[[0, -1]]
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    return math.degrees(math.acos(float(np.clip(u[0] @ u[1], -1.0, 1.0))))
+        d, dc = (decoder.seconds, decoder.cpu_seconds) if decoder is not None else (0.0, 0.0)
+        yield
+        if decoder is not None:
+            d, dc = decoder.seconds - d, decoder.cpu_seconds - dc
+            self.wall["decode"], self.cpu["decode"] = d, dc
+        self.wall[stage] = time.perf_counter() - t - d
+        self.cpu[stage] = time.process_time() - c - dc
 
 
 def _methods(config: FlightConfig) -> list[str]:
@@ -193,132 +94,99 @@ def _frame_reason(lost: bool, via: str, inside: bool, used: bool) -> str | None:
     return "; ".join(why) or None
 
 
-def _estimate_clock(config, log, frames, cam, cam_source, plan, origin, decoder, tracker, mark_index, mark_px, notes):
-    """clock.estimate: the video offset from the flight (`pipeline.sync.clock_estimate`); returns
-    (the estimate, the observation plan at the estimated video offset, or the given plan when not determined)."""
-    from pipeline.sync.clock_estimate import estimate_clock
-
-    resolved = ResolvedFlight(config, log, frames, cam, cam_source, current_reading(config, log), plan, None, origin)
-    est = estimate_clock(resolved, decoder, tracker, mark_index, mark_px)
+def _estimate_clock(flight: Flight, tracker: SiftTracker, mark: TargetMark,
+                    notes: list[str]) -> tuple[ClockEstimate, ObservationPlan]:
+    """clock.estimate: the video offset from the flight (`pipeline.clock_estimate`); returns (the estimate, the
+    observation plan at the estimated video offset, or the configured plan when not determined)."""
+    est = estimate_clock(flight, tracker, mark)
     v = est.video
     if v is not None and v.determined:
-        plan = plan_flight_observations(config, frames, log, round(v.offset_s * 1e9))
         notes.append(f"clock estimated: {v.describe()}; the estimate is used")
-    else:
-        notes.append(f"clock estimate: {v.describe() if v is not None else 'too few tracked frames'}; the "
-                     "configured offset is used")
-    return est, plan
+        return est, flight.plan_at(round(v.offset_s * 1e9))
+    notes.append(f"clock estimate: {v.describe() if v is not None else 'too few tracked frames'}; the "
+                 "configured offset is used")
+    return est, flight.plan
 
 
-def process_group(config: FlightConfig) -> GroupResult:
-    """Ingest, track, synchronize and solve one flight group (see the module docstring)."""
-    report_stage("ingest")
-    timings: dict[str, float] = {}
-    notes: list[str] = []
-    cpu: dict[str, float] = {}  # process CPU seconds per stage (all threads): the wall times' counterpart under load
-    t0, c0 = time.perf_counter(), time.process_time()
-    log = read_flight_logs(config)
-    frames, decoder, closable = open_frames(config, log)
-    cam, cam_source = resolve_camera(config, log if log.frames is not None else dataclasses.replace(log, frames=frames))
-    notes.extend(log.warnings)
-    timings["ingest"] = time.perf_counter() - t0
-    cpu["ingest"] = time.process_time() - c0
-    try:
-        # Which frames are observations (needs only timestamps).
-        c, sel = config.clock, config.observations
-        plan = plan_flight_observations(config, frames, log)
-        notes.extend(plan.notes)
-        report_stage("track")
-        t1, c1 = time.perf_counter(), time.process_time()
-        tracker = SiftTracker(config.tracking)
-        if config.target is None:  # the boresighted laser's crosshair at the first observation
-            if plan.n == 0:
-                raise InputError("no observation frame to take the target from", config.path)
-            mark_index = int(plan.frame_index[0])
-            mark_px = (float(cam.cx_px), float(cam.cy_px))
-            notes.append(f"target: the image centre of frame {mark_index}, where the laser points (no mark given)")
-        elif config.target.template is not None:
-            template = cv2.imread(config.target.template, cv2.IMREAD_GRAYSCALE)
-            if template is None:
-                raise ConfigError("target.template: not a readable image", config.target.template)
-            mark_index, mark_px = tracker.acquire(template, config.target.template_pixel, decoder,
-                                                  plan.frame_index.tolist())
-        else:
-            mark_index, mark_px = config.target.frame_index, config.target.pixel
-            if mark_index not in set(np.asarray(frames.index).tolist()):
-                raise ConfigError(f"target.frame_index {mark_index} is not a frame of the video", config.path)
-        separation_m = geoid_separation_m(config, log)
-        if config.altitude.geoid_separation_m == "auto" and log.position.alt_datum == "amsl":
-            notes.append(f"geoid separation {separation_m:.2f} m (altitude.geoid_separation_m: auto, EGM2008 at "
-                         "the first position)")
-        origin = _origin(config, log, separation_m)
-        clock_estimate = None
-        if c.estimate:
-            clock_estimate, plan = _estimate_clock(config, log, frames, cam, cam_source, plan, origin, decoder,
-                                                   tracker, mark_index, mark_px, notes)
-        track = tracker.track(decoder, mark_index, mark_px, plan.frame_index.tolist(),
-                              available=np.asarray(frames.index).tolist())
-        timings["decode"] = decoder.seconds
-        timings["track"] = time.perf_counter() - t1 - decoder.seconds
-        cpu["decode"] = decoder.cpu_seconds
-        cpu["track"] = time.process_time() - c1 - decoder.cpu_seconds
-    finally:
-        close = getattr(closable, "close", None)
-        if close is not None:
-            close()
-    if decoder.failed:
-        notes.append(f"{len(decoder.failed)} frame(s) could not be decoded (damaged or truncated stream)")
-    if track.lost.any():
-        notes.append(f"target lost in {int(track.lost.sum())} of {plan.n} observation frames (pixel not used)")
-    range_m = plan.range_m.copy()
-    if sel.max_laser_offset_px is not None:
-        # The laser is boresighted: when the target is far from the principal point the shot is not on it.
-        where = np.where(np.isnan(track.pixel_px), track.predicted_px, track.pixel_px)
-        offset = np.hypot(where[:, 0] - cam.cx_px, where[:, 1] - cam.cy_px)
-        off_target = (offset > sel.max_laser_offset_px) & ~np.isnan(range_m)
-        if off_target.any():
-            range_m[off_target] = np.nan
-            notes.append(f"{int(off_target.sum())} range(s) not used: the target was more than "
-                         f"{sel.max_laser_offset_px:g} px from the image centre, off the laser's axis")
+def _on_axis_ranges(flight: Flight, plan: ObservationPlan, track: TrackResult, notes: list[str]) -> np.ndarray:
+    """The planned ranges (m,), NaN where the target was more than observations.max_laser_offset_px from the
+    principal point: the laser is boresighted, so the shot was not on the target."""
+    range_m, limit, cam = plan.range_m.copy(), flight.config.observations.max_laser_offset_px, flight.camera
+    if limit is None:
+        return range_m
+    where = np.where(np.isnan(track.pixel_px), track.predicted_px, track.pixel_px)
+    off_target = (np.hypot(where[:, 0] - cam.cx_px, where[:, 1] - cam.cy_px) > limit) & ~np.isnan(range_m)
+    if off_target.any():
+        range_m[off_target] = np.nan
+        notes.append(f"{int(off_target.sum())} range(s) not used: the target was more than {limit:g} px from the "
+                     "image centre, off the laser's axis")
+    return range_m
 
-    report_stage("sync")
-    t2, c2 = time.perf_counter(), time.process_time()
-    states = frame_states(log, plan.t_ns, position_offset_ns=c.offset_ns("position"),
-                          attitude_offset_ns=c.offset_ns("attitude"), gimbal_offset_ns=c.offset_ns("gimbal"),
-                          geoid_separation_m=separation_m)
-    resolved = ResolvedFlight(config, log, frames, cam, cam_source, current_reading(config, log), plan, None, origin)
-    if not states.inside.any():
-        raise InputError(outside_telemetry(resolved), config.path)
-    if not states.inside.all():
-        notes.append(f"{int((~states.inside).sum())} observation(s) outside the telemetry span were dropped")
-    truth_lla = config.truth_lla()
-    truth_m = None if truth_lla is None else enu_from_lla(*truth_lla, origin)
+
+def _synchronize(flight: Flight, plan: ObservationPlan, track: TrackResult, range_m: np.ndarray, truth_m,
+                 notes: list[str]) -> tuple[Observations, np.ndarray, np.ndarray]:
+    """(observations, useful (m,), inside (m,)): the observations of the planned frames the telemetry covers with a
+    tracked pixel or a range, after the geometry check (`pipeline.check.flight.refusal_reason`)."""
+    config = flight.config
+    poses, inside = flight.poses(plan.t_ns)
+    if not inside.any():
+        raise InputError(outside_telemetry(flight), config.path)
+    if not inside.all():
+        notes.append(f"{int((~inside).sum())} observation(s) outside the telemetry span were dropped")
     sigma = Sigma.from_dict(dataclasses.asdict(config.sigma), "sigma")
-    useful = states.inside & (~track.lost | ~np.isnan(range_m))
-    if (states.inside & ~useful).any():
-        notes.append(f"{int((states.inside & ~useful).sum())} observation(s) with neither pixel nor range dropped")
+    useful = inside & (~track.lost | ~np.isnan(range_m))
+    if (inside & ~useful).any():
+        notes.append(f"{int((inside & ~useful).sum())} observation(s) with neither pixel nor range dropped")
     if not useful.any():
         raise InputError("no usable observation: the target was never tracked and no laser range is valid",
                          config.path)
     # A wrong convention gives an answer kilometres off with nothing else to show for it: refuse the flight.
-    refusal = refusal_reason(resolved, plan.t_ns[useful], track.pixel_px[useful], range_m[useful])
+    refusal = refusal_reason(flight, plan.t_ns[useful], track.pixel_px[useful], range_m[useful])
     if refusal is not None:
         raise InputError(refusal, config.path)
-    sub = dataclasses.replace(states, inside=useful)
-    K_frames = frame_K(cam, cam_source, log, plan.t_ns)  # per frame when a zoom lens reports its field of view
-    obs, _ = assemble_observations(sub, track.pixel_px, range_m, K=K_frames, dist=cam.dist, origin_lla=origin,
-                                       R_optical_from_gimbal=np.array(cam.R_optical_from_gimbal),
-                                       lever_camera_m=config.lever_arms_m.camera,
-                                       lever_rangefinder_m=config.lever_arms_m.rangefinder, sigma=sigma,
-                                       truth_m=truth_m)
-    timings["sync"] = time.perf_counter() - t2
-    cpu["sync"] = time.process_time() - c2
+    K = frame_K(flight.camera, flight.camera_source, flight.log, plan.t_ns)  # per frame when a zoom reports its FOV
+    obs = assemble_observations(poses.subset(useful[inside]), plan.t_ns[useful], track.pixel_px[useful],
+                                range_m[useful], K=K[useful], dist=flight.camera.dist,
+                                sigma=sigma, truth_m=truth_m)
+    return obs, useful, inside
 
-    report_stage("solve")
-    t3, c3 = time.perf_counter(), time.process_time()
-    estimates, failures = solve_all(obs, _methods(config), config.solve.options)
-    timings["solve"] = time.perf_counter() - t3
-    cpu["solve"] = time.process_time() - c3
+
+def process_group(config: FlightConfig) -> GroupResult:
+    """One flight group through its stages: open the flight (logs, frame index, camera, plan, origin); acquire
+    the target mark; estimate the clock when clock.estimate asks; track the target; drop the ranges off the
+    laser's axis; synchronize (poses, geometry check, observations); solve with every method; collect the
+    result."""
+    times, notes = _StageTimes(), []
+    with times("ingest"):
+        flight = Flight.open(config)
+    with flight:
+        plan = flight.require_plan()
+        notes += flight.notes + plan.notes
+        with times("track", flight.decoder):
+            tracker = SiftTracker(config.tracking)
+            mark = acquire_mark(config.target, frames=flight.frames, plan_frame_index=plan.frame_index,
+                                camera=flight.camera, decoder=flight.decoder, tracker=tracker, config_path=config.path)
+            notes += [mark.note] if mark.note else []
+            origin = flight.require_origin()
+            if config.altitude.geoid_separation_m == "auto" and flight.log.position.alt_datum == "amsl":
+                notes.append(f"geoid separation {flight.separation_m:.2f} m (altitude.geoid_separation_m: auto, "
+                             "EGM2008 at the first position)")
+            clock_estimate = None
+            if config.clock.estimate:
+                clock_estimate, plan = _estimate_clock(flight, tracker, mark, notes)
+            track = tracker.track(flight.decoder, mark.frame_index, mark.pixel_px, plan.frame_index.tolist(),
+                                  available=np.asarray(flight.frames.index).tolist())
+    if flight.decoder.failed:
+        notes.append(f"{len(flight.decoder.failed)} frame(s) could not be decoded (damaged or truncated stream)")
+    if track.lost.any():
+        notes.append(f"target lost in {int(track.lost.sum())} of {plan.n} observation frames (pixel not used)")
+    range_m = _on_axis_ranges(flight, plan, track, notes)
+    truth_lla = config.truth_lla()
+    truth_m = None if truth_lla is None else enu_from_lla(*truth_lla, origin)
+    with times("sync"):
+        obs, useful, inside = _synchronize(flight, plan, track, range_m, truth_m, notes)
+    with times("solve"):
+        estimates, failures = solve_all(obs, _methods(config), config.solve.options)
     if not estimates:
         reasons = "; ".join(f"{m}: {f['reason']}" for m, f in failures.items())
         raise InputError(f"no estimator could solve the flight: {reasons}", config.path)
@@ -333,64 +201,20 @@ def process_group(config: FlightConfig) -> GroupResult:
         float("nan")
     tracking = track.to_dict()  # every planned observation frame, the dropped ones included
     tracking["used"] = [bool(u) for u in useful]  # True: a row of observations.json, in the same order
-    tracking["reason"] = [_frame_reason(lost, via, inside, use) for lost, via, inside, use in
-                          zip(track.lost, tracking["via"], states.inside, useful, strict=True)]
+    tracking["reason"] = [_frame_reason(lost, via, ins, use) for lost, via, ins, use in
+                          zip(track.lost, tracking["via"], inside, useful, strict=True)]
     tracking["t_ns"] = [int(t) for t in plan.t_ns]
     tracking["range_t_ns"] = [int(t) for t in plan.range_t_ns]
-    tracking["mark"] = {"frame_index": int(mark_index), "pixel_px": [float(mark_px[0]), float(mark_px[1])]}
+    tracking["mark"] = mark.to_dict()
+    cam = flight.camera
     settings = config.to_dict()
-    settings["camera_resolved"] = {"source": cam_source, **{k: getattr(cam, k) for k in (
+    settings["camera_resolved"] = {"source": flight.camera_source, **{k: getattr(cam, k) for k in (
         "width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px", "dist")}}
     settings["notes"] = notes
     if clock_estimate is not None:
         settings["clock_estimate"] = clock_estimate.to_dict()
     settings["solve_failures"] = failures
-    settings["frames_decoded"] = decoder.decoded
-    settings["cpu_s"] = cpu
+    settings["frames_decoded"] = flight.decoder.decoded
+    settings["cpu_s"] = times.cpu
     return GroupResult(name=config.name, origin_lla=origin, observations=obs, estimates=estimates, truth_m=truth_m,
-                       intersection_angle_deg=gamma, timings_s=timings, settings=settings, tracking=tracking)
-
-
-# ---- outputs of one group ------------------------------------------------------------------------------------
-
-
-def estimates_document(result: GroupResult) -> dict:
-    """The `ridgeloc solve OBS.json --method all --json` document of the group's observations:
-    {"estimates": {method: Estimate.to_dict(truth)}, "unsolved": {method: {"status", "reason"}} (only when some
-    could not run)}."""
-    doc: dict = {"estimates": {m: e.to_dict(result.truth_m) for m, e in result.estimates.items()}}
-    failures = result.settings.get("solve_failures") or {}
-    if failures:
-        doc["unsolved"] = dict(failures)
-    return doc
-
-
-def _json_default(o):
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer, np.bool_)):
-        return o.item()
-    raise TypeError(f"not JSON-serialisable: {type(o).__name__}")
-
-
-def group_files(result: GroupResult) -> dict[str, str]:
-    """The per-group files `ridgeloc run` writes, name -> text: observations.json (the `ridgeloc solve` input,
-    to re-solve without re-processing video), estimates.json (its --json output) and tracking.json (per-frame
-    tracking quality). The report stage can pass them on as extra files of the group's folder."""
-    return {
-        "observations.json": json.dumps(result.observations.to_dict(), indent=1) + "\n",
-        "estimates.json": json.dumps(estimates_document(result), indent=1, default=_json_default) + "\n",
-        "tracking.json": json.dumps(result.tracking, indent=1, default=_json_default) + "\n",
-    }
-
-
-def write_group_outputs(outdir: str | PathLike, result: GroupResult) -> Path:
-    """Write OUTDIR/<group>/ with `group_files(result)`, atomically: the folder is complete or absent."""
-    from pipeline.atomic import atomic_dir
-
-    final = Path(outdir) / result.name
-    files = group_files(result)
-    with atomic_dir(final) as tmp:
-        for name, text in files.items():
-            (tmp / name).write_text(text)
-    return final
+                       intersection_angle_deg=gamma, timings_s=times.wall, settings=settings, tracking=tracking)

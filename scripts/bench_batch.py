@@ -41,7 +41,8 @@ def standin_job(payload: dict) -> str:
 
 def real_job(payload: dict) -> str:
     from pipeline.flight_config import load_flight_config
-    from pipeline.run import group_files, process_group
+    from pipeline.results import group_files
+    from pipeline.run import process_group
 
     r = process_group(load_flight_config(payload["config"]))
     r = dataclasses.replace(r, name=payload["name"])

@@ -18,24 +18,17 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.flight import Flight
 from pipeline.flight_config import load_run_config
-from pipeline.ingest import read_flight
-from pipeline.run import open_frames, plan_flight_observations
 from pipeline.track.sift import SiftTracker
 
 
 def track_group(cfg):
-    log = read_flight(list(cfg.files.telemetry), mapping=cfg.mapping)
-    frames, decoder, closable = open_frames(cfg, log)
-    try:
-        plan = plan_flight_observations(cfg, frames, log)
+    with Flight.open(cfg) as flight:
         tracker = SiftTracker(cfg.tracking)
-        res = tracker.track(decoder, cfg.target.frame_index, cfg.target.pixel, plan.frame_index.tolist(),
-                            available=np.asarray(frames.index).tolist())
-    finally:
-        if closable is not None:
-            closable.close()
-    return res
+        return tracker.track(flight.decoder, cfg.target.frame_index, cfg.target.pixel,
+                             flight.require_plan().frame_index.tolist(),
+                             available=np.asarray(flight.frames.index).tolist())
 
 
 def true_pose_errors(cfg, truth: dict) -> tuple[dict, dict]:

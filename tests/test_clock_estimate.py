@@ -1,4 +1,4 @@
-"""The video clock offset estimated from a flight (pipeline/sync/clock_estimate.py), on a small synthetic flight
+"""The video clock offset estimated from a flight (pipeline/clock_estimate.py), on a small synthetic flight
 with encoder-grade gimbal errors (0.02 deg) and bursts of 9 frames: configured offsets -1.5 .. +1.5 s off are
 recovered within 20 ms with the truth inside the 95 % interval, and `clock.estimate` started 1 s off locates the
 target as well as the true offset (within 10 % + 1 m). scripts/clock_offsets.py gives the full table."""
@@ -9,10 +9,10 @@ import json
 import numpy as np
 import pytest
 
-from pipeline.check.flight import resolve_flight
+from pipeline import clock_estimate as ce
+from pipeline.flight import Flight
 from pipeline.flight_config import load_flight_config
-from pipeline.run import open_frames, process_group
-from pipeline.sync import clock_estimate as ce
+from pipeline.run import process_group
 from pipeline.synth import flight as synth
 from pipeline.synth.config import SynthConfig
 from pipeline.track.sift import SiftTracker
@@ -31,13 +31,17 @@ def burst_flight(tmp_path_factory):
         "scene": {"texture_px": 2048, "texture_res_m": 2.0, "supersample": 1}})
     synth.generate(cfg, root / "flight", write_flight_config=True)
     config = load_flight_config(root / "flight" / "flight.yaml")
-    r = resolve_flight(config)
-    pos, groups = ce.estimation_frames(r)
-    _, decoder, video = open_frames(config, r.log)
-    with video:
-        track = SiftTracker(config.tracking).track(decoder, config.target.frame_index, config.target.pixel,
+    with Flight.open(config) as r:
+        pos, groups = ce.estimation_frames(r)
+        track = SiftTracker(config.tracking).track(r.decoder, config.target.frame_index, config.target.pixel,
                                                    np.asarray(r.frames.index)[pos].tolist())
     return root, config, pos, groups, track.pixel_px
+
+
+def _flight(config) -> Flight:
+    """The flight's logs and frame index (its frames closed: no frame is decoded here)."""
+    with Flight.open(config) as flight:
+        return flight
 
 
 def _shifted(config, error_s: float):
@@ -49,7 +53,7 @@ def _shifted(config, error_s: float):
 @pytest.mark.parametrize("error_s", [-1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5])
 def test_offsets_are_recovered_with_honest_intervals(burst_flight, error_s):
     _, config, pos, groups, pixels = burst_flight
-    r = resolve_flight(_shifted(config, error_s))
+    r = _flight(_shifted(config, error_s))
     est = ce.estimate_video_offset(r, np.asarray(r.frames.t_ns)[pos], pixels, groups, 2.0)
     assert est is not None and est.determined, est
     # the true correction is -error_s
@@ -72,7 +76,7 @@ def test_run_with_estimate_started_1s_off_is_as_good_as_the_true_offset(burst_fl
 
 def test_single_frames_give_no_estimate(burst_flight):
     _, config, pos, groups, pixels = burst_flight
-    r = resolve_flight(config)
+    r = _flight(config)
     # one frame per group: no frame-to-frame information at all
     first = np.r_[True, groups[1:] != groups[:-1]]
     assert ce.estimate_video_offset(r, np.asarray(r.frames.t_ns)[pos][first], pixels[first], groups[first],

@@ -137,8 +137,8 @@ def test_geoid_separation_auto_is_the_geoid_model_at_the_first_position(flight_d
 
     import numpy as np
 
+    from pipeline.flight import geoid_separation_m
     from pipeline.geometry.geoid import geoid_undulation_m
-    from pipeline.run import geoid_separation_m
 
     doc = copy.deepcopy(_doc())
     doc["files"] = {"telemetry": ["data/flight.tlog"], "video": "data/video.mp4"}

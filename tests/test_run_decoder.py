@@ -1,7 +1,8 @@
 import numpy as np
 
 from pipeline.errors import LogReadError
-from pipeline.run import _TimedDecoder, intersection_angle_deg
+from pipeline.flight.frames import TimedDecoder
+from pipeline.geometry.rays import intersection_angle_deg
 
 
 def test_decoder_keeps_the_frames_that_decode_and_converts_to_gray():
@@ -10,7 +11,7 @@ def test_decoder_keeps_the_frames_that_decode_and_converts_to_gray():
             raise LogReadError("video ends before frame 7", path="v.mp4")
         return {i: np.full((4, 6, 3), i, np.uint8) for i in indices}
 
-    dec = _TimedDecoder(read)
+    dec = TimedDecoder(read)
     out = dec([3, 7, 5, 3])
     assert sorted(out) == [3, 5] and out[5].shape == (4, 6) and out[5][0, 0] == 5
     assert dec.failed == [7] and dec.decoded == 2 and dec.seconds >= 0

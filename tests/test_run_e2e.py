@@ -147,7 +147,7 @@ def test_hard_outliers_tracking_lists_every_frame_with_its_reason():
     frames, flags the 2 lost ones with why, and marks the one dropped (no range either) as not used."""
     from pathlib import Path
 
-    from pipeline.run import group_files
+    from pipeline.results import group_files
 
     cfg = Path(__file__).resolve().parent.parent / "configs" / "flights" / "hard_outliers.yaml"
     r = process_group(load_flight_config(cfg))

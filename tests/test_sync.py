@@ -5,6 +5,7 @@ from scipy.spatial.transform import Rotation
 from pipeline.errors import ConfigError, InputError
 from pipeline.geometry.camera import intrinsics_matrix, project
 from pipeline.geometry.frames import enu_from_lla
+from pipeline.geometry.pose import frame_poses
 from pipeline.ingest.model import AttitudeSeries, FlightLog, FrameSeries, GimbalSeries, PositionSeries, RangeSeries
 from pipeline.sync import assemble_observations, frame_states, interpolate_linear, interpolate_rotations, nearest_within
 from pipeline.sync.select import plan_observations
@@ -112,16 +113,15 @@ def test_assembled_observation_projects_the_true_target_with_lens_and_lever_arms
     # cover; here check that assembly keeps the pixel/range pairing and undistortion consistent with P.
     dist = [-0.1, 0.02, 0.0, 0.0, 0.0]
     target = enu_from_lla(30.02, 114.0, 0.0, origin)
-    obs0, poses = assemble_observations(s, np.zeros((3, 2)), np.full(3, np.nan), K=K, dist=dist, origin_lla=origin,
-                                        R_optical_from_gimbal=np.array([[0, 1, 0], [0, 0, 1], [1, 0, 0.0]]),
-                                        lever_camera_m=[0.5, 0, 0.2], lever_rangefinder_m=[0.5, 0.1, 0.2])
+    poses = frame_poses(s.lat_deg, s.lon_deg, s.alt_m, s.body_quat_wxyz, s.gimbal_quat_wxyz, s.yaw_in_vehicle_frame,
+                        origin, R_optical_from_gimbal=np.array([[0, 1, 0], [0, 0, 1], [1, 0, 0.0]]),
+                        lever_camera_m=[0.5, 0, 0.2], lever_rangefinder_m=[0.5, 0.1, 0.2])
+    obs0 = assemble_observations(poses, s.t_ns, np.zeros((3, 2)), np.full(3, np.nan), K=K, dist=dist)
     ideal = project(obs0.P, np.broadcast_to(target, (3, 3)))
     from pipeline.geometry.lens import distort_pixels
     seen = distort_pixels(ideal, K, dist)
     rng = np.array([np.nan, 2500.0, 2600.0])
-    obs, _ = assemble_observations(s, seen, rng, K=K, dist=dist, origin_lla=origin,
-                                   R_optical_from_gimbal=np.array([[0, 1, 0], [0, 0, 1], [1, 0, 0.0]]),
-                                   lever_camera_m=[0.5, 0, 0.2], lever_rangefinder_m=[0.5, 0.1, 0.2], truth_m=target)
+    obs = assemble_observations(poses, s.t_ns, seen, rng, K=K, dist=dist, truth_m=target)
     np.testing.assert_allclose(obs.pixel, ideal, atol=1e-6)
     np.testing.assert_array_equal(obs.has_range, [False, True, True])
     # the laser origin sits 0.1 m to the right of the camera, the camera 0.5 m ahead of the antenna

@@ -1,5 +1,5 @@
-"""The checks of one flight: its config resolved against its data (`resolve_flight`, `mapping_lines`), the geometry
-checks (`geometry_checks`) and the one-line refusal `ridgeloc run` gives an inconsistent flight
+"""The checks of one flight (a `pipeline.flight.Flight`): what each role was resolved to (`mapping_lines`), the
+geometry checks (`geometry_checks`) and the one-line refusal `ridgeloc run` gives an inconsistent flight
 (`refusal_reason`)."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 import datetime
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -22,57 +22,9 @@ from pipeline.check.conventions import (
     reinterpret,
 )
 from pipeline.check.geometry import Cluster, _fmt_m, cluster, range_bias_problem
-from pipeline.errors import InputError, RidgelocError
-from pipeline.flight_config import CLOCK_SOURCES, Camera, FlightConfig
-from pipeline.geometry.lens import undistort_pixels
-from pipeline.geometry.pose import frame_poses
-from pipeline.ingest.model import FlightLog, FrameSeries
-from pipeline.sync.assemble import frame_states
-
-
-@dataclass
-class ResolvedFlight:
-    """A flight config resolved against its data: the log, the frames, the camera (with intrinsics, and where
-    they came from), the observation plan (None with the reason in `plan_error`), the origin, the gimbal reading."""
-
-    config: FlightConfig
-    log: FlightLog
-    frames: FrameSeries
-    camera: Camera
-    camera_source: str
-    reading: Reading
-    plan: object | None
-    plan_error: str | None
-    origin: tuple[float, float, float] | None
-    notes: list[str] = field(default_factory=list)
-
-
-def resolve_flight(config: FlightConfig) -> ResolvedFlight:
-    """Read the flight's logs and frame index (no pixels decoded) and resolve every role; raises RidgelocError for
-    what makes the flight unreadable."""
-    from pipeline.intrinsics import resolve_camera
-    from pipeline.run import _origin, geoid_separation_m, open_frames, plan_flight_observations, read_flight_logs
-
-    log = read_flight_logs(config)
-    frames, _, closable = open_frames(config, log)
-    close = getattr(closable, "close", None)
-    if close is not None:
-        close()
-    if log.frames is None:
-        log.frames = frames
-    camera, source = resolve_camera(config, log)
-    plan, plan_error = None, None
-    try:
-        plan = plan_flight_observations(config, frames, log)
-    except InputError as exc:
-        plan_error = str(exc)
-    try:
-        origin = _origin(config, log, geoid_separation_m(config, log))
-    except RidgelocError:
-        origin = None
-    return ResolvedFlight(config, log, frames, camera, source, current_reading(config, log), plan, plan_error,
-                          origin, list(log.warnings))
-
+from pipeline.errors import RidgelocError
+from pipeline.flight import Flight
+from pipeline.flight_config import CLOCK_SOURCES
 
 # ---- the resolved mapping ---------------------------------------------------------------------------------------
 
@@ -96,20 +48,9 @@ def _rate(t_ns) -> str:
     return f"{(t.size - 1) / ((t[-1] - t[0]) / 1e9):.1f} Hz" if t.size > 1 and t[-1] > t[0] else "-"
 
 
-def telemetry_span_ns(r: ResolvedFlight) -> tuple[int, int] | None:
-    """The interval (telemetry clock, ns) that position, attitude and gimbal all cover, with their offsets."""
-    c = r.config.clock
-    lo, hi = -(2**62), 2**62
-    for role in ("position", "attitude", "gimbal"):
-        s = getattr(r.log, role)
-        off = c.offset_ns(role)
-        lo, hi = max(lo, int(s.t_ns[0]) + off), min(hi, int(s.t_ns[-1]) + off)
-    return (lo, hi) if lo <= hi else None
-
-
-def mapping_lines(r: ResolvedFlight) -> list[str]:
+def mapping_lines(r: Flight) -> list[str]:
     """What each role comes from, in which frame, units and time base, with spans, rates and overlaps."""
-    c, log, now = r.config.clock, r.log, r.reading
+    c, log, now = r.config.clock, r.log, current_reading(r.config, r.log)
     lines = [f"flight {r.config.name} ({r.config.path or 'built in code'})"]
     yaw = {None: "per the log's flags", True: "relative to the vehicle heading", False: "earth-referenced"}
     describe = {
@@ -147,7 +88,7 @@ def mapping_lines(r: ResolvedFlight) -> list[str]:
                         c.offset_ns(s))
     lines.append(f"  {'clock':<10} video {off / 1e9:+.6f} s" + (f", {offsets}" if offsets else "")
                  + (f"; estimate within +-{c.search_s:g} s" if c.estimate else ""))
-    tel = telemetry_span_ns(r)
+    tel = r.telemetry_span_ns()
     if tel is None:
         lines.append("  overlap    position, attitude and gimbal do not overlap in time")
     elif f.t_ns.size:
@@ -168,52 +109,23 @@ def mapping_lines(r: ResolvedFlight) -> list[str]:
 # ---- geometry ---------------------------------------------------------------------------------------------------
 
 
-def outside_telemetry(r: ResolvedFlight) -> str:
+def outside_telemetry(r: Flight) -> str:
     """The one-line problem when no observation time falls inside the telemetry."""
-    tel = telemetry_span_ns(r)
+    tel = r.telemetry_span_ns()
     span = "" if tel is None else f" ({_when(tel[0])} .. {_when(tel[1])})"
     return (f"no observation time falls inside the telemetry{span}: the video clock is off; set clock.video_start "
             "(the first frame's UNIX time or ISO 8601) or clock.video_offset_s")
 
 
-def separation_m(cfg: FlightConfig, log: FlightLog) -> float | None:
-    """altitude.geoid_separation_m as a number (`auto` resolved from the geoid model; pipeline.run)."""
-    from pipeline.run import geoid_separation_m
-
-    return geoid_separation_m(cfg, log)
-
-
-def rays(r: ResolvedFlight, t_ns: np.ndarray, pixel_px: np.ndarray | None = None, conv: Convention | None = None,
-         log: FlightLog | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(origins (m, 3), directions (m, 3), inside (m,)) of the lines of sight at telemetry times t_ns: through
-    pixel_px (m, 2) as tracked (distorted; NaN rows give NaN rays), or the optical axis when None; under the
-    convention `conv` (None: as configured). Origins are the rangefinder's; rows outside the telemetry are NaN."""
-    log = log or r.log
-    cfg, cam = r.config, r.camera
-    M = np.asarray(cam.R_optical_from_gimbal, dtype=float)
-    if conv is not None:
-        log = dataclasses.replace(log, gimbal=reinterpret(log.gimbal, conv, r.reading))
-        M = mount_matrix(conv, r.reading)
-    c = cfg.clock
-    st = frame_states(log, t_ns, position_offset_ns=c.offset_ns("position"),
-                      attitude_offset_ns=c.offset_ns("attitude"), gimbal_offset_ns=c.offset_ns("gimbal"),
-                      geoid_separation_m=separation_m(cfg, log))
-    m = len(t_ns)
-    origins, dirs = np.full((m, 3), np.nan), np.full((m, 3), np.nan)
-    k = st.inside
-    if not k.any() or r.origin is None:
-        return origins, dirs, k
-    poses = frame_poses(st.lat_deg[k], st.lon_deg[k], st.alt_m[k], st.body_quat_wxyz[k], st.gimbal_quat_wxyz[k],
-                        st.yaw_in_vehicle_frame[k], r.origin, R_optical_from_gimbal=M,
-                        lever_camera_m=cfg.lever_arms_m.camera, lever_rangefinder_m=cfg.lever_arms_m.rangefinder)
-    if pixel_px is None:
-        d = poses.optical_axis_enu()
-    else:
-        px = undistort_pixels(np.asarray(pixel_px, dtype=float)[k], cam.K, cam.dist)
-        v = np.c_[px, np.ones(len(px))] @ np.linalg.inv(cam.K).T
-        d = np.einsum("nij,nj->ni", poses.R_enu0_from_optical, v)
-    origins[k], dirs[k] = poses.laser_m, d / np.linalg.norm(d, axis=1, keepdims=True)
-    return origins, dirs, k
+def rays(r: Flight, t_ns: np.ndarray, pixel_px: np.ndarray | None = None, conv: Convention | None = None,
+         now: Reading | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`Flight.rays` under the convention `conv` (None: as configured) instead of the one the flight was read
+    with (`now`, default the configured reading)."""
+    if conv is None:
+        return r.rays(t_ns, pixel_px)
+    now = now or current_reading(r.config, r.log)
+    log = dataclasses.replace(r.log, gimbal=reinterpret(r.log.gimbal, conv, now))
+    return r.rays(t_ns, pixel_px, log=log, R_optical_from_gimbal=mount_matrix(conv, now))
 
 
 @dataclass(frozen=True)
@@ -237,14 +149,14 @@ class GeometryResult:
     what: str  # which rays: "optical axes" or "tracked target"
 
 
-def try_alternatives(r: ResolvedFlight, t_ns, pixel_px, ranges_m, configured: Cluster | None,
+def try_alternatives(r: Flight, now: Reading, t_ns, pixel_px, ranges_m, configured: Cluster | None,
                      limit: int = 4) -> list[Alternative]:
     """The alternative conventions whose lines of sight cluster (consistent), best first, one per distinct
     cluster size (equivalent fixes: the one with fewest changes)."""
     found: list[Alternative] = []
-    for conv in candidates(r.reading)[1:]:
+    for conv in candidates(now)[1:]:
         try:
-            o, d, _ = rays(r, t_ns, pixel_px, conv)
+            o, d, _ = rays(r, t_ns, pixel_px, conv, now)
         except RidgelocError:
             continue
         c = cluster(o, d, ranges_m)
@@ -252,8 +164,8 @@ def try_alternatives(r: ResolvedFlight, t_ns, pixel_px, ranges_m, configured: Cl
             continue
         if configured is not None and configured.ahead and c.spread_m >= 0.5 * configured.spread_m:
             continue
-        changes, notes = fix(conv, r.reading)
-        found.append(Alternative(conv, c, fix_lines(changes), notes, conv.changes(r.reading)))
+        changes, notes = fix(conv, now)
+        found.append(Alternative(conv, c, fix_lines(changes), notes, conv.changes(now)))
     if not found:
         return []
     # Alternatives within 2x (or 0.3 deg) of the tightest fit the data equally well (a camera rolled 180 deg about
@@ -277,8 +189,8 @@ def _rarity(conv: Convention) -> tuple[int, int]:
     return _COMMON_MOUNTS.index(conv.mount), _COMMON_FRAMES.index(conv.frame)
 
 
-def mark_checks(r: ResolvedFlight, centre_m: np.ndarray | None,
-                conv: Convention | None = None) -> tuple[list[str], list[str]]:
+def mark_checks(r: Flight, centre_m: np.ndarray | None, conv: Convention | None = None,
+                now: Reading | None = None) -> tuple[list[str], list[str]]:
     """The marked target pixel against the image bounds and the principal point, and (with the cluster's centre)
     whether its line of sight passes near the cluster. Returns (problems, warnings)."""
     problems, warnings = [], []
@@ -312,7 +224,7 @@ def mark_checks(r: ResolvedFlight, centre_m: np.ndarray | None,
         cands["swapped (row, column)"] = (v, u)
     miss = {}
     for name, px in cands.items():
-        o, d, k = rays(r, t_mark, np.array([px]), conv)
+        o, d, k = rays(r, t_mark, np.array([px]), conv, now)
         if k[0]:
             miss[name] = float(np.linalg.norm(np.cross(centre_m - o[0], d[0])))
     if "as given" in miss:
@@ -325,13 +237,14 @@ def mark_checks(r: ResolvedFlight, centre_m: np.ndarray | None,
     return problems, warnings
 
 
-def geometry_checks(r: ResolvedFlight, pixel_px: np.ndarray | None = None, t_ns: np.ndarray | None = None,
+def geometry_checks(r: Flight, pixel_px: np.ndarray | None = None, t_ns: np.ndarray | None = None,
                     ranges_m: np.ndarray | None = None) -> GeometryResult:
     """The geometry checks at the planned observations (or at t_ns with pixel_px / ranges_m, as `run` has them)."""
     if t_ns is None:
         if r.plan is None:
             return GeometryResult(None, [], [f"no observations to check: {r.plan_error}"], [], "none")
         t_ns, ranges_m = r.plan.t_ns, r.plan.range_m
+    now = current_reading(r.config, r.log)
     what = "optical axes" if pixel_px is None else "lines of sight through the tracked target"
     o, d, inside = rays(r, t_ns, pixel_px)
     problems, warnings = [], []
@@ -346,7 +259,7 @@ def geometry_checks(r: ResolvedFlight, pixel_px: np.ndarray | None = None, t_ns:
         return GeometryResult(None, [], problems, warnings, what)
     alts: list[Alternative] = []
     if not c.consistent:
-        alts = try_alternatives(r, t_ns, pixel_px, ranges_m, c)
+        alts = try_alternatives(r, now, t_ns, pixel_px, ranges_m, c)
         where = c.describe()
         if alts:
             best = alts[0]
@@ -363,14 +276,14 @@ def geometry_checks(r: ResolvedFlight, pixel_px: np.ndarray | None = None, t_ns:
     if rb and not alts:
         problems.append(rb)
     p, w = mark_checks(r, c.centre_m if c.consistent else (alts[0].cluster.centre_m if alts else None),
-                       alts[0].convention if alts and not c.consistent else None)
+                       alts[0].convention if alts and not c.consistent else None, now)
     if c.consistent or alts:
         problems += p
     warnings += w
     return GeometryResult(c, alts, problems, warnings, what)
 
 
-def refusal_reason(r: ResolvedFlight, t_ns, pixel_px, ranges_m) -> str | None:
+def refusal_reason(r: Flight, t_ns, pixel_px, ranges_m) -> str | None:
     """One line when the flight's geometry is inconsistent beyond doubt (ridgeloc run refuses it), else None."""
     o, d, _ = rays(r, t_ns, pixel_px)
     c = cluster(o, d, ranges_m)
@@ -383,11 +296,12 @@ def refusal_reason(r: ResolvedFlight, t_ns, pixel_px, ranges_m) -> str | None:
             if swapped:
                 return f"the marked target is not what the gimbal tracks: {swapped[0]}; give target.pixel as [x, y]"
         return None
-    alts = try_alternatives(r, t_ns, pixel_px, ranges_m, c, limit=1)
+    now = current_reading(r.config, r.log)
+    alts = try_alternatives(r, now, t_ns, pixel_px, ranges_m, c, limit=1)
     head = f"inconsistent geometry: the lines of sight through the tracked target do not converge ({c.describe()})"
     if alts:
         a = alts[0]
-        cause = _cause(a.convention, r.reading)
+        cause = _cause(a.convention, now)
         return (f"{head}; probable cause: {cause}; fix: {'; '.join(a.lines or a.notes)} (then "
                 f"{_fmt_m(a.cluster.spread_m)}); details: ridgeloc check")
     return f"{head}; no common convention fixes it: check the gimbal frame and mount with `ridgeloc check`"

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.geometry.rays import meeting_point
+
 # A spread above this fraction of the distance (2.9 deg) is beyond any attitude, tracking or clock error a flight
 # can have, and below CONSISTENT_REL (1.1 deg) everything is consistent; in between the check warns.
 INCONSISTENT_REL = 0.05
@@ -63,27 +65,6 @@ class Cluster:
 
 def _fmt_m(x: float) -> str:
     return f"{x / 1000:.1f} km" if abs(x) >= 1000 else f"{x:.0f} m"
-
-
-def meeting_point(origins: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(X (3,), miss distances (n,), covariance scale N^-1 (3, 3)) of the rays' least-squares meeting point,
-    with one Cauchy-like reweighting pass so that a few stray rays do not drag it. NaN when the rays are parallel."""
-    o, d = np.asarray(origins, float), np.asarray(dirs, float)
-    proj = np.eye(3) - d[:, :, None] * d[:, None, :]  # (n, 3, 3) projectors orthogonal to each ray
-    w = np.ones(len(o))
-    X = np.full(3, np.nan)
-    Ninv = np.full((3, 3), np.nan)
-    for _ in range(3):
-        N = np.einsum("i,ijk->jk", w, proj)
-        b = np.einsum("i,ijk,ik->j", w, proj, o)
-        if np.linalg.cond(N) > 1e12:
-            return X, np.full(len(o), np.nan), Ninv
-        X = np.linalg.solve(N, b)
-        miss = np.linalg.norm(np.einsum("ijk,ik->ij", proj, X - o), axis=1)
-        scale = max(float(np.median(miss)), 1e-6) * 3.0
-        w = 1.0 / (1.0 + (miss / scale) ** 2)
-        Ninv = np.linalg.inv(N)
-    return X, miss, Ninv
 
 
 def cluster(origins: np.ndarray, dirs: np.ndarray, ranges_m: np.ndarray | None = None) -> Cluster | None:

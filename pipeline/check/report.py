@@ -4,18 +4,21 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from pipeline.check.flight import GeometryResult, ResolvedFlight, geometry_checks, mapping_lines, resolve_flight
+from pipeline.check.flight import GeometryResult, geometry_checks, mapping_lines
 from pipeline.check.geometry import _fmt_m
-from pipeline.errors import InputError, RidgelocError
+from pipeline.clock_estimate import ClockEstimate, estimate_clock
+from pipeline.errors import RidgelocError
+from pipeline.flight import Flight, acquire_mark
 from pipeline.flight_config import FlightConfig
+from pipeline.track.sift import SiftTracker
 
 
 @dataclass
 class CheckResult:
-    resolved: ResolvedFlight
+    resolved: Flight
     mapping: list[str]
     geometry: GeometryResult
-    clock: object | None = None  # pipeline.sync.clock_estimate.ClockEstimate
+    clock: ClockEstimate | None = None
     problems: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
 
@@ -37,49 +40,28 @@ class CheckResult:
 def check_flight(config: FlightConfig, clock: bool = True) -> CheckResult:
     """Resolve `config` against its data and run every check; with `clock`, also estimate the clock offsets
     (whether or not clock.estimate is set; this tracks the target through the frames around each observation)."""
-    r = resolve_flight(config)
-    geo = geometry_checks(r)
-    result = CheckResult(r, mapping_lines(r), geo, problems=list(geo.problems), warnings=list(geo.warnings))
-    result.warnings[:0] = r.notes
-    if clock and r.plan is not None and not geo.problems:
-        try:
-            result.clock = _estimate_clock(r)
-        except RidgelocError as exc:
-            result.warnings.append(f"clock offsets not estimated: {exc}")
-        v = getattr(result.clock, "video", None)
-        if v is not None and v.determined and not (v.low_s <= 0 <= v.high_s) and abs(v.delta_s) > 0.05:
-            result.problems.append(f"the video clock looks {v.delta_s:+.3f} s off (95 % [{v.low_s:+.3f}, "
-                                   f"{v.high_s:+.3f}] s): set clock.video_offset_s to {v.offset_s:.3f} (or the "
-                                   "equivalent video_start), or clock: {estimate: true}")
+    with Flight.open(config) as r:
+        geo = geometry_checks(r)
+        result = CheckResult(r, mapping_lines(r), geo, problems=list(geo.problems), warnings=list(geo.warnings))
+        result.warnings[:0] = r.notes
+        if clock and r.plan is not None and not geo.problems:
+            try:
+                result.clock = _estimate_clock(r)
+            except RidgelocError as exc:
+                result.warnings.append(f"clock offsets not estimated: {exc}")
+    v = getattr(result.clock, "video", None)
+    if v is not None and v.determined and not (v.low_s <= 0 <= v.high_s) and abs(v.delta_s) > 0.05:
+        result.problems.append(f"the video clock looks {v.delta_s:+.3f} s off (95 % [{v.low_s:+.3f}, "
+                               f"{v.high_s:+.3f}] s): set clock.video_offset_s to {v.offset_s:.3f} (or the "
+                               "equivalent video_start), or clock: {estimate: true}")
     return result
 
 
-def _estimate_clock(r: ResolvedFlight):
-    from pipeline.run import open_frames
-    from pipeline.sync.clock_estimate import estimate_clock
-    from pipeline.track.sift import SiftTracker
-
-    cfg = r.config
-    _, decoder, closable = open_frames(cfg, r.log)
-    try:
-        tracker = SiftTracker(cfg.tracking)
-        if cfg.target is None:  # the crosshair of the first observation frame, as `run` takes it
-            mark_index, mark_px = int(r.plan.frame_index[0]), (float(r.camera.cx_px), float(r.camera.cy_px))
-        elif cfg.target.template is not None:
-            import cv2
-
-            template = cv2.imread(cfg.target.template, cv2.IMREAD_GRAYSCALE)
-            if template is None:
-                raise InputError("target.template: not a readable image", cfg.target.template)
-            mark_index, mark_px = tracker.acquire(template, cfg.target.template_pixel, decoder,
-                                                  r.plan.frame_index.tolist())
-        else:
-            mark_index, mark_px = cfg.target.frame_index, cfg.target.pixel
-        return estimate_clock(r, decoder, tracker, mark_index, mark_px)
-    finally:
-        close = getattr(closable, "close", None)
-        if close is not None:
-            close()
+def _estimate_clock(r: Flight) -> ClockEstimate:
+    tracker = SiftTracker(r.config.tracking)
+    mark = acquire_mark(r.config.target, frames=r.frames, plan_frame_index=r.plan.frame_index, camera=r.camera,
+                        decoder=r.decoder, tracker=tracker, config_path=r.config.path)
+    return estimate_clock(r, tracker, mark)
 
 
 def format_check(result: CheckResult) -> str:

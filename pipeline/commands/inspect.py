@@ -18,10 +18,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _inspect_config(path: str, as_json: bool) -> int:
-    from pipeline.check.flight import mapping_lines, resolve_flight
+    from pipeline.check.flight import mapping_lines
+    from pipeline.flight import Flight
     from pipeline.flight_config import load_flight_config
 
-    lines = mapping_lines(resolve_flight(load_flight_config(path)))
+    with Flight.open(load_flight_config(path)) as flight:
+        lines = mapping_lines(flight)
     print(json.dumps({"config": path, "mapping": lines}, indent=2) if as_json else "\n".join(lines))
     return 0
 

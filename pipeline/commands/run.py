@@ -86,8 +86,8 @@ def main(args) -> int:
     from pipeline.batch import Job, job_digest, run_groups, summarize_failures
     from pipeline.report.outputs import write_run_outputs
     from pipeline.report.table4 import write_table4
-    from pipeline.results import GroupFailure
-    from pipeline.run import group_files, process_group
+    from pipeline.results import GroupFailure, group_files
+    from pipeline.run import process_group
 
     config_failures: list[GroupFailure] = []
     loaded: list[tuple[str, FlightConfig]] = []

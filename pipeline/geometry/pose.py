@@ -25,11 +25,16 @@ R_OPTICAL_FROM_GIMBAL_DEFAULT = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0
 
 
 def rotation_from_wxyz(quat_wxyz) -> Rotation:
-    """scipy Rotation from (..., 4) quaternions ordered w, x, y, z (normalised by scipy)."""
+    """scipy Rotation of n rotations from (n, 4) (or one (4,)) quaternions ordered w, x, y, z (normalised by
+    scipy): the one conversion from the model's quaternion order."""
+    return Rotation.from_quat(np.atleast_2d(np.asarray(quat_wxyz, dtype=np.float64))[..., [1, 2, 3, 0]])
+
+
+def _valid_quaternions(quat_wxyz) -> np.ndarray:
     q = np.asarray(quat_wxyz, dtype=np.float64)
     if q.shape[-1] != 4 or not np.isfinite(q).all() or (np.linalg.norm(q, axis=-1) < 1e-9).any():
         raise GeometryError(f"quaternions must be finite non-zero (..., 4) arrays, got shape {q.shape}")
-    return Rotation.from_quat(q[..., [1, 2, 3, 0]])
+    return q
 
 
 def vehicle_yaw_rad(R_ned_from_body: Rotation) -> np.ndarray:
@@ -65,6 +70,11 @@ class FramePoses:
         """(n, 3, 4) pinhole projection matrices P = K [R | -R c] (world = ENU at the origin)."""
         return projection_matrix(np.asarray(K, dtype=np.float64), self.R_optical_from_enu0, self.camera_m)
 
+    def subset(self, keep: np.ndarray) -> FramePoses:
+        """The poses of the frames selected by `keep` (a boolean mask or indices)."""
+        return FramePoses(self.origin_lla, self.R_enu0_from_optical[keep], self.camera_m[keep], self.laser_m[keep],
+                          self.antenna_m[keep])
+
     def optical_axis_enu(self) -> np.ndarray:
         """(n, 3) unit viewing directions (camera +z) in ENU."""
         return self.R_enu0_from_optical[..., :, 2]
@@ -83,8 +93,8 @@ def frame_poses(lat_deg, lon_deg, alt_m, body_quat_wxyz, gimbal_quat_wxyz, yaw_i
     """
     lat = np.asarray(lat_deg, dtype=np.float64)
     lon = np.asarray(lon_deg, dtype=np.float64)
-    R_body = rotation_from_wxyz(body_quat_wxyz)
-    R_gimbal = rotation_from_wxyz(gimbal_quat_wxyz)
+    R_body = rotation_from_wxyz(_valid_quaternions(body_quat_wxyz))
+    R_gimbal = rotation_from_wxyz(_valid_quaternions(gimbal_quat_wxyz))
     n = lat.shape[0]
     if len(R_body) != n or len(R_gimbal) != n:
         raise GeometryError(f"pose inputs disagree in length: {n} positions, {len(R_body)} attitudes, "

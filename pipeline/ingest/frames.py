@@ -14,10 +14,14 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-R_NED_FROM_ENU = Rotation.from_matrix([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+from pipeline.geometry.frames import R_ENU_FROM_NED
+from pipeline.geometry.pose import R_OPTICAL_FROM_GIMBAL_DEFAULT, gimbal_in_ned
+from pipeline.geometry.pose import rotation_from_wxyz as rotation_from_quat_wxyz
+
+R_NED_FROM_ENU = Rotation.from_matrix(R_ENU_FROM_NED.T)
 R_FLU_FROM_FRD = Rotation.from_matrix([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
 # Camera optical (REP-103 `_optical`: x right, y down, z forward) from gimbal FRD (x forward, y right, z down).
-R_OPTICAL_FROM_FRD = Rotation.from_matrix([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+R_OPTICAL_FROM_FRD = Rotation.from_matrix(R_OPTICAL_FROM_GIMBAL_DEFAULT)
 _BODY = {"frd": Rotation.identity(), "flu": R_FLU_FROM_FRD, "optical": R_OPTICAL_FROM_FRD}
 _WORLD = {"ned": Rotation.identity(), "enu": R_NED_FROM_ENU}
 ORIENTATION_FRAMES = tuple(f"{b}_{w}" for b in _BODY for w in _WORLD)  # frd_ned, frd_enu, flu_ned, flu_enu, ...
@@ -28,10 +32,6 @@ def quat_wxyz_from_rotation(rot: Rotation) -> np.ndarray:
     """(n, 4) w, x, y, z with w >= 0 (one sign per rotation, so series stay comparable)."""
     q = np.atleast_2d(rot.as_quat(scalar_first=True))
     return np.where(q[:, :1] < 0, -q, q)
-
-
-def rotation_from_quat_wxyz(q_wxyz: np.ndarray) -> Rotation:
-    return Rotation.from_quat(np.atleast_2d(np.asarray(q_wxyz, dtype=float)), scalar_first=True)
 
 
 def quat_ned_from_frd_euler(roll_rad, pitch_rad, yaw_rad) -> np.ndarray:
@@ -101,10 +101,9 @@ def gimbal_to_earth(gimbal, attitude):
     t = np.clip(gimbal.t_ns[flag], t_att[0], t_att[-1])
     rots = rotation_from_quat_wxyz(attitude.quat_wxyz)
     if t_att.size == 1:
-        yaw = np.full(t.shape, rots.as_euler("ZYX")[0, 0])
+        body = rots[np.zeros(t.size, dtype=int)]
     else:
-        t_rel, ref = (t_att - t_att[0]).astype(float), t_att[0]
-        yaw = Slerp(t_rel, rots)((t - ref).astype(float)).as_euler("ZYX")[:, 0]
+        body = Slerp((t_att - t_att[0]).astype(float), rots)((t - t_att[0]).astype(float))
     q = gimbal.quat_wxyz.copy()
-    q[flag] = quat_wxyz_from_rotation(Rotation.from_euler("Z", yaw[:, None]) * rotation_from_quat_wxyz(q[flag]))
+    q[flag] = quat_wxyz_from_rotation(gimbal_in_ned(body, rotation_from_quat_wxyz(q[flag]), True))
     return GimbalSeries(gimbal.t_ns, q, np.zeros_like(flag), source=gimbal.source, clock=gimbal.clock)

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from pipeline.geometry import rays
 from pipeline.geometry.camera import intrinsics_matrix, look_at_rotation, project, projection_matrix
 from pipeline.simulate.config import CameraConfig, GeometryConfig, NoiseConfig, SimulationConfig
 from pipeline.solve.observations import ObservationBatch, Sigma
@@ -43,9 +44,7 @@ def platform_path_m(g: GeometryConfig, intersection_angle_deg: float) -> np.ndar
 
 def intersection_angle_deg(platform_m: np.ndarray, target_m: np.ndarray = TARGET_M) -> float:
     """Angle between the first and last lines of sight (the paper's gamma), degrees."""
-    u = target_m - platform_m[[0, -1]]
-    u = u / np.linalg.norm(u, axis=1, keepdims=True)
-    return math.degrees(math.acos(float(np.clip(u[0] @ u[1], -1.0, 1.0))))
+    return rays.intersection_angle_deg(platform_m, target_m)
 
 
 def observation_angle_deg(g: GeometryConfig) -> float:

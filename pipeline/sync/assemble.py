@@ -9,7 +9,7 @@ import numpy as np
 from pipeline.errors import ConfigError, InputError
 from pipeline.geometry.frames import ellipsoid_from_amsl_m
 from pipeline.geometry.lens import undistort_pixels
-from pipeline.geometry.pose import FramePoses, frame_poses
+from pipeline.geometry.pose import FramePoses
 from pipeline.ingest.model import FlightLog
 from pipeline.solve.observations import Observations, Sigma
 from pipeline.sync.interpolate import interpolate_linear, interpolate_rotations, nearest_within
@@ -67,27 +67,15 @@ def frame_states(log: FlightLog, t_ns: np.ndarray, *, position_offset_ns: int = 
                        gimbal_quat_wxyz=gimbal, yaw_in_vehicle_frame=flag, inside=in_pos & in_att & in_gim)
 
 
-def assemble_observations(states: FrameStates, pixel_px: np.ndarray, range_m: np.ndarray, *, K: np.ndarray, dist,
-                          origin_lla, R_optical_from_gimbal, lever_camera_m, lever_rangefinder_m,
-                          sigma: Sigma | None = None, truth_m=None) -> tuple[Observations, FramePoses]:
-    """The synchronized observations of the frames whose state is known (states.inside).
+def assemble_observations(poses: FramePoses, t_ns: np.ndarray, pixel_px: np.ndarray, range_m: np.ndarray, *,
+                          K: np.ndarray, dist, sigma: Sigma | None = None, truth_m=None) -> Observations:
+    """The synchronized observations of n frames with known poses (`pipeline.flight.Flight.poses`).
 
-    K: (3, 3), or (m, 3, 3) per frame. pixel_px (m, 2) are image pixels as tracked (distorted; NaN where the target
-    was lost): they are undistorted so that P = K [R | t] is an exact pinhole model. The platform position is the
-    rangefinder's origin."""
-    keep = np.asarray(states.inside, dtype=bool)
-    if not keep.any():
-        raise InputError("no observation time is covered by position, attitude and gimbal data "
-                         "(check the clock offsets)")
-    poses = frame_poses(states.lat_deg[keep], states.lon_deg[keep], states.alt_m[keep],
-                        states.body_quat_wxyz[keep], states.gimbal_quat_wxyz[keep],
-                        states.yaw_in_vehicle_frame[keep], origin_lla, R_optical_from_gimbal=R_optical_from_gimbal,
-                        lever_camera_m=lever_camera_m, lever_rangefinder_m=lever_rangefinder_m)
+    t_ns (n,) telemetry times; K: (3, 3), or (n, 3, 3) per frame. pixel_px (n, 2) are image pixels as tracked
+    (distorted; NaN where the target was lost): they are undistorted so that P = K [R | t] is an exact pinhole
+    model. range_m (n,) (NaN where none). The platform position is the rangefinder's origin."""
     K = np.asarray(K, dtype=np.float64)
-    if K.ndim == 3:  # per-frame intrinsics (zoom): one K per state
-        K = K[keep]
-    pix = undistort_pixels(np.asarray(pixel_px, dtype=np.float64)[keep], K, dist)
-    obs = Observations(P=poses.projection_matrices(K), pixel=pix, platform_m=poses.laser_m,
-                       range_m=np.asarray(range_m, dtype=np.float64)[keep], t_ns=states.t_ns[keep],
-                       sigma=sigma or Sigma(), truth_m=truth_m)
-    return obs, poses
+    pix = undistort_pixels(np.asarray(pixel_px, dtype=np.float64), K, dist)
+    return Observations(P=poses.projection_matrices(K), pixel=pix, platform_m=poses.laser_m,
+                        range_m=np.asarray(range_m, dtype=np.float64), t_ns=np.asarray(t_ns, dtype=np.int64),
+                        sigma=sigma or Sigma(), truth_m=truth_m)

@@ -19,11 +19,11 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.errors import ConfigError
 from pipeline.geometry.camera import look_at_rotation
+from pipeline.geometry.frames import R_ENU_FROM_NED, lla_from_enu
+from pipeline.geometry.pose import R_OPTICAL_FROM_GIMBAL_DEFAULT as R_OPTICAL_FROM_GIMBAL
 from pipeline.synth.config import SynthConfig
 from pipeline.synth.noise import sample_process, smooth_gauss_markov
 
-R_OPTICAL_FROM_GIMBAL = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
-R_ENU_FROM_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 GRAVITY_MPS2 = 9.80665
 MASTER_RATE_HZ = 100.0  # random processes are drawn on this grid and interpolated to sample times
 
@@ -138,8 +138,7 @@ class Flight:
         self.jitter_px = jit
 
     def enu_to_lla(self, enu: np.ndarray) -> np.ndarray:
-        lat, lon, h = pymap3d.enu2geodetic(enu[:, 0], enu[:, 1], enu[:, 2], *self.target_lla)
-        return np.stack([lat, lon, h], axis=-1)
+        return lla_from_enu(enu, self.target_lla)
 
     def state(self, t_ns) -> TrueState:
         """The true state at telemetry times t_ns (n,) int64 UNIX ns."""

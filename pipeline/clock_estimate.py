@@ -35,11 +35,9 @@ import numpy as np
 from scipy.signal import savgol_filter
 from scipy.stats import t as student_t
 
-from pipeline.check.flight import ResolvedFlight, rays, separation_m
-from pipeline.check.geometry import meeting_point
+from pipeline.flight import Flight, TargetMark
 from pipeline.geometry.lens import undistort_pixels
-from pipeline.geometry.pose import frame_poses
-from pipeline.sync.assemble import frame_states
+from pipeline.geometry.rays import meeting_point
 
 CHI2_95_1DOF = 3.841
 GROUP_HALF_WINDOW_S = 0.4  # frames within this of an observation form its group (continuous video)
@@ -97,7 +95,7 @@ class ClockEstimate:
         return self.video.describe() if self.video is not None else "video offset: too few tracked frames"
 
 
-def estimation_frames(r: ResolvedFlight) -> tuple[np.ndarray, np.ndarray]:
+def estimation_frames(r: Flight) -> tuple[np.ndarray, np.ndarray]:
     """(frame positions in r.frames, group id of each): every frame within GROUP_HALF_WINDOW_S of an observation
     frame (at most MAX_FRAMES_PER_GROUP, the nearest), grouped by observation."""
     t = np.asarray(r.frames.t_ns, dtype=np.int64)
@@ -155,13 +153,12 @@ def smoothed_log(log):
     return dataclasses.replace(log, position=pos, attitude=quats(att), gimbal=quats(gim))
 
 
-def estimate_video_offset(r: ResolvedFlight, t_video_ns: np.ndarray, pixel_px: np.ndarray, groups: np.ndarray,
+def estimate_video_offset(r: Flight, t_video_ns: np.ndarray, pixel_px: np.ndarray, groups: np.ndarray,
                           search_s: float) -> OffsetEstimate | None:
     """The video offset correction from tracked pixels pixel_px (m, 2) (distorted, NaN = lost) at frames whose
     video-clock times are t_video_ns (m,), grouped by `groups` (m,). None with too few tracked frames."""
-    cfg, cam = r.config, r.camera
-    c = cfg.clock
-    configured_ns = c.offset_ns("video")
+    cam = r.camera
+    configured_ns = r.config.clock.offset_ns("video")
     ok = np.isfinite(pixel_px).all(1)
     # only groups with at least 2 tracked frames carry within-group information
     counts = np.bincount(groups[ok], minlength=int(groups.max()) + 1) if ok.any() else np.zeros(1, int)
@@ -172,13 +169,12 @@ def estimate_video_offset(r: ResolvedFlight, t_video_ns: np.ndarray, pixel_px: n
     _, g = np.unique(g, return_inverse=True)
     px_u = undistort_pixels(px, cam.K, cam.dist)
     # the target: where the lines of sight through the tracked pixels meet (at the configured offset)
-    o, d, inside = rays(r, t0 + configured_ns, px)
+    o, d, inside = r.rays(t0 + configured_ns, px)
     if inside.sum() < 3:
         return None
     X, _, _ = meeting_point(o[inside], d[inside])
     if not np.isfinite(X).all():
         return None
-    M = np.asarray(cam.R_optical_from_gimbal, dtype=float)
     n_groups = int(g.max()) + 1
     log = smoothed_log(r.log)
 
@@ -186,16 +182,9 @@ def estimate_video_offset(r: ResolvedFlight, t_video_ns: np.ndarray, pixel_px: n
         """(K, n_groups) within-group misfit of each group at each candidate offset (NaN outside the telemetry)."""
         K_, m = len(deltas_ns), len(t0)
         t = (t0[None, :] + configured_ns + deltas_ns[:, None]).ravel()
-        st = frame_states(log, t, position_offset_ns=c.offset_ns("position"),
-                          attitude_offset_ns=c.offset_ns("attitude"), gimbal_offset_ns=c.offset_ns("gimbal"),
-                          geoid_separation_m=separation_m(cfg, log))
+        poses, k = r.poses(t, log=log)
         resid = np.full((K_ * m, 2), np.nan)
-        k = st.inside
-        if k.any():
-            poses = frame_poses(st.lat_deg[k], st.lon_deg[k], st.alt_m[k], st.body_quat_wxyz[k],
-                                st.gimbal_quat_wxyz[k], st.yaw_in_vehicle_frame[k], r.origin, R_optical_from_gimbal=M,
-                                lever_camera_m=cfg.lever_arms_m.camera,
-                                lever_rangefinder_m=cfg.lever_arms_m.rangefinder)
+        if poses is not None:
             v = np.einsum("nij,nj->ni", poses.R_optical_from_enu0, X - poses.camera_m)
             proj = (v[:, :2] / v[:, 2:3]) * [cam.fx_px, cam.fy_px] + [cam.cx_px, cam.cy_px]
             resid[k] = np.tile(px_u, (K_, 1))[k] - proj
@@ -247,13 +236,14 @@ def estimate_video_offset(r: ResolvedFlight, t_video_ns: np.ndarray, pixel_px: n
                           len(t0), math.sqrt(s2), search_s)
 
 
-def estimate_clock(r: ResolvedFlight, decoder, tracker, mark_index: int, mark_px) -> ClockEstimate:
-    """Track the frames around each observation and estimate the video offset (see the module
-    docstring). `decoder(indices)` -> {index: image}; `tracker` a SiftTracker."""
+def estimate_clock(r: Flight, tracker, mark: TargetMark) -> ClockEstimate:
+    """Track the target from `mark` through the frames around each observation (decoded by the flight's
+    frames) and estimate the video offset (see the module docstring); `tracker` a SiftTracker."""
     if r.plan is None:
         return ClockEstimate(None)
     search_s = r.config.clock.search_s
     pos, groups = estimation_frames(r)
     idx = np.asarray(r.frames.index)[pos]
-    track = tracker.track(decoder, mark_index, mark_px, idx.tolist(), available=np.asarray(r.frames.index).tolist())
+    track = tracker.track(r.decoder, mark.frame_index, mark.pixel_px, idx.tolist(),
+                          available=np.asarray(r.frames.index).tolist())
     return ClockEstimate(estimate_video_offset(r, np.asarray(r.frames.t_ns)[pos], track.pixel_px, groups, search_s))

@@ -1,0 +1,95 @@
+"""The frames of a flight: their index (frame numbers and video-clock times, no pixels) and a decoder of chosen
+frames. `FrameSource` is the interface every kind of frames gives (a video file, a full-motion video stream, a
+bag's image topic; an image folder would be one more `open_frames` branch); it is a context manager that closes
+the reader."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+
+import cv2
+import numpy as np
+
+from pipeline.errors import ConfigError, RidgelocError
+from pipeline.flight_config import FlightConfig
+from pipeline.ingest.model import FlightLog, FrameSeries
+
+
+class TimedDecoder:
+    """Decodes chosen frame numbers to grayscale and accumulates the time spent."""
+
+    def __init__(self, read: Callable[[list[int]], dict[int, np.ndarray]]):
+        self._read = read
+        self.seconds = 0.0
+        self.cpu_seconds = 0.0
+        self.decoded = 0
+        self.failed: list[int] = []
+
+    def __call__(self, indices: Sequence[int]) -> dict[int, np.ndarray]:
+        t, c = time.perf_counter(), time.process_time()
+        wanted = sorted(set(int(i) for i in indices))
+        try:
+            images = self._read(wanted)
+        except RidgelocError:  # a truncated or damaged stream: keep the frames that decode, the others are lost
+            images = {}
+            for i in wanted:
+                try:
+                    images.update(self._read([i]))
+                except RidgelocError:
+                    self.failed.append(i)
+        out = {i: (img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)) for i, img in images.items()}
+        self.seconds += time.perf_counter() - t
+        self.cpu_seconds += time.process_time() - c
+        self.decoded += len(out)
+        return out
+
+
+class FrameSource:
+    """`frames`: the FrameSeries (index, t_ns on the video clock); `decoder(indices)` -> {index: gray image}
+    (a TimedDecoder); `close()` releases the reader (also on leaving a `with` block; closing twice is harmless)."""
+
+    def __init__(self, frames: FrameSeries, read: Callable[[list[int]], dict[int, np.ndarray]], closable=None):
+        self.frames = frames
+        self.decoder = TimedDecoder(read)
+        self._closable = closable
+
+    def close(self) -> None:
+        closable, self._closable = self._closable, None
+        close = getattr(closable, "close", None)
+        if close is not None:
+            close()
+
+    def __enter__(self) -> FrameSource:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def open_frames(config: FlightConfig, log: FlightLog) -> FrameSource:
+    """The flight's frames: the video file when the config names one, else the full-motion video the telemetry
+    came from, else the image topic of a bag the telemetry came from."""
+    from pipeline import ingest
+
+    if config.files.video is not None:
+        video = ingest.VideoFrames(config.files.video)  # demuxes the file once: its index serves both
+        try:
+            frames = ingest.read_video(config.files.video, frames_csv=config.files.frames_csv or "auto",
+                                       index=video.index)
+        except BaseException:
+            video.close()
+            raise
+        return FrameSource(frames, video.read, video)
+    if log.frames is not None and "fmv" in log.formats:  # full-motion video: the frames of the telemetry file
+        video = ingest.VideoFrames(log.frames.source)
+        return FrameSource(log.frames, video.read, video)
+    if log.frames is None:
+        raise ConfigError("the flight has no video (files.video) and its logs carry no images", config.path)
+    for path in config.files.telemetry:
+        try:
+            images = ingest.BagImages(path, None, mapping=config.mapping, frames=log.frames)
+        except (RidgelocError, ValueError, KeyError):
+            continue
+        return FrameSource(images.frames, images.read)
+    raise ConfigError(f"cannot open the image stream {log.frames.source!r} of the flight's logs", config.path)

@@ -221,6 +221,9 @@ def process_group(config: FlightConfig) -> GroupResult:
     frames, decoder, closable = open_frames(config, log)
     cam, cam_source = resolve_camera(config, log if log.frames is not None else dataclasses.replace(log, frames=frames))
     notes.extend(log.warnings)
+    if {"fmv", "klv"} & set(log.formats):  # i23: the payload's own frame centre as a second opinion
+        from pipeline.check.frame_centre import frame_centre_checks
+        notes.extend(r.line() for _, r in frame_centre_checks(config))
     timings["ingest"] = time.perf_counter() - t0
     cpu["ingest"] = time.process_time() - c0
     try:

@@ -196,3 +196,38 @@ def check_file(path, index=None) -> FrameCentreCheck | None:
 
     table, _ = read_klv_table(path, index)
     return check_frame_centre(table)
+
+
+def frame_centre_checks(config) -> list[tuple[str, FrameCentreCheck]]:
+    """(file, check) for every KLV-carrying file of a flight config (its telemetry files and video that are raw
+    KLV dumps or videos with a KLV stream holding frame centres)."""
+    from pipeline.errors import RidgelocError
+    from pipeline.ingest.dispatch import detect_format
+
+    out = []
+    paths = [*config.files.telemetry, *([config.files.video] if config.files.video else [])]
+    for p in dict.fromkeys(paths):
+        try:
+            if detect_format(p) not in ("klv", "video"):
+                continue
+            r = check_file(p)
+        except RidgelocError:
+            continue  # a video without KLV, or a file the reader refuses (reported by the reader itself)
+        if r is not None:
+            out.append((str(p), r))
+    return out
+
+
+def frame_centre_document(checks: list[tuple[str, FrameCentreCheck]]) -> dict | None:
+    """The `frame_centre` entry of `ridgeloc check --json`: the first KLV file's check (n, median_m, p95_m, ...)
+    with its "file", and "others" for any further KLV files; None without any."""
+    if not checks:
+        return None
+    docs = [{"file": f, **r.to_dict()} for f, r in checks]
+    return {**docs[0], "others": docs[1:]} if len(docs) > 1 else docs[0]
+
+
+def add_frame_centre(result, checks: list[tuple[str, FrameCentreCheck]]) -> None:
+    """Put the checks on a check result; a convention error (median above LARGE_M) is also a problem."""
+    result.frame_centre = checks
+    result.problems += [f"{f}: {r.line()}" for f, r in checks if r.median_m > LARGE_M]

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from pipeline.check.flight import GeometryResult, ResolvedFlight, geometry_checks, mapping_lines, resolve_flight
+from pipeline.check.frame_centre import add_frame_centre, frame_centre_checks, frame_centre_document
 from pipeline.check.geometry import _fmt_m
 from pipeline.errors import InputError, RidgelocError
 from pipeline.flight_config import FlightConfig
@@ -18,6 +19,7 @@ class CheckResult:
     clock: object | None = None  # pipeline.sync.clock_estimate.ClockEstimate
     problems: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    frame_centre: list = field(default_factory=list)  # i23: [(file, check.frame_centre.FrameCentreCheck)]
 
     def to_dict(self) -> dict:
         g = self.geometry
@@ -31,6 +33,7 @@ class CheckResult:
                 "alternatives": [{"lines": a.lines, "notes": a.notes, "spread_m": a.cluster.spread_m}
                                  for a in g.alternatives]},
             "clock": None if self.clock is None else self.clock.to_dict(),
+            "frame_centre": frame_centre_document(self.frame_centre),  # i23
         }
 
 
@@ -41,6 +44,7 @@ def check_flight(config: FlightConfig, clock: bool = True) -> CheckResult:
     geo = geometry_checks(r)
     result = CheckResult(r, mapping_lines(r), geo, problems=list(geo.problems), warnings=list(geo.warnings))
     result.warnings[:0] = r.notes
+    add_frame_centre(result, frame_centre_checks(config))  # i23
     if clock and r.plan is not None and not geo.problems:
         try:
             result.clock = _estimate_clock(r)
@@ -100,6 +104,7 @@ def format_check(result: CheckResult) -> str:
     if result.clock is not None:
         lines.append("clock")
         lines.append("  " + result.clock.describe())
+    lines += [f"  {r.line()}" for _, r in result.frame_centre]  # i23
     lines += [f"warning: {w}" for w in result.warnings]
     lines += [f"problem: {p}" for p in result.problems]
     lines.append("consistent" if not result.problems else f"{len(result.problems)} problem(s)")

@@ -42,6 +42,7 @@ from pipeline.ingest.model import (
 ST0601_KEY = bytes.fromhex("060E2B34020B01010E01030101000000")
 EG0104_KEY = eg0104.SET_KEY
 KEY_PREFIX = ST0601_KEY[:4]
+MAX_T_US = (2**63 - 1) // 1000  # time stamps past 2262 do not fit int64 nanoseconds: not a packet
 MAX_PACKET_BYTES = 65536  # far above any ST 0601 packet; a longer BER length is garbage, not a packet
 # ST 0601 tag -> column name of the decoded table
 TAGS = {5: "heading_deg", 6: "pitch_deg", 7: "roll_deg", 13: "lat_deg", 14: "lon_deg", 15: "alt_msl_m",
@@ -126,7 +127,7 @@ def decode_eg0104(packet: bytes) -> dict | None:
     first = packet[16]
     start = 17 + (first & 0x7F if first >= 0x80 else 0)
     row, unknown, damaged = eg0104.decode_set(packet[start:])
-    if not isinstance(row.get("t_us"), int):
+    if not 0 <= row.get("t_us", -1) <= MAX_T_US:
         return None
     out: dict = {k: v for k, v in row.items() if not isinstance(v, str)}
     for name in ("lon_deg", "centre_lon_deg", *(f"corner{i}_lon_deg" for i in range(1, 5))):
@@ -148,7 +149,7 @@ def decode_packet(packet: bytes) -> dict[str, float] | None:
     except (Stanag4609Error, ValueError, TypeError, OverflowError):
         return None
     t_us = ls.misp_timestamp_microseconds
-    if t_us is None:
+    if t_us is None or not 0 <= t_us <= MAX_T_US:
         return None
     row: dict[str, float] = {"t_us": t_us}
     for field in ls.fields:

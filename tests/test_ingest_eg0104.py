@@ -145,6 +145,14 @@ def test_the_kwiver_clips_read_every_quantity(name):
     assert log.position.alt_datum == "amsl" and not any("skipped" in w for w in log.warnings)
     assert np.isnan(log.frame_centre.alt_m).all()  # these clips carry no frame-centre elevation
     np.testing.assert_allclose(log.field_of_view.hfov_deg, 0.8, atol=1e-6)
+    from pipeline.ingest.inspect import format_result, inspect_paths
+
+    (result,) = inspect_paths([str(_clip(name))])
+    text = format_result(result)
+    for what in (f"position {n_sets}", f"attitude {n_sets}", f"gimbal {n_sets}", "EG 0104 sensor angles",
+                 f"range {n_sets}", "EG 0104 slant range", f"field_of_view {n_sets}", f"frames {n_frames}"):
+        assert what in text, what
+    assert "missing for localization: nothing" in text
 
 
 @pytest.mark.parametrize("name, median_m", [("aphill_short.ts", 35.5), ("aphill_klv_10s.ts", 72.3)])
@@ -169,21 +177,22 @@ def test_check_json_on_a_clip_prints_frame_centre():
     assert fc["n"] == 48 and fc["median_m"] == pytest.approx(35.5, abs=0.5) and fc["p95_m"] >= fc["median_m"]
 
 
-def test_run_on_a_clip_locates_the_crosshair_near_the_frame_centre():
+@pytest.mark.parametrize("name", sorted(CLIPS))
+def test_run_on_a_clip_locates_the_crosshair_near_the_frame_centre(name):
     from pipeline.flight_config import load_run_config
     from pipeline.run import process_group
 
-    (entry,) = load_run_config(_clip("aphill_short.ts"))
+    (entry,) = load_run_config(_clip(name))
     result = process_group(entry.config)
     from pipeline.geometry.frames import lla_from_enu
 
     lat, lon, _ = lla_from_enu(result.estimates["los"].position_m, result.origin_lla)
-    log = read_flight([_clip("aphill_short.ts")])
+    log = read_flight([_clip(name)])
     # the logged frame centres of the clip, within the grid-azimuth offset (35 m) and the camera's motion
     d_m = np.hypot((log.frame_centre.lat_deg - lat) * 111_000,
                    (log.frame_centre.lon_deg - lon) * 111_000 * np.cos(np.radians(lat)))
     assert d_m.min() < 100.0
-    assert any(n.startswith("frame centre: 48 packets") for n in result.settings["notes"])
+    assert any(n.startswith(f"frame centre: {CLIPS[name][0]} packets") for n in result.settings["notes"])
 
 
 # ---- the synth's ST 0601 writer ------------------------------------------------------------------------

@@ -265,3 +265,19 @@ def test_scan_finds_sets_among_junk():
     rows, bad, cut = scan_packets(b"xx" + sets[0] + b"\x06\x0e" + sets[1] + sets[2] + sets[3][:-3], SET_KEY,
                                   decode_eg0104)
     assert [r["t_us"] - 1_221_515_219_356_000 for r in rows] == [0, 1, 2] and cut == 1 and bad == 0
+
+
+@pytest.mark.parametrize("convention, code", [("platform", 0), ("earth", 1)])
+def test_check_json_on_a_raw_klv_dump(tmp_path, convention, code):
+    from pipeline.geometry.geoid import geoid_undulation_m
+    from pipeline.synth.writers.fmv import klv_packets
+
+    tel, t = _synth_tel(10)
+    p = _write(tmp_path, klv_packets(tel, t, (640, 480, 800.0, 800.0), np.ones(t.size),
+                                     float(geoid_undulation_m(47.3, 8.5)), sensor_angles=convention))
+    out = subprocess.run([sys.executable, "-m", "pipeline", "check", str(p), "--json"], capture_output=True,
+                         text=True, timeout=600)
+    assert out.returncode == code, out.stderr
+    fc = json.loads(out.stdout)["frame_centre"]
+    assert fc["n"] == 10 and fc["file"] == str(p)
+    assert (fc["median_m"] < 1.0) if code == 0 else (fc["median_m"] > 200.0 and fc["p95_m"] >= fc["median_m"])

@@ -221,9 +221,8 @@ def process_group(config: FlightConfig) -> GroupResult:
     frames, decoder, closable = open_frames(config, log)
     cam, cam_source = resolve_camera(config, log if log.frames is not None else dataclasses.replace(log, frames=frames))
     notes.extend(log.warnings)
-    if {"fmv", "klv"} & set(log.formats):  # i23: the payload's own frame centre as a second opinion
-        from pipeline.check.frame_centre import frame_centre_checks
-        notes.extend(r.line() for _, r in frame_centre_checks(config))
+    from pipeline.check.frame_centre import frame_centre_checks  # i23: the payload's frame centre, a second opinion
+    notes.extend(r.line() for _, r in frame_centre_checks(config, log.formats))
     timings["ingest"] = time.perf_counter() - t0
     cpu["ingest"] = time.process_time() - c0
     try:

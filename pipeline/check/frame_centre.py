@@ -199,13 +199,16 @@ def check_file(path, index=None) -> FrameCentreCheck | None:
     return check_frame_centre(table)
 
 
-def frame_centre_checks(config) -> list[tuple[str, FrameCentreCheck]]:
+def frame_centre_checks(config, formats=("fmv", "klv")) -> list[tuple[str, FrameCentreCheck]]:
     """(file, check) for every KLV-carrying file of a flight config (its telemetry files and video that are raw
-    KLV dumps or videos with a KLV stream holding frame centres)."""
+    KLV dumps or videos with a KLV stream holding frame centres). `formats`: the reader formats of the flight's
+    read log (`FlightLog.formats`); without "fmv" or "klv" nothing is read again."""
     from pipeline.errors import RidgelocError
     from pipeline.ingest.dispatch import detect_format
 
     out = []
+    if not {"fmv", "klv"} & set(formats):
+        return out
     paths = [*config.files.telemetry, *([config.files.video] if config.files.video else [])]
     for p in dict.fromkeys(paths):
         try:

@@ -1,4 +1,4 @@
-"""MISB ST 0601 UAS Datalink Local Set (STANAG 4609 full-motion video metadata) -> the time-series model.
+"""MISB ST 0601 UAS Datalink Local Set and EG 0104 Universal Set (STANAG 4609 FMV metadata) -> the model.
 
 Packets are split out of a byte stream here (bounded, resynchronising on the 16-byte Universal Key) and each is
 decoded and checksum-verified by the `stanag4609` library (docs/ingest.md says why that one). Where they come
@@ -15,6 +15,8 @@ packet has them), 13/14 sensor lat/lon with 75 (ellipsoid
 height) or else 15 (true altitude, MSL), 16/17 field of view, 18/19/20 sensor azimuth/elevation/roll relative to
 the platform, 21 slant range, 23/24/25 frame centre, 40/41/42 target location, 1 checksum (verified).
 Sensor attitude = platform ZYX (heading, pitch, roll) then sensor ZYX (azimuth, elevation, roll), both FRD.
+EG 0104 sets (`eg0104.py` holds their key table; no checksum) fill the same columns, their sensor angles
+earth-referenced (SENSOR_CONVENTION). A stream may hold both; each row keeps its set (`KlvTable.is_eg0104`).
 """
 
 from __future__ import annotations

@@ -368,7 +368,9 @@ def flight_config_for_video(path: str | PathLike) -> FlightConfig:
     if not path.is_file():
         raise ConfigError("no such file", path)
     name = "".join(c if c.isalnum() or c in "-_" else "_" for c in path.stem) or "flight"
-    return FlightConfig(name=name.lstrip("."), files=Files(telemetry=(str(path),)), path=str(path))
+    # i23: MSL altitudes (EG 0104, ST 0601 tag 15 alone) converted with the EGM2008 geoid; unused for ellipsoid heights
+    return FlightConfig(name=name.lstrip("."), files=Files(telemetry=(str(path),)), path=str(path),
+                        altitude=Altitude(geoid_separation_m="auto"))
 
 
 @dataclass(frozen=True)

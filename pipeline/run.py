@@ -19,6 +19,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from pipeline.check.flight import outside_telemetry, refusal_reason
+from pipeline.check.frame_centre import frame_centre_checks
 from pipeline.clock_estimate import ClockEstimate, estimate_clock
 from pipeline.errors import ConfigError, InputError, RidgelocError
 from pipeline.flight import Flight, TargetMark, acquire_mark
@@ -162,6 +163,7 @@ def process_group(config: FlightConfig) -> GroupResult:
     with flight:
         plan = flight.require_plan()
         notes += flight.notes + plan.notes
+        notes += [r.line() for _, r in frame_centre_checks(config, flight.log.formats)]  # the payload's own fix
         with times("track", flight.decoder):
             tracker = SiftTracker(config.tracking)
             mark = acquire_mark(config.target, frames=flight.frames, plan_frame_index=plan.frame_index,

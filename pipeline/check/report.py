@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from pipeline.check.flight import GeometryResult, geometry_checks, mapping_lines
+from pipeline.check.frame_centre import add_frame_centre, frame_centre_checks, frame_centre_document
 from pipeline.check.geometry import _fmt_m
 from pipeline.clock_estimate import ClockEstimate, estimate_clock
 from pipeline.errors import RidgelocError
@@ -21,6 +22,7 @@ class CheckResult:
     clock: ClockEstimate | None = None
     problems: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    frame_centre: list = field(default_factory=list)  # [(file, check.frame_centre.FrameCentreCheck)]
 
     def to_dict(self) -> dict:
         g = self.geometry
@@ -34,6 +36,7 @@ class CheckResult:
                 "alternatives": [{"lines": a.lines, "notes": a.notes, "spread_m": a.cluster.spread_m}
                                  for a in g.alternatives]},
             "clock": None if self.clock is None else self.clock.to_dict(),
+            "frame_centre": frame_centre_document(self.frame_centre),
         }
 
 
@@ -44,6 +47,7 @@ def check_flight(config: FlightConfig, clock: bool = True) -> CheckResult:
         geo = geometry_checks(r)
         result = CheckResult(r, mapping_lines(r), geo, problems=list(geo.problems), warnings=list(geo.warnings))
         result.warnings[:0] = r.notes
+        add_frame_centre(result, frame_centre_checks(config, r.log.formats))
         if clock and r.plan is not None and not geo.problems:
             try:
                 result.clock = _estimate_clock(r)
@@ -82,6 +86,7 @@ def format_check(result: CheckResult) -> str:
     if result.clock is not None:
         lines.append("clock")
         lines.append("  " + result.clock.describe())
+    lines += [f"  {r.line()}" for _, r in result.frame_centre]
     lines += [f"warning: {w}" for w in result.warnings]
     lines += [f"problem: {p}" for p in result.problems]
     lines.append("consistent" if not result.problems else f"{len(result.problems)} problem(s)")

@@ -8,8 +8,8 @@ from pipeline.errors import InputError, LogReadError, RidgelocError
 from pipeline.ingest.mapping import check_override, mapping_for
 from pipeline.ingest.merge import merge_logs
 from pipeline.ingest.model import FlightLog
+from pipeline.ingest.video import VIDEO_SUFFIXES
 
-VIDEO_SUFFIXES = {".mp4", ".mov", ".avi", ".mkv", ".m4v", ".mpg", ".mpeg", ".ts", ".webm"}
 MAGIC = (
     (b"ULog\x01\x12\x35", "ulog"),
     (b"#ROSBAG V2.0", "ros1"),

@@ -1,4 +1,4 @@
-"""MISB ST 0601 UAS Datalink Local Set (STANAG 4609 full-motion video metadata) -> the time-series model.
+"""MISB ST 0601 UAS Datalink Local Set and EG 0104 Universal Set (STANAG 4609 FMV metadata) -> the model.
 
 Packets are split out of a byte stream here (bounded, resynchronising on the 16-byte Universal Key) and each is
 decoded and checksum-verified by the `stanag4609` library (docs/ingest.md says why that one). Where they come
@@ -15,6 +15,8 @@ packet has them), 13/14 sensor lat/lon with 75 (ellipsoid
 height) or else 15 (true altitude, MSL), 16/17 field of view, 18/19/20 sensor azimuth/elevation/roll relative to
 the platform, 21 slant range, 23/24/25 frame centre, 40/41/42 target location, 1 checksum (verified).
 Sensor attitude = platform ZYX (heading, pitch, roll) then sensor ZYX (azimuth, elevation, roll), both FRD.
+EG 0104 sets (`eg0104.py` holds their key table; no checksum) fill the same columns, their sensor angles
+earth-referenced (SENSOR_CONVENTION). A stream may hold both; each row keeps its set (`KlvTable.is_eg0104`).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pipeline.errors import LogReadError
+from pipeline.ingest import eg0104
 from pipeline.ingest.frames import quat_wxyz_from_rotation
 from pipeline.ingest.model import (
     AttitudeSeries,
@@ -39,8 +42,9 @@ from pipeline.ingest.model import (
 )
 
 ST0601_KEY = bytes.fromhex("060E2B34020B01010E01030101000000")
-EG0104_KEY = bytes.fromhex("060E2B34020101010E01010201010000")
+EG0104_KEY = eg0104.SET_KEY
 KEY_PREFIX = ST0601_KEY[:4]
+MAX_T_US = (2**63 - 1) // 1000  # time stamps past 2262 do not fit int64 nanoseconds: not a packet
 MAX_PACKET_BYTES = 65536  # far above any ST 0601 packet; a longer BER length is garbage, not a packet
 # ST 0601 tag -> column name of the decoded table
 TAGS = {5: "heading_deg", 6: "pitch_deg", 7: "roll_deg", 13: "lat_deg", 14: "lon_deg", 15: "alt_msl_m",
@@ -49,6 +53,7 @@ TAGS = {5: "heading_deg", 6: "pitch_deg", 7: "roll_deg", 13: "lat_deg", 14: "lon
         25: "centre_alt_m", 40: "target_lat_deg", 41: "target_lon_deg", 42: "target_alt_m",
         90: "pitch_full_deg", 91: "roll_full_deg"}
 TAG_OF = {name: tag for tag, name in TAGS.items()}
+COLUMNS = tuple(dict.fromkeys((*TAGS.values(), *eg0104.COLUMNS)))  # every column of a KlvTable
 
 
 def _checksum_ok(packet: bytes) -> bool:
@@ -62,13 +67,15 @@ def _checksum_ok(packet: bytes) -> bool:
     return (s & 0xFFFF) == int.from_bytes(packet[-2:], "big")
 
 
-def scan_packets(data: bytes, key: bytes = ST0601_KEY) -> tuple[list[dict], int, int]:
-    """Decode consecutive KLV packets with Universal Key `key` in `data` -> (rows of `decode_packet`, bad, cut off).
+def scan_packets(data: bytes, key: bytes = ST0601_KEY, decode=None) -> tuple[list[dict], int, int]:
+    """Decode consecutive KLV packets with Universal Key `key` in `data` -> (rows of `decode`, bad, cut off).
 
-    A packet is taken when its BER length fits (at most MAX_PACKET_BYTES), its checksum holds and the library
-    decodes it; then scanning goes on after it. Anything else (a false key match, a bad checksum, a packet running
-    past the end) is skipped by resuming just past its key, so one damaged packet costs only itself. Work is
-    linear in len(data) times at most MAX_PACKET_BYTES / 16 per key occurrence, all in numpy."""
+    `decode(packet) -> row | None` defaults to `decode_checked` (ST 0601); EG 0104 sets use `decode_eg0104`.
+    A packet is taken when its BER length fits (at most MAX_PACKET_BYTES) and `decode` accepts it (ST 0601: its
+    checksum holds and the library decodes it); then scanning goes on after it. Anything else (a false key
+    match, a bad checksum, a packet running past the end) is skipped by resuming just past its key, so one damaged
+    packet costs only itself. Work is linear in len(data) times at most MAX_PACKET_BYTES / 16 per key occurrence."""
+    decode = decode or decode_checked
     rows: list[dict] = []
     bad = cut = 0
     pos, n = 0, len(data)
@@ -97,7 +104,7 @@ def scan_packets(data: bytes, key: bytes = ST0601_KEY) -> tuple[list[dict], int,
             cut += 1
             continue
         packet = data[k:start + length]
-        row = decode_packet(packet) if _checksum_ok(packet) else None
+        row = decode(packet)
         if row is None:
             bad += 1
             continue
@@ -109,6 +116,27 @@ def _st0601():
     from stanag4609 import st0601  # imported on first use: the package import takes ~0.6 s
 
     return st0601
+
+
+def decode_checked(packet: bytes) -> dict | None:
+    """An ST 0601 packet -> its row when the checksum holds and it decodes, else None."""
+    return decode_packet(packet) if _checksum_ok(packet) else None
+
+
+def decode_eg0104(packet: bytes) -> dict | None:
+    """An EG 0104 universal set (key, BER length, items) -> row as `decode_packet` gives, plus "_unknown" and
+    "_damaged" item counts and "set" = "eg0104"; None without a valid time stamp (nothing to place it by)."""
+    first = packet[16]
+    start = 17 + (first & 0x7F if first >= 0x80 else 0)
+    row, unknown, damaged = eg0104.decode_set(packet[start:])
+    if not 0 <= row.get("t_us", -1) <= MAX_T_US:
+        return None
+    out: dict = {k: v for k, v in row.items() if not isinstance(v, str)}
+    for name in ("lon_deg", "centre_lon_deg", *(f"corner{i}_lon_deg" for i in range(1, 5))):
+        if name in out and out[name] > 180:  # some writers give 0..360
+            out[name] -= 360.0
+    out.update(_unknown=unknown, _damaged=damaged, set="eg0104")
+    return out
 
 
 def decode_packet(packet: bytes) -> dict[str, float] | None:
@@ -123,7 +151,7 @@ def decode_packet(packet: bytes) -> dict[str, float] | None:
     except (Stanag4609Error, ValueError, TypeError, OverflowError):
         return None
     t_us = ls.misp_timestamp_microseconds
-    if t_us is None:
+    if t_us is None or not 0 <= t_us <= MAX_T_US:
         return None
     row: dict[str, float] = {"t_us": t_us}
     for field in ls.fields:
@@ -143,7 +171,8 @@ class KlvTable:
         self.n = len(rows)
         self.t_us = np.array([r["t_us"] for r in rows], dtype=np.int64)
         self.t_ns = np.array(t_ns, dtype=np.int64)
-        self.cols = {name: np.array([r.get(name, math.nan) for r in rows], dtype=np.float64) for name in TAGS.values()}
+        self.cols = {name: np.array([r.get(name, math.nan) for r in rows], dtype=np.float64) for name in COLUMNS}
+        self.is_eg0104 = np.array([r.get("set") == "eg0104" for r in rows], dtype=bool)
         self.clock = clock
         self.source = source
 
@@ -162,8 +191,57 @@ def _platform_rotation(c: dict[str, np.ndarray], mask: np.ndarray) -> Rotation:
         [c["heading_deg"][mask], c["pitch_deg"][mask], c["roll_deg"][mask]])))
 
 
+# How each set's sensor angles give the sensor's attitude (NED from sensor FRD, x = optical axis):
+# "platform": ST 0601's definition, platform ZYX (heading, pitch, roll) then sensor ZYX (azimuth, elevation, roll)
+#   relative to the platform;
+# "earth": the angles are earth-referenced, ZYX (azimuth from true north, elevation from the local horizontal,
+#   roll) in the local NED frame, without the platform attitude. EG 0104's "Angle to North" and "Obliquity Angle"
+#   items, as the KWIVER Fort A.P. Hill clips write them (docs/ingest.md gives the frame-centre evidence).
+SENSOR_CONVENTION = {"st0601": "platform", "eg0104": "earth"}
+
+
+def sensor_rotation(c: dict[str, np.ndarray], mask: np.ndarray, convention: str) -> Rotation:
+    """The sensor's attitude (NED from sensor FRD) of the rows in `mask` under `convention` ("platform" or
+    "earth", see SENSOR_CONVENTION); a missing sensor roll counts as 0."""
+    roll = np.nan_to_num(c["sensor_roll_deg"][mask], nan=0.0)
+    rel = Rotation.from_euler("ZYX", np.radians(np.column_stack(
+        [c["sensor_az_deg"][mask], c["sensor_el_deg"][mask], roll])))
+    if convention == "earth":
+        return rel
+    return _platform_rotation(c, mask) * rel
+
+
+def table_sensor_rotation(table: KlvTable, mask: np.ndarray) -> Rotation:
+    """`sensor_rotation` of the rows in `mask`, each under its own set's convention (SENSOR_CONVENTION)."""
+    eg = table.is_eg0104[mask]
+    q = np.empty((int(mask.sum()), 4))
+    for conv, rows in ((SENSOR_CONVENTION["eg0104"], eg), (SENSOR_CONVENTION["st0601"], ~eg)):
+        if rows.any():
+            sub = mask.copy()
+            sub[mask] = rows
+            q[rows] = sensor_rotation(table.cols, sub, conv).as_quat()
+    return Rotation.from_quat(q)
+
+
+def sensor_position(table: KlvTable) -> tuple[np.ndarray, np.ndarray, str, str]:
+    """(rows with a sensor position (n,) bool, altitude of every row (n,) m, its datum "ellipsoid" or "amsl",
+    the tags it came from): ST 0601 tag 75 (ellipsoid) where more rows have it than tag 15 / EG 0104 altitude
+    (MSL)."""
+    hae = _has(table, "lat_deg", "lon_deg", "alt_hae_m")
+    msl = _has(table, "lat_deg", "lon_deg", "alt_msl_m")
+    if hae.sum() >= msl.sum() and hae.any():
+        return hae, table.cols["alt_hae_m"], "ellipsoid", "75"
+    return msl, table.cols["alt_msl_m"], "amsl", "15"
+
+
+def _items(table: KlvTable, st0601: str, eg: str) -> str:
+    """Where a series came from: the ST 0601 tags, the EG 0104 items, or both."""
+    names = ([st0601] if (~table.is_eg0104).any() else []) + ([f"EG 0104 {eg}"] if table.is_eg0104.any() else [])
+    return " + ".join(names)
+
+
 def table_to_log(table: KlvTable, path: str, warnings: list[str]) -> FlightLog:
-    """The model's series from decoded ST 0601 packets (see the module docstring for the tag mapping)."""
+    """The model's series from decoded ST 0601 / EG 0104 packets (see the module docstring for the mapping)."""
     c, src = table.cols, table.source
     for short, full in (("pitch_deg", "pitch_full_deg"), ("roll_deg", "roll_full_deg")):
         c[short] = np.where(np.isfinite(c[full]), c[full], c[short])  # 90/91 cover what 6/7 cannot (+-20/50 deg)
@@ -171,125 +249,120 @@ def table_to_log(table: KlvTable, path: str, warnings: list[str]) -> FlightLog:
     if table.n == 0:
         return log
 
-    hae = _has(table, "lat_deg", "lon_deg", "alt_hae_m")
-    msl = _has(table, "lat_deg", "lon_deg", "alt_msl_m")
-    if hae.any() or msl.any():
-        use_hae = hae.sum() >= msl.sum()
-        m = hae if use_hae else msl
+    m, alt_all, datum, alt_tag = sensor_position(table)
+    if m.any():
         t, o = _series(table, m)
-        alt = c["alt_hae_m" if use_hae else "alt_msl_m"][m][o]
-        log.position = PositionSeries(t, c["lat_deg"][m][o], c["lon_deg"][m][o], alt,
-                                      "ellipsoid" if use_hae else "amsl",
-                                      source=f"{src}:tags 13/14/{75 if use_hae else 15}", clock=table.clock)
+        log.position = PositionSeries(t, c["lat_deg"][m][o], c["lon_deg"][m][o], alt_all[m][o], datum,
+                                      source=f"{src}:{_items(table, f'tags 13/14/{alt_tag}', 'sensor position')}",
+                                      clock=table.clock)
     att = _has(table, "heading_deg", "pitch_deg", "roll_deg")
     if att.any():
         t, o = _series(table, att)
-        log.attitude = AttitudeSeries(t, quat_wxyz_from_rotation(_platform_rotation(c, att))[o],
-                                      source=f"{src}:tags 5/6/7", clock=table.clock)
-    gim = att & _has(table, "sensor_az_deg", "sensor_el_deg")
+        log.attitude = AttitudeSeries(t, quat_wxyz_from_rotation(_platform_rotation(c, att))[o], clock=table.clock,
+                                      source=f"{src}:{_items(table, 'tags 5/6/7', 'platform angles')}")
+    gim = _has(table, "sensor_az_deg", "sensor_el_deg") & (att | table.is_eg0104)
     if gim.any():
         t, o = _series(table, gim)
-        roll = np.nan_to_num(c["sensor_roll_deg"][gim], nan=0.0)
-        rel = Rotation.from_euler("ZYX", np.radians(np.column_stack(
-            [c["sensor_az_deg"][gim], c["sensor_el_deg"][gim], roll])))
-        q = quat_wxyz_from_rotation(_platform_rotation(c, gim) * rel)[o]
-        log.gimbal = GimbalSeries(t, q, np.zeros(t.size, bool), source=f"{src}:tags 18/19/20 on 5/6/7",
-                                  clock=table.clock)
+        q = quat_wxyz_from_rotation(table_sensor_rotation(table, gim))[o]
+        log.gimbal = GimbalSeries(t, q, np.zeros(t.size, bool), clock=table.clock, source=f"{src}:" + _items(
+            table, "tags 18/19/20 on 5/6/7", "sensor angles (earth-referenced)"))
     rng = _has(table, "slant_range_m")
     if rng.any():
         t, o = _series(table, rng)
         r = c["slant_range_m"][rng][o]
-        log.range = RangeSeries(t, r, r > 0, source=f"{src}:tag 21", clock=table.clock)
+        log.range = RangeSeries(t, r, r > 0, source=f"{src}:{_items(table, 'tag 21', 'slant range')}",
+                                clock=table.clock)
     fov = np.isfinite(c["hfov_deg"]) | np.isfinite(c["vfov_deg"])
     if fov.any():
         t, o = _series(table, fov)
-        log.field_of_view = FieldOfViewSeries(t, c["hfov_deg"][fov][o], c["vfov_deg"][fov][o],
-                                              source=f"{src}:tags 16/17", clock=table.clock)
+        log.field_of_view = FieldOfViewSeries(t, c["hfov_deg"][fov][o], c["vfov_deg"][fov][o], clock=table.clock,
+                                              source=f"{src}:{_items(table, 'tags 16/17', 'fields of view')}")
     for attr, names, tags in (("frame_centre", ("centre_lat_deg", "centre_lon_deg", "centre_alt_m"), "23/24/25"),
                               ("payload_target", ("target_lat_deg", "target_lon_deg", "target_alt_m"), "40/41/42")):
-        m = _has(table, *names)
+        m = _has(table, *names[:2])  # EG 0104 has no frame-centre elevation in many files: NaN there
         if m.any():
             t, o = _series(table, m)
+            what = _items(table, f"tags {tags}", attr.replace("_", " "))
             setattr(log, attr, PositionSeries(t, c[names[0]][m][o], c[names[1]][m][o], c[names[2]][m][o], "amsl",
-                                              source=f"{src}:tags {tags}", clock=table.clock))
+                                              source=f"{src}:{what}", clock=table.clock))
     supplies = tuple(q for q in ("position", "attitude", "gimbal", "range", "field_of_view")
                      if getattr(log, q) is not None)
-    log.streams.append(StreamInfo("ST 0601 UAS Local Set", "klv", table.n, int(table.t_ns.min()),
+    name = " + ".join(n for n, has in (("ST 0601 UAS Local Set", (~table.is_eg0104).any()),
+                                        ("EG 0104 Universal Set", table.is_eg0104.any())) if has)
+    log.streams.append(StreamInfo(name, "klv", table.n, int(table.t_ns.min()),
                                   int(table.t_ns.max()), supplies))
     return log
 
 
-def _skipped_warning(path, n_ok: int, n_bad: int, n_cut: int, other_keys: int) -> list[str]:
+def _skipped_warning(path, n_ok: int, n_bad: int, n_cut: int, other_keys: int, unknown: int = 0,
+                     damaged: int = 0) -> list[str]:
     out = []
     if n_bad or n_cut:
         out.append(f"{Path(path).name}: skipped {n_bad + n_cut} KLV packet(s) of {n_ok + n_bad + n_cut} "
                    f"({n_bad} bad checksum or undecodable, {n_cut} cut off)")
+    if unknown or damaged:
+        out.append(f"{Path(path).name}: EG 0104 items skipped: {unknown} with an unknown key, {damaged} damaged "
+                   "(wrong length, out of range or cut off)")
     if other_keys:
-        out.append(f"{Path(path).name}: {other_keys} KLV packet(s) of other sets (not ST 0601) ignored")
+        out.append(f"{Path(path).name}: {other_keys} KLV packet(s) of other sets (not ST 0601 or EG 0104) ignored")
     return out
 
 
-def _decode_all(chunks) -> tuple[list[dict], list, int, int, int]:
-    """chunks: iterable of (bytes, time or None). Returns rows, their chunk's time, bad and cut counts, and the
-    number of chunks holding only other sets (EG 0104 universal sets, ST 0903 VMTI ...)."""
+def _decode_all(chunks) -> tuple[list[dict], list, int, int, int, int, int]:
+    """chunks: iterable of (bytes, time or None). Returns rows (ST 0601 and EG 0104), their chunk's time, bad and
+    cut packet counts, the number of chunks holding only other sets (ST 0903 VMTI ...), and the unknown and
+    damaged EG 0104 item counts."""
     rows, times = [], []
-    bad = cut = other = 0
+    bad = cut = other = unknown = damaged = 0
     for data, t in chunks:
-        if data.startswith(KEY_PREFIX) and not data.startswith(ST0601_KEY) and data.find(ST0601_KEY) < 0:
+        got: list[dict] = []
+        for key, decode in ((ST0601_KEY, decode_checked), (eg0104.SET_KEY, decode_eg0104)):
+            if data.find(key) < 0:
+                continue
+            part, n_bad, n_cut = scan_packets(data, key, decode)
+            bad += n_bad
+            cut += n_cut
+            got += part
+        if not got and data.startswith(KEY_PREFIX) and data.find(ST0601_KEY) < 0 and data.find(eg0104.SET_KEY) < 0:
             other += 1
             continue
-        got, n_bad, n_cut = scan_packets(data)
-        bad += n_bad
-        cut += n_cut
+        for r in got:
+            unknown += r.pop("_unknown", 0)
+            damaged += r.pop("_damaged", 0)
         rows += got
         times += [t] * len(got)
-    return rows, times, bad, cut, other
+    return rows, times, bad, cut, other, unknown, damaged
 
 
-def read_klv_dump(path) -> FlightLog:
-    """A raw file of consecutive ST 0601 packets (`ffmpeg -i in.ts -map 0:d -f data out.klv`) -> FlightLog on the
-    "unix" clock (tag 2)."""
-    p = Path(path)
+def _dump_table(p: Path) -> tuple[KlvTable, list[str]]:
     try:
         data = p.read_bytes()
     except OSError as exc:
         raise LogReadError(f"cannot read: {exc.strerror}", path=p) from None
     if not data:
         raise LogReadError("empty file", path=p)
-    rows, _, bad, cut, _ = _decode_all([(data, None)])
+    rows, _, bad, cut, _, unknown, damaged = _decode_all([(data, None)])
     if not rows:
-        if data.find(EG0104_KEY) >= 0:
-            raise LogReadError("holds MISB EG 0104 universal sets only; ridgeloc reads ST 0601 local sets "
-                               "(see docs/ingest.md)", path=p)
-        raise LogReadError(f"no valid ST 0601 KLV packet ({bad} bad checksum or undecodable, {cut} cut off)", path=p)
+        raise LogReadError(f"no valid ST 0601 or EG 0104 KLV packet ({bad} bad checksum or undecodable, {cut} cut "
+                           "off)", path=p)
     t_ns = [r["t_us"] * 1000 for r in rows]
-    table = KlvTable(rows, t_ns, "unix", p.name)
-    log = table_to_log(table, str(p), _skipped_warning(p, len(rows), bad, cut, 0))
-    log.formats.append("klv")
-    return log
+    return KlvTable(rows, t_ns, "unix", p.name), _skipped_warning(p, len(rows), bad, cut, 0, unknown, damaged)
 
 
-def read_fmv(path, index=None) -> FlightLog:
-    """An MPEG-TS (STANAG 4609) with a video stream and a KLV data stream -> FlightLog: frames from the video
-    packets' pts, telemetry from the KLV packets, all on the "video" clock (0 = the first video frame), with a
-    ClockLink video -> unix from each packet's tag 2. `index`: the file's demux_index(data_streams=True) if known."""
-    from pipeline.ingest.video import demux_index
-
-    p = Path(path)
-    index = index if index is not None else demux_index(p, data_streams=True)
+def _fmv_table(p: Path, index) -> tuple[KlvTable, list[str]]:
     if not index.data_packets:
         raise LogReadError("no KLV data stream (this video carries no MISB metadata; give telemetry files)", path=p)
-    rows, times, bad, cut, other = _decode_all(index.data_packets)
+    rows, times, bad, cut, other, unknown, damaged = _decode_all(index.data_packets)
     if not rows:
-        raise LogReadError(f"no valid ST 0601 KLV packet in the data stream ({bad} bad checksum or undecodable, "
-                           f"{cut} cut off)", path=p)
+        raise LogReadError(f"no valid ST 0601 or EG 0104 KLV packet in the data stream ({bad} bad checksum or "
+                           f"undecodable, {cut} cut off)", path=p)
     t_us = np.array([r["t_us"] for r in rows], dtype=np.int64)
     have = np.array([t is not None for t in times])
     t_ns = np.zeros(len(rows), dtype=np.int64)
-    warnings = _skipped_warning(p, len(rows), bad, cut, other)
+    warnings = _skipped_warning(p, len(rows), bad, cut, other, unknown, damaged)
     if have.all():
         t_ns[:] = [t for t in times]
-    elif have.sum() >= 2:  # packets without a PTS: place them by tag 2, fitted to those with one
+    elif have.sum() >= 2:  # packets without a PTS: place them by their time stamp, fitted to those with one
         a, b = np.polyfit(t_us[have] * 1e3, np.array([t for t in times if t is not None], dtype=np.float64), 1)
         t_ns[have] = [t for t in times if t is not None]
         t_ns[~have] = np.round(a * t_us[~have] * 1e3 + b).astype(np.int64)
@@ -298,7 +371,42 @@ def read_fmv(path, index=None) -> FlightLog:
         t_ns[:] = (t_us - t_us.min()) * 1000
         warnings.append(f"{p.name}: KLV packets carry no PTS; their time stamps are aligned with the first video "
                         "frame (set clock offsets if this is wrong)")
-    table = KlvTable(rows, t_ns.tolist(), "video", p.name)
+    return KlvTable(rows, t_ns.tolist(), "video", p.name), warnings
+
+
+def read_klv_table(path, index=None) -> tuple[KlvTable, list[str]]:
+    """The decoded packets of a raw KLV dump (times on the "unix" clock) or of a video's KLV data stream (the
+    "video" clock) and the reader's warnings; `index`: the video's demux_index(data_streams=True) if known."""
+    from pipeline.ingest.video import VIDEO_SUFFIXES, demux_index
+
+    p = Path(path)
+    if index is None and p.suffix.lower() not in VIDEO_SUFFIXES:  # a raw dump (dispatch's rule: videos by suffix)
+        return _dump_table(p)
+    if index is None:
+        index = demux_index(p, data_streams=True)
+    return _fmv_table(p, index)
+
+
+def read_klv_dump(path) -> FlightLog:
+    """A raw file of consecutive ST 0601 packets or EG 0104 sets (`ffmpeg -i in.ts -map 0:d -f data out.klv`) ->
+    FlightLog on the "unix" clock (tag 2 / the EG 0104 time stamp)."""
+    p = Path(path)
+    table, warnings = _dump_table(p)
+    log = table_to_log(table, str(p), warnings)
+    log.formats.append("klv")
+    return log
+
+
+def read_fmv(path, index=None) -> FlightLog:
+    """An MPEG-TS (STANAG 4609) with a video stream and a KLV data stream -> FlightLog: frames from the video
+    packets' pts, telemetry from the KLV packets, all on the "video" clock (0 = the first video frame), with a
+    ClockLink video -> unix from each packet's time stamp. `index`: the file's demux_index(data_streams=True) if
+    known."""
+    from pipeline.ingest.video import demux_index
+
+    p = Path(path)
+    index = index if index is not None else demux_index(p, data_streams=True)
+    table, warnings = _fmv_table(p, index)
     log = table_to_log(table, str(p), warnings)
     log.frames = index.frames
     log.clock_links.append(ClockLink("video", "unix", table.t_ns.copy(), table.t_us * 1000))

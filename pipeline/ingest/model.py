@@ -19,7 +19,7 @@ import numpy as np
 
 from pipeline.errors import InputError
 
-ALT_DATUMS = ("amsl", "ellipsoid", "relative")
+ALT_DATUMS = ("amsl", "ellipsoid", "relative", "missing")  # i23: "missing": a horizontal track, altitudes NaN
 CLOCKS = ("unix", "boot", "video", "unknown")
 
 
@@ -202,4 +202,7 @@ class FlightLog:
         """Quantities localization needs that this log does not supply."""
         needed = {"position": self.position, "attitude": self.attitude, "gimbal": self.gimbal,
                   "range": self.range, "frames": self.frames}
-        return [k for k, v in needed.items() if v is None]
+        out = [k for k, v in needed.items() if v is None]
+        if self.position is not None and self.position.alt_datum == "missing":  # i23
+            out.append("altitude")
+        return out

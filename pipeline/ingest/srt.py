@@ -11,6 +11,9 @@ Layouts (the test corpus in tests/data/srt has one file per layout; docs/ingest.
 - `HOME(lon,lat) date ... GPS(lon,lat,sats) BAROMETER:h` (Phantom 3/4, Mavic Pro);
 - `GPS(lat,lon,12.3M)` (enterprise payloads: a decimal third value with an `M` is the altitude, an integer is
   the satellite count, which is what tells the coordinate order apart).
+A file whose cues carry no altitude at all (Mavic 2 Pro firmware printing only `[latitude]` `[longtitude]`) gives
+its horizontal track: altitude from the mapping's `altitude_m` (datum `abs_datum`) when set, else NaN on datum
+"missing", which gives way to another log's positions when the flight has one (merge.py).
 Cue times are the subtitle start times on the "video" clock; each cue's absolute date/time, when the layout
 prints one, is kept as a ClockLink from "video" to "local" (the aircraft's wall clock, time zone unknown), or to
 "unix" when `srt.utc_offset_h` states the zone.
@@ -253,8 +256,18 @@ def read_srt(path: str | Path, mapping: dict) -> FlightLog:
             warn(f"{path}: some cues lack the absolute altitude; using relative altitudes")
     else:
         ok, alt, datum = has_abs, cols["abs_alt"], mapping["abs_datum"]
-    if not ok.any():
-        warn(f"{path}: no altitude in the subtitles; position not read")
+    if not ok.any():  # e.g. Mavic 2 Pro firmware printing only [latitude] [longtitude]
+        tt, lat, lon = sort_by_time(t, cols["lat"], cols["lon"])
+        const = mapping.get("altitude_m")
+        if const is not None:
+            a, datum = np.full(tt.size, float(const)), mapping["abs_datum"]
+            warn(f"{path}: no altitude in the subtitles: horizontal track read, altitude {float(const):g} m "
+                 f"({datum}) from the mapping's srt.altitude_m")
+        else:
+            a, datum = np.full(tt.size, np.nan), "missing"
+            warn(f"{path}: no altitude in the subtitles: horizontal track read ({tt.size} positions), altitude "
+                 "missing; give a log of the flight with altitudes, or set the mapping's srt.altitude_m")
+        log.position = PositionSeries(tt, lat, lon, a, datum, source=src, clock="video")
     else:
         if not ok.all():
             warn(f"{path}: {int((~ok).sum())} of {ok.size} cues without an altitude skipped")

@@ -23,6 +23,8 @@ import numpy as np
 from pipeline.errors import LogReadError
 from pipeline.ingest.model import FrameSeries
 
+VIDEO_SUFFIXES = {".mp4", ".mov", ".avi", ".mkv", ".m4v", ".mpg", ".mpeg", ".ts", ".webm"}
+
 
 def _av():
     import av

@@ -230,6 +230,52 @@ def _seed_klv_dump(folder: Path) -> Path:
     return path
 
 
+def _eg0104_sets(n: int) -> list[bytes]:
+    """n MISB EG 0104 universal sets 40 ms apart: 16-byte item keys (EG 0104.5's table), BER lengths, IEEE 754
+    big-endian values, as the KWIVER Fort A.P. Hill clips carry them (doubles for latitudes/longitudes)."""
+    def item(key_hex: str, value: bytes) -> bytes:
+        return bytes.fromhex(key_hex) + bytes([len(value)]) + value
+
+    ul = "060E2B34010101"
+    out = []
+    for k in range(n):
+        body = b"".join([
+            item(ul + "030702010101050000", struct.pack(">Q", T0_NS // 1000 + k * 40_000)),
+            item(ul + "010101200100000000", b"ABCD"),
+            item(ul + "030701020102040200", struct.pack(">d", 38.25 + k * 1e-5)),
+            item(ul + "030701020102060200", struct.pack(">d", -77.37)),
+            item(ul + "010701020102020000", struct.pack(">f", 1054.4)),
+            item(ul + "070701100104000000", struct.pack(">f", 1.8)),
+            item(ul + "070701100105000000", struct.pack(">f", 1.1)),
+            item(ul + "070701100106000000", struct.pack(">f", -102.8 + k)),
+            item(ul + "020420020101080000", struct.pack(">f", 0.8)),
+            item(ul + "0704200201010A0100", struct.pack(">f", 0.6)),
+            item(ul + "010701080101000000", struct.pack(">f", 1730.0)),
+            item(ul + "010701100102000000", struct.pack(">f", 124.5)),
+            item(ul + "010701100103000000", struct.pack(">f", -37.5)),
+            item(ul + "010701020103020000", struct.pack(">d", 38.2456)),
+            item(ul + "010701020103040000", struct.pack(">d", -77.3537)),
+            item(ul + "030701020103070100", struct.pack(">d", 38.2456))])
+        out.append(bytes.fromhex("060E2B34020101010E01010201010000") + b"\x82" + len(body).to_bytes(2, "big") + body)
+    return out
+
+
+def _seed_eg0104_dump(folder: Path) -> Path:
+    path = folder / "eg0104.klv"
+    path.write_bytes(b"".join(_eg0104_sets(5)))
+    return path
+
+
+def _read_klv_checked(path: Path) -> None:
+    """`ridgeloc inspect` of a raw KLV dump, then `ridgeloc check FILE`'s frame-centre check of it."""
+    from pipeline.check.frame_centre import check_file
+
+    _read_log(path)
+    r = check_file(path)
+    if r is not None:
+        json.dumps(r.to_dict())
+
+
 def _seed_fmv(folder: Path) -> Path:
     """A 6-frame 32x24 H.264 MPEG-TS with a KLV data stream (the synth's MISB writer), ~6 KB."""
     import numpy as np
@@ -312,6 +358,7 @@ TARGETS: tuple[Target, ...] = (
     Target("srt", _seed_srt, _read_log),
     Target("klv-dump", _seed_klv_dump, _read_log),
     Target("fmv-ts", _seed_fmv, _read_log),
+    Target("eg0104-dump", _seed_eg0104_dump, _read_klv_checked),
     Target("video", _seed_video, _read_video),
     Target("frames-csv", _seed_frames_csv, _read_frames_csv),
     Target("flight-config", _seed_flight_config, _read_flight_config, tree="yaml"),

@@ -5,7 +5,10 @@ One KLV packet per video frame, with that frame's PTS (synchronous carriage as F
 the noisy logged series: position (tags 13/14, 75 ellipsoid height and 15 true altitude MSL), platform heading/
 pitch/roll (5/6/7, or 90/91 for pitch and roll beyond 6/7's +-20/+-50 deg), the sensor's azimuth/elevation/roll
 relative to the platform (18/19/20), the field of view of the frame's zoom (16/17) and, on frames where the laser
-fired, its range as the slant range (21).
+fired, its range as the slant range (21) and the frame centre (23/24/25) where the optical axis reaches at that
+range (pymap3d's aer2geodetic from the logged attitude; elevation MSL), as a payload computes it.
+`sensor_angles="earth"` writes a deliberate convention error: tags 18/19/20 earth-referenced (azimuth from true
+north, elevation from the horizon) instead of relative to the platform, the frame centre still the true one.
 """
 
 from __future__ import annotations
@@ -28,9 +31,11 @@ def _interp_rot(t_src: np.ndarray, q_wxyz: np.ndarray, t: np.ndarray) -> Rotatio
 
 
 def klv_packets(tel, t_ns: np.ndarray, camera: tuple[int, int, float, float], zoom: np.ndarray,
-                geoid_separation_m: float) -> list[bytes]:
+                geoid_separation_m: float, sensor_angles: str = "platform") -> list[bytes]:
     """ST 0601 packets at telemetry times t_ns (n,) (UNIX ns): camera (width, height, fx, fy) px at zoom 1,
-    zoom (n,) factors. The gimbal series must be earth-referenced."""
+    zoom (n,) factors. The gimbal series must be earth-referenced. sensor_angles: "platform" (the standard) or
+    "earth" (a deliberate convention error, see the module docstring)."""
+    import pymap3d
     from stanag4609 import st0601
 
     t_ns = np.asarray(t_ns, dtype=np.int64)
@@ -38,7 +43,10 @@ def klv_packets(tel, t_ns: np.ndarray, camera: tuple[int, int, float, float], zo
     R_body = _interp_rot(tel.att_t_ns, tel.att_quat_wxyz, t_ns)
     R_gim = _interp_rot(tel.gimbal_t_ns, tel.gimbal_quat_wxyz, t_ns)
     hpr = R_body.as_euler("ZYX", degrees=True)
-    aer = (R_body.inv() * R_gim).as_euler("ZYX", degrees=True)
+    aer = (R_body.inv() * R_gim if sensor_angles == "platform" else R_gim).as_euler("ZYX", degrees=True)
+    axis_ned = R_gim.apply([1.0, 0.0, 0.0])
+    axis_az = np.degrees(np.arctan2(axis_ned[:, 1], axis_ned[:, 0]))
+    axis_el = np.degrees(np.arcsin(np.clip(-axis_ned[:, 2], -1.0, 1.0)))
     w, h, fx, fy = camera
     hfov = np.degrees(2 * np.arctan(w / (2 * fx * zoom)))
     vfov = np.degrees(2 * np.arctan(h / (2 * fy * zoom)))
@@ -57,6 +65,8 @@ def klv_packets(tel, t_ns: np.ndarray, camera: tuple[int, int, float, float], zo
         r = shots.get(t)
         if r is not None and np.isfinite(r) and 0 <= r <= 5_000_000:
             values[21] = r
+            c_lat, c_lon, c_h = pymap3d.aer2geodetic(axis_az[i], axis_el[i], r, *lla[i])
+            values.update({23: float(c_lat), 24: float(c_lon), 25: float(c_h - geoid_separation_m)})
         out.append(st0601.encode_uas_local_set(values))
     return out
 

@@ -1,0 +1,161 @@
+"""Locate a target from drone photos (`ridgeloc locate`, docs/locate.md): the photos' poses and one pixel per
+photo become `Observations` (P = K [R | -R c] in ENU at the first photo, the pinhole pixel, the camera centre as
+platform, the laser range where the photo's LRF status is Normal and the pixel is the laser's, the image centre);
+every estimator of `pipeline.solve` runs on them, plus `dem` (a GeoTIFF DEM, pipeline.terrain) and `dji` (the
+photos' own LRFTarget*, the maker's one-shot answer, for comparison).
+
+Error model for consumer drones (docs/locate.md): compass/gimbal yaw errors of 1-5 deg that stay constant over a
+flight are the MLE's boresight bias (bias_prior_deg, default PHOTO_BIAS_PRIOR_DEG); the other sigmas default to
+PHOTO_SIGMA. An altitude datum offset shared by all photos moves every estimate by the same vector (no geometry
+sees it) except `dem`, which it moves horizontally by offset / tan(depression).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pipeline.errors import InputError, RidgelocError
+from pipeline.geometry.frames import enu_from_lla
+from pipeline.ingest.photo import Photo
+from pipeline.ingest.photo_views import PhotoViews, photo_heights_ellipsoid_m, photo_views
+from pipeline.solve import METHODS, Estimate, Status, solve, unsolved_status
+from pipeline.solve.observations import Observations, Sigma
+
+#: consumer drone defaults: marking 2 px, DJI LRF ~1 m, GNSS 3 m, gimbal jitter 0.5 deg frame to frame
+PHOTO_SIGMA = Sigma(pixel_px=2.0, range_m=1.0, position_m=3.0, attitude_deg=0.5)
+#: the constant compass / gimbal-yaw bias a consumer drone carries over a flight (1-5 deg): the prior's 1 sigma
+PHOTO_BIAS_PRIOR_DEG = 3.0
+#: a pixel within this fraction of the image width from the centre is taken to be where the laser points
+LASER_PIXEL_TOLERANCE = 0.01
+
+
+@dataclass
+class PhotoLocation:
+    """Every method's answer: estimates {method: Estimate} in ENU at views.origin_lla; unsolved {method: (status,
+    reason)}; the observations built."""
+
+    views: PhotoViews
+    obs: Observations
+    estimates: dict[str, Estimate] = field(default_factory=dict)
+    unsolved: dict[str, tuple[str, str]] = field(default_factory=dict)
+
+
+def photo_observations(views: PhotoViews, pixel_px=None, sigma: Sigma = PHOTO_SIGMA) -> Observations:
+    """Observations of photos' views: pixel_px (n, 2) in the files' frame (NaN row: not seen; None: every image
+    centre); ranges where the LRF is valid and the pixel is the image centre."""
+    photos = views.photos
+    n = len(photos)
+    centre = np.array([[(p.width_px - 1) / 2.0, (p.height_px - 1) / 2.0] for p in photos])
+    px = centre.copy() if pixel_px is None else np.asarray(pixel_px, dtype=np.float64).reshape(n, 2)
+    width = np.array([p.width_px for p in photos], dtype=np.float64)
+    at_centre = np.linalg.norm(px - centre, axis=1) <= LASER_PIXEL_TOLERANCE * width
+    rng = np.array([p.lrf_range_m if (p.lrf_valid and c) else np.nan for p, c in zip(photos, at_centre, strict=True)])
+    t = np.array([p.t_ns if p.t_ns is not None else i for i, p in enumerate(photos)], dtype=np.int64)
+    return Observations(P=views.P, pixel=views.pinhole_pixels(px), platform_m=views.camera_m, range_m=rng,
+                        t_ns=t, sigma=sigma)
+
+
+def mle_options(bias_prior_deg: float, terrain=None) -> dict:
+    """Options for solve("mle"): the bias prior, and the terrain prior `terrain=(fn, sigma_m)` only where the MLE
+    takes that option (the MLE rebuild adds it; until then the DEM enters through `dem` alone)."""
+    from pipeline.solve.methods import _OPTIONS
+
+    o = {"bias_prior_deg": float(bias_prior_deg)}
+    if terrain is not None and "terrain" in _OPTIONS["mle"]:
+        o["terrain"] = terrain
+    return o
+
+
+def dji_estimate(views: PhotoViews) -> Estimate | None:
+    """The mean of the photos' own laser targets (LRFTargetLat/Lon/AbsAlt, on the photos' altitude datum) in ENU;
+    extras: per-photo points. None when no photo has one."""
+    pts = []
+    for p in views.photos:
+        if p.dji_target_lla is None:
+            continue
+        lat, lon, alt = p.dji_target_lla
+        h = photo_heights_ellipsoid_m([_with_alt(p, lat, lon, alt)])[0]
+        pts.append(enu_from_lla(lat, lon, h, views.origin_lla))
+    if not pts:
+        return None
+    pts = np.array(pts)
+    return Estimate(method="dji", position_m=pts.mean(axis=0), iterations=0, status=Status.CLOSED_FORM,
+                    extras={"points_m": pts.tolist(), "n_points": len(pts)})
+
+
+def _with_alt(p: Photo, lat, lon, alt) -> Photo:
+    import dataclasses
+
+    return dataclasses.replace(p, lat_deg=lat, lon_deg=lon, alt_m=alt)
+
+
+def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: int = 0, sigma: Sigma = PHOTO_SIGMA,
+                  bias_prior_deg: float = PHOTO_BIAS_PRIOR_DEG, dem_sigma_m: float = 5.0,
+                  methods=None) -> PhotoLocation:
+    """Run every method (or `methods`) on the photos and one pixel per photo (see photo_observations)."""
+    views = photo_views(photos, rotation_deg=rotation_deg)
+    obs = photo_observations(views, pixel_px, sigma)
+    out = PhotoLocation(views, obs)
+    wanted = list(methods) if methods is not None else [*METHODS, "dem", "dji"]
+    terrain = None
+    if dem is not None:
+        terrain = (dem.local(*views.origin_lla), float(dem_sigma_m))
+    for m in wanted:
+        try:
+            if m == "dji":
+                e = dji_estimate(views)
+                if e is None:
+                    out.unsolved[m] = ("insufficient_data", "no photo has drone-dji:LRFTargetLat/Lon/AbsAlt")
+                    continue
+            elif m == "dem":
+                if dem is None:
+                    out.unsolved[m] = ("insufficient_data", "no DEM given (--dem)")
+                    continue
+                from pipeline.terrain import locate_dem
+                e = locate_dem(obs, dem, views.origin_lla, labels=[p.name for p in photos])
+            elif m == "mle":
+                e = solve("mle", obs, **mle_options(bias_prior_deg, terrain))
+            else:
+                e = solve(m, obs)
+        except RidgelocError as exc:
+            out.unsolved[m] = (unsolved_status(exc), str(exc))
+            continue
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            out.unsolved[m] = ("diverged", str(exc))
+            continue
+        if not np.isfinite(e.position_m).all():
+            out.unsolved[m] = ("diverged", "no finite estimate")
+            continue
+        out.estimates[m] = e
+    return out
+
+
+def estimate_row(e: Estimate, views: PhotoViews) -> dict:
+    """lat_deg, lon_deg, h_m (WGS84 ellipsoidal), alt_msl_m (EGM2008), cep50_m (None where undefined), the 95 %
+    horizontal ellipse where there is a covariance, status, and the method's own extras that are small."""
+    from pipeline.geometry.geoid import geoid_undulation_m
+    from pipeline.report.geometry import uncertainty
+
+    lat, lon, h = views.lla(e.position_m)
+    n_m = float(geoid_undulation_m(lat, lon))
+    u = uncertainty(e)
+    row = {"lat_deg": float(lat), "lon_deg": float(lon), "h_m": float(h), "alt_msl_m": float(h - n_m),
+           "cep50_m": u["cep50_m"], "status": e.status.name.lower(), "e_m": float(e.position_m[0]),
+           "n_m": float(e.position_m[1]), "u_m": float(e.position_m[2])}
+    if u["ellipse95_semi_major_m"] is not None:
+        row.update({k: u[k] for k in ("cep90_m", "sigma_up_m", "ellipse95_semi_major_m", "ellipse95_semi_minor_m",
+                                      "ellipse95_azimuth_deg")})
+    for key in ("bias_deg", "bias_sigma_deg", "n_points", "missed"):
+        if key in e.extras:
+            v = e.extras[key]
+            row[key] = v.tolist() if isinstance(v, np.ndarray) else v
+    return row
+
+
+def check_pixels(photos: list[Photo], pixel_px) -> None:
+    """InputError naming the photo when a pixel lies outside its image."""
+    for p, (u, v) in zip(photos, np.asarray(pixel_px, dtype=np.float64).reshape(-1, 2), strict=True):
+        if np.isfinite(u) and not (-0.5 <= u <= p.width_px - 0.5 and -0.5 <= v <= p.height_px - 0.5):
+            raise InputError(f"pixel ({u:g}, {v:g}) is outside the {p.width_px}x{p.height_px} image", path=p.path)

@@ -148,6 +148,13 @@ class Dem:
                 if units not in _METRE:
                     raise InputError(f"heights are in '{units}', only metres are supported", path)
                 vertical = _vertical_datum(wkt2, vertical_datum, path)
+                try:
+                    _check_crs(crs, transform, rows, cols)
+                except Exception:  # PROJ's own messages are long JSON dumps
+                    name = re.search(r'^\w+\["([^"]*)"', wkt2)
+                    raise InputError(f"unknown CRS '{name.group(1) if name else crs.to_string()[:60]}': it does not "
+                                     f"map to WGS84 (a local or engineering CRS, another body, or one PROJ cannot "
+                                     f"relate to WGS84)", path) from None
                 band = ds.read(1, masked=True)
                 scale, offset = (ds.scales[0] if ds.scales else 1.0), (ds.offsets[0] if ds.offsets else 0.0)
         except InputError:
@@ -159,11 +166,6 @@ class Dem:
             raise InputError(f"not a readable GeoTIFF DEM: {msg}", path) from None
         heights = np.ma.filled(band.astype(np.float64), np.nan) * float(scale) + float(offset)
         heights[~np.isfinite(heights) | (np.abs(heights) > 20_000.0)] = np.nan  # no ground is 20 km from sea level
-        try:
-            _check_crs(crs, transform, rows, cols)
-        except Exception as exc:
-            raise InputError(f"unknown CRS ({crs.to_string()[:60]}): it does not map to WGS84 "
-                             f"({str(exc).splitlines()[0][:80] if str(exc) else type(exc).__name__})", path) from None
         return cls(path, heights, transform, crs, vertical)
 
     # ---- coordinates -----------------------------------------------------------------------------------------
@@ -244,6 +246,14 @@ class Dem:
 
     # ---- rays ------------------------------------------------------------------------------------------------
 
+    def intersect_many(self, origins_lla, directions_enu) -> tuple[np.ndarray, list[str | None]]:
+        """Vectorised `intersect` of k rays, origins_lla (k, 3) and directions_enu (k, 3) (each in the ENU frame at
+        its origin): lla (k, 3) of the hits (NaN rows for misses) and k reasons (None for a hit, else a phrase
+        saying why the ray misses)."""
+        from pipeline.terrain.raycast import intersect_rays
+
+        return intersect_rays(self, origins_lla, directions_enu)
+
     def intersect(self, origin_lla, direction_enu, label: str | None = None) -> tuple[float, float, float]:
         """(lat_deg, lon_deg, h_wgs84_m) of the first point where the ray from `origin_lla` (lat_deg, lon_deg,
         ellipsoid height m) along `direction_enu` (3,) (any length; the ENU frame at the origin) meets the DEM
@@ -271,7 +281,8 @@ def _check_crs(crs, transform, rows: int, cols: int) -> None:
     """Raises when the DEM's centre does not round-trip through WGS84 (an engineering or unknown CRS)."""
     if crs.to_epsg() in _WGS84_GEOGRAPHIC:
         return
-    x, y = transform * (cols / 2, rows / 2)
+    a, b, c, d, e, f = list(transform)[:6]
+    x, y = a * cols / 2 + b * rows / 2 + c, d * cols / 2 + e * rows / 2 + f
     lon, lat = _transform_xy(crs, "EPSG:4326", [x], [y])
     if not (np.isfinite(lon).all() and np.isfinite(lat).all() and abs(lat[0]) <= 90):
         raise ValueError("the DEM's centre has no WGS84 latitude/longitude")

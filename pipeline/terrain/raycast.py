@@ -192,8 +192,8 @@ def intersect_rays(dem, origins_lla: np.ndarray, directions_enu: np.ndarray):
                 if entered[r]:
                     reasons[r] = "the ray never meets the ground within the DEM: it passes above the terrain"
                 elif t_far[r] == t_v[r]:
-                    reasons[r] = (f"the ray drops below the DEM's lowest post ({dem.h_min_m:.1f} m) before reaching "
-                                  f"its area: the ground it meets lies outside the DEM")
+                    reasons[r] = (f"the ray meets the ground outside the DEM: it drops below the DEM's lowest post "
+                                  f"({dem.h_min_m:.1f} m) without crossing its area")
                 else:
                     reasons[r] = "the ray never crosses the DEM's area"
         block += 1

@@ -91,11 +91,12 @@ class Dem:
         self.bounds_deg = (float(lat.min()), float(lat.max()), float(lon.min()), float(lon.max()))
         self._geoid = None
         if vertical.kind == "orthometric":
-            from pipeline.geometry.geoid import GeoidPatch
+            from pipeline.geometry.geoid import patch_around
 
-            margin = 0.1
-            self._geoid = GeoidPatch(self.bounds_deg[0] - margin, self.bounds_deg[1] + margin,
-                                     self.bounds_deg[2] - margin, self.bounds_deg[3] + margin)
+            # a cached window of the geoid grid holding the DEM with 0.1 deg to spare (reading one costs ~0.1 s)
+            lat_c, lon_c = round((lat.min() + lat.max()) / 2, 1), round((lon.min() + lon.max()) / 2, 1)
+            half = max(lat.max() - lat_c, lat_c - lat.min(), lon.max() - lon_c, lon_c - lon.min()) + 0.1
+            self._geoid = patch_around(lat_c, lon_c, float(np.ceil(half / 0.25) * 0.25))
         clat, clon = self._lla_of_grid(np.array([(cols - 1) / 2, (cols - 1) / 2 + 1, (cols - 1) / 2]),
                                        np.array([(rows - 1) / 2, (rows - 1) / 2, (rows - 1) / 2 + 1]))
         enu = enu_from_lla(clat, clon, 0.0, (clat[0], clon[0], 0.0))

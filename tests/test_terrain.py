@@ -5,7 +5,6 @@ surface that a bilinear grid represents exactly) found by dense sampling and bis
 """
 
 import numpy as np
-import pymap3d
 import pytest
 import rasterio
 from rasterio.crs import CRS
@@ -13,9 +12,9 @@ from rasterio.transform import from_origin
 from rasterio.warp import transform as crs_transform
 
 from pipeline.errors import GeometryError, InputError, ObservationError
-from pipeline.geometry.frames import R_ecef_from_enu, ecef_from_lla, enu_from_lla, lla_from_enu
+from pipeline.geometry.frames import ecef_from_lla, enu_from_lla, lla_from_enu
 from pipeline.solve.observations import Observations
-from pipeline.synth.dem import Hills, write_dem
+from pipeline.synth.dem import Hills, ray_truth_ecef, write_dem
 from pipeline.terrain import Dem, locate_dem
 
 LAT0, LON0 = 46.5, 7.5
@@ -35,28 +34,10 @@ def random_rays(n: int, seed: int, spread_deg: float = 0.008):
     return origins, dirs
 
 
-def truth_hits_ecef(origins, dirs, height_fn, t_max_m=6000.0, step_m=0.5):
-    """First point of each ray below `height_fn(lat, lon)` (ellipsoidal): dense samples every step_m, then
-    60 bisections of the first bracket. Independent of pipeline.terrain."""
-    O = ecef_from_lla(origins[:, 0], origins[:, 1], origins[:, 2])
-    D = np.einsum("kij,kj->ki", R_ecef_from_enu(origins[:, 0], origins[:, 1]), dirs)
-
-    def above(t):
-        p = (O[:, None, :] + t[..., None] * D[:, None, :]) if t.ndim == 2 else O + t[..., None] * D
-        lat, lon, h = pymap3d.ecef2geodetic(p[..., 0], p[..., 1], p[..., 2])
-        return h - height_fn(lat, lon)
-
-    ts = np.arange(0.0, t_max_m, step_m)
-    f = above(np.broadcast_to(ts, (len(O), ts.size)))  # (k, samples)
-    below = f < 0
-    assert below.any(axis=1).all(), "a test ray does not meet the analytic terrain"
-    j = below.argmax(axis=1)
-    lo, hi = ts[j - 1], ts[j]
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        b = above(mid) < 0
-        hi, lo = np.where(b, mid, hi), np.where(b, lo, mid)
-    return O + lo[:, None] * D
+def truth_hits_ecef(origins, dirs, height_fn):
+    truth = ray_truth_ecef(origins, dirs, height_fn)
+    assert np.isfinite(truth).all(), "a test ray does not meet the analytic terrain"
+    return truth
 
 
 def hits_ecef(dem, origins, dirs):

@@ -92,3 +92,35 @@ def write_dem(path: str | PathLike, hills: Hills, extent_m: float = 4000.0, post
     with rasterio.open(path, "w", **profile) as ds:
         ds.write(h.astype(dtype)[None])
     return path
+
+
+def ray_truth_ecef(origins_lla: np.ndarray, directions_enu: np.ndarray, height_fn, t_max_m: float = 6000.0,
+                   step_m: float = 0.5) -> np.ndarray:
+    """The first point (k, 3) (ECEF m) of each ray below the surface `height_fn(lat_deg, lon_deg)` (ellipsoidal
+    m): samples every step_m up to t_max_m, then 60 bisections of the first bracket. A reference for the ray
+    caster (pipeline.terrain.raycast), deliberately the plain way: it shares no code with it. NaN rows for rays
+    that do not go below the surface within t_max_m."""
+    from pipeline.geometry.frames import R_ecef_from_enu, ecef_from_lla
+
+    origins = np.asarray(origins_lla, dtype=np.float64)
+    d = np.asarray(directions_enu, dtype=np.float64)
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    O = ecef_from_lla(origins[:, 0], origins[:, 1], origins[:, 2])
+    D = np.einsum("kij,kj->ki", R_ecef_from_enu(origins[:, 0], origins[:, 1]), d)
+
+    def above(t):  # t (k,) or (k, m)
+        p = O[:, None, :] + t[..., None] * D[:, None, :] if t.ndim == 2 else O + t[:, None] * D
+        lat, lon, h = pymap3d.ecef2geodetic(p[..., 0], p[..., 1], p[..., 2])
+        return h - height_fn(lat, lon)
+
+    ts = np.arange(0.0, t_max_m, step_m)
+    below = above(np.broadcast_to(ts, (len(O), ts.size))) < 0
+    j = np.maximum(below.argmax(axis=1), 1)
+    lo, hi = ts[j - 1], ts[j]
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        b = above(mid) < 0
+        hi, lo = np.where(b, mid, hi), np.where(b, lo, mid)
+    out = O + lo[:, None] * D
+    out[~below.any(axis=1)] = np.nan
+    return out

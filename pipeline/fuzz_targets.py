@@ -299,6 +299,28 @@ def _seed_observations(folder: Path) -> Path:
     return path
 
 
+def _seed_photo(folder: Path) -> Path:
+    """A 64x48 DJI-style photo with laser (EXIF GPS + drone-dji XMP), ~3 KB."""
+    import numpy as np
+
+    from pipeline.synth.photos import PhotoFlightSpec, simulate_photo_flight, write_photo
+
+    flight = simulate_photo_flight(PhotoFlightSpec(seed=1, n_photos=1, width_px=64, height_px=48, fx_px=110.0))
+    return write_photo(folder / "DJI_0001.JPG", flight.tags[0], np.random.default_rng(0))
+
+
+def _read_photo(path: Path) -> None:
+    """`ridgeloc inspect PHOTO` and the first step of `ridgeloc locate PHOTO`: the reader, the pose chain and the
+    observations (the solvers have their own target: observations)."""
+    from pipeline.ingest.photo import read_photo_checked
+    from pipeline.ingest.photo_locate import photo_observations
+    from pipeline.ingest.photo_views import photo_views
+
+    photo = read_photo_checked(path)
+    if photo.intrinsics is not None:
+        photo_observations(photo_views([photo]))
+
+
 TARGETS: tuple[Target, ...] = (
     Target("tlog", _seed_tlog, _read_log),
     Target("dataflash-bin", _seed_dataflash, _read_log),
@@ -317,6 +339,7 @@ TARGETS: tuple[Target, ...] = (
     Target("flight-config", _seed_flight_config, _read_flight_config, tree="yaml"),
     Target("run-config", _seed_run_config, _read_run_config, tree="yaml"),
     Target("observations", _seed_observations, _read_observations, tree="json"),
+    Target("photo", _seed_photo, _read_photo),
 )
 BY_NAME = {t.name: t for t in TARGETS}
 

@@ -245,6 +245,23 @@ class SigmaPriors:
     position_tau_s: float | None = None
 
 
+# ---- issue 22 (terrain helper): `terrain:`, a DEM for the `dem` method and the MLE's terrain prior ----------
+@dataclass(frozen=True)
+class Terrain:
+    """A GeoTIFF DEM of the target's area (docs/terrain.md). `vertical_datum` overrides what the file says
+    (orthometric: EGM96/EGM2008 heights; ellipsoidal: WGS84); `vertical_sigma_m` is the DEM's vertical error
+    (1 sigma, m) at the target, for the MLE's terrain prior (None: no prior, `dem` only)."""
+
+    dem: str
+    vertical_sigma_m: float | None = None
+    vertical_datum: typing.Literal["orthometric", "ellipsoidal"] | None = None
+
+    def __post_init__(self):
+        if self.vertical_sigma_m is not None and not (np.isfinite(self.vertical_sigma_m) and self.vertical_sigma_m > 0):
+            raise ValueError(f"'vertical_sigma_m' must be a positive number of metres, got {self.vertical_sigma_m}")
+# ---- end of issue 22 (terrain) -------------------------------------------------------------------------------
+
+
 @dataclass(frozen=True)
 class FlightConfig:
     """One flight, resolved: every file path is absolute. `path` is the config file (None if built in code)."""
@@ -264,6 +281,7 @@ class FlightConfig:
     truth_file: str | None = None
     solve: Solve = field(default_factory=Solve)
     sigma: SigmaPriors = field(default_factory=SigmaPriors)
+    terrain: Terrain | None = None  # issue 22 (terrain)
     path: str | None = None
 
     def __post_init__(self):
@@ -316,6 +334,9 @@ def flight_config_from_dict(doc: dict, path: str | PathLike | None = None) -> Fl
     target = cfg.target
     if target is not None and target.template is not None:
         target = dataclasses.replace(target, template=_resolve(base, target.template, "target.template", where))
+    if cfg.terrain is not None:  # issue 22 (terrain)
+        cfg = dataclasses.replace(cfg, terrain=dataclasses.replace(
+            cfg.terrain, dem=_resolve(base, cfg.terrain.dem, "terrain.dem", where)))
     return dataclasses.replace(cfg, files=files, target=target,
                                truth_file=_resolve(base, cfg.truth_file, "truth_file", where),
                                path=None if where is None else str(where.resolve()))

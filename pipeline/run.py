@@ -316,7 +316,13 @@ def process_group(config: FlightConfig) -> GroupResult:
 
     report_stage("solve")
     t3, c3 = time.perf_counter(), time.process_time()
-    estimates, failures = solve_all(obs, _methods(config), config.solve.options)
+    # issue 22 (terrain helper): the `dem` method and the MLE's terrain prior when the config has `terrain:`
+    from pipeline.terrain.flight import add_dem_estimate, open_flight_dem, terrain_solve_options
+    dem = open_flight_dem(config.terrain)
+    estimates, failures = solve_all(obs, _methods(config),
+                                    terrain_solve_options(dem, config.terrain, origin, config.solve.options))
+    add_dem_estimate(dem, obs, origin, estimates, failures, [f"frame {i}" for i in plan.frame_index[useful]])
+    # end of issue 22 (terrain)
     timings["solve"] = time.perf_counter() - t3
     cpu["solve"] = time.process_time() - c3
     if not estimates:

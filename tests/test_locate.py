@@ -40,7 +40,7 @@ def test_one_photo_centre_gives_los_at_dji_target(flight, capsys):
 
 
 def test_several_photos_every_method_mle_beats_the_one_shot_target(flight, capsys):
-    _, folder = flight
+    fl, folder = flight
     rc, doc = _locate(capsys, folder, "--marks", folder / "marks.csv")
     assert rc == 0 and doc["ranges_used"] == 5
     est = doc["estimates"]

@@ -29,13 +29,17 @@ from pipeline.track.sift import TrackerSettings
 
 @dataclass(frozen=True)
 class Files:
-    telemetry: tuple[str, ...]
+    telemetry: tuple[str, ...] = ()
     video: str | None = None
     frames_csv: str | None = None
+    # issue 22 (photos): drone photos as the flight (a folder or a list of JPEGs), and their marks CSV
+    # (photo,x_px,y_px; none: every image centre, where the laser points). docs/locate.md
+    photos: tuple[str, ...] = ()
+    marks: str | None = None
 
     def __post_init__(self):
-        if not self.telemetry:
-            raise ValueError("'telemetry' must list at least one file")
+        if not self.telemetry and not self.photos:
+            raise ValueError("'telemetry' must list at least one file (or 'photos' the flight's photos)")
 
 
 @dataclass(frozen=True)
@@ -325,12 +329,16 @@ def flight_config_from_dict(doc: dict, path: str | PathLike | None = None) -> Fl
     base = where.resolve().parent if where is not None else Path.cwd()
     if isinstance(doc, dict) and "path" in doc:
         raise ConfigError("path: unknown key", where)
+    if isinstance(doc, dict) and isinstance(doc.get("files"), dict) and isinstance(doc["files"].get("photos"), str):
+        doc = {**doc, "files": {**doc["files"], "photos": [doc["files"]["photos"]]}}  # issue 22 (photos): a folder
     cfg = load_dataclass(FlightConfig, doc, source=where, integral_floats=True)
     files = dataclasses.replace(
         cfg.files,
         telemetry=tuple(_resolve(base, p, f"files.telemetry[{i}]", where) for i, p in enumerate(cfg.files.telemetry)),
         video=_resolve(base, cfg.files.video, "files.video", where),
-        frames_csv=_resolve(base, cfg.files.frames_csv, "files.frames_csv", where))
+        frames_csv=_resolve(base, cfg.files.frames_csv, "files.frames_csv", where),
+        photos=tuple(_resolve(base, p, f"files.photos[{i}]", where) for i, p in enumerate(cfg.files.photos)),
+        marks=_resolve(base, cfg.files.marks, "files.marks", where))
     target = cfg.target
     if target is not None and target.template is not None:
         target = dataclasses.replace(target, template=_resolve(base, target.template, "target.template", where))

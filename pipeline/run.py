@@ -212,6 +212,9 @@ def _estimate_clock(config, log, frames, cam, cam_source, plan, origin, decoder,
 
 def process_group(config: FlightConfig) -> GroupResult:
     """Ingest, track, synchronize and solve one flight group (see the module docstring)."""
+    if config.files.photos:  # issue 22 (photos): a photo flight is located as `ridgeloc locate` does
+        from pipeline.ingest.photo_locate import process_photo_group
+        return process_photo_group(config)
     report_stage("ingest")
     timings: dict[str, float] = {}
     notes: list[str] = []

@@ -87,3 +87,20 @@ def test_synth_command_writes_a_photo_flight_without_laser(tmp_path, capsys):
     rc, doc = _locate(capsys, out, "--marks", out / "marks.csv")
     assert rc == 0 and doc["ranges_used"] == 0 and doc["estimates"]["dji"]["status"] == "insufficient_data"
     assert doc["estimates"]["mle"]["status"] == "converged"
+
+
+def test_run_treats_a_photo_flight_config_as_a_flight(tmp_path, capsys):
+    from pipeline.flight_config import load_flight_config
+
+    flight = simulate_photo_flight(PhotoFlightSpec(seed=12))
+    write_photo_flight(flight, tmp_path / "ph")
+    cfg = load_flight_config(tmp_path / "ph" / "flight.yaml")
+    assert cfg.files.photos == (str((tmp_path / "ph").resolve()),) and cfg.files.telemetry == ()
+    from pipeline.run import process_group
+
+    result = process_group(cfg)
+    assert set(result.estimates) >= {"mle", "dji", "vision"} and result.observations.n == 5
+    truth = np.asarray(result.truth_m)
+    assert np.linalg.norm((result.estimates["mle"].position_m - truth)[:2]) < \
+        np.linalg.norm((result.estimates["dji"].position_m - truth)[:2])
+    assert result.settings["solve_failures"]["dem"]["status"] == "insufficient_data"

@@ -159,3 +159,48 @@ def check_pixels(photos: list[Photo], pixel_px) -> None:
     for p, (u, v) in zip(photos, np.asarray(pixel_px, dtype=np.float64).reshape(-1, 2), strict=True):
         if np.isfinite(u) and not (-0.5 <= u <= p.width_px - 0.5 and -0.5 <= v <= p.height_px - 0.5):
             raise InputError(f"pixel ({u:g}, {v:g}) is outside the {p.width_px}x{p.height_px} image", path=p.path)
+
+
+def process_photo_group(config):
+    """`ridgeloc run` of a flight config with `files: {photos: ..., marks: ...}` (issue 22): the photos located as
+    `ridgeloc locate` does (marks from files.marks, else every image centre), as a GroupResult for the report.
+    Unreadable photos are left out with a note each; none readable is an InputError naming the config."""
+    import time
+
+    from pipeline.commands.locate import read_marks
+    from pipeline.ingest.photo import read_photos
+    from pipeline.results import GroupResult
+    from pipeline.run import intersection_angle_deg
+
+    t0 = time.perf_counter()
+    photos, bad = read_photos(list(config.files.photos))
+    notes = [f"photo left out: {err}" for _, err in bad]
+    if not photos:
+        raise InputError("no readable photo in files.photos", config.path)
+    pixels = read_marks(config.files.marks, photos) if config.files.marks else None
+    if pixels is not None:
+        check_pixels(photos, pixels)
+    dem = None
+    dem_sigma = 5.0
+    terrain_cfg = getattr(config, "terrain", None)
+    if terrain_cfg is not None:
+        from pipeline.terrain import Dem
+        dem = Dem.open(terrain_cfg.dem, vertical_datum=terrain_cfg.vertical_datum)
+        dem_sigma = terrain_cfg.vertical_sigma_m or dem_sigma
+    loc = locate_photos(photos, pixels, dem=dem, dem_sigma_m=dem_sigma)
+    if not loc.estimates:
+        reasons = "; ".join(f"{m}: {r}" for m, (_, r) in loc.unsolved.items())
+        raise InputError(f"no method could locate the target from the photos: {reasons}", config.path)
+    truth = config.truth_lla()
+    truth_m = None if truth is None else enu_from_lla(*truth, origin_lla=loc.views.origin_lla)
+    ref = truth_m if truth_m is not None else next(iter(loc.estimates.values())).position_m
+    gamma = intersection_angle_deg(loc.obs.platform_m, ref) if loc.obs.n >= 2 else float("nan")
+    for p in photos:
+        notes.extend(f"{p.name}: {w}" for w in p.warnings)
+    settings = config.to_dict()
+    settings["notes"] = notes
+    settings["solve_failures"] = {m: {"status": s, "reason": r} for m, (s, r) in loc.unsolved.items()}
+    settings["photos"] = [p.path for p in photos]
+    return GroupResult(name=config.name, origin_lla=loc.views.origin_lla, observations=loc.obs,
+                       estimates=loc.estimates, truth_m=truth_m, intersection_angle_deg=gamma,
+                       timings_s={"locate": time.perf_counter() - t0}, settings=settings)

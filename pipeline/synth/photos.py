@@ -208,7 +208,9 @@ def write_photo(path, tag: dict, rng: np.random.Generator) -> Path:
 
 
 def write_photo_flight(flight: PhotoFlight, out_dir) -> list[Path]:
-    """DJI_0001.JPG ... in out_dir, with marks.csv (photo,x_px,y_px: the target's pixel as marked) and truth.json."""
+    """DJI_0001.JPG ... in out_dir, with marks.csv (photo,x_px,y_px: the target's pixel as marked), truth.json
+    (`target` {lat_deg, lon_deg, alt_m ellipsoidal}, the errors drawn, the tags written) and flight.yaml (its flight
+    config for `ridgeloc run`)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(flight.spec.seed + 1)
@@ -217,6 +219,12 @@ def write_photo_flight(flight: PhotoFlight, out_dir) -> list[Path]:
         f.write("photo,x_px,y_px\n")
         for p, (u, v) in zip(paths, flight.marks_px, strict=True):
             f.write(f"{p.name},{u:.2f},{v:.2f}\n")
-    truth = dict(flight.truth, tags=flight.tags, marks_px=flight.marks_px.tolist())
+    lat, lon, h = flight.truth["target_lla"]
+    truth = dict(flight.truth, target={"lat_deg": lat, "lon_deg": lon, "alt_m": h}, tags=flight.tags,
+                 marks_px=flight.marks_px.tolist())
     (out / "truth.json").write_text(json.dumps(truth, indent=1, default=list))
+    name = "".join(c if c.isalnum() or c in "-_" else "_" for c in out.name) or "photos"
+    (out / "flight.yaml").write_text(f"# a synthetic DJI photo flight (pipeline/synth/photos.py): ridgeloc run this\n"
+                                     f"name: {name}\nfiles:\n  photos: .\n  marks: marks.csv\n"
+                                     f"truth_file: truth.json\n")
     return paths

@@ -14,7 +14,7 @@ from rasterio.warp import transform as crs_transform
 from pipeline.errors import GeometryError, InputError, ObservationError
 from pipeline.geometry.frames import ecef_from_lla, enu_from_lla, lla_from_enu
 from pipeline.solve.observations import Observations
-from pipeline.synth.dem import Hills, ray_truth_ecef, write_dem
+from pipeline.synth.dem import Hills, bilinear_error_bound_m, incidence_sin, ray_truth_ecef, write_dem
 from pipeline.terrain import Dem, locate_dem
 
 LAT0, LON0 = 46.5, 7.5
@@ -60,10 +60,16 @@ def hits_ecef(dem, origins, dirs):
 def test_dem_hits_match_the_analytic_terrain_within_a_fifth_of_a_post(tmp_path, crs, stated):
     path = write_dem(tmp_path / "dem.tif", HILLS, extent_m=6000.0, post_m=POST_M, crs=crs, vertical_datum=stated)
     dem = Dem.open(path, vertical_datum=stated)
-    origins, dirs = random_rays(60, seed=hash(crs) % 1000)
+    origins, dirs = random_rays(60, seed=sum(map(ord, crs)))
     truth = truth_hits_ecef(origins, dirs, HILLS.h_wgs84_m)
     err = np.linalg.norm(hits_ecef(dem, origins, dirs) - truth, axis=1)
-    assert err.max() < 0.2 * POST_M, f"max {err.max():.2f} m, median {np.median(err):.2f} m"
+    # A ray meeting a slope at a grazing angle a turns the DEM's height error dh (bilinear between posts of the
+    # terrain) into dh / sin(a) along the ground: beyond 0.2 post for a < ~2 deg whatever the ray caster does.
+    sin_a = incidence_sin(truth, dirs, HILLS.h_wgs84_m)
+    steep = sin_a > np.sin(np.radians(2.0))
+    assert steep.sum() >= 50
+    assert err[steep].max() < 0.2 * POST_M, f"max {err[steep].max():.2f} m, median {np.median(err):.2f} m"
+    assert (err * sin_a).max() < bilinear_error_bound_m(HILLS, POST_M)  # every ray: no more than the DEM's error
 
 
 def test_a_dem_read_without_its_geoid_would_miss(tmp_path):

@@ -45,7 +45,7 @@ class Hills:
 
 def write_dem(path: str | PathLike, hills: Hills, extent_m: float = 4000.0, post_m: float = 30.0,
               crs: str = "EPSG:4326", vertical_datum: str | None = None, dtype: str = "float32",
-              nodata: float | None = None) -> Path:
+              nodata: float | None = None, compress: str | None = None) -> Path:
     """Writes a square DEM of side `extent_m` centred on the hills' centre with posts every ~`post_m` metres, in
     `crs` (a geographic CRS: posts on a lat/lon grid; a projected one: on its x/y grid), as a GeoTIFF.
 
@@ -89,8 +89,10 @@ def write_dem(path: str | PathLike, hills: Hills, extent_m: float = 4000.0, post
                    transform=from_origin(x0 - dx / 2, y0 + dy / 2, dx, dy))
     if nodata is not None:
         profile["nodata"] = nodata
+    if compress is not None:
+        profile["compress"] = compress
     with rasterio.open(path, "w", **profile) as ds:
-        ds.write(h.astype(dtype)[None])
+        ds.write((np.round(h) if np.dtype(dtype).kind in "iu" else h).astype(dtype)[None])
     return path
 
 
@@ -124,3 +126,27 @@ def ray_truth_ecef(origins_lla: np.ndarray, directions_enu: np.ndarray, height_f
     out = O + lo[:, None] * D
     out[~below.any(axis=1)] = np.nan
     return out
+
+
+def incidence_sin(points_ecef: np.ndarray, directions_enu: np.ndarray, height_fn, step_m: float = 1.0) -> np.ndarray:
+    """|sin| of the angle (k,) between each ray (unit direction (k, 3), ENU; the ENU frames of the ray's origin
+    and of its hit differ by ~0.01 deg per km) and the surface `height_fn` at its hit (ECEF (k, 3)), from the
+    surface's slope by central differences over +-step_m. A DEM height error dh moves the hit by ~dh / sin."""
+    lat, lon, h = pymap3d.ecef2geodetic(points_ecef[:, 0], points_ecef[:, 1], points_ecef[:, 2])
+
+    def at(de, dn):
+        la, lo, _ = pymap3d.enu2geodetic(de, dn, 0.0, lat, lon, h)
+        return height_fn(la, lo)
+
+    ge = (at(step_m, 0.0) - at(-step_m, 0.0)) / (2 * step_m)
+    gn = (at(0.0, step_m) - at(0.0, -step_m)) / (2 * step_m)
+    normal = np.stack([-ge, -gn, np.ones_like(ge)], axis=1)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    d = np.asarray(directions_enu, dtype=np.float64)
+    return np.abs((normal * d).sum(axis=1)) / np.linalg.norm(d, axis=1)
+
+
+def bilinear_error_bound_m(hills: Hills, post_m: float) -> float:
+    """An upper bound of |bilinear interpolation - terrain| for the hills sampled every post_m (m) in both
+    directions: sum_k A_k (2 pi / L_k)^2 (2 post^2) / 8, the second-derivative bound of each ridge."""
+    return float(sum(a * (2 * np.pi / wl) ** 2 * 2 * post_m ** 2 / 8 for a, wl, _, _ in hills.ridges))

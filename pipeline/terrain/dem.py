@@ -25,7 +25,9 @@ import numpy as np
 from pipeline.errors import GeometryError, InputError
 from pipeline.geometry.frames import enu_from_lla, lla_from_enu
 
-MAX_POSTS = 2**27  # 134 M posts (1 GB as float64): a larger DEM must be cropped to the area first
+MAX_POSTS = 2**26  # 67 M posts (8192 x 8192, 512 MB as float64): a larger DEM must be cropped first
+MAX_SPAN_DEG = 10.0  # a DEM for targeting covers a few tens of km; this also bounds the geoid window read
+MIN_POST_M = 0.01
 VERTICAL_DATUMS = ("orthometric", "ellipsoidal")
 _WGS84_GEOGRAPHIC = {4326, 4979, 9518, 9707}  # 2-D, 3-D, + EGM2008 height, + EGM96 height
 _METRE = {"", "m", "metre", "meter", "metres", "meters"}
@@ -84,9 +86,12 @@ class Dem:
         gx = np.concatenate([k * (cols - 1), np.full(9, cols - 1.0), k * (cols - 1), np.zeros(9)])
         gy = np.concatenate([np.zeros(9), k * (rows - 1), np.full(9, rows - 1.0), k * (rows - 1)])
         lat, lon = self._lla_of_grid(gx, gy)
-        if not (np.isfinite(lat).all() and np.isfinite(lon).all() and (np.abs(lat) <= 90).all()):
-            raise InputError(f"its extent does not map to valid latitudes/longitudes in its CRS "
-                             f"({crs.to_string()[:60]})", path)
+        if not (np.isfinite(lat).all() and np.isfinite(lon).all() and (np.abs(lat) <= 90).all()
+                and (np.abs(lon) <= 540).all()):
+            raise InputError("its extent does not map to valid latitudes/longitudes (check its geotransform)", path)
+        if max(np.ptp(lat), np.ptp(lon)) > MAX_SPAN_DEG:
+            raise InputError(f"spans {np.ptp(lat):.3g} deg of latitude and {np.ptp(lon):.3g} deg of longitude, more "
+                             f"than {MAX_SPAN_DEG:g} deg (crop the DEM to the area of interest)", path)
         self.outline_deg = np.stack([lat, lon], axis=-1)
         self.bounds_deg = (float(lat.min()), float(lat.max()), float(lon.min()), float(lon.max()))
         self._geoid = None
@@ -101,6 +106,9 @@ class Dem:
                                        np.array([(rows - 1) / 2, (rows - 1) / 2, (rows - 1) / 2 + 1]))
         enu = enu_from_lla(clat, clon, 0.0, (clat[0], clon[0], 0.0))
         self.post_m = (float(np.hypot(*enu[1, :2])), float(np.hypot(*enu[2, :2])))
+        if not (np.isfinite(self.post_m).all() and min(self.post_m) >= MIN_POST_M):
+            raise InputError(f"has posts {min(self.post_m):.3g} m apart, under {MIN_POST_M:g} m (check its "
+                             f"geotransform)", path)
         finite = np.isfinite(heights_m)
         if not finite.any():
             raise InputError("has no height data (every post is nodata)", path)
@@ -156,7 +164,8 @@ class Dem:
                     raise InputError(f"unknown CRS '{name.group(1) if name else crs.to_string()[:60]}': it does not "
                                      f"map to WGS84 (a local or engineering CRS, another body, or one PROJ cannot "
                                      f"relate to WGS84)", path) from None
-                band = ds.read(1, masked=True)
+                heights = ds.read(1, out_dtype="float64")
+                heights[ds.read_masks(1) == 0] = np.nan
                 scale, offset = (ds.scales[0] if ds.scales else 1.0), (ds.offsets[0] if ds.offsets else 0.0)
         except InputError:
             raise
@@ -165,8 +174,11 @@ class Dem:
         except (RasterioError, OSError, ValueError, TypeError) as exc:
             msg = str(exc).splitlines()[0][:160] if str(exc) else type(exc).__name__
             raise InputError(f"not a readable GeoTIFF DEM: {msg}", path) from None
-        heights = np.ma.filled(band.astype(np.float64), np.nan) * float(scale) + float(offset)
-        heights[~np.isfinite(heights) | (np.abs(heights) > 20_000.0)] = np.nan  # no ground is 20 km from sea level
+        if (scale, offset) != (1.0, 0.0):
+            heights *= float(scale)
+            heights += float(offset)
+        with np.errstate(invalid="ignore"):
+            heights[~(np.abs(heights) <= 20_000.0)] = np.nan  # no ground is 20 km from sea level; inf, NaN
         return cls(path, heights, transform, crs, vertical)
 
     # ---- coordinates -----------------------------------------------------------------------------------------
@@ -238,10 +250,8 @@ class Dem:
 
         def terrain(e_m, n_m):
             e, n = np.broadcast_arrays(np.asarray(e_m, dtype=np.float64), np.asarray(n_m, dtype=np.float64))
-            u = up_at(e, n)
-            de = (up_at(e + step, n) - up_at(e - step, n)) / (2 * step)
-            dn = (up_at(e, n + step) - up_at(e, n - step)) / (2 * step)
-            return u, de, dn
+            u, e1, e0, n1, n0 = up_at(np.stack([e, e + step, e - step, e, e]), np.stack([n, n, n, n + step, n - step]))
+            return u, (e1 - e0) / (2 * step), (n1 - n0) / (2 * step)
 
         return terrain
 

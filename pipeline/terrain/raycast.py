@@ -22,9 +22,11 @@ import pymap3d
 from pipeline.geometry.frames import R_ecef_from_enu, ecef_from_lla
 
 NODE_POSTS = 64  # node spacing along the ray, in posts (horizontally)
+MAX_NODES = 20_000  # node intervals per ray at most (the crossings per interval are bounded by the grid)
 BLOCK_NODES = 8  # node intervals per ray handled in one vectorised block
 R_MIN_M = 6.3e6  # below the ellipsoid's smallest radius of curvature: bounds the ray's rise over it
-BISECTIONS = 32  # a piece is at most a cell's diagonal long: 32 halvings leave ~1e-8 m
+TOL_M = 1e-6  # the polished root: |f| or the bracket below this
+MAX_POLISH = 60
 
 
 def _f(dem, O: np.ndarray, D: np.ndarray, ray: np.ndarray, t: np.ndarray):
@@ -60,6 +62,39 @@ def _first_root(f0: np.ndarray, fm: np.ndarray, f1: np.ndarray) -> tuple[np.ndar
         vertex = np.clip(-b / (2 * a), 0.0, 1.0)
     tau_b = np.where(crosses, 1.0, vertex)
     return tau, tau_b
+
+
+def _polish(fun, lo: np.ndarray, hi: np.ndarray, f_lo: np.ndarray, f_hi: np.ndarray) -> np.ndarray:
+    """Roots of fun(i, t) (the rays i at t) in brackets with f_lo >= 0 > f_hi: the Illinois variant of regula
+    falsi (superlinear; a handful of steps from the quadratic's bracket), a bisection step where fun is NaN
+    (at a data edge: counted as below, so the root stays on the side with data)."""
+    lo, hi, f_lo, f_hi = (np.array(v, dtype=np.float64) for v in (lo, hi, f_lo, f_hi))
+    t = 0.5 * (lo + hi)
+    last = np.zeros(lo.size, np.int8)  # which end moved last: +1 hi, -1 lo
+    todo = np.ones(lo.size, bool)
+    for _ in range(MAX_POLISH):
+        i = np.flatnonzero(todo)
+        if i.size == 0:
+            break
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ti = lo[i] - f_lo[i] * (hi[i] - lo[i]) / (f_hi[i] - f_lo[i])
+        ti = np.where(np.isfinite(ti) & (ti > lo[i]) & (ti < hi[i]), ti, 0.5 * (lo[i] + hi[i]))
+        fi = fun(i, ti)
+        nan = np.isnan(fi)
+        below = nan | (fi < 0)
+        t[i] = ti
+        # Illinois: an end kept twice in a row has its value halved, so the secant stops creeping
+        keep_lo = below & (last[i] == 1)
+        keep_hi = ~below & (last[i] == -1)
+        f_lo[i] = np.where(keep_lo, 0.5 * f_lo[i], f_lo[i])
+        f_hi[i] = np.where(keep_hi, 0.5 * f_hi[i], f_hi[i])
+        hi[i] = np.where(below, ti, hi[i])
+        f_hi[i] = np.where(below, np.where(nan, -np.abs(f_lo[i]) - TOL_M, fi), f_hi[i])
+        lo[i] = np.where(below, lo[i], ti)
+        f_lo[i] = np.where(below, f_lo[i], fi)
+        last[i] = np.where(below, 1, -1)
+        todo[i] = ~((~nan & (np.abs(fi) < TOL_M)) | (hi[i] - lo[i] < TOL_M))
+    return t
 
 
 def _crossings(g: np.ndarray, t: np.ndarray, ray: np.ndarray, n_lines: int):
@@ -124,13 +159,13 @@ def intersect_rays(dem, origins_lla: np.ndarray, directions_enu: np.ndarray):
         reasons[r] = (f"the ray never meets the ground: it points above the terrain (starts at {h0[r]:.1f} m, "
                       f"above the DEM's highest post at {dem.h_max_m:.1f} m)")
     node_t = np.where(d_h * t_far > 0, NODE_POSTS * post / np.maximum(d_h, 1e-300), t_far)
-    node_t = np.minimum(node_t, t_far)
+    node_t = np.clip(node_t, t_far / MAX_NODES, t_far)  # a camera 1000s of posts from a fine DEM: bounded work
     n_int = np.where(t_far > 0, np.ceil(t_far / np.where(node_t > 0, node_t, 1.0)), 0).astype(np.int64)
     rows, cols = dem.heights_m.shape
 
     active = good & ~above
     entered = np.zeros(k, bool)
-    hit_seg = {}  # ray -> (t0, t1, f0, f1, tau, tau_b)
+    hit_seg = {}  # ray -> (t0, t1, tau, tau_b, f0) of the piece holding its hit
     block = 0
     while active.any():
         ids = np.flatnonzero(active)
@@ -169,7 +204,7 @@ def intersect_rays(dem, origins_lla: np.ndarray, directions_enu: np.ndarray):
         for r, e in zip(ev_rays, ev[first], strict=True):
             active[r] = False
             if is_hit[e]:
-                hit_seg[r] = (t0[e], t1[e], tau[e], tau_b[e])
+                hit_seg[r] = (t0[e], t1[e], tau[e], tau_b[e], f0[e])
             elif is_below[e]:
                 ll = _f(dem, O, D, np.array([r]), np.array([t0[e]]))
                 where = f"{ll[1][0]:.6f}, {ll[2][0]:.6f}"
@@ -200,17 +235,14 @@ def intersect_rays(dem, origins_lla: np.ndarray, directions_enu: np.ndarray):
 
     if hit_seg:
         rs = np.array(sorted(hit_seg))
-        t0, t1, tau, tau_b = (np.array([hit_seg[r][i] for r in rs]) for i in range(4))
-        lo, hi = t0.copy(), t0 + tau_b * (t1 - t0)
+        t0, t1, tau, tau_b, f0 = (np.array([hit_seg[r][i] for r in rs]) for i in range(5))
+        hi = t0 + tau_b * (t1 - t0)
         f_hi, *_ = _f(dem, O, D, rs, hi)
         bracketed = f_hi < 0
-        for _ in range(BISECTIONS):
-            mid = 0.5 * (lo + hi)
-            fmid, *_ = _f(dem, O, D, rs, mid)
-            below = ~(fmid >= 0)  # NaN (at a data edge) counts as below: stay on the side with data
-            hi = np.where(below, mid, hi)
-            lo = np.where(below, lo, mid)
-        t_hit = np.where(bracketed, 0.5 * (lo + hi), t0 + tau * (t1 - t0))
+        t_hit = t0 + tau * (t1 - t0)
+        if bracketed.any():
+            b = np.flatnonzero(bracketed)
+            t_hit[b] = _polish(lambda i, t: _f(dem, O, D, rs[b][i], t)[0], t0[b], hi[b], f0[b], f_hi[b])
         _, lat, lon, h = _f(dem, O, D, rs, t_hit)
         out[rs] = np.stack([lat, lon, h], axis=-1)
         for r in rs:

@@ -1,5 +1,6 @@
 """Photo zoo (docs/locate.md, "Evaluation"): generated DJI photo flights (5 photos with laser, a compass bias of
-1-5 deg constant per flight, an altitude datum offset of up to +-30 m, GNSS and attitude noise; targets on
+1-5 deg constant per flight, an altitude datum offset of up to +-30 m, a GNSS offset shared by the flight's
+photos and a little noise per photo, attitude jitter; targets on
 synthetic hills with a GeoTIFF DEM), each written as JPEGs, read back and located by
 
   mle      all photos, marked pixels + laser ranges, the consumer-drone bias prior (PHOTO_BIAS_PRIOR_DEG)
@@ -90,7 +91,8 @@ def main() -> int:
 
     spec = PhotoFlightSpec()
     sigma = None if args.sigma == "default" else Sigma(
-        pixel_px=spec.mark_sigma_px, range_m=spec.laser_sigma_m, position_m=float(np.hypot(*spec.gnss_sigma_m)),
+        pixel_px=spec.mark_sigma_px, range_m=spec.laser_sigma_m,
+        position_m=float(np.hypot(spec.gnss_offset_sigma_m[0], spec.gnss_noise_sigma_m[0])),
         attitude_deg=spec.attitude_jitter_deg)
 
     bias = PHOTO_BIAS_PRIOR_DEG if args.bias_prior_deg is None else args.bias_prior_deg

@@ -48,6 +48,9 @@ def _photo_flight(args) -> int:
         write_dem(out / "dem.tif", hills, extent_m=4000.0, post_m=30.0, crs="EPSG:32632")
     flight = simulate_photo_flight(spec)
     write_photo_flight(flight, out)
+    if args.dem:
+        with open(out / "flight.yaml", "a") as f:
+            f.write("terrain:\n  dem: dem.tif\n  vertical_sigma_m: 2.0\n")
     t = flight.truth
     print(f"{args.photos} photos ({'with' if spec.laser else 'without'} laser), compass bias "
           f"{t['compass_bias_deg']:+.2f} deg, altitude datum offset {t['datum_offset_m']:+.1f} m -> {out}")

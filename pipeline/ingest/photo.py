@@ -158,6 +158,8 @@ def _photo_time(exif_ifd: dict, gps: dict) -> tuple[int | None, str]:
         t = t - delta if offset[0] == "+" else t + delta
         zone = offset
     t_ns = int(t.timestamp()) * 1_000_000_000 + t.microsecond * 1000
+    if not 0 <= t_ns < 2**63:  # before 1970 or past 2262: no int64 nanosecond time
+        return None, "unknown"
     return t_ns, zone
 
 

@@ -4,8 +4,9 @@ DewarpData, LRF fields), as a DJI Enterprise camera writes them, with a known ta
 The truth: a target on the ground (on `Hills` terrain, pipeline.synth.dem, or a flat plane), n photos taken from
 positions around it (azimuths spread over `spread_deg`, 250-600 m away, 60-150 m above it), each pointed at the
 target (target at the principal point, where the laser points). The recorded tags carry the errors of a consumer
-drone: a compass bias constant over the flight added to every gimbal yaw, frame-to-frame attitude jitter, GNSS
-noise, an altitude datum offset shared by all photos, the laser's noise. DJI's own one-shot target
+drone: a compass bias constant over the flight added to every gimbal yaw, frame-to-frame attitude jitter, a GNSS
+error that is mostly an offset shared by the flight's photos (it drifts over minutes) plus a little noise per
+photo, an altitude datum offset shared by all photos, the laser's noise. DJI's own one-shot target
 (LRFTargetLat/Lon/AbsAlt) is computed as the aircraft does: recorded position + recorded gimbal angles + range.
 
     from pipeline.synth.photos import PhotoFlightSpec, simulate_photo_flight, write_photo_flight
@@ -23,7 +24,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pipeline.geometry.frames import enu_from_lla, lla_from_enu
-from pipeline.geometry.geoid import geoid_undulation_m
+from pipeline.geometry.geoid import patch_around
 from pipeline.geometry.lens import distort_pixels
 
 
@@ -47,7 +48,8 @@ class PhotoFlightSpec:
     height_above_m: tuple[float, float] = (60.0, 150.0)
     compass_bias_deg: tuple[float, float] = (1.0, 5.0)  # |bias|, random sign, constant over the flight
     attitude_jitter_deg: float = 0.3
-    gnss_sigma_m: tuple[float, float] = (1.5, 2.0)  # horizontal, vertical
+    gnss_offset_sigma_m: tuple[float, float] = (1.5, 2.0)  # shared by the flight's photos: horizontal, vertical
+    gnss_noise_sigma_m: tuple[float, float] = (0.3, 0.5)  # photo to photo: horizontal, vertical
     datum_offset_m: tuple[float, float] = (-30.0, 30.0)  # added to every recorded altitude
     laser_sigma_m: float = 0.5
     mark_sigma_px: float = 1.0
@@ -92,7 +94,10 @@ def simulate_photo_flight(spec: PhotoFlightSpec) -> PhotoFlight:
     cams = lla_from_enu(enu, target)
     bias = rng.uniform(*spec.compass_bias_deg) * rng.choice([-1.0, 1.0])
     offset = rng.uniform(*spec.datum_offset_m)
-    N = geoid_undulation_m(cams[:, 0], cams[:, 1])
+    # a consumer GNSS error drifts over minutes: over one photo flight it is mostly a shared offset
+    gnss_offset = rng.normal(0, 1, 3) * np.array([*[spec.gnss_offset_sigma_m[0]] * 2, spec.gnss_offset_sigma_m[1]])
+    geoid = patch_around(round(lat0, 1), round(lon0, 1))  # EGM2008 around the target, read once per area
+    N = geoid(cams[:, 0], cams[:, 1])
     K = np.array([[spec.fx_px, 0, (spec.width_px - 1) / 2], [0, spec.fx_px, (spec.height_px - 1) / 2], [0, 0, 1]])
     tags, marks = [], []
     t0 = 1_700_000_000
@@ -115,9 +120,8 @@ def simulate_photo_flight(spec: PhotoFlightSpec) -> PhotoFlight:
         rec_yaw = yaw_true + bias + rng.normal(0, spec.attitude_jitter_deg)
         rec_pitch = pitch_true + rng.normal(0, spec.attitude_jitter_deg)
         rec_roll = rng.normal(0, spec.attitude_jitter_deg / 3)
-        e_noise = rng.normal(0, spec.gnss_sigma_m[0], 2)
-        u_noise = rng.normal(0, spec.gnss_sigma_m[1])
-        rec = lla_from_enu(np.array([e_noise[0], e_noise[1], u_noise + offset]), tuple(cams[i]))
+        noise = rng.normal(0, 1, 3) * np.array([*[spec.gnss_noise_sigma_m[0]] * 2, spec.gnss_noise_sigma_m[1]])
+        rec = lla_from_enu(gnss_offset + noise + np.array([0.0, 0.0, offset]), tuple(cams[i]))
         tag = {"lat_deg": float(rec[0]), "lon_deg": float(rec[1]), "abs_alt_m": float(rec[2] - N[i]),
                "relative_alt_m": float(up[i]), "gimbal_ypr_deg": (float(rec_yaw), float(rec_pitch), float(rec_roll)),
                "flight_ypr_deg": (float(rec_yaw + rng.normal(0, 2)), float(rng.normal(0, 2)), float(rng.normal(0, 2))),
@@ -126,12 +130,13 @@ def simulate_photo_flight(spec: PhotoFlightSpec) -> PhotoFlight:
         if spec.laser:
             measured = true_range + rng.normal(0, spec.laser_sigma_m)
             dji = _point_along(rec, rec_yaw, rec_pitch, measured)
-            n_dji = float(geoid_undulation_m(dji[0], dji[1]))
+            n_dji = float(geoid(dji[0], dji[1]))
             tag.update(lrf_range_m=float(measured), lrf_status="Normal", dji_target=(float(dji[0]), float(dji[1]),
                                                                                       float(dji[2] - n_dji)))
         tags.append(tag)
     truth = {"target_lla": [lat0, lon0, h_t], "target_alt_datum": "ellipsoid", "compass_bias_deg": float(bias),
-             "datum_offset_m": float(offset), "camera_lla_true": cams.tolist(), "spec": _spec_dict(spec)}
+             "datum_offset_m": float(offset), "gnss_offset_enu_m": gnss_offset.tolist(),
+             "camera_lla_true": cams.tolist(), "spec": _spec_dict(spec)}
     return PhotoFlight(spec, tags, np.array(marks), truth)
 
 

@@ -3,7 +3,7 @@
 photos and a little noise per photo, attitude jitter; targets on
 synthetic hills with a GeoTIFF DEM), each written as JPEGs, read back and located by
 
-  mle      all photos, marked pixels + laser ranges, the consumer-drone bias prior (PHOTO_BIAS_PRIOR_DEG)
+  mle      all photos, marked pixels + laser ranges, PHOTO_SIGMA (the largest compass bias 5 deg, its size learned)
   dji      DJI's one-shot laser target of the first photo (drone-dji:LRFTarget*), as DJI Pilot shows it
   dji-mean the mean of the five one-shot targets
   dem      the ray through the first photo's marked pixel onto the DEM (OpenAthena's method)
@@ -11,7 +11,7 @@ synthetic hills with a GeoTIFF DEM), each written as JPEGs, read back and locate
 Prints horizontal and vertical median errors and the share of flights whose truth lies in the MLE's 95 %
 horizontal ellipse (chi-square 2 dof).
 
-    python scripts/photo_zoo.py [--flights 100] [--seed 0] [--bias-prior-deg 3]
+    python scripts/photo_zoo.py [--flights 100] [--seed 0] [--sigma default|matched] [--bias-prior-deg B]
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 CHI2_2DOF_95 = 5.991464547107979
 
 
-def run(n_flights: int, seed: int, bias_prior_deg: float, workdir: Path, sigma=None) -> dict:
+def run(n_flights: int, seed: int, bias_prior_deg: float | None, workdir: Path, sigma=None) -> dict:
     from pipeline.geometry.frames import enu_from_lla
     from pipeline.ingest.photo import read_photos
     from pipeline.ingest.photo_locate import locate_photos
@@ -85,7 +85,6 @@ def main() -> int:
     ap.add_argument("--sigma", choices=("default", "matched"), default="default",
                     help="the MLE's stated sigmas: locate's defaults (PHOTO_SIGMA), or the generator's own noise")
     args = ap.parse_args()
-    from pipeline.ingest.photo_locate import PHOTO_BIAS_PRIOR_DEG
     from pipeline.solve.observations import Sigma
     from pipeline.synth.photos import PhotoFlightSpec
 
@@ -93,12 +92,13 @@ def main() -> int:
     sigma = None if args.sigma == "default" else Sigma(
         pixel_px=spec.mark_sigma_px, range_m=spec.laser_sigma_m,
         position_m=float(np.hypot(spec.gnss_offset_sigma_m[0], spec.gnss_noise_sigma_m[0])),
-        attitude_deg=spec.attitude_jitter_deg)
+        attitude_deg=spec.compass_bias_deg[1])  # the largest bias the generator draws
 
-    bias = PHOTO_BIAS_PRIOR_DEG if args.bias_prior_deg is None else args.bias_prior_deg
+    bias = args.bias_prior_deg
     with tempfile.TemporaryDirectory() as tmp:
         res = run(args.flights, args.seed, bias, Path(tmp), sigma)
-    print(f"{args.flights} flights, seed {args.seed}, bias prior {bias} deg, sigmas {args.sigma}")
+    print(f"{args.flights} flights, seed {args.seed}, sigmas {args.sigma}, "
+          + ("bias size learned" if bias is None else f"fixed bias prior {bias} deg"))
     print("method     n   median horiz m   p90 horiz m   median |vert| m")
     for m, d in res["rows"].items():
         if len(d) == 0:

@@ -24,8 +24,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="datum of drone-dji:AbsoluteAltitude / EXIF GPSAltitude (default amsl; docs/ingest.md)")
     parser.add_argument("--image-rotation", type=int, choices=(0, 180), default=0,
                         help="180 when the files were turned upside down after capture (docs/ingest.md)")
+    parser.add_argument("--largest-bias-deg", type=float, default=None,
+                        help="the largest constant compass/gimbal bias expected over the flight (default 5 deg); the "
+                             "MLE learns its size (docs/locate.md)")
     parser.add_argument("--bias-prior-deg", type=float, default=None,
-                        help="1-sigma constant compass/gimbal yaw bias of the aircraft (default 3 deg: docs/locate.md)")
+                        help="instead: a fixed 1-sigma prior of the constant bias (0: no bias state)")
     parser.add_argument("--dem-sigma-m", type=float, default=5.0, help="vertical sigma of the DEM (m)")
     parser.add_argument("--json", action="store_true", help="print one JSON document")
 
@@ -54,9 +57,11 @@ def read_marks(path: str, photos) -> list:
 
 
 def main(args) -> int:
+    import dataclasses
+
     from pipeline.errors import InputError
     from pipeline.ingest.photo import read_photos
-    from pipeline.ingest.photo_locate import PHOTO_BIAS_PRIOR_DEG, check_pixels, estimate_row, locate_photos
+    from pipeline.ingest.photo_locate import PHOTO_SIGMA, check_pixels, estimate_row, locate_photos
 
     photos, bad = read_photos(args.photos, alt_datum=args.alt_datum)
     for _path, err in bad:
@@ -75,9 +80,10 @@ def main(args) -> int:
     if args.dem:
         from pipeline.terrain import Dem
         dem = Dem.open(args.dem)
-    bias = PHOTO_BIAS_PRIOR_DEG if args.bias_prior_deg is None else args.bias_prior_deg
-    loc = locate_photos(photos, pixels, dem=dem, rotation_deg=args.image_rotation, bias_prior_deg=bias,
-                        dem_sigma_m=args.dem_sigma_m)
+    sigma = PHOTO_SIGMA if args.largest_bias_deg is None else \
+        dataclasses.replace(PHOTO_SIGMA, attitude_deg=args.largest_bias_deg)
+    loc = locate_photos(photos, pixels, dem=dem, rotation_deg=args.image_rotation, sigma=sigma,
+                        bias_prior_deg=args.bias_prior_deg, dem_sigma_m=args.dem_sigma_m)
     rows = {m: estimate_row(e, loc.views) for m, e in loc.estimates.items()}
     for m, (status, reason) in loc.unsolved.items():
         rows[m] = {"status": status, "reason": reason}

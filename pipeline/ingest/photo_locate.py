@@ -5,9 +5,11 @@ every estimator of `pipeline.solve` runs on them, plus `dem` (a GeoTIFF DEM, pip
 photos' own LRFTarget*, the maker's one-shot answer, for comparison).
 
 Error model for consumer drones (docs/locate.md): compass/gimbal yaw errors of 1-5 deg that stay constant over a
-flight are the MLE's boresight bias (bias_prior_deg, default PHOTO_BIAS_PRIOR_DEG); the other sigmas default to
-PHOTO_SIGMA. An altitude datum offset shared by all photos moves every estimate by the same vector (no geometry
-sees it) except `dem`, which it moves horizontally by offset / tan(depression).
+flight are the MLE's boresight bias. PHOTO_SIGMA states the attitude sigma as the largest such bias (5 deg): the MLE
+then learns the bias's size from the flight (its bias mixture, docs/solvers.md) and carries the GNSS error as an
+offset shared by the photos; a fixed bias prior (bias_prior_deg) may be stated instead. An altitude datum offset
+shared by all photos moves every estimate by the same vector (no geometry sees it) except `dem`, which it moves
+horizontally by offset / tan(depression).
 """
 
 from __future__ import annotations
@@ -23,10 +25,9 @@ from pipeline.ingest.photo_views import PhotoViews, photo_heights_ellipsoid_m, p
 from pipeline.solve import METHODS, Estimate, Status, solve, unsolved_status
 from pipeline.solve.observations import Observations, Sigma
 
-#: consumer drone defaults: marking 2 px, DJI LRF ~1 m, GNSS 3 m, gimbal jitter 0.5 deg frame to frame
-PHOTO_SIGMA = Sigma(pixel_px=2.0, range_m=1.0, position_m=3.0, attitude_deg=0.5)
-#: the constant compass / gimbal-yaw bias a consumer drone carries over a flight (1-5 deg): the prior's 1 sigma
-PHOTO_BIAS_PRIOR_DEG = 3.0
+#: consumer drone defaults: marking 2 px, DJI LRF ~1 m, GNSS 3 m, and the largest constant compass / gimbal-yaw
+#: bias over a flight, 5 deg (the MLE learns the bias's size up to it)
+PHOTO_SIGMA = Sigma(pixel_px=2.0, range_m=1.0, position_m=3.0, attitude_deg=5.0)
 #: a pixel within this fraction of the image width from the centre is taken to be where the laser points
 LASER_PIXEL_TOLERANCE = 0.01
 
@@ -57,12 +58,13 @@ def photo_observations(views: PhotoViews, pixel_px=None, sigma: Sigma = PHOTO_SI
                         t_ns=t, sigma=sigma)
 
 
-def mle_options(bias_prior_deg: float, terrain=None) -> dict:
-    """Options for solve("mle"): the bias prior, and the terrain prior `terrain=(fn, sigma_m)` only where the MLE
-    takes that option (the MLE rebuild adds it; until then the DEM enters through `dem` alone)."""
+def mle_options(bias_prior_deg: float | None = None, terrain=None) -> dict:
+    """Options for solve("mle"): a fixed bias prior when given (else the MLE learns the bias's size up to the
+    attitude sigma), and the terrain prior `terrain=(fn, sigma_m)` only where the MLE takes that option (the MLE
+    rebuild adds it; until then the DEM enters through `dem` alone)."""
     from pipeline.solve.methods import _OPTIONS
 
-    o = {"bias_prior_deg": float(bias_prior_deg)}
+    o = {} if bias_prior_deg is None else {"bias_prior_deg": float(bias_prior_deg)}
     if terrain is not None and "terrain" in _OPTIONS["mle"]:
         o["terrain"] = terrain
     return o
@@ -92,7 +94,7 @@ def _with_alt(p: Photo, lat, lon, alt) -> Photo:
 
 
 def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: int = 0, sigma: Sigma = PHOTO_SIGMA,
-                  bias_prior_deg: float = PHOTO_BIAS_PRIOR_DEG, dem_sigma_m: float = 5.0,
+                  bias_prior_deg: float | None = None, dem_sigma_m: float = 5.0,
                   methods=None) -> PhotoLocation:
     """Run every method (or `methods`) on the photos and one pixel per photo (see photo_observations)."""
     views = photo_views(photos, rotation_deg=rotation_deg)
@@ -147,10 +149,13 @@ def estimate_row(e: Estimate, views: PhotoViews) -> dict:
     if u["ellipse95_semi_major_m"] is not None:
         row.update({k: u[k] for k in ("cep90_m", "sigma_up_m", "ellipse95_semi_major_m", "ellipse95_semi_minor_m",
                                       "ellipse95_azimuth_deg")})
-    for key in ("bias_deg", "bias_sigma_deg", "n_points", "missed"):
+    for key in ("n_points", "missed"):
         if key in e.extras:
-            v = e.extras[key]
-            row[key] = v.tolist() if isinstance(v, np.ndarray) else v
+            row[key] = e.extras[key]
+    bias = e.extras.get("boresight_bias")
+    if isinstance(bias, dict):  # the MLE's constant pointing bias: camera-frame u (pan) and v (tilt) angles
+        row["boresight_bias_deg"] = {k: float(bias[k]) for k in ("u_deg", "v_deg", "u_sigma_deg", "v_sigma_deg")
+                                     if isinstance(bias.get(k), (int, float))}
     return row
 
 

@@ -10,11 +10,26 @@ from pipeline.ingest.photo import PHOTO_SUFFIXES, Photo
 
 
 def is_photo_input(path) -> bool:
-    """A .jpg/.jpeg file, or a folder holding one."""
+    """A .jpg/.jpeg file, or a folder of photos: one holding a .jpg/.jpeg and no log, bag or video (a flight folder
+    whose only JPEG is, say, a target template stays a flight folder)."""
+    from pipeline.errors import RidgelocError
+    from pipeline.ingest.dispatch import detect_format
+
     p = Path(path)
-    if p.is_dir():
-        return any(c.suffix.lower() in PHOTO_SUFFIXES for c in p.iterdir())
-    return p.suffix.lower() in PHOTO_SUFFIXES
+    if not p.is_dir():
+        return p.suffix.lower() in PHOTO_SUFFIXES
+    children = [c for c in p.iterdir() if c.is_file()]
+    if not any(c.suffix.lower() in PHOTO_SUFFIXES for c in children) or (p / "metadata.yaml").is_file():
+        return False
+    for c in children:
+        if c.suffix.lower() in PHOTO_SUFFIXES:
+            continue
+        try:
+            detect_format(c)
+        except RidgelocError:
+            continue
+        return False
+    return True
 
 
 def _time_text(p: Photo) -> str:

@@ -124,6 +124,14 @@ def test_heights_are_nan_outside_and_bilinear_inside(tmp_path):
     assert np.isnan(dem.height_wgs84_m([LAT0 + 0.05, np.nan, 91.0], [LON0, LON0, LON0])).all()
 
 
+def test_a_geographic_dem_across_the_antimeridian(tmp_path):
+    hills = Hills(-16.5, 180.0, base_m=300.0)
+    dem = Dem.open(write_dem(tmp_path / "fiji.tif", hills, extent_m=2000.0, crs="EPSG:4979"))
+    assert dem.bounds_deg[3] > 180.0  # the file's longitudes run past 180
+    lat, lon = np.full(4, -16.5), np.array([179.995, 180.005, -179.995, 180.0])
+    assert np.abs(dem.height_wgs84_m(lat, lon) - hills.h_wgs84_m(lat, lon)).max() < 0.5
+
+
 # ---- the datum and refusals --------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("crs, kind, source", [

@@ -94,6 +94,7 @@ class Dem:
                              f"than {MAX_SPAN_DEG:g} deg (crop the DEM to the area of interest)", path)
         self.outline_deg = np.stack([lat, lon], axis=-1)
         self.bounds_deg = (float(lat.min()), float(lat.max()), float(lon.min()), float(lon.max()))
+        self._lon_base = self.bounds_deg[2] - 1.0
         self._geoid = None
         if vertical.kind == "orthometric":
             from pipeline.geometry.geoid import patch_around
@@ -185,8 +186,8 @@ class Dem:
 
     def _grid_of_lla(self, lat_deg: np.ndarray, lon_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Grid coordinates (gx, gy) of WGS84 points: the post of column i, row j is at (i, j)."""
-        if self._identity:
-            x, y = lon_deg, lat_deg
+        if self._identity:  # longitudes into the file's own 360 deg range (a DEM across 180 deg E writes 180.5)
+            x, y = self._lon_base + (lon_deg - self._lon_base) % 360.0, lat_deg
         else:
             x, y = _transform_xy("EPSG:4326", self.crs, lon_deg, lat_deg)
         a, b, c, d, e, f = list(self._to_grid)[:6]

@@ -27,20 +27,19 @@ def _inspect_config(path: str, as_json: bool) -> int:
     return 0
 
 
-def _inspect_photos(paths: list[str], as_json: bool) -> list[str]:
-    """Print what each drone photo states; returns the one-line errors of the unreadable ones."""
+def _inspect_photos(paths: list[str], as_json: bool) -> tuple[dict, list[str]]:
+    """What each drone photo states (printed as text unless as_json, else returned as a dict for the one JSON
+    document), and the one-line errors of the unreadable ones."""
     from pipeline.ingest.photo import read_photos
     from pipeline.ingest.photo_inspect import format_photo, photo_as_dict
 
     photos, bad = read_photos(paths)
-    if as_json:
-        print(json.dumps({"photos": [photo_as_dict(p) for p in photos],
-                          "errors": [{"path": p, "error": e} for p, e in bad]}, indent=2))
-    else:
+    if not as_json:
         for p in photos:
             print(format_photo(p))
             print()
-    return [e for _, e in bad]
+    return ({"photos": [photo_as_dict(p) for p in photos], "errors": [{"path": p, "error": e} for p, e in bad]},
+            [e for _, e in bad])
 
 
 def main(args) -> int:
@@ -50,18 +49,20 @@ def main(args) -> int:
     if len(args.logs) == 1 and args.logs[0].lower().endswith((".yaml", ".yml")):
         return _inspect_config(args.logs[0], args.json)
     photo_inputs = [p for p in args.logs if is_photo_input(p)]
+    photo_doc, photo_errors = {}, []
     if photo_inputs:  # drone photos (docs/ingest.md, "Drone photos"); logs named with them are inspected after
-        errors = _inspect_photos(photo_inputs, args.json)
-        for e in errors:
+        photo_doc, photo_errors = _inspect_photos(photo_inputs, args.json)
+        for e in photo_errors:
             print(f"ridgeloc: error: {e}", file=sys.stderr)
-        logs = [p for p in args.logs if p not in photo_inputs]
-        if not logs:
-            return 1 if errors else 0
-        args.logs = logs
-    results = inspect_paths(args.logs)
+    logs = [p for p in args.logs if p not in photo_inputs]
+    if not logs:
+        if args.json:
+            print(json.dumps(photo_doc, indent=2))
+        return 1 if photo_errors else 0
+    results = inspect_paths(logs)
     if args.json:
         doc = {"files": [result_as_dict(r) for r in results],
-               "missing_for_localization_together": combined_missing(results)}
+               "missing_for_localization_together": combined_missing(results), **photo_doc}
         print(json.dumps(doc, indent=2))
     else:
         for r in results:
@@ -74,4 +75,4 @@ def main(args) -> int:
     failed = [r for r in results if r.error is not None]
     for r in failed:
         print(f"ridgeloc: error: {r.error}", file=sys.stderr)
-    return 1 if failed else 0
+    return 1 if failed or photo_errors else 0

@@ -67,8 +67,8 @@ class Dem:
 
     Attributes: path; heights_m (rows, cols) float64 in the file's vertical datum, NaN where there is no data;
     vertical (VerticalDatum); crs (rasterio CRS); post_m (east-west, north-south post spacing in metres at the
-    centre); h_min_m / h_max_m (ellipsoidal, over the posts with data); bounds_deg (lat_min, lat_max, lon_min,
-    lon_max) of the posts.
+    centre); h_min_m / h_max_m (bounds of the ellipsoidal heights, with 2 m to spare for an orthometric DEM);
+    bounds_deg (lat_min, lat_max, lon_min, lon_max) of the posts.
     """
 
     def __init__(self, path: Path, heights_m: np.ndarray, transform, crs, vertical: VerticalDatum):
@@ -113,9 +113,13 @@ class Dem:
         finite = np.isfinite(heights_m)
         if not finite.any():
             raise InputError("has no height data (every post is nodata)", path)
-        n = self._geoid_m(lat, lon)
-        self.h_min_m = float(np.nanmin(heights_m) + np.nanmin(n))
-        self.h_max_m = float(np.nanmax(heights_m) + np.nanmax(n))
+        # bounds of the ellipsoidal heights (they bound the ray search): the geoid over a 9 x 9 net of the DEM, with
+        # 2 m to spare for its extremes between the net's points (the geoid is smooth at these scales)
+        gx, gy = np.meshgrid(np.linspace(0, cols - 1, 9), np.linspace(0, rows - 1, 9))
+        n = self._geoid_m(*self._lla_of_grid(gx.ravel(), gy.ravel()))
+        pad = 2.0 if self._geoid is not None else 0.0
+        self.h_min_m = float(np.nanmin(heights_m) + np.nanmin(n) - pad)
+        self.h_max_m = float(np.nanmax(heights_m) + np.nanmax(n) + pad)
 
     # ---- reading ---------------------------------------------------------------------------------------------
 
@@ -230,7 +234,10 @@ class Dem:
         ok = np.isfinite(lat) & np.isfinite(lon) & (np.abs(lat) <= 90)
         if ok.any():
             gx, gy = self._grid_of_lla(lat[ok], lon[ok])
-            out[ok] = self._bilinear(gx, gy) + self._geoid_m(lat[ok], lon[ok])
+            h = self._bilinear(gx, gy)
+            on = np.isfinite(h)  # the geoid only where there is ground (its window covers the DEM alone)
+            h[on] += self._geoid_m(lat[ok][on], lon[ok][on])
+            out[ok] = h
         return out
 
     def local(self, origin_lat_deg: float, origin_lon_deg: float, origin_h_m: float):

@@ -238,6 +238,8 @@ def test_locate_dem_takes_the_median_of_the_views_and_lists_the_misses(hills_dem
     assert est.extras["missed"][0].startswith("c.jpg pixel (500.0, -4000.0): the ray never meets the ground")
     with pytest.raises(GeometryError, match=r"^dem: c.jpg pixel \(500.0, -4000.0\): .* \(DEM .*hills.tif\)$"):
         locate_dem(obs.subset(np.array([2])), hills_dem, origin, labels=["c.jpg"])
+    with pytest.raises(GeometryError, match=r"^dem: c.jpg pixel \(510.0, -3990.0\): "):  # as the user gave it
+        locate_dem(obs.subset(np.array([2])), hills_dem, origin, labels=["c.jpg"], pixels_shown=[[510.0, -3990.0]])
     with pytest.raises(ObservationError, match="no view has a target pixel"):
         locate_dem(Observations(P=P[:1], pixel=[[np.nan, np.nan]], platform_m=Cs[:1], range_m=[np.nan]),
                    hills_dem, origin)

@@ -28,10 +28,11 @@ def view_rays(P: np.ndarray, pixel: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return C, a / np.linalg.norm(a, axis=1, keepdims=True)
 
 
-def dem_points(obs: Observations, dem: Dem, origin_lla, labels: list[str] | None = None):
+def dem_points(obs: Observations, dem: Dem, origin_lla, labels: list[str] | None = None, pixels_shown=None):
     """Per view: the ground point (n, 3) in the world frame (ENU at origin_lla, metres) where the ray through its
     pixel meets the DEM, NaN where the view has no pixel or the ray misses; and the misses as one-line messages
-    (view label, pixel, reason, DEM) keyed by view index."""
+    (view label, pixel, reason, DEM) keyed by view index. `pixels_shown` (n, 2): the pixels to name in those
+    messages, as the user gave them (before undistortion); default the observations' own."""
     origin = tuple(float(v) for v in origin_lla)
     if labels is not None and len(labels) != obs.n:
         raise ObservationError(f"{len(labels)} labels for {obs.n} views")
@@ -53,17 +54,18 @@ def dem_points(obs: Observations, dem: Dem, origin_lla, labels: list[str] | None
             points[i] = enu_from_lla(*hits[j], origin)
         else:
             name = labels[i] if labels is not None else f"view {i} (t_ns {int(obs.t_ns[i])})"
-            u, v = obs.pixel[i]
+            u, v = obs.pixel[i] if pixels_shown is None else np.asarray(pixels_shown, dtype=np.float64)[i]
             misses[int(i)] = f"{name} pixel ({u:.1f}, {v:.1f}): {reasons[j]} (DEM {dem.path})"
     return points, misses
 
 
-def locate_dem(obs: Observations, dem: Dem, origin_lla, labels: list[str] | None = None) -> Estimate:
+def locate_dem(obs: Observations, dem: Dem, origin_lla, labels: list[str] | None = None,
+               pixels_shown=None) -> Estimate:
     """The `dem` estimate: the median of the views' terrain points (world frame, metres), status CLOSED_FORM;
     extras: points_m (per view, None where no point), n_points, missed (the one-line messages of the views whose
-    ray missed). Raises ObservationError when no view has a pixel, GeometryError when every ray misses (the
-    first miss's message)."""
-    points, misses = dem_points(obs, dem, origin_lla, labels)
+    ray missed; `labels` and `pixels_shown` as in dem_points). Raises ObservationError when no view has a pixel,
+    GeometryError when every ray misses (the first miss's message)."""
+    points, misses = dem_points(obs, dem, origin_lla, labels, pixels_shown)
     ok = np.isfinite(points).all(axis=1)
     if not obs.has_pixel.any():
         raise ObservationError("dem: no view has a target pixel")

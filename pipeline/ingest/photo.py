@@ -14,6 +14,7 @@ pitch -90 looks straight down.
 from __future__ import annotations
 
 import math
+import warnings as warnings_module
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
@@ -200,7 +201,8 @@ def read_photo(path, alt_datum: str | None = None) -> Photo:
     if alt_datum is not None and alt_datum not in ALT_DATUMS_PHOTO:
         raise InputError(f"unknown altitude datum {alt_datum!r} (choose {' or '.join(ALT_DATUMS_PHOTO)})", path=p)
     try:
-        with Image.open(p) as im:
+        with Image.open(p) as im, warnings_module.catch_warnings(record=True) as caught:
+            warnings_module.simplefilter("always")
             if im.format not in ("JPEG", "MPO"):  # MPO: a JPEG with a multi-picture (preview) index
                 raise InputError(f"not a JPEG photo ({im.format})", path=p)
             width, height = im.size
@@ -217,7 +219,7 @@ def read_photo(path, alt_datum: str | None = None) -> Photo:
         raise InputError(f"damaged image ({str(exc)[:120]})", path=p) from None
     if isinstance(packet, str):
         packet = packet.encode()
-    warnings: list[str] = []
+    warnings: list[str] = [f"Pillow: {str(w.message).strip()[:160]}" for w in caught]  # e.g. "Corrupt EXIF data"
     xmp = parse_xmp(packet, p) if packet else {}
     dji = {name: v for (ns, name), v in xmp.items() if ns == NS_DJI}
     others = sorted({OTHER_MAKER_NAMESPACES[ns] for ns, _ in xmp if ns in OTHER_MAKER_NAMESPACES})

@@ -166,8 +166,11 @@ def _photo_time(exif_ifd: dict, gps: dict) -> tuple[int | None, str]:
 
 def _maker_note_attitude(path) -> tuple[tuple[float, float, float] | None, tuple[float, float, float] | None]:
     """(gimbal, body) (yaw, pitch, roll) degrees from a DJI MakerNote (CameraYaw/Pitch/Roll, Yaw/Pitch/Roll)."""
+    import logging
+
     import exifread
 
+    logging.getLogger("exifread").setLevel(logging.CRITICAL)  # its complaints about damaged tags are not ours to print
     with open(path, "rb") as f:
         tags = exifread.process_file(f, details=True)
 
@@ -200,9 +203,9 @@ def read_photo(path, alt_datum: str | None = None) -> Photo:
     p = Path(path)
     if alt_datum is not None and alt_datum not in ALT_DATUMS_PHOTO:
         raise InputError(f"unknown altitude datum {alt_datum!r} (choose {' or '.join(ALT_DATUMS_PHOTO)})", path=p)
+    caught: list = []
     try:
-        with Image.open(p) as im, warnings_module.catch_warnings(record=True) as caught:
-            warnings_module.simplefilter("always")
+        with warnings_module.catch_warnings(record=True) as caught, Image.open(p) as im:
             if im.format not in ("JPEG", "MPO"):  # MPO: a JPEG with a multi-picture (preview) index
                 raise InputError(f"not a JPEG photo ({im.format})", path=p)
             width, height = im.size
@@ -219,7 +222,8 @@ def read_photo(path, alt_datum: str | None = None) -> Photo:
         raise InputError(f"damaged image ({str(exc)[:120]})", path=p) from None
     if isinstance(packet, str):
         packet = packet.encode()
-    warnings: list[str] = [f"Pillow: {str(w.message).strip()[:160]}" for w in caught]  # e.g. "Corrupt EXIF data"
+    warnings: list[str] = [f"Pillow: {str(w.message).strip()[:160]}" for w in caught
+                           if issubclass(w.category, UserWarning)]  # e.g. "Corrupt EXIF data"
     xmp = parse_xmp(packet, p) if packet else {}
     dji = {name: v for (ns, name), v in xmp.items() if ns == NS_DJI}
     others = sorted({OTHER_MAKER_NAMESPACES[ns] for ns, _ in xmp if ns in OTHER_MAKER_NAMESPACES})

@@ -58,6 +58,13 @@ def photo_observations(views: PhotoViews, pixel_px=None, sigma: Sigma = PHOTO_SI
                         t_ns=t, sigma=sigma)
 
 
+def _file_pixels(photos: list[Photo], pixel_px) -> np.ndarray:
+    """(n, 2) the pixels as the user gave them (the image centres when none), to name in messages."""
+    if pixel_px is None:
+        return np.array([[(p.width_px - 1) / 2.0, (p.height_px - 1) / 2.0] for p in photos])
+    return np.asarray(pixel_px, dtype=np.float64).reshape(len(photos), 2)
+
+
 def mle_options(bias_prior_deg: float | None = None, terrain=None) -> dict:
     """Options for solve("mle"): a fixed bias prior when given (else the MLE learns the bias's size up to the
     attitude sigma), and the terrain prior `terrain=(fn, sigma_m)` only where the MLE takes that option (the MLE
@@ -116,7 +123,8 @@ def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: in
                     out.unsolved[m] = ("insufficient_data", "no DEM given (--dem)")
                     continue
                 from pipeline.terrain import locate_dem
-                e = locate_dem(obs, dem, views.origin_lla, labels=[p.name for p in photos])
+                e = locate_dem(obs, dem, views.origin_lla, labels=[p.name for p in photos],
+                               pixels_shown=_file_pixels(photos, pixel_px))
             elif m == "mle":
                 e = solve("mle", obs, **mle_options(bias_prior_deg, terrain))
             else:

@@ -38,13 +38,17 @@ Positive = Annotated[float, Gt(0)]
 
 @dataclass(frozen=True)
 class Files:
-    telemetry: tuple[str, ...]
+    telemetry: tuple[str, ...] = ()
     video: str | None = None
     frames_csv: str | None = None
+    # issue 22 (photos): drone photos as the flight (a folder or a list of JPEGs), and their marks CSV
+    # (photo,x_px,y_px; none: every image centre, where the laser points). docs/locate.md
+    photos: tuple[str, ...] = ()
+    marks: str | None = None
 
     def __post_init__(self):
-        if not self.telemetry:
-            raise ValueError("'telemetry' must list at least one file")
+        if not self.telemetry and not self.photos:
+            raise ValueError("'telemetry' must list at least one file (or 'photos' the flight's photos)")
 
 
 @dataclass(frozen=True)
@@ -269,6 +273,23 @@ class SigmaPriors:
     position_tau_s: NonNegative | None = None
 
 
+# ---- issue 22 (terrain helper): `terrain:`, a DEM for the `dem` method and the MLE's terrain prior ----------
+@dataclass(frozen=True)
+class Terrain:
+    """A GeoTIFF DEM of the target's area (docs/terrain.md). `vertical_datum` overrides what the file says
+    (orthometric: EGM96/EGM2008 heights; ellipsoidal: WGS84); `vertical_sigma_m` is the DEM's vertical error
+    (1 sigma, m) at the target, for the MLE's terrain prior (None: no prior, `dem` only)."""
+
+    dem: str
+    vertical_sigma_m: float | None = None
+    vertical_datum: typing.Literal["orthometric", "ellipsoidal"] | None = None
+
+    def __post_init__(self):
+        if self.vertical_sigma_m is not None and not (np.isfinite(self.vertical_sigma_m) and self.vertical_sigma_m > 0):
+            raise ValueError(f"'vertical_sigma_m' must be a positive number of metres, got {self.vertical_sigma_m}")
+# ---- end of issue 22 (terrain) -------------------------------------------------------------------------------
+
+
 @dataclass(frozen=True)
 class FlightConfig:
     """One flight, resolved: every file path is absolute. `path` is the config file (None if built in code)."""
@@ -288,6 +309,7 @@ class FlightConfig:
     truth_file: str | None = None
     solve: Solve = field(default_factory=Solve)
     sigma: SigmaPriors = field(default_factory=SigmaPriors)
+    terrain: Terrain | None = None  # issue 22 (terrain)
     path: str | None = None
 
     def __post_init__(self):
@@ -331,15 +353,22 @@ def flight_config_from_dict(doc: dict, path: str | PathLike | None = None) -> Fl
     base = where.resolve().parent if where is not None else Path.cwd()
     if isinstance(doc, dict) and "path" in doc:
         raise ConfigError("path: unknown key", where)
+    if isinstance(doc, dict) and isinstance(doc.get("files"), dict) and isinstance(doc["files"].get("photos"), str):
+        doc = {**doc, "files": {**doc["files"], "photos": [doc["files"]["photos"]]}}  # issue 22 (photos): a folder
     cfg = load_dataclass(FlightConfig, doc, source=where, integral_floats=True)
     files = dataclasses.replace(
         cfg.files,
         telemetry=tuple(_resolve(base, p, f"files.telemetry[{i}]", where) for i, p in enumerate(cfg.files.telemetry)),
         video=_resolve(base, cfg.files.video, "files.video", where),
-        frames_csv=_resolve(base, cfg.files.frames_csv, "files.frames_csv", where))
+        frames_csv=_resolve(base, cfg.files.frames_csv, "files.frames_csv", where),
+        photos=tuple(_resolve(base, p, f"files.photos[{i}]", where) for i, p in enumerate(cfg.files.photos)),
+        marks=_resolve(base, cfg.files.marks, "files.marks", where))
     target = cfg.target
     if target is not None and target.template is not None:
         target = dataclasses.replace(target, template=_resolve(base, target.template, "target.template", where))
+    if cfg.terrain is not None:  # issue 22 (terrain)
+        cfg = dataclasses.replace(cfg, terrain=dataclasses.replace(
+            cfg.terrain, dem=_resolve(base, cfg.terrain.dem, "terrain.dem", where)))
     return dataclasses.replace(cfg, files=files, target=target,
                                truth_file=_resolve(base, cfg.truth_file, "truth_file", where),
                                path=None if where is None else str(where.resolve()))

@@ -26,6 +26,7 @@ from pipeline.flight import Flight, TargetMark, acquire_mark
 from pipeline.flight_config import FlightConfig
 from pipeline.geometry.frames import enu_from_lla
 from pipeline.geometry.rays import intersection_angle_deg
+from pipeline.ingest.photo_locate import process_photo_group
 from pipeline.intrinsics import frame_K
 from pipeline.progress import report_stage
 from pipeline.results import GroupResult
@@ -34,6 +35,7 @@ from pipeline.solve.estimate import Estimate
 from pipeline.solve.observations import Observations, Sigma
 from pipeline.sync.assemble import assemble_observations
 from pipeline.sync.select import ObservationPlan
+from pipeline.terrain.flight import add_dem_estimate, open_flight_dem, terrain_solve_options
 from pipeline.track.sift import SiftTracker, TrackResult
 
 
@@ -156,7 +158,9 @@ def process_group(config: FlightConfig) -> GroupResult:
     """One flight group through its stages: open the flight (logs, frame index, camera, plan, origin); acquire
     the target mark; estimate the clock when clock.estimate asks; track the target; drop the ranges off the
     laser's axis; synchronize (poses, geometry check, observations); solve with every method; collect the
-    result."""
+    result. A photo flight (files.photos) is located as `ridgeloc locate` does."""
+    if config.files.photos:
+        return process_photo_group(config)
     times, notes = _StageTimes(), []
     with times("ingest"):
         flight = Flight.open(config)
@@ -187,8 +191,11 @@ def process_group(config: FlightConfig) -> GroupResult:
     truth_m = None if truth_lla is None else enu_from_lla(*truth_lla, origin)
     with times("sync"):
         obs, useful, inside = _synchronize(flight, plan, track, range_m, truth_m, notes)
-    with times("solve"):
-        estimates, failures = solve_all(obs, _methods(config), config.solve.options)
+    with times("solve"):  # with terrain: the `dem` method and the MLE's terrain prior
+        dem = open_flight_dem(config.terrain)
+        estimates, failures = solve_all(obs, _methods(config),
+                                        terrain_solve_options(dem, config.terrain, origin, config.solve.options))
+        add_dem_estimate(dem, obs, origin, estimates, failures, [f"frame {i}" for i in plan.frame_index[useful]])
     if not estimates:
         reasons = "; ".join(f"{m}: {f['reason']}" for m, f in failures.items())
         raise InputError(f"no estimator could solve the flight: {reasons}", config.path)

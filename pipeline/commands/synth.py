@@ -12,7 +12,8 @@ HELP = "generate a synthetic flight (video + telemetry + laser + ground truth) f
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("config", help="flight config YAML (e.g. configs/synth/example.yaml)")
+    parser.add_argument("config", nargs="?", help="flight config YAML (e.g. configs/synth/example.yaml); not with "
+                                                  "--photos")
     parser.add_argument("-o", "--output", required=True, help="output folder for the flight (must not exist)")
     parser.add_argument("--overwrite", action="store_true", help="replace the output folder if it exists")
     parser.add_argument("--seed", type=int, help="override the config's noise seed")
@@ -20,10 +21,55 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="override video.mode: bursts around observations, or continuous 25 Hz video")
     parser.add_argument("--format", choices=("tlog", "ros1", "ros2-sqlite3", "ros2-mcap", "mcap", "klv"),
                         help="override the telemetry format")
+    photos = parser.add_argument_group("photo flights (pipeline/synth/photos.py, docs/locate.md)")
+    photos.add_argument("--photos", type=int, metavar="N", help="write a DJI photo flight of N photos instead")
+    photos.add_argument("--no-laser", action="store_true", help="photos without LRF tags (a consumer drone)")
+    photos.add_argument("--dem", action="store_true", help="the target on synthetic hills, with their GeoTIFF dem.tif")
+
+
+def _photo_flight(args) -> int:
+    import shutil
+
+    from pipeline.synth.photos import PhotoFlightSpec, simulate_photo_flight, write_photo_flight
+
+    out = Path(args.output)
+    if out.exists():
+        if not args.overwrite:
+            raise InputError("output folder exists (use --overwrite)", out)
+        shutil.rmtree(out)
+    spec = PhotoFlightSpec(seed=args.seed or 0, n_photos=args.photos, laser=not args.no_laser,
+                           mark_offset_px=0.0 if not args.no_laser else 150.0)
+    if args.dem:
+        from pipeline.synth.dem import Hills, write_dem
+
+        hills = Hills(spec.lat_deg, spec.lon_deg, base_m=spec.ground_h_m)
+        spec = PhotoFlightSpec(**{**spec.__dict__, "hills": hills})
+        out.mkdir(parents=True)
+        write_dem(out / "dem.tif", hills, extent_m=4000.0, post_m=30.0, crs="EPSG:32632")
+    flight = simulate_photo_flight(spec)
+    write_photo_flight(flight, out)
+    if args.dem:
+        with open(out / "flight.yaml", "a") as f:
+            f.write("terrain:\n  dem: dem.tif\n  vertical_sigma_m: 2.0\n")
+    t = flight.truth
+    print(f"{args.photos} photos ({'with' if spec.laser else 'without'} laser), compass bias "
+          f"{t['compass_bias_deg']:+.2f} deg, altitude datum offset {t['datum_offset_m']:+.1f} m -> {out}")
+    print(f"locate it: ridgeloc locate {out} --marks {out / 'marks.csv'}" + (f" --dem {out / 'dem.tif'}"
+                                                                            if args.dem else ""))
+    return 0
 
 
 def main(args) -> int:
     import dataclasses
+
+    if args.photos is not None:
+        if args.config is not None:
+            raise InputError("give a config or --photos, not both")
+        if args.photos < 1:
+            raise InputError(f"--photos must be at least 1, got {args.photos}")
+        return _photo_flight(args)
+    if args.config is None:
+        raise InputError("give a flight config YAML (or --photos N)")
 
     from pipeline.synth.config import SynthConfig
     from pipeline.synth.flight import generate

@@ -345,6 +345,57 @@ def _seed_observations(folder: Path) -> Path:
     return path
 
 
+def _seed_photo(folder: Path) -> Path:
+    """A 64x48 DJI-style photo with laser (EXIF GPS + drone-dji XMP), ~3 KB."""
+    import numpy as np
+
+    from pipeline.synth.photos import PhotoFlightSpec, simulate_photo_flight, write_photo
+
+    flight = simulate_photo_flight(PhotoFlightSpec(seed=1, n_photos=1, width_px=64, height_px=48, fx_px=110.0))
+    return write_photo(folder / "DJI_0001.JPG", flight.tags[0], np.random.default_rng(0))
+
+
+def _read_photo(path: Path) -> None:
+    """`ridgeloc inspect PHOTO` and the first step of `ridgeloc locate PHOTO`: the reader, the pose chain and the
+    observations (the solvers have their own target: observations)."""
+    from pipeline.ingest.photo import read_photo_checked
+    from pipeline.ingest.photo_locate import photo_observations
+    from pipeline.ingest.photo_views import photo_views
+
+    photo = read_photo_checked(path)
+    if photo.intrinsics is not None:
+        photo_observations(photo_views([photo]))
+
+
+
+def _seed_dem(folder: Path) -> Path:
+    """A 12 x 12 int16 GeoTIFF DEM (EPSG:4326, EGM2008 heights, deflate, nodata -32768), ~1 KB."""
+    from pipeline.synth.dem import Hills, write_dem
+
+    return write_dem(folder / "dem.tif", Hills(46.5, 7.5, base_m=600.0), extent_m=330.0, post_m=30.0,
+                     crs="EPSG:4326+3855", dtype="int16", nodata=-32768, compress="deflate")
+
+
+def _read_dem(path: Path) -> None:
+    """`ridgeloc locate --dem` and a flight's `terrain.dem`: open, a height, the terrain function, a ray cast."""
+    import numpy as np
+
+    from pipeline.errors import GeometryError
+    from pipeline.terrain import Dem
+
+    dem = Dem.open(path)
+    lat = (dem.bounds_deg[0] + dem.bounds_deg[1]) / 2
+    lon = (dem.bounds_deg[2] + dem.bounds_deg[3]) / 2
+    dem.height_wgs84_m(lat, lon)
+    with np.errstate(invalid="ignore"):
+        dem.local(lat, lon, dem.h_max_m)(np.array([0.0, 30.0]), np.array([0.0, -30.0]))
+    try:
+        dem.intersect((lat, lon, dem.h_max_m + 100.0), (0.3, 0.2, -1.0), label="fuzz pixel (0, 0)")
+    except GeometryError as exc:
+        if str(path) not in str(exc):
+            raise AssertionError(f"a ray error does not name the DEM: {exc}") from None
+
+
 TARGETS: tuple[Target, ...] = (
     Target("tlog", _seed_tlog, _read_log),
     Target("dataflash-bin", _seed_dataflash, _read_log),
@@ -364,6 +415,8 @@ TARGETS: tuple[Target, ...] = (
     Target("flight-config", _seed_flight_config, _read_flight_config, tree="yaml"),
     Target("run-config", _seed_run_config, _read_run_config, tree="yaml"),
     Target("observations", _seed_observations, _read_observations, tree="json"),
+    Target("photo", _seed_photo, _read_photo),
+    Target("dem", _seed_dem, _read_dem),
 )
 BY_NAME = {t.name: t for t in TARGETS}
 

@@ -1,0 +1,105 @@
+"""`ridgeloc locate PHOTO... [--dem DEM.tif] [--pixel X Y | --marks FILE] [--json]`: a target from drone photos."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+from pathlib import Path
+
+HELP = "locate a target from drone photos: one photo and a pixel (laser or DEM), or several photos (every method)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("photos", nargs="+", metavar="PHOTO", help="DJI-style JPEG photos, or folders of them")
+    parser.add_argument("--dem", metavar="DEM.tif", help="a GeoTIFF terrain model: adds the `dem` method")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--pixel", nargs=2, type=float, metavar=("X", "Y"),
+                       help="the target pixel in every photo (default: the image centre, where the laser points)")
+    where.add_argument("--marks", metavar="FILE",
+                       help="CSV with a header `photo,x_px,y_px`: the target pixel per photo (file name); photos "
+                            "not listed have no pixel")
+    parser.add_argument("--alt-datum", choices=("amsl", "ellipsoid"), default=None,
+                        help="datum of drone-dji:AbsoluteAltitude / EXIF GPSAltitude (default amsl; docs/ingest.md)")
+    parser.add_argument("--image-rotation", type=int, choices=(0, 180), default=0,
+                        help="180 when the files were turned upside down after capture (docs/ingest.md)")
+    parser.add_argument("--largest-bias-deg", type=float, default=None,
+                        help="the largest constant compass/gimbal bias expected over the flight (default 5 deg); the "
+                             "MLE learns its size (docs/locate.md)")
+    parser.add_argument("--bias-prior-deg", type=float, default=None,
+                        help="instead: a fixed 1-sigma prior of the constant bias (0: no bias state)")
+    parser.add_argument("--dem-sigma-m", type=float, default=5.0, help="vertical sigma of the DEM (m)")
+    parser.add_argument("--json", action="store_true", help="print one JSON document")
+
+
+def read_marks(path: str, photos) -> list:
+    """(n, 2) pixels (NaN where a photo is not listed) from a marks CSV `photo,x_px,y_px`."""
+    import numpy as np
+
+    from pipeline.errors import InputError
+
+    try:
+        with open(path, newline="") as f:
+            rows = list(csv.DictReader(f))
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise InputError(f"cannot read marks: {exc}", path=path) from None
+    by_name = {}
+    for i, r in enumerate(rows, start=2):
+        try:
+            by_name[Path(r["photo"]).name] = (float(r["x_px"]), float(r["y_px"]))
+        except (KeyError, TypeError, ValueError):
+            raise InputError(f"line {i}: want photo,x_px,y_px with numbers", path=path) from None
+    unknown = sorted(set(by_name) - {p.name for p in photos})
+    if unknown:
+        raise InputError(f"marks for photos not given: {', '.join(unknown[:5])}", path=path)
+    return np.array([by_name.get(p.name, (np.nan, np.nan)) for p in photos])
+
+
+def main(args) -> int:
+    import dataclasses
+
+    from pipeline.errors import InputError
+    from pipeline.ingest.photo import read_photos
+    from pipeline.ingest.photo_locate import PHOTO_SIGMA, check_pixels, estimate_row, locate_photos
+
+    photos, bad = read_photos(args.photos, alt_datum=args.alt_datum)
+    for _path, err in bad:
+        print(f"ridgeloc: error: {err}", file=sys.stderr)
+    if not photos:
+        raise InputError("no readable photo among " + ", ".join(args.photos))
+    if args.marks:
+        pixels = read_marks(args.marks, photos)
+    elif args.pixel:
+        pixels = [args.pixel] * len(photos)
+    else:
+        pixels = None
+    if pixels is not None:
+        check_pixels(photos, pixels)
+    dem = None
+    if args.dem:
+        from pipeline.terrain import Dem
+        dem = Dem.open(args.dem)
+    sigma = PHOTO_SIGMA if args.largest_bias_deg is None else \
+        dataclasses.replace(PHOTO_SIGMA, attitude_deg=args.largest_bias_deg)
+    loc = locate_photos(photos, pixels, dem=dem, rotation_deg=args.image_rotation, sigma=sigma,
+                        bias_prior_deg=args.bias_prior_deg, dem_sigma_m=args.dem_sigma_m)
+    rows = {m: estimate_row(e, loc.views) for m, e in loc.estimates.items()}
+    for m, (status, reason) in loc.unsolved.items():
+        rows[m] = {"status": status, "reason": reason}
+    doc = {"photos": [p.path for p in photos], "bad_photos": [{"path": p, "error": e} for p, e in bad],
+           "origin_lla": list(loc.views.origin_lla), "ranges_used": int(loc.obs.has_range.sum()),
+           "estimates": rows}
+    if args.json:
+        print(json.dumps(doc, indent=2))
+    else:
+        print(f"{len(photos)} photo(s), {doc['ranges_used']} laser range(s) used"
+              + (f", {len(bad)} unreadable" if bad else ""))
+        for m, r in rows.items():
+            if "lat_deg" in r:
+                cep = "" if r["cep50_m"] is None else f"  CEP50 {r['cep50_m']:.2f} m"
+                print(f"  {m:10s} {r['lat_deg']:.7f} {r['lon_deg']:.7f}  h {r['h_m']:.1f} m (ellipsoid)  "
+                      f"{r['alt_msl_m']:.1f} m MSL{cep}")
+            else:
+                print(f"  {m:10s} {r['status']}: {r['reason']}")
+    return 1 if bad else 0

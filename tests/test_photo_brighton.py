@@ -1,0 +1,89 @@
+"""The six real DJI Phantom 3 photos of ../shared/photos/brighton: read with position, attitude, gimbal and
+intrinsics, and their pose chain checked by triangulating marked points from two pairs of photos
+(scripts/photo_brighton_check.py marked them; docs/ingest.md, "Brighton check")."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+FOLDER = Path("../shared/photos/brighton")
+pytestmark = pytest.mark.skipif(not FOLDER.is_dir(), reason="../shared/photos/brighton is absent")
+
+# (first photo index, pixels in photos i, i+1, i+2 in the files' frame), from scripts/photo_brighton_check.py
+MARKS = [
+    (0, [(1244.4, 2180.5), (1404.2, 1340.6), (1341.7, 503.9)]),
+    (0, [(1262.0, 2022.0), (1387.7, 1187.1), (1321.0, 349.4)]),
+    (1, [(3698.3, 1730.7), (3646.1, 896.8), (3596.4, 95.6)]),
+    (2, [(1421.3, 2095.7), (1340.3, 1268.0), (1285.4, 416.7)]),
+    (2, [(1467.2, 2048.6), (1387.0, 1220.0), (1335.2, 370.2)]),
+    (3, [(1519.4, 2052.5), (1427.6, 1222.3), (1346.7, 416.8)]),
+    (3, [(1510.0, 2101.3), (1415.7, 1271.1), (1335.6, 466.7)]),
+]
+
+
+@pytest.fixture(scope="module")
+def photos():
+    from pipeline.ingest.photo import read_photos
+
+    photos, bad = read_photos([FOLDER])
+    assert bad == []
+    return photos
+
+
+def test_six_photos_read_with_pose_and_intrinsics(photos):
+    assert [p.name for p in photos] == [f"DJI_00{i}.JPG" for i in range(24, 30)]
+    p = photos[0]
+    assert (p.make, p.model, p.width_px, p.height_px) == ("DJI", "FC300S", 4000, 2250)
+    # EXIF GPS 46 deg 50' 34.3126" N, 91 deg 59' 37.308" W; drone-dji:AbsoluteAltitude +198.41
+    assert p.lat_deg == pytest.approx(46 + 50 / 60 + 34.3126 / 3600, abs=1e-9)
+    assert p.lon_deg == pytest.approx(-(91 + 59 / 60 + 37.308 / 3600), abs=1e-9)
+    assert (p.alt_m, p.alt_source, p.relative_alt_m, p.gps_alt_m) == (198.41, "drone-dji:AbsoluteAltitude", 39.9,
+                                                                       198.409)
+    assert p.gimbal_ypr_deg == (-140.0, -89.9, 0.0)
+    assert p.flight_ypr_deg == (-138.7, -0.1, -4.0)
+    # database djiFC300S: 3.61 mm / (6.3175 mm / 4000 px)
+    assert p.intrinsics.fx_px == pytest.approx(3.61 / (6.3175 / 4000))
+    assert p.intrinsics.dist == (-0.132438, 0.111056, 0.00011023, 0.000114239, -0.0158256)
+    assert p.time_zone == "unknown" and p.t_ns is not None
+    assert any("Windows Photo Viewer" in w for w in p.warnings)
+    assert all(q.intrinsics is not None and q.flight_ypr_deg is not None for q in photos)
+
+
+def _triangulate(views, idx, px):
+    from pipeline.solve import solve
+    from pipeline.solve.observations import Observations
+
+    obs = Observations(P=views.P[idx], pixel=views.pinhole_pixels(px, idx), platform_m=views.camera_m[idx],
+                       range_m=np.full(len(idx), np.nan))
+    return solve("dlt", obs).position_m
+
+
+def test_marked_points_agree_between_pairs(photos):
+    from pipeline.ingest.photo_views import photo_views
+
+    views = photo_views(photos, rotation_deg=180)  # the files were turned upside down after capture (docs)
+    for i, px in MARKS:
+        px = np.array(px)
+        a = _triangulate(views, [i, i + 1], px[:2])
+        b = _triangulate(views, [i + 1, i + 2], px[1:])
+        assert np.linalg.norm(a - b) < 5.0, (i, a, b)
+        # the beach is 30-45 m below the cameras (drone-dji:RelativeAltitude ~40 m above the take-off point)
+        assert -45.0 < a[2] - views.camera_m[i, 2] < -30.0
+
+
+def test_without_the_rotation_the_pairs_do_not_locate(photos):
+    """The same marks with the files' pixels taken as captured: the rays diverge (behind the cameras) or the pairs
+    disagree, which is how the 180-degree turn was found."""
+    from pipeline.errors import GeometryError
+    from pipeline.ingest.photo_views import photo_views
+
+    views = photo_views(photos)
+    for i, px in MARKS:
+        px = np.array(px)
+        try:
+            a = _triangulate(views, [i, i + 1], px[:2])
+            b = _triangulate(views, [i + 1, i + 2], px[1:])
+        except GeometryError:
+            continue
+        assert np.linalg.norm(a - b) > 10.0 or a[2] > views.camera_m[i, 2]

@@ -1,0 +1,35 @@
+"""`ridgeloc inspect PHOTO...` lists what each photo states."""
+
+import json
+from pathlib import Path
+
+import pytest
+
+from pipeline.cli import main as cli_main
+from pipeline.synth.photos import PhotoFlightSpec, simulate_photo_flight, write_photo_flight
+
+BRIGHTON = Path("../shared/photos/brighton")
+
+
+@pytest.mark.skipif(not BRIGHTON.is_dir(), reason="../shared/photos/brighton is absent")
+def test_inspect_brighton(capsys):
+    assert cli_main(["inspect", str(BRIGHTON)]) == 0
+    out = capsys.readouterr().out
+    assert out.count("[photo DJI FC300S 4000x2250]") == 6
+    assert "altitude 198.41 m amsl (drone-dji:AbsoluteAltitude; EXIF GPSAltitude 198.41 m" in out
+    assert "gimbal -140.00 -89.90 0.00; aircraft -138.70 -0.10 -4.00" in out
+    assert "database djiFC300S + EXIF FocalLength" in out and "time zone unknown" in out
+
+
+def test_inspect_json_with_a_bad_photo(tmp_path, capsys):
+    flight = simulate_photo_flight(PhotoFlightSpec(seed=4, n_photos=2))
+    write_photo_flight(flight, tmp_path)
+    (tmp_path / "DJI_0003.JPG").write_bytes(b"\xff\xd8\xff")
+    assert cli_main(["inspect", "--json", str(tmp_path)]) == 1
+    cap = capsys.readouterr()
+    doc = json.loads(cap.out)
+    assert [p["lrf_range_m"] for p in doc["photos"]] == pytest.approx([t["lrf_range_m"] for t in flight.tags],
+                                                                       abs=1e-3)
+    assert doc["photos"][0]["intrinsics"]["source"] == "drone-dji Calibrated* + DewarpData"
+    assert len(doc["errors"]) == 1 and "DJI_0003.JPG" in doc["errors"][0]["path"]
+    assert "DJI_0003.JPG" in cap.err

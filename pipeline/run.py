@@ -26,8 +26,8 @@ from pipeline.flight import Flight, TargetMark, acquire_mark
 from pipeline.flight_config import FlightConfig
 from pipeline.geometry.frames import enu_from_lla
 from pipeline.geometry.rays import intersection_angle_deg
-from pipeline.ingest.photo_locate import process_photo_group
 from pipeline.intrinsics import frame_K
+from pipeline.locate import process_photo_group
 from pipeline.progress import report_stage
 from pipeline.results import GroupResult
 from pipeline.solve import mle_outputs

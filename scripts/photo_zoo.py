@@ -31,7 +31,7 @@ CHI2_2DOF_95 = 5.991464547107979
 def run(n_flights: int, seed: int, bias_prior_deg: float | None, workdir: Path, sigma=None) -> dict:
     from pipeline.geometry.frames import enu_from_lla
     from pipeline.ingest.photo import read_photos
-    from pipeline.ingest.photo_locate import locate_photos
+    from pipeline.locate import locate_photos
     from pipeline.synth.dem import Hills, write_dem
     from pipeline.synth.photos import PhotoFlightSpec, simulate_photo_flight, write_photo_flight
     from pipeline.terrain import Dem

@@ -41,7 +41,7 @@ def test_round_trip(tmp_path, laser):
 def test_marks_project_from_the_true_poses(tmp_path):
     """The synth's marked pixels are where its true cameras see the target: with no recorded error the photo
     views (reader + pose chain) triangulate the target exactly."""
-    from pipeline.ingest.photo_locate import locate_photos
+    from pipeline.locate import locate_photos
 
     spec = PhotoFlightSpec(seed=2, laser=False, compass_bias_deg=(0.0, 0.0), attitude_jitter_deg=0.0,
                            gnss_offset_sigma_m=(0.0, 0.0), gnss_noise_sigma_m=(0.0, 0.0),

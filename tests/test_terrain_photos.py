@@ -22,7 +22,7 @@ def dem(tmp_path_factory):
 @pytest.mark.parametrize("seed", range(8))
 def test_dem_on_one_photo_matches_the_ray_terrain_truth(tmp_path, dem, seed):
     from pipeline.ingest.photo import read_photo_checked
-    from pipeline.ingest.photo_locate import locate_photos
+    from pipeline.locate import locate_photos
     from pipeline.synth.photos import PhotoFlightSpec, simulate_photo_flight, write_photo_flight
 
     flight = simulate_photo_flight(PhotoFlightSpec(seed=seed, n_photos=1, hills=HILLS))

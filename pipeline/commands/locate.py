@@ -3,10 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import sys
-from pathlib import Path
 
 HELP = "locate a target from drone photos: one photo and a pixel (laser or DEM), or several photos (every method)"
 
@@ -33,35 +31,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON document")
 
 
-def read_marks(path: str, photos) -> list:
-    """(n, 2) pixels (NaN where a photo is not listed) from a marks CSV `photo,x_px,y_px`."""
-    import numpy as np
-
-    from pipeline.errors import InputError
-
-    try:
-        with open(path, newline="") as f:
-            rows = list(csv.DictReader(f))
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise InputError(f"cannot read marks: {exc}", path=path) from None
-    by_name = {}
-    for i, r in enumerate(rows, start=2):
-        try:
-            by_name[Path(r["photo"]).name] = (float(r["x_px"]), float(r["y_px"]))
-        except (KeyError, TypeError, ValueError):
-            raise InputError(f"line {i}: want photo,x_px,y_px with numbers", path=path) from None
-    unknown = sorted(set(by_name) - {p.name for p in photos})
-    if unknown:
-        raise InputError(f"marks for photos not given: {', '.join(unknown[:5])}", path=path)
-    return np.array([by_name.get(p.name, (np.nan, np.nan)) for p in photos])
-
-
 def main(args) -> int:
     import dataclasses
 
     from pipeline.errors import InputError
     from pipeline.ingest.photo import read_photos
-    from pipeline.ingest.photo_locate import PHOTO_SIGMA, check_pixels, estimate_row, locate_photos
+    from pipeline.locate import PHOTO_SIGMA, check_pixels, estimate_row, locate_photos, read_marks
 
     photos, bad = read_photos(args.photos, alt_datum=args.alt_datum)
     for _path, err in bad:

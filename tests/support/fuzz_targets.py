@@ -359,8 +359,8 @@ def _read_photo(path: Path) -> None:
     """`ridgeloc inspect PHOTO` and the first step of `ridgeloc locate PHOTO`: the reader, the pose chain and the
     observations (the solvers have their own target: observations)."""
     from pipeline.ingest.photo import read_photo_checked
-    from pipeline.ingest.photo_locate import photo_observations
     from pipeline.ingest.photo_views import photo_views
+    from pipeline.locate import photo_observations
 
     photo = read_photo_checked(path)
     if photo.intrinsics is not None:

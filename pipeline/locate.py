@@ -14,7 +14,9 @@ horizontally by offset / tan(depression).
 
 from __future__ import annotations
 
+import csv
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -180,10 +182,9 @@ def process_photo_group(config):
     Unreadable photos are left out with a note each; none readable is an InputError naming the config."""
     import time
 
-    from pipeline.commands.locate import read_marks
+    from pipeline.geometry.rays import intersection_angle_deg
     from pipeline.ingest.photo import read_photos
     from pipeline.results import GroupResult
-    from pipeline.run import intersection_angle_deg
 
     t0 = time.perf_counter()
     photos, bad = read_photos(list(config.files.photos))
@@ -217,3 +218,22 @@ def process_photo_group(config):
     return GroupResult(name=config.name, origin_lla=loc.views.origin_lla, observations=loc.obs,
                        estimates=loc.estimates, truth_m=truth_m, intersection_angle_deg=gamma,
                        timings_s={"locate": time.perf_counter() - t0}, settings=settings)
+
+
+def read_marks(path: str, photos) -> list:
+    """(n, 2) pixels (NaN where a photo is not listed) from a marks CSV `photo,x_px,y_px`."""
+    try:
+        with open(path, newline="") as f:
+            rows = list(csv.DictReader(f))
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise InputError(f"cannot read marks: {exc}", path=path) from None
+    by_name = {}
+    for i, r in enumerate(rows, start=2):
+        try:
+            by_name[Path(r["photo"]).name] = (float(r["x_px"]), float(r["y_px"]))
+        except (KeyError, TypeError, ValueError):
+            raise InputError(f"line {i}: want photo,x_px,y_px with numbers", path=path) from None
+    unknown = sorted(set(by_name) - {p.name for p in photos})
+    if unknown:
+        raise InputError(f"marks for photos not given: {', '.join(unknown[:5])}", path=path)
+    return np.array([by_name.get(p.name, (np.nan, np.nan)) for p in photos])

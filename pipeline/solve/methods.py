@@ -208,9 +208,9 @@ def _mle_dispatch(st: Stacked, o: dict):
             return (nan, np.zeros(1, dtype=np.int64), status, np.full(1, np.nan), np.full((1, 3, 3), np.nan),
                     {"variance_factor_pixel": np.ones(1), "variance_factor_range": np.ones(1),
                      "sigma0_sq": np.full(1, np.nan), "vce_rounds": np.zeros(1, dtype=np.int64)})
-        C = _correlated.problem_covariance(st, x0[0], sigma)
-        if (C != np.diag(np.diag(C))).any():
-            return _correlated.mle_gls(st, x0[0], C, robust, vce, tol, itmax)
+        model = _correlated.problem_model(st, x0[0], sigma)
+        if model.correlated:
+            return _correlated.mle_gls(st, x0[0], model, robust, vce, tol, itmax)[0]
         sigma = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
     res = _mle.mle(st, x0, sigma, robust, vce, tol, itmax, init_status, bias_deg, size_unknown)
     if st.size == 1 and st.t_ns is not None and size_unknown and _drifts(res[5]) and _real_times(st):
@@ -238,9 +238,11 @@ def _learned_tau(st: Stacked, res: tuple, sigma, robust, vce, tol, itmax) -> tup
     got = _learned.learn_tau(clean, X[0], sigma, robust, vce, tol, itmax)
     if got is None:
         return res
-    tau, lls, (Xg, it, status, cond, cov, exg), chi2, m = got
-    out = _learned.replace_with_learned(ex, tau, lls, chi2, m)
+    tau, att, lls, (Xg, it, status, cond, cov, exg), chi2, m = got
+    out = _learned.replace_with_learned(ex, tau, att, lls, chi2, m)
     out.update({k: exg[k] for k in ("variance_factor_pixel", "variance_factor_range", "sigma0_sq", "vce_rounds")})
+    # the attitude sigma the chosen model carries (variance components scale the whole pixel covariance)
+    out["error_model_attitude_deg"] = out["error_model_attitude_deg"] * np.sqrt(exg["variance_factor_pixel"])
     cov = cov * out["covariance_inflation"][0]
     return Xg, it + res[1], status, cond, cov, out
 

@@ -165,8 +165,10 @@ def _loguniform(rng, lo, hi):
 def make_flight(rng: np.random.Generator, name: str, family: str, shape: str, *, gamma_deg=None, slant_m=None,
                 height_m=None, fx=None, image=None, fps=None, n_obs=None, speed_mps=None, laser_returns=None,
                 occlusion_s=None, pixel_sigma_px=None, pixel_stated=None, told=None, stride=None,
-                path=None) -> Flight:
-    """A flight drawn from rng; keyword arguments fix any of its parameters (the named cases)."""
+                path=None, laser_keep=None) -> Flight:
+    """A flight drawn from rng; keyword arguments fix any of its parameters (the named cases). family may also
+    be "drift" (not in the zoo's cycle; the scale benchmark's): attitude Gauss-Markov tau 20 s and position
+    Gauss-Markov tau 120 s."""
     gamma_deg = rng.uniform(10.0, 80.0) if gamma_deg is None else gamma_deg
     slant_m = rng.uniform(2000.0, 10000.0) if slant_m is None else slant_m
     height_m = slant_m * math.sin(math.radians(rng.uniform(15.0, 60.0))) if height_m is None else height_m
@@ -208,7 +210,7 @@ def make_flight(rng: np.random.Generator, name: str, family: str, shape: str, *,
     near = np.clip(np.searchsorted(t_s, pulses), 1, n - 1)
     near = np.where(np.abs(t_s[near - 1] - pulses) < np.abs(t_s[near] - pulses), near - 1, near)
     hit = np.abs(t_s[near] - pulses) <= 0.5 * float(np.median(np.diff(t_s))) + 1e-9
-    keep_frac = rng.uniform(0.7, 1.0)
+    keep_frac = rng.uniform(0.7, 1.0) if laser_keep is None else laser_keep
     hit &= rng.random(pulses.size) < keep_frac
     has_range = np.zeros(n, dtype=bool)
     has_range[near[hit]] = True
@@ -241,7 +243,12 @@ def make_flight(rng: np.random.Generator, name: str, family: str, shape: str, *,
     told_sigma = dataclasses.replace(told, pixel_px=pixel_sigma_px)
     told_options: dict = {"robust": None, "bias_prior_deg": 0.0}
     meta: dict = {}
-    if family == "gauss_markov":
+    if family == "drift":
+        att_err = _gauss_markov(rng, t_s, s_att, 20.0)
+        pos_err = _gauss_markov(rng, t_s, s_pos, 120.0)
+        told_sigma = dataclasses.replace(told_sigma, attitude_tau_s=20.0, position_tau_s=120.0)
+        told_options = {"robust": None}
+    elif family == "gauss_markov":
         tau = rng.uniform(5.0, 60.0)
         att_err = _gauss_markov(rng, t_s, s_att, tau)
         told_sigma = dataclasses.replace(told_sigma, attitude_tau_s=tau)

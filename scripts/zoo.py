@@ -343,16 +343,27 @@ def _straight_300m(slant_m: float, height_m: float) -> dict:
     return {"gamma_deg": math.degrees(2 * math.atan(150.0 / slant_m))}
 
 
+def random_flight(seed: int, i: int) -> Flight:
+    """The zoo's i-th random flight ("z{i:03d}"): family and shape cycling with i, everything else drawn."""
+    family = FAMILIES[i % len(FAMILIES)]
+    shape = SHAPES[(i // len(FAMILIES)) % len(SHAPES)]
+    return make_flight(np.random.default_rng([seed, i]), f"z{i:03d}", family, shape)
+
+
+def flight(name: str, seed: int = 0) -> Flight:
+    """One zoo flight by name: "arc", "straight", "obsfile" or "zNNN"."""
+    if name.startswith("z") and name[1:].isdigit():
+        return random_flight(seed, int(name[1:]))
+    named = {f.name: f for f in named_flights(seed)}
+    if name not in named:
+        raise KeyError(f"no zoo flight {name!r} (named: {', '.join(named)}; random: z000, z001, ...)")
+    return named[name]
+
+
 def zoo(flights: int, seed: int) -> list[Flight]:
-    """The named flights, then random ones (family and shape cycling, everything else drawn) up to `flights`."""
+    """The named flights, then random ones up to `flights`."""
     out = named_flights(seed)
-    i = 0
-    while len(out) < flights:
-        rng = np.random.default_rng([seed, i])
-        family = FAMILIES[i % len(FAMILIES)]
-        shape = SHAPES[(i // len(FAMILIES)) % len(SHAPES)]
-        out.append(make_flight(rng, f"z{i:03d}", family, shape))
-        i += 1
+    out += [random_flight(seed, i) for i in range(max(flights - len(out), 0))]
     return out
 
 

@@ -15,7 +15,7 @@ Reports, in one run:
 
     python scripts/bench_solvers.py [--problems 40] [--batch 8000] [--gamma 30]
     python scripts/bench_solvers.py --against COMMIT[,COMMIT...] [--batch 0]   (before / after, interleaved)
-    python scripts/bench_solvers.py --scale [--sizes 300,600,1200,1800,18000] [--timeout 600]
+    python scripts/bench_solvers.py --scale [--sizes 300,600,1200,1800,18000] [--timeout 600] [--memory-gb 4]
 
 `--scale` (issue 19): `solve("mle", obs)` on one long continuous-video flight per size (scripts/zoo.py's
 generator: an orbit at 20 m/s, 5 km slant, 2 km height, fx 4,000 px, every frame at 30 Hz with a pixel, the laser
@@ -303,8 +303,10 @@ def _scale_child(n: int) -> None:
                       "iterations": int(est.iterations)}), flush=True)
 
 
-def _run_scale_case(n: int, timeout_s: float) -> dict:
-    """_scale_child(n) in a child process: its JSON, plus its peak RSS (kB); {'n', 'timeout'} when killed."""
+def _run_scale_case(n: int, timeout_s: float, memory_gb: float) -> dict:
+    """_scale_child(n) in a child process: its JSON, plus its peak RSS (kB); {'n', 'timeout'} when killed,
+    {'n', 'failed'} when it failed (e.g. out of memory: its address space is limited to memory_gb, so that a
+    dense n x n path cannot take the shared machine's memory)."""
     import json
     import subprocess
     import sys
@@ -313,8 +315,13 @@ def _run_scale_case(n: int, timeout_s: float) -> dict:
 
     repo = str(Path(__file__).resolve().parents[1])
     env = {**os.environ, "PYTHONPATH": repo}
-    with tempfile.TemporaryFile("w+") as out:
-        p = subprocess.Popen([sys.executable, __file__, "--scale-child", str(n)], stdout=out, env=env, cwd=repo)
+    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as errf:
+        import resource
+
+        limit = int(memory_gb * 2**30)
+        p = subprocess.Popen([sys.executable, __file__, "--scale-child", str(n)], stdout=out, env=env, cwd=repo,
+                             stderr=errf,
+                             preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_AS, (limit, limit)))
         t0 = time.perf_counter()
         while True:
             pid, status, ru = os.wait4(p.pid, os.WNOHANG)
@@ -326,24 +333,29 @@ def _run_scale_case(n: int, timeout_s: float) -> dict:
                 return {"n": n, "timeout": timeout_s}
             time.sleep(0.2)
         p.returncode = os.waitstatus_to_exitcode(status)
+        errf.seek(0)
+        err = errf.read().strip().splitlines()
         out.seek(0)
         text = out.read().strip().splitlines()
     if p.returncode != 0 or not text:
-        return {"n": n, "failed": f"exit {p.returncode}"}
+        why = err[-1][:100] if err else ""
+        if "MemoryError" in why or "Unable to allocate" in why:
+            why = f"out of memory: over the {memory_gb:g} GB address-space limit ({why})"
+        return {"n": n, "failed": f"exit {p.returncode}: {why}"}
     row = json.loads(text[-1])
     row["rss_peak_kb"] = ru.ru_maxrss
     return row
 
 
-def _scale(sizes: list[int], timeout_s: float, batch_size: int) -> None:
+def _scale(sizes: list[int], timeout_s: float, batch_size: int, memory_gb: float) -> None:
     print(f"\nscale: solve('mle') on one continuous-video flight per size (30 Hz, a pixel per frame, a range per "
           f"second, drifting attitude and GNSS errors, no correlation times), each in a child process, "
-          f"timeout {timeout_s:g} s")
+          f"timeout {timeout_s:g} s, address space limited to {memory_gb:g} GB")
     print(f"  {'observations':>12} {'ranges':>7} {'wall s':>9} {'cpu s':>9} {'peak RSS MB':>12} "
           f"{'RSS before MB':>14} {'error m':>9}  status")
     done = []
     for n in sizes:
-        r = _run_scale_case(n, timeout_s)
+        r = _run_scale_case(n, timeout_s, memory_gb)
         if "timeout" in r:
             print(f"  {n:>12}  did not finish in {timeout_s:g} s", flush=True)
             continue
@@ -382,6 +394,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scale", action="store_true", help="instead: the scale cases (issue 19, above)")
     ap.add_argument("--sizes", default="300,600,1200,1800,18000", help="with --scale: observations per case")
     ap.add_argument("--timeout", type=float, default=600.0, help="with --scale: seconds per case")
+    ap.add_argument("--memory-gb", type=float, default=4.0, help="with --scale: address-space limit per case")
     ap.add_argument("--scale-child", type=int, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.scale_child:
@@ -390,7 +403,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.scale:
         print(f"machine: {os.cpu_count()} cpus, load average {os.getloadavg()[0]:.1f}, one trivial numpy call "
               f"{_calibration_us():.2f} us")
-        _scale([int(x) for x in args.sizes.split(",")], args.timeout, args.batch)
+        _scale([int(x) for x in args.sizes.split(",")], args.timeout, args.batch, args.memory_gb)
         return 0
     print(f"geometry: 10 frames, 5 km slant range, 2 km height, intersection {args.gamma:g} deg, paper noise")
     print(f"machine: {os.cpu_count()} cpus, load average {os.getloadavg()[0]:.1f}, one trivial numpy call "

@@ -338,7 +338,7 @@ def _run_scale_case(n: int, timeout_s: float, memory_gb: float) -> dict:
         out.seek(0)
         text = out.read().strip().splitlines()
     if p.returncode != 0 or not text:
-        why = err[-1][:100] if err else ""
+        why = err[-1][:160] if err else ""
         if "MemoryError" in why or "Unable to allocate" in why:
             why = f"out of memory: over the {memory_gb:g} GB address-space limit ({why})"
         return {"n": n, "failed": f"exit {p.returncode}: {why}"}

@@ -326,8 +326,8 @@ def named_flights(seed: int) -> list[Flight]:
     paper = Sigma(pixel_px=0.1, range_m=2.5, position_m=5.0, attitude_deg=0.2)  # the paper's noise
     operator = Sigma(range_m=2.0, position_m=3.0, attitude_deg=0.2)
     arc = make_flight(rng, "arc", "gauss_markov", "arc", gamma_deg=35.0, slant_m=5000.0, height_m=2000.0,
-                      fx=10000.0, image=(600, 400), fps=25.0, n_obs=58, speed_mps=60.0, pixel_sigma_px=0.5,
-                      pixel_stated=False, told=operator, occlusion_s=0.0)
+                      fx=10000.0, image=(600, 400), fps=25.0, n_obs=58, speed_mps=49.0, pixel_sigma_px=0.5,
+                      pixel_stated=False, told=operator, occlusion_s=0.0, laser_keep=1.0)
     straight = make_flight(rng, "straight", "gnss_drift", "straight", slant_m=3000.0,
                            height_m=1500.0, fx=4500.0, image=(960, 540), fps=30.0, n_obs=300, speed_mps=30.0,
                            laser_returns=2, occlusion_s=1.5, pixel_sigma_px=1.0, pixel_stated=True,

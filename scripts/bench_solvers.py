@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import os
 import statistics
 import time
@@ -366,10 +367,10 @@ def _scale(sizes: list[int], timeout_s: float, batch_size: int, memory_gb: float
         print(f"  {r['n']:>12} {r['ranges']:>7} {r['wall_s']:9.2f} {r['cpu_s']:9.2f} {r['rss_peak_kb'] / 1024:12.0f} "
               f"{r['rss_before_kb'] / 1024:14.0f} {r['error_m']:9.2f}  {r['status']}, {r['iterations']} iterations",
               flush=True)
-    if len(done) >= 2:
-        a, b = done[0], done[-1]
+    for a, b in itertools.pairwise(done):  # consecutive sizes: the 18,000 / 1,800 <= 12
         print(f"  time ratio {b['n']} / {a['n']} observations: {b['wall_s'] / a['wall_s']:.1f} wall, "
-              f"{b['cpu_s'] / a['cpu_s']:.1f} cpu (size ratio {b['n'] / a['n']:.1f})")
+              f"{b['cpu_s'] / a['cpu_s']:.1f} cpu (size ratio {b['n'] / a['n']:.1f}); peak RSS ratio "
+              f"{b['rss_peak_kb'] / a['rss_peak_kb']:.2f}")
     if batch_size > 0:
         batch = paper_batch(batch_size, seed=123)
         solve_batch("mle", paper_batch(8, seed=1))

@@ -70,12 +70,14 @@ def candidates(sigma: Sigma):
 
 def learn_tau(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
               max_iterations: int):
-    """The GLS `mle` of one problem (B = 1, st without rejected rows) with the correlation time (and attitude
-    sigma where unstated) of the largest likelihood over `candidates`, from X0 (3,). Returns (tau_s,
-    attitude_deg, {(tau, att): log L}, the `correlated.mle_gls` result tuple, chi-square, rows) or None when
-    no model gave an answer."""
+    """The GLS `mle` of one problem (B = 1, st without rejected rows) averaged over the models of `candidates`
+    (correlation time, and attitude sigma where unstated), each weighted by its likelihood (equal priors): the
+    posterior mean estimate and the mixture's covariance (the spread between the models included), from X0
+    (3,). Returns (tau_s, attitude_deg of the most likely model, {(tau, att): log L}, the `correlated.mle_gls`
+    result tuple with the mixture's estimate and covariance, that model's chi-square, rows) or None when no
+    model gave an answer."""
     lls: dict[tuple, float] = {}
-    best = None
+    fits = []
     for tau, att in candidates(sigma):
         s = dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau, attitude_deg=att)
         model = _correlated.problem_model(st, X0, s)
@@ -85,12 +87,25 @@ def learn_tau(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce
             continue
         vf = (float(res[5]["variance_factor_pixel"][0]), float(res[5]["variance_factor_range"][0]))
         ll, chi2, m = log_likelihood(st, X, s, vf)
+        if not np.isfinite(ll):
+            continue
         lls[(tau, att)] = ll
-        if best is None or ll > best[0]:
-            best = (ll, tau, att, res, chi2, m)
-    if best is None:
+        fits.append((ll, tau, att, res, chi2, m))
+    if not fits:
         return None
-    _, tau, att, res, chi2, m = best
+    ll = np.array([f[0] for f in fits])
+    post = np.exp(ll - ll.max())
+    post /= post.sum()
+    best = fits[int(np.argmax(ll))]
+    # the posterior mixture over the models: the mean, and the covariance with the spread between them
+    Xs = np.array([f[3][0][0] for f in fits])
+    covs = np.array([f[3][4][0] for f in fits])
+    Xm = post @ Xs
+    d = Xs - Xm
+    cov = np.einsum("k,kij->ij", post, covs + d[:, :, None] * d[:, None, :])
+    _, it, status, cond, _, ex = best[3]
+    res = (Xm[None], it, status, cond, cov[None], ex)
+    _, tau, att, _, chi2, m = best
     return tau, att, lls, res, chi2, m
 
 

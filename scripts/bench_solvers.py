@@ -15,12 +15,22 @@ Reports, in one run:
 
     python scripts/bench_solvers.py [--problems 40] [--batch 8000] [--gamma 30]
     python scripts/bench_solvers.py --against COMMIT[,COMMIT...] [--batch 0]   (before / after, interleaved)
+    python scripts/bench_solvers.py --scale [--sizes 300,600,1200,1800,18000] [--timeout 600] [--memory-gb 4]
+
+`--scale` (issue 19): `solve("mle", obs)` on one long continuous-video flight per size (scripts/zoo.py's
+generator: an orbit at 20 m/s, 5 km slant, 2 km height, fx 4,000 px, every frame at 30 Hz with a pixel, the laser
+at 1 Hz, attitude and GNSS errors drifting (Gauss-Markov, tau 20 s and 120 s), the sigma without correlation
+times), each in its own child process: wall and CPU seconds of the solve, the child's peak RSS (max RSS from
+wait4) and its RSS before the solve, the error; a case still running after --timeout seconds is killed and
+reported as "did not finish in T s". Then the time ratio of the largest to the smallest size that finished
+against the ratio of their sizes, and the batched mle on the paper's problems (problems/s, best of 3).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import os
 import statistics
 import time
@@ -256,6 +266,122 @@ def _gtsam_batch(probs, setups) -> tuple[float, float]:
     return _tm(lambda: [_gtsam_solve(o, setups[id(o)]) for o in probs])
 
 
+def scale_flight(n: int):
+    """The scale benchmark's flight of n observations: n / 30 s of video at 30 Hz on an orbit at 20 m/s (5 km
+    slant, 2 km height: 10 s cover 2.5 deg of azimuth, 10 minutes 150 deg), a range per second."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import zoo
+
+    slant, height, speed = 5000.0, 2000.0, 20.0
+    horiz2 = slant ** 2 - height ** 2
+    azimuth = speed * (n / 30.0) / np.sqrt(horiz2)
+    gamma = np.degrees(np.arccos((height ** 2 + horiz2 * np.cos(azimuth)) / slant ** 2))
+    return zoo.make_flight(np.random.default_rng([19, 1]), f"scale{n}", "drift", "arc", gamma_deg=gamma,
+                           slant_m=slant, height_m=height, fx=4000.0, image=(1280, 720), fps=30.0, n_obs=n,
+                           stride=1, speed_mps=speed, pixel_sigma_px=0.7, pixel_stated=True,
+                           told=zoo.Sigma(range_m=3.0, position_m=3.0, attitude_deg=0.1), occlusion_s=0.0,
+                           laser_keep=1.0, path="arc")
+
+
+def _scale_child(n: int) -> None:
+    """In a child process: one solve("mle") on the n-observation flight; prints a JSON line."""
+    import json
+    import resource
+
+    f = scale_flight(n)
+    obs = dataclasses.replace(f.obs, truth_m=None)
+    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    c, t = time.process_time(), time.perf_counter()
+    est = solve("mle", obs)
+    wall, cpu = time.perf_counter() - t, time.process_time() - c
+    err = float(np.linalg.norm(est.position_m - f.obs.truth_m))
+    print(json.dumps({"n": obs.n, "pixels": int(obs.has_pixel.sum()), "ranges": int(obs.has_range.sum()),
+                      "wall_s": wall, "cpu_s": cpu, "rss_before_kb": rss0, "error_m": err,
+                      "status": est.status.name.lower(),
+                      "iterations": int(est.iterations)}), flush=True)
+
+
+def _run_scale_case(n: int, timeout_s: float, memory_gb: float) -> dict:
+    """_scale_child(n) in a child process: its JSON, plus its peak RSS (kB); {'n', 'timeout'} when killed,
+    {'n', 'failed'} when it failed (e.g. out of memory: its address space is limited to memory_gb, so that a
+    dense n x n path cannot take the shared machine's memory)."""
+    import json
+    import subprocess
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    repo = str(Path(__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": repo}
+    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as errf:
+        import resource
+
+        limit = int(memory_gb * 2**30)
+        p = subprocess.Popen([sys.executable, __file__, "--scale-child", str(n)], stdout=out, env=env, cwd=repo,
+                             stderr=errf,
+                             preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_AS, (limit, limit)))
+        t0 = time.perf_counter()
+        while True:
+            pid, status, ru = os.wait4(p.pid, os.WNOHANG)
+            if pid:
+                break
+            if time.perf_counter() - t0 > timeout_s:
+                p.kill()
+                os.wait4(p.pid, 0)
+                return {"n": n, "timeout": timeout_s}
+            time.sleep(0.2)
+        p.returncode = os.waitstatus_to_exitcode(status)
+        errf.seek(0)
+        err = errf.read().strip().splitlines()
+        out.seek(0)
+        text = out.read().strip().splitlines()
+    if p.returncode != 0 or not text:
+        why = err[-1][:160] if err else ""
+        if "MemoryError" in why or "Unable to allocate" in why:
+            why = f"out of memory: over the {memory_gb:g} GB address-space limit ({why})"
+        return {"n": n, "failed": f"exit {p.returncode}: {why}"}
+    row = json.loads(text[-1])
+    row["rss_peak_kb"] = ru.ru_maxrss
+    return row
+
+
+def _scale(sizes: list[int], timeout_s: float, batch_size: int, memory_gb: float) -> None:
+    print(f"\nscale: solve('mle') on one continuous-video flight per size (30 Hz, a pixel per frame, a range per "
+          f"second, drifting attitude and GNSS errors, no correlation times), each in a child process, "
+          f"timeout {timeout_s:g} s, address space limited to {memory_gb:g} GB")
+    print(f"  {'observations':>12} {'ranges':>7} {'wall s':>9} {'cpu s':>9} {'peak RSS MB':>12} "
+          f"{'RSS before MB':>14} {'error m':>9}  status")
+    done = []
+    for n in sizes:
+        r = _run_scale_case(n, timeout_s, memory_gb)
+        if "timeout" in r:
+            print(f"  {n:>12}  did not finish in {timeout_s:g} s", flush=True)
+            continue
+        if "failed" in r:
+            print(f"  {n:>12}  failed ({r['failed']})", flush=True)
+            continue
+        done.append(r)
+        print(f"  {r['n']:>12} {r['ranges']:>7} {r['wall_s']:9.2f} {r['cpu_s']:9.2f} {r['rss_peak_kb'] / 1024:12.0f} "
+              f"{r['rss_before_kb'] / 1024:14.0f} {r['error_m']:9.2f}  {r['status']}, {r['iterations']} iterations",
+              flush=True)
+    for a, b in itertools.pairwise(done):  # consecutive sizes: the issue's 18,000 / 1,800 <= 12
+        print(f"  time ratio {b['n']} / {a['n']} observations: {b['wall_s'] / a['wall_s']:.1f} wall, "
+              f"{b['cpu_s'] / a['cpu_s']:.1f} cpu (size ratio {b['n'] / a['n']:.1f}); peak RSS ratio "
+              f"{b['rss_peak_kb'] / a['rss_peak_kb']:.2f}")
+    if batch_size > 0:
+        batch = paper_batch(batch_size, seed=123)
+        solve_batch("mle", paper_batch(8, seed=1))
+        best = (np.inf, np.inf)
+        for _ in range(3):
+            w, c = _tm(lambda: solve_batch("mle", batch))
+            best = (min(best[0], w), min(best[1], c))
+        print(f"\nbatched mle, paper's problems (10 frames, 30 deg), B = {batch_size}, best of 3: "
+              f"{batch_size / best[1]:.0f} problems/s CPU ({batch_size / best[0]:.0f} wall)")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--problems", type=int, default=40, help="distinct problems for the single-solve timings")
@@ -266,7 +392,20 @@ def main(argv: list[str] | None = None) -> int:
                     "--batch 0 skips the batched part")
     ap.add_argument("--simulate-rounds", type=int, default=3, help="with --against: alternating runs of "
                     "`ridgeloc simulate` per commit (0 skips them)")
+    ap.add_argument("--scale", action="store_true", help="instead: the scale cases (issue 19, above)")
+    ap.add_argument("--sizes", default="300,600,1200,1800,18000", help="with --scale: observations per case")
+    ap.add_argument("--timeout", type=float, default=600.0, help="with --scale: seconds per case")
+    ap.add_argument("--memory-gb", type=float, default=4.0, help="with --scale: address-space limit per case")
+    ap.add_argument("--scale-child", type=int, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.scale_child:
+        _scale_child(args.scale_child)
+        return 0
+    if args.scale:
+        print(f"machine: {os.cpu_count()} cpus, load average {os.getloadavg()[0]:.1f}, one trivial numpy call "
+              f"{_calibration_us():.2f} us")
+        _scale([int(x) for x in args.sizes.split(",")], args.timeout, args.batch, args.memory_gb)
+        return 0
     print(f"geometry: 10 frames, 5 km slant range, 2 km height, intersection {args.gamma:g} deg, paper noise")
     print(f"machine: {os.cpu_count()} cpus, load average {os.getloadavg()[0]:.1f}, one trivial numpy call "
           f"{_calibration_us():.2f} us")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from pipeline.errors import ObservationError
+from pipeline.errors import GeometryError, ObservationError
 from pipeline.geometry.camera import project
 from pipeline.solve import solve, solve_batch
 from pipeline.solve.mle import CHI2_3_95
@@ -168,8 +168,13 @@ def test_robust_gls_resists_a_gross_range_error():
         errs.append(np.linalg.norm(e))
         d2s.append(e @ np.linalg.solve(est.covariance_m2, e))
         assert est.converged
-    plain = solve("mle", obs, sigma=CORR, robust=None)
-    assert np.linalg.norm(plain.position_m - obs.truth_m) > 100.0
+    # without a robust loss the range drags the fit (sigma0^2 in the tens of thousands: since issue 19 that is
+    # reported as not determined rather than as an answer)
+    try:
+        plain = solve("mle", obs, sigma=CORR, robust=None)
+        assert np.linalg.norm(plain.position_m - obs.truth_m) > 100.0
+    except GeometryError as exc:
+        assert "not determined" in str(exc)
     assert np.median(errs) < 20.0
     assert np.mean(np.array(d2s) <= CHI2_3_95) >= 0.85
 

@@ -1,32 +1,35 @@
-"""Time-correlated telemetry errors for `mle` (generalized least squares), one problem.
+"""Time-correlated telemetry errors for `mle` (generalized least squares), one problem, in O(n).
 
 Attitude and platform position errors of real telemetry drift slowly (first-order Gauss-Markov processes:
 an IMU/AHRS attitude error with a correlation time of tens of seconds, a GNSS position error of a minute or
-more), while the frames of one flight are a few seconds apart. Treating them as independent from frame to
-frame overstates the information in the data and makes the covariance too small. With the correlation times
-`Sigma.attitude_tau_s` and `Sigma.position_tau_s` the residual covariance, per image axis (u, v) over the
-frames with a pixel and over the frames with a range, is
+more). With the correlation times `Sigma.attitude_tau_s` and `Sigma.position_tau_s` the residual covariance,
+per image axis (u, v) over the frames with a pixel and over the frames with a range, is
 
     C_u[i, j] = pixel_px^2 delta_ij + fx_i fx_j (att^2 exp(-|t_i - t_j| / tau_att)
                                                  + pos^2 / (D_i D_j) exp(-|t_i - t_j| / tau_pos))
     C_d[i, j] = range_m^2 delta_ij + pos^2 exp(-|t_i - t_j| / tau_pos)
 
 (likewise C_v with fy; a tau of None or 0 leaves that part on the diagonal, which is then exactly the
-independent model of `mle.base_variances`). u, v and range rows stay mutually uncorrelated, as in the
-independent model. The residuals and the Jacobian are whitened by W = L^-1, C = L L^T (Cholesky), after
-which the problem has unit variances and the estimator runs unchanged; with a robust loss, rows down-weighted
-by it get an inflated independent variance C_ii / w_i before the whitening (`inflated_whitening`).
+independent model of `mle.base_variances`). u, v and range rows stay mutually uncorrelated.
 
-`mle_gls` is the estimator itself, for one problem (a batch has no timestamps): `solve("mle", obs)` calls it when
-the sigma has correlation times and the frames' covariance is not diagonal; otherwise the batched `mle.mle`.
+The factor-graph form: each Gauss-Markov error is one state per frame chained by its transition
+x_(i+1) = a_i x_i + sqrt(1 - a_i^2) w_i, a_i = exp(-dt_i / tau), so its precision K^-1 is tridiagonal, and a
+group's covariance is C = R + G K G^T (R the white variances, G the per-row gains of the states). Eliminating
+the states (Woodbury) gives C^-1 y = R^-1 y - R^-1 G A^-1 G^T R^-1 y with A = K^-1 + G^T R^-1 G banded
+(bandwidth = the number of processes), and log det C = log det R + log det A + log det K: a banded Cholesky
+(LAPACK pbtrf through scipy.linalg.cholesky_banded), O(n) time and memory, no n x n matrix.
+
+With a robust loss a row with weight w carries an extra independent error that makes its variance C_ii / w
+(only R changes), so a gross error in one frame does not leak into the others.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg.lapack import dpotrf, dtrtrs
+from scipy.linalg import cho_solve_banded, cholesky_banded
 
 from pipeline.solve.estimate import Status
 from pipeline.solve.iterate import DIVERGENCE_FACTOR, problem_scale_m
@@ -34,88 +37,119 @@ from pipeline.solve.mle import VCE_MAX_ROUNDS, VCE_TOL, _rho_and_weight, pixel_p
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import Stacked, condition_numbers, inverse3, pixel_model, range_model, solve_spd
 
+#: 1 - a^2 floor of a transition (frames at equal times): keeps the chain's precision finite
+_MIN_INNOVATION = 1e-10
 
-def _kernel(t_s: np.ndarray, tau_s: float | None) -> np.ndarray:
-    """(k,k) correlation exp(-|t_i - t_j| / tau); the identity when tau is None or 0."""
+
+@dataclass
+class Group:
+    """One uncorrelated block of rows (u, v or range) of one problem: rows (k,) into the rows in use (time
+    order), R0 (k,) white variances, gains (k, p) of p unit-variance Gauss-Markov states, a (k-1, p) their
+    transitions (empty p: white), marginal variances C_ii (k,)."""
+    rows: np.ndarray
+    R0: np.ndarray
+    gains: np.ndarray
+    a: np.ndarray
+    Cii: np.ndarray
+
+    def solve(self, Rinv: np.ndarray, Y: np.ndarray, scale: float = 1.0):
+        """(C_w^-1 Y (k,q), log det C_w) for C_w = scale (R + G K G^T) with R = 1/Rinv (Rinv (k,) >= 0, in units
+        of scale; 0: a row with no weight, log det then over the rows that have one)."""
+        RiY = Rinv[:, None] * Y
+        keep = Rinv > 0
+        logdet = float(np.sum(np.log(scale / Rinv[keep])))
+        k, p = self.gains.shape
+        if p == 0 or k == 0:
+            return RiY / scale, logdet
+        g = self.gains
+        inn = np.maximum(1.0 - self.a ** 2, _MIN_INNOVATION)  # (k-1, p)
+        # A = K^-1 + G^T R^-1 G, states ordered frame by frame (index i p + j), lower banded storage ab[d, c]
+        diag = np.ones((k, p))
+        diag[1:] += 1.0 / inn - 1.0
+        diag[:-1] += self.a ** 2 / inn
+        ab = np.zeros((p + 1, k * p))
+        rw = Rinv
+        for d in range(p):  # the same frame's states: G^T R^-1 G, offsets 0..p-1
+            blk = rw[:, None] * g[:, :p - d] * g[:, d:]
+            if d == 0:
+                blk = blk + diag
+            ab[d].reshape(k, p)[:, :p - d] = blk
+        ab[p, :(k - 1) * p] = (-self.a / inn).ravel()  # transitions: offset p
+        cb = cholesky_banded(ab, lower=True, check_finite=False)
+        GtRiY = (g[:, :, None] * RiY[:, None, :]).reshape(k * p, -1)
+        Z = cho_solve_banded((cb, True), GtRiY, check_finite=False).reshape(k, p, -1)
+        out = (RiY - rw[:, None] * np.einsum("kp,kpq->kq", g, Z)) / scale
+        logdet += 2.0 * float(np.log(cb[0]).sum()) + float(np.log(inn).sum())
+        return out, logdet
+
+
+@dataclass
+class Model:
+    """The GLS residual model of one problem's rows in use (`rows_in_use`): groups u, v, range; npix pixel
+    rows (u, v interleaved) first. correlated: some process has a nonzero transition (else C is diagonal)."""
+    groups: tuple
+    npix: int
+    m: int
+
+    @property
+    def correlated(self) -> bool:
+        return any(g.a.size and (g.a > 0).any() and (g.gains != 0).any() for g in self.groups)
+
+    def Cii(self) -> np.ndarray:
+        out = np.empty(self.m)
+        for g in self.groups:
+            out[g.rows] = g.Cii
+        return out
+
+
+def _chain(t_s: np.ndarray, tau_s: float | None) -> np.ndarray:
+    """(k-1,) transitions exp(-dt / tau) between time-ordered frames; zeros (white) without tau."""
     if not tau_s:
-        return np.eye(t_s.size)
-    return np.exp(-np.abs(t_s[:, None] - t_s[None, :]) / tau_s)
+        return np.zeros(max(t_s.size - 1, 0))
+    return np.exp(-np.diff(t_s) / tau_s)
 
 
-def _cholesky_lower(C: np.ndarray) -> np.ndarray:
-    """L (lower) with C = L L^T, by LAPACK directly (small matrices: the scipy wrappers' checks cost more than
-    the factorization); a tiny diagonal load when C is singular (frames at equal times with no white part)."""
-    L, info = dpotrf(C, lower=1, clean=1)
-    if info != 0:
-        L, info = dpotrf(C + 1e-12 * np.trace(C) / len(C) * np.eye(len(C)), lower=1, clean=1)
-        if info != 0:
-            raise np.linalg.LinAlgError("the residual covariance is not positive definite")
-    return L
-
-
-def _solve_lower(L: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """L^-1 B for lower-triangular L."""
-    X, info = dtrtrs(L, B, lower=1)
-    if info != 0:  # pragma: no cover - L from _cholesky_lower has a positive diagonal
-        raise np.linalg.LinAlgError("singular triangular factor")
-    return X
-
-
-def _inverse_cholesky(C: np.ndarray) -> np.ndarray:
-    """W = L^-1 for C = L L^T (lower)."""
-    if C.size == 0:
-        return C
-    return _solve_lower(_cholesky_lower(C), np.eye(len(C)))
-
-
-def covariance_blocks(t_pix_s, t_rng_s, fx, fy, D_pix_m, sigma: Sigma):
-    """The residual covariances C_u, C_v (k,k) px^2 over the k frames with a pixel and C_d (l,l) m^2 over the
-    l frames with a range (module docstring). Unknown pixel / range sigmas count as 1 px / 1 m (variance
-    component estimation then scales them), like `mle.base_variances`."""
+def problem_model(st: Stacked, X0: np.ndarray, sigma: Sigma) -> Model:
+    """The `Model` of one problem (B = 1) under sigma, with the focal lengths, the distances at X0 (3,) and the
+    frames' times. Unknown pixel / range sigmas count as 1 px / 1 m (variance components then scale them),
+    like `mle.base_variances`; a part without a correlation time is white (on R)."""
     s_px = 1.0 if sigma.pixel_px is None else sigma.pixel_px
     s_r = 1.0 if sigma.range_m is None else sigma.range_m
     s_pos = 0.0 if sigma.position_m is None else sigma.position_m
     s_att = 0.0 if sigma.attitude_deg is None else math.radians(sigma.attitude_deg)
-    k = len(t_pix_s)
-    ang = s_att ** 2 * _kernel(t_pix_s, sigma.attitude_tau_s)
-    if s_pos > 0:
-        inv_d = np.where(np.isfinite(D_pix_m) & (D_pix_m > 0), 1.0 / np.where(D_pix_m > 0, D_pix_m, 1.0), 0.0)
-        ang = ang + s_pos ** 2 * np.outer(inv_d, inv_d) * _kernel(t_pix_s, sigma.position_tau_s)
-    white = s_px ** 2 * np.eye(k)
-    C_u = white + np.outer(fx, fx) * ang
-    C_v = white + np.outer(fy, fy) * ang
-    C_d = s_r ** 2 * np.eye(len(t_rng_s)) + s_pos ** 2 * _kernel(t_rng_s, sigma.position_tau_s)
-    return C_u, C_v, C_d
+    t_ns = st.t_ns[0]
+    t_s = (t_ns - t_ns.min()).astype(np.float64) * 1e-9  # differences of int64 first: no rounding of epochs
+    hp, hr = st.has_pix[0], st.has_range[0]
+    fx, fy = st.focal_px()
+    D = np.sqrt(((X0 - st.platform_m[0, hp]) ** 2).sum(axis=1))
+    inv_d = np.where(np.isfinite(D) & (D > 0), 1.0 / np.where(D > 0, D, 1.0), 0.0)
+    k, npix = int(hp.sum()), 2 * int(hp.sum())
+    groups = []
+    order_p = np.argsort(t_s[hp], kind="stable")
+    tp = t_s[hp][order_p]
+    for axis, f in ((0, fx[0, hp][order_p]), (1, fy[0, hp][order_p])):
+        parts = [(f * s_att, sigma.attitude_tau_s), (f * s_pos * inv_d[order_p], sigma.position_tau_s)]
+        groups.append(_group(2 * order_p + axis, np.full(k, s_px ** 2), parts, tp))
+    order_r = np.argsort(t_s[hr], kind="stable")
+    tr = t_s[hr][order_r]
+    groups.append(_group(npix + order_r, np.full(tr.size, s_r ** 2),
+                         [(np.full(tr.size, s_pos), sigma.position_tau_s)], tr))
+    return Model(tuple(groups), npix, npix + tr.size)
 
 
-def full_covariance(t_pix_s, t_rng_s, fx, fy, D_pix_m, sigma: Sigma) -> np.ndarray:
-    """C (m,m), m = 2k + l, of the residual rows [u_1, v_1, ..., u_k, v_k, d_1, ..., d_l] of `mle`."""
-    C_u, C_v, C_d = covariance_blocks(t_pix_s, t_rng_s, fx, fy, D_pix_m, sigma)
-    k, m = len(t_pix_s), 2 * len(t_pix_s) + len(t_rng_s)
-    C = np.zeros((m, m))
-    C[0:2 * k:2, 0:2 * k:2] = C_u
-    C[1:2 * k:2, 1:2 * k:2] = C_v
-    C[2 * k:, 2 * k:] = C_d
-    return C
-
-
-def inflated_whitening(C: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """W = L^-1 of the robustly reweighted covariance C + diag(C_ii (1/w_i - 1)) (weights w in (0, 1]): a row
-    with weight w is treated as carrying an extra independent error that makes its variance C_ii / w (a gross
-    error in that one observation), its correlations with the others unchanged in covariance."""
-    return _inverse_cholesky(_inflated(C, weights))
-
-
-def inflated_whiten(C: np.ndarray, weights: np.ndarray, A: np.ndarray) -> np.ndarray:
-    """`inflated_whitening`(C, weights) @ A, by one triangular solve."""
-    return _solve_lower(_cholesky_lower(_inflated(C, weights)), A)
-
-
-def _inflated(C: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    Cw = C.copy()
-    d = np.einsum("ii->i", Cw)  # a view of the diagonal
-    d *= 1.0 / weights
-    return Cw
+def _group(rows, R0, parts, t_s) -> Group:
+    gains, chains = [], []
+    for g, tau in parts:
+        if not (g != 0).any():
+            continue
+        if tau:
+            gains.append(g)
+            chains.append(_chain(t_s, tau))
+        else:
+            R0 = R0 + g * g
+    G = np.stack(gains, axis=1) if gains else np.zeros((rows.size, 0))
+    a = np.stack(chains, axis=1) if chains else np.zeros((max(rows.size - 1, 0), 0))
+    return Group(rows, R0, G, a, R0 + (G * G).sum(axis=1))
 
 
 # ---- the estimator (one problem) ----------------------------------------------------------------------------
@@ -131,106 +165,137 @@ def rows_in_use(st: Stacked, X: np.ndarray) -> np.ndarray:
                            np.concatenate([Jr[0, rng], rr[0, rng, None]], axis=1)])
 
 
-def problem_covariance(st: Stacked, X0: np.ndarray, sigma: Sigma) -> np.ndarray:
-    """`full_covariance` (m,m) of one problem's rows in use (`rows_in_use`), with the focal lengths, the
-    distances at X0 (3,) and the frames' times in seconds."""
-    t_ns = st.t_ns[0]
-    t_s = (t_ns - t_ns.min()).astype(np.float64) * 1e-9  # differences of int64 first: no rounding of epochs
-    hp, hr = st.has_pix[0], st.has_range[0]
-    fx, fy = st.focal_px()
-    diff = X0 - st.platform_m[0, hp]
-    D = np.sqrt((diff * diff).sum(axis=1))
-    return full_covariance(t_s[hp], t_s[hr], fx[0, hp], fy[0, hp], D, sigma)
+def robust_weights(z: np.ndarray, npix: int, robust: str | None) -> np.ndarray:
+    """(m,) robust weights of the rows' standardized marginal residuals z (pixel rows u, v interleaved first)."""
+    w = np.ones(z.size) if robust is None else _rho_and_weight(z, robust)[1]
+    if robust == "redescending":  # the pixel rows weighted in pairs, by their 2-D length
+        w[:npix] = np.repeat(pixel_pair_redescending(z[:npix:2], z[1:npix:2])[1], 2)
+    return w
 
 
-def mle_gls(st: Stacked, X0: np.ndarray, C: np.ndarray, robust: str | None, vce: bool, tol_m: float,
+def quadratic_forms(model: Model, A: np.ndarray, w: np.ndarray, vf: np.ndarray):
+    """Per group (u, v, range): ([J|r]^T C_w^-1 [J|r] (4,4), log det C_w, rows with weight) with the robust
+    weights w (m,) (row variance C_ii / w, the rest of C unchanged) and the variance factors vf (2,) (pixel,
+    range)."""
+    out = []
+    for gi, g in enumerate(model.groups):
+        if g.rows.size == 0:
+            out.append((np.zeros((4, 4)), 0.0, 0))
+            continue
+        wg = w[g.rows]
+        # R_w = C_ii / w - (C_ii - R0): the weight inflates the row's own variance only
+        with np.errstate(divide="ignore"):
+            Rinv = np.where(wg > 0, wg / (g.Cii - wg * (g.Cii - g.R0)), 0.0)
+        Y = A[g.rows]
+        CY, logdet = g.solve(Rinv, Y, vf[0] if gi < 2 else vf[1])
+        out.append((Y.T @ CY, logdet, int(np.count_nonzero(Rinv))))
+    return out
+
+
+def mle_gls(st: Stacked, X0: np.ndarray, model: Model, robust: str | None, vce: bool, tol_m: float,
             max_iterations: int):
-    """Generalized least squares `mle` of one problem (B = 1) from a usable start X0 (3,) with the residual
-    covariance C (m,m) of `problem_covariance`, by iteratively reweighted least squares.
+    """Generalized least squares `mle` of one problem (B = 1) from a usable start X0 (3,) under `model`
+    (`problem_model`), by iteratively reweighted least squares.
 
-    Every iteration takes the robust weights w_i = rho'(z)/z (all 1 without a robust loss) of the rows' marginal
-    standardized residuals z_i = r_i / sqrt(C_ii) (C_ii times the variance factor of the row's group) at the
-    current estimate, applies them as inflated variances C_ii / w_i of an independent gross error
-    (`inflated_whiten`), and takes the Gauss-Newton step of the whitened problem. Stops when the step is below
-    tol_m (then, with variance components, re-estimates them and continues while they change). Weights on the
-    whitened residuals instead would mix a gross error of one frame into the rows of the next frames and let it
-    drag the estimate.
+    Every iteration takes the robust weights w_i = rho'(z)/z of the rows' marginal standardized residuals
+    z_i = r_i / sqrt(C_ii vf) at the current estimate, applies them as inflated variances of an independent
+    gross error, and takes the Gauss-Newton step of the correlated problem (`quadratic_forms`, O(n)). Stops when
+    the step is below tol_m (then, with variance components, re-estimates them and continues while they change).
+    With the redescending loss the variance factors first take the residuals' robust spread where that exceeds
+    them (the scale guard: a misfit or an unknown sigma must not reject good data).
 
     Returns, shaped as `mle.mle` for B = 1: X (1,3), iterations (1,), status (1,) int8, cond (1,),
-    covariance (1,3,3) and the extras {variance_factor_pixel, variance_factor_range, sigma0_sq, vce_rounds}.
+    covariance (1,3,3) and the extras {variance_factor_pixel, variance_factor_range, sigma0_sq, vce_rounds,
+    log_likelihood (restricted, at the final weights' rows), chi2, rows}.
     """
-    npix, m = 2 * int(np.count_nonzero(st.has_pix[0])), len(C)
-    sd = np.sqrt(np.diag(C))
+    npix, m = model.npix, model.m
+    sd = np.sqrt(model.Cii())
     bound = DIVERGENCE_FACTOR * problem_scale_m(st, X0[None])[0]
     centre = st.platform_m[0].mean(axis=0)
     vf = np.ones(2)
+    grp = np.r_[np.zeros(npix, dtype=int), np.ones(m - npix, dtype=int)]
 
-    def whitened(A):
-        scale = np.r_[np.full(npix, vf[0]), np.full(m - npix, vf[1])]
-        z = A[:, 3] / (sd * np.sqrt(scale))
-        w = np.ones(m) if robust is None else _rho_and_weight(z, robust)[1]
-        if robust == "redescending":  # the pixel rows (u, v interleaved) weighted in pairs
-            w[:npix] = np.repeat(pixel_pair_redescending(z[:npix:2], z[1:npix:2])[1], 2)
-        return inflated_whiten(C, w, A) / np.sqrt(scale)[:, None]
+    def forms(A, loss):
+        w = robust_weights(A[:, 3] / (sd * np.sqrt(vf[grp])), npix, loss)
+        q = quadratic_forms(model, A, w, vf)
+        return w, q, sum(f for f, _, _ in q)
 
-    X = np.array(X0, dtype=np.float64)
-    A = rows_in_use(st, X)
-    status = Status.MAX_ITERATIONS
-    it = vce_rounds = 0
-    for _ in range(max_iterations):
-        G = (Aw := whitened(A)).T @ Aw
-        dX, singular = solve_spd(G[None, :3, :3], G[None, :3, 3])
-        dX = dX[0]
-        it += 1
-        if singular[0]:
-            status = Status.DEGENERATE
-            break
-        Xn = X + dX
-        if not np.isfinite(Xn).all() or np.linalg.norm(Xn - centre) > bound:
-            status = Status.DIVERGED
-            break
-        X = Xn
+    def run(X, loss):
+        """IRLS from X to convergence with this loss (variance components between rounds)."""
+        nonlocal vf, it, vce_rounds
         A = rows_in_use(st, X)
-        if np.linalg.norm(dX) <= tol_m:
-            if vce and vce_rounds < VCE_MAX_ROUNDS:
-                Aw = whitened(A)
-                factors, usable = _vce_factors(Aw[:, :3], Aw[:, 3], npix)
-                if (usable & (np.abs(factors - 1) > VCE_TOL)).any():
-                    vf = np.where(usable, vf * factors, vf)
-                    vce_rounds += 1
-                    continue
-            status = Status.CONVERGED
-            break
+        for _ in range(max_iterations):
+            _, _, G = forms(A, loss)
+            dX, singular = solve_spd(G[None, :3, :3], G[None, :3, 3])
+            dX = dX[0]
+            it += 1
+            if singular[0]:
+                return X, A, Status.DEGENERATE
+            Xn = X + dX
+            if not np.isfinite(Xn).all() or np.linalg.norm(Xn - centre) > bound:
+                return X, A, Status.DIVERGED
+            X = Xn
+            A = rows_in_use(st, X)
+            if np.linalg.norm(dX) <= tol_m:
+                if vce and vce_rounds < VCE_MAX_ROUNDS:
+                    _, q, G = forms(A, loss)
+                    factors, usable = _vce_factors(q, G)
+                    if (usable & (np.abs(factors - 1) > VCE_TOL)).any():
+                        vf = np.where(usable, vf * factors, vf)
+                        vce_rounds += 1
+                        continue
+                return X, A, Status.CONVERGED
+        return X, A, Status.MAX_ITERATIONS
+
+    it = vce_rounds = 0
+    X, A, status = run(np.array(X0, dtype=np.float64), "huber" if robust == "redescending" else robust)
+    if robust == "redescending" and status not in (Status.DIVERGED, Status.DEGENERATE):
+        # the scale guard at the convex (Huber) fit, before anything can get zero weight: a group whose
+        # residuals are more spread than its sigma says (beyond the MAD's own noise) is scaled up, so that a
+        # misfit model does not reject good data
+        z = A[:, 3] / (sd * np.sqrt(vf[grp]))
+        for gi, sl in ((0, slice(0, npix)), (1, slice(npix, m))):
+            cnt = z[sl].size
+            if cnt >= 4:
+                mad = 1.4826 * float(np.median(np.abs(z[sl])))
+                if mad > 1.0 + 2.34 / math.sqrt(cnt):
+                    vf[gi] *= mad * mad
+        X, A, status = run(X, robust)
     # covariance with the weights at the final estimate
-    Aw = whitened(A)
-    N = Aw[None, :, :3].transpose(0, 2, 1) @ Aw[None, :, :3]
+    w, q, G = forms(A, robust)
+    N = G[None, :3, :3]
     cov, singular = inverse3(N)
     cond = condition_numbers(N)
     if singular[0] and status not in (Status.DIVERGED, Status.DEGENERATE):
         status = Status.DEGENERATE
+    chi2 = float(G[3, 3])  # r^T C_w^-1 r at the solution
+    used = int(np.count_nonzero(w > 0))
+    logdet = sum(ld for _, ld, _ in q)
+    sign, logdet_n = np.linalg.slogdet(G[:3, :3])
+    ll = -0.5 * (chi2 + logdet + (logdet_n if sign > 0 else np.inf) + (used - 3) * math.log(2 * math.pi))
     if status in (Status.DIVERGED, Status.DEGENERATE):
         X = np.full(3, np.nan)
         cov[:] = np.nan
         if not singular[0]:
             cond[:] = np.nan
-    e = Aw[:, 3]
     extras = {"variance_factor_pixel": vf[:1], "variance_factor_range": vf[1:],
-              "sigma0_sq": np.array([float(e @ e) / (m - 3) if m > 3 else np.nan]),
+              "sigma0_sq": np.array([chi2 / (used - 3) if used > 3 else np.nan]),
               "vce_rounds": np.array([vce_rounds])}
-    return (X[None], np.array([it]), np.array([status], dtype=np.int8), cond, cov, extras)
+    info = {"log_likelihood": ll, "chi2": chi2, "rows": used}
+    return (X[None], np.array([it]), np.array([status], dtype=np.int8), cond, cov, extras), info
 
 
-def _vce_factors(Jw: np.ndarray, e: np.ndarray, npix: int):
-    """Helmert/Foerstner variance factors (2,) of the pixel and range groups of whitened rows Jw (m,3),
-    e (m,) (the first npix are pixel rows), and which of them are usable (redundancy >= 0.5), as
-    `mle._vce_factors`."""
-    Ninv = inverse3((Jw.T @ Jw)[None])[0][0]
-    lev = ((Jw @ Ninv) * Jw).sum(axis=1)
+def _vce_factors(q, G):
+    """Helmert/Foerstner variance factors (2,) of the pixel (u and v) and range groups from the per-group
+    quadratic forms q (`quadratic_forms`) and their sum G, and which are usable (redundancy >= 0.5): the group's
+    r^T C^-1 r over its redundancy, its rows with weight minus trace(N^-1 J_g^T C_g^-1 J_g)."""
+    Ninv = inverse3(G[None, :3, :3])[0][0]
     out, usable = np.ones(2), np.zeros(2, dtype=bool)
-    for k, sl in ((0, slice(0, npix)), (1, slice(npix, None))):
-        red = float((1.0 - lev[sl]).sum())
+    for k, parts in ((0, q[:2]), (1, q[2:])):
+        Q = sum(f for f, _, _ in parts)
+        red = sum(n for _, _, n in parts) - float(np.sum(Ninv * Q[:3, :3]))
         if red >= 0.5:
-            f = float((e[sl] * e[sl]).sum()) / red
+            f = float(Q[3, 3]) / red
             if np.isfinite(f) and f > 0:
                 out[k], usable[k] = f, True
     return out, usable

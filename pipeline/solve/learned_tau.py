@@ -1,22 +1,25 @@
-"""The telemetry errors' correlation time learned from the flight, for `mle` on one problem whose sigma gives
-none (an operator's spec sheet does not).
+"""The telemetry errors' correlation time (and, where the sigma does not state it, their size) learned from the
+flight by evidence, for `mle` on one problem whose sigma gives no correlation time.
 
 Attitude and GNSS errors drift: first-order Gauss-Markov with a correlation time tau. `mle` first solves the
 independent-error model with a boresight bias (`mle.mle`: redescending loss, fit checks); where it has timestamps
 and its residuals drift from frame to frame (`fit_checks`), it then fits the generalized least squares model
-(`correlated.mle_gls`) with one correlation time for the attitude and the position errors, for each tau of
-TAU_GRID_S, without the rows the first solve rejected, and keeps the tau of the largest Gaussian likelihood
+(`correlated.mle_gls`, O(n)) with one correlation time for the attitude and the position errors, for each tau of
+TAU_GRID_S, and where the attitude sigma is not stated for each attitude sigma of ATTITUDE_GRID_DEG too (without
+a size the drift has no covariance, and every tau would give the same likelihood), without the rows the first
+solve rejected, and keeps the model of the largest restricted (REML) Gaussian likelihood
 
-    log L(tau) = -1/2 (r^T C_tau^-1 r / k + m log k + log det C_tau),   k = max(r^T C_tau^-1 r / m, 1)
+    log L = -1/2 (r^T C^-1 r / k + m log k + log det C + log det (J^T C^-1 J / k)),  k = max(r^T C^-1 r / m, 1)
 
-(r the m residuals at that tau's estimate; the profile likelihood: the same data under each model, the
-covariance's size charged by log det, its overall scale k at its maximum likelihood but never below the stated
-sigmas). The chosen model's estimate and covariance are the answer; its chi-square is checked again.
+(r the m residuals at that model's estimate, the target integrated out with a flat prior; the covariance's size
+charged by log det, its overall scale k at its maximum likelihood but never below the stated sigmas). The chosen
+model's estimate and covariance are the answer; its chi-square is checked again.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -28,6 +31,8 @@ from pipeline.solve.stacked import Stacked
 
 #: candidate correlation times (s); from frame-to-frame to about the length of a survey flight
 TAU_GRID_S = (5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0)
+#: candidate attitude sigmas (deg) where the sigma states none
+ATTITUDE_GRID_DEG = (0.01, 0.03, 0.1, 0.3, 1.0)
 
 
 def without_rejected(st: Stacked, rejected: np.ndarray) -> Stacked:
@@ -38,52 +43,76 @@ def without_rejected(st: Stacked, rejected: np.ndarray) -> Stacked:
     return dataclasses.replace(st, has_pix=has_pix, has_range=has_range)
 
 
-def log_likelihood(st: Stacked, X: np.ndarray, sigma: Sigma, vf: tuple[float, float]) -> tuple[float, float, int]:
-    """(log L, chi-square r^T C^-1 r, rows m) of one problem at X (3,) under sigma, the pixel and range blocks of
-    C scaled by the variance factors vf; C's overall scale k >= 1 at its maximum likelihood, max(chi2 / m, 1)
-    (the stated sigmas a lower bound: with sigmas stated too small, a tau is not chosen for hiding the misfit
-    in the target)."""
-    C = _correlated.problem_covariance(st, X, sigma)
-    npix = 2 * int(np.count_nonzero(st.has_pix[0]))
-    s = np.r_[np.full(npix, vf[0]), np.full(len(C) - npix, vf[1])]
-    C = C * np.sqrt(np.outer(s, s))
-    r = _correlated.rows_in_use(st, X)[:, 3]
-    L = np.linalg.cholesky(C)
-    z = np.linalg.solve(L, r)
-    chi2 = float(z @ z)
-    m = len(C)
+def log_likelihood(st: Stacked, X: np.ndarray, sigma: Sigma, vf) -> tuple[float, float, int]:
+    """(restricted log L, chi-square r^T C^-1 r, rows m) of one problem at X (3,) under sigma, the pixel and
+    range blocks of C scaled by the variance factors vf (2,); every row at full weight (the same data under
+    every model); C's overall scale k = max(chi2 / m, 1) (the stated sigmas a lower bound: with sigmas stated
+    too small, a model is not chosen for hiding the misfit in the target)."""
+    model = _correlated.problem_model(st, X, sigma)
+    A = _correlated.rows_in_use(st, X)
+    q = _correlated.quadratic_forms(model, A, np.ones(model.m), np.asarray(vf, dtype=np.float64))
+    G = sum(f for f, _, _ in q)
+    logdet = sum(ld for _, ld, _ in q)
+    chi2, m = float(G[3, 3]), model.m
     k = max(chi2 / m, 1.0)
-    return -0.5 * (chi2 / k + m * np.log(k) + 2.0 * float(np.log(np.diag(L)).sum())), chi2, m
+    sign, logdet_n = np.linalg.slogdet(G[:3, :3] / k)
+    if sign <= 0:
+        return -np.inf, chi2, m
+    ll = -0.5 * (chi2 / k + m * math.log(k) + logdet + logdet_n + (m - 3) * math.log(2 * math.pi))
+    return ll, chi2, m
+
+
+def candidates(sigma: Sigma):
+    """The (tau_s, attitude_deg) grid: the stated attitude sigma, or ATTITUDE_GRID_DEG where none is stated."""
+    atts = (sigma.attitude_deg,) if sigma.attitude_deg else ATTITUDE_GRID_DEG
+    return [(tau, att) for att in atts for tau in TAU_GRID_S]
 
 
 def learn_tau(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
               max_iterations: int):
-    """The GLS `mle` of one problem (B = 1, st without rejected rows) with the correlation time of the largest
-    likelihood over TAU_GRID_S, from X0 (3,). Returns (tau_s, {tau: log L}, the `correlated.mle_gls` result
-    tuple, chi-square, rows) or None when no tau gave an answer."""
-    lls: dict[float, float] = {}
-    best = None
-    for tau in TAU_GRID_S:
-        s = dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau)
-        C = _correlated.problem_covariance(st, X0, s)
-        res = _correlated.mle_gls(st, X0, C, robust, vce, tol_m, max_iterations)
+    """The GLS `mle` of one problem (B = 1, st without rejected rows) averaged over the models of `candidates`
+    (correlation time, and attitude sigma where unstated), each weighted by its likelihood (equal priors): the
+    posterior mean estimate and the mixture's covariance (the spread between the models included), from X0
+    (3,). Returns (tau_s, attitude_deg of the most likely model, {(tau, att): log L}, the `correlated.mle_gls`
+    result tuple with the mixture's estimate and covariance, that model's chi-square, rows) or None when no
+    model gave an answer."""
+    lls: dict[tuple, float] = {}
+    fits = []
+    for tau, att in candidates(sigma):
+        s = dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau, attitude_deg=att)
+        model = _correlated.problem_model(st, X0, s)
+        res, _ = _correlated.mle_gls(st, X0, model, robust, vce, tol_m, max_iterations)
         X, status = res[0][0], res[2][0]
         if status in (Status.DIVERGED, Status.DEGENERATE) or not np.isfinite(X).all():
             continue
         vf = (float(res[5]["variance_factor_pixel"][0]), float(res[5]["variance_factor_range"][0]))
         ll, chi2, m = log_likelihood(st, X, s, vf)
-        lls[tau] = ll
-        if best is None or ll > best[0]:
-            best = (ll, tau, res, chi2, m)
-    if best is None:
+        if not np.isfinite(ll):
+            continue
+        lls[(tau, att)] = ll
+        fits.append((ll, tau, att, res, chi2, m))
+    if not fits:
         return None
-    _, tau, res, chi2, m = best
-    return tau, lls, res, chi2, m
+    ll = np.array([f[0] for f in fits])
+    post = np.exp(ll - ll.max())
+    post /= post.sum()
+    best = fits[int(np.argmax(ll))]
+    # the posterior mixture over the models: the mean, and the covariance with the spread between them
+    Xs = np.array([f[3][0][0] for f in fits])
+    covs = np.array([f[3][4][0] for f in fits])
+    Xm = post @ Xs
+    d = Xs - Xm
+    cov = np.einsum("k,kij->ij", post, covs + d[:, :, None] * d[:, None, :])
+    _, it, status, cond, _, ex = best[3]
+    res = (Xm[None], it, status, cond, cov[None], ex)
+    _, tau, att, _, chi2, m = best
+    return tau, att, lls, res, chi2, m
 
 
-def replace_with_learned(ex: dict, tau: float, lls: dict, chi2: float, m: int) -> dict:
-    """The first solve's extras (B = 1 arrays) updated for the learned-tau answer: the fit checks of the GLS
-    model (its chi-square; drift is now modelled), no bias, the chosen tau and the likelihoods."""
+def replace_with_learned(ex: dict, tau: float, att: float, lls: dict, chi2: float, m: int) -> dict:
+    """The first solve's extras (B = 1 arrays) updated for the learned model's answer: the fit checks of the GLS
+    model (its chi-square; drift is now modelled), no bias, the chosen tau and attitude sigma, and the
+    likelihoods over TAU_GRID_S at the chosen attitude sigma."""
     out = {k: v for k, v in ex.items() if not k.startswith("bias_")}
     dof = float(m - 3)
     p = fit_checks.chi_square_p(np.array([chi2]), np.array([dof]))
@@ -92,6 +121,6 @@ def replace_with_learned(ex: dict, tau: float, lls: dict, chi2: float, m: int) -
                 "drift_pixel": np.zeros(1, dtype=bool), "drift_range": np.zeros(1, dtype=bool),
                 "consistent": np.array([not fail]), "robust_spread": np.ones((1, 2)),
                 "covariance_inflation": np.array([max(chi2 / dof, 1.0) if fail and dof > 0 else 1.0]),
-                "error_model_tau_s": np.array([tau]),
-                "error_model_log_likelihoods": np.array([[lls.get(t, np.nan) for t in TAU_GRID_S]])})
+                "error_model_tau_s": np.array([tau]), "error_model_attitude_deg": np.array([att]),
+                "error_model_log_likelihoods": np.array([[lls.get((t, att), np.nan) for t in TAU_GRID_S]])})
     return out

@@ -16,6 +16,7 @@ from pipeline.solve import correlated as _correlated
 from pipeline.solve import learned_tau as _learned
 from pipeline.solve import least_squares, linear, mle_outputs
 from pipeline.solve import mle as _mle
+from pipeline.solve import starts as _starts
 from pipeline.solve.estimate import BatchEstimate, Estimate, Status
 from pipeline.solve.iterate import start_status
 from pipeline.solve.observations import ObservationBatch, Observations, Sigma
@@ -154,7 +155,10 @@ def _solve_stacked(method: str, st: Stacked, o: dict) -> BatchEstimate:
         if method == "ridge":
             extras["k"] = ex["k"]
     elif method == "mle":
-        X, it, status, cond, cov, ex = _mle_dispatch(st, o)
+        if st.size == 1 and o.get("initial_m") is None:
+            X, it, status, cond, cov, ex = _mle_multistart(st, o)
+        else:
+            X, it, status, cond, cov, ex = _mle_dispatch(st, o)
         extras = {**_mle_summaries(cov), **ex}
     else:  # pragma: no cover - _check_options rejects it
         raise ValueError(method)
@@ -207,14 +211,76 @@ def _mle_dispatch(st: Stacked, o: dict):
             return (nan, np.zeros(1, dtype=np.int64), status, np.full(1, np.nan), np.full((1, 3, 3), np.nan),
                     {"variance_factor_pixel": np.ones(1), "variance_factor_range": np.ones(1),
                      "sigma0_sq": np.full(1, np.nan), "vce_rounds": np.zeros(1, dtype=np.int64)})
-        C = _correlated.problem_covariance(st, x0[0], sigma)
-        if (C != np.diag(np.diag(C))).any():
-            return _correlated.mle_gls(st, x0[0], C, robust, vce, tol, itmax)
+        model = _correlated.problem_model(st, x0[0], sigma)
+        if model.correlated:
+            return _correlated.mle_gls(st, x0[0], model, robust, vce, tol, itmax)[0]
         sigma = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
     res = _mle.mle(st, x0, sigma, robust, vce, tol, itmax, init_status, bias_deg, size_unknown)
     if st.size == 1 and st.t_ns is not None and size_unknown and _drifts(res[5]) and _real_times(st):
         res = _learned_tau(st, res, sigma, robust, vce, tol, itmax)
     return res
+
+
+def _mle_multistart(st: Stacked, o: dict):
+    """`_mle_dispatch` on one problem, never an answer that explains the pixels away (`starts`): the fit from the
+    default start is kept when it does not; otherwise mle is run again from every other estimator's answer and
+    the fit of the lowest common robust cost among those that do not explain the pixels away is kept; when
+    every fit does, the target is not determined (DEGENERATE, with the reason in `not_determined`). The other
+    estimators' answers outside the kept fit's ellipsoid (chi-square 99.9 %) are listed (`disagree`)."""
+    res = _mle_dispatch(st, o)
+    npix = int(st.has_pix[0].sum())
+    cands = {}
+    plain = {"tol_m": o["tol_m"], "max_iterations": o["max_iterations"]}
+    for name in _starts.START_METHODS:
+        try:
+            be = _solve_stacked(name, st, plain)
+        except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - the kernels report failures as statuses
+            continue
+        X, s = be.position_m[0], int(be.status[0])
+        if np.isfinite(X).all() and s not in (Status.DEGENERATE, Status.DIVERGED) and (
+                name != "range" or s == Status.CONVERGED):
+            cands[name] = X
+    finite = bool(np.isfinite(res[0][0]).all())
+    why = _starts.explains_away(res[5], npix) if finite else "no estimate"
+    dis = _starts.disagreement(res[0][0], res[4][0], cands) if finite else {}
+    runs = [("default", res, why)]
+    if why is not None:
+        tried = [res[0][0]] if finite else []
+        for name, c in cands.items():
+            if all(np.linalg.norm(c - t) > _starts.SAME_START_M for t in tried):
+                r = _mle_dispatch(st, {**o, "initial_m": c[None]})
+                ok = bool(np.isfinite(r[0][0]).all()) and not _behind_camera(st, r[0])[0]
+                runs.append((name, r, _starts.explains_away(r[5], npix) if ok else "no estimate"))
+                tried.append(c)
+    good = [(n, r) for n, r, w in runs if w is None]
+    points = np.array([c for c in cands.values()] or [res[0][0]])
+    consensus = np.median(points, axis=0) if np.isfinite(points).all() else res[0][0]
+    sigma = o.get("sigma") or st.sigma
+    costs = {}
+    if good:
+        yard = _starts.yardstick(st, sigma, np.array([r[0][0] for _, r in good]), consensus)
+        costs = {n: float(c) for (n, _), c in zip(good, yard, strict=True)}
+        # another start's fit replaces the default start's only where it fits clearly better (ties: the default)
+        k = int(np.argmin(yard))
+        if good[0][0] == "default" and not yard[k] < yard[0] - _starts.CLEARLY_BETTER * max(yard[0], 1.0):
+            k = 0
+        name, res = good[k]
+        reason = None
+    else:  # none: not determined (a default fit with no estimate keeps its own status and reason)
+        name, reason = "default", runs[0][2] if finite else None
+    X, it, status, cond, cov, ex = res
+    ex = dict(ex)
+    if reason is not None and np.isfinite(X[0]).all():
+        X, cov = np.full_like(X, np.nan), np.full_like(cov, np.nan)
+        status = np.full_like(status, Status.DEGENERATE)
+    dis = _starts.disagreement(X[0], cov[0], cands) if np.isfinite(X[0]).all() else {}
+    ex["starts"] = np.array([{"chosen": name, "not_determined": reason,
+                              "refits": {n: w or "fitted" for n, _, w in runs[1:]}, "yardstick": costs,
+                              "candidates": {k: {"position_m": v.tolist(), "chi2_vs_mle": dis.get(k)}
+                                             for k, v in cands.items()},
+                              "disagree": sorted(k for k, v in dis.items() if v > _starts.DISAGREE_CHI2)}],
+                            dtype=object)
+    return X, it, status, cond, cov, ex
 
 
 def _drifts(ex: dict) -> bool:
@@ -237,9 +303,22 @@ def _learned_tau(st: Stacked, res: tuple, sigma, robust, vce, tol, itmax) -> tup
     got = _learned.learn_tau(clean, X[0], sigma, robust, vce, tol, itmax)
     if got is None:
         return res
-    tau, lls, (Xg, it, status, cond, cov, exg), chi2, m = got
-    out = _learned.replace_with_learned(ex, tau, lls, chi2, m)
+    tau, att, lls, (Xg, it, status, cond, cov, exg), chi2, m = got
+    if np.isfinite(Xg[0]).all():
+        # a drift model may trade the target against the drift where the flight cannot tell them apart (a short
+        # burst, a run of mistracked frames): kept only when its estimate lies within the first answer's
+        # uncertainty (chi-square 99.9 %); otherwise the first answer stands
+        d2 = _starts.disagreement(X[0], res[4][0], {"learned": Xg[0]}).get("learned", np.inf)
+        if not d2 <= _starts.DISAGREE_CHI2:
+            return res
+        # nor where it needs an attitude error far beyond the stated one (the drift then explains the pixels away)
+        att_eff = att * float(np.sqrt(exg["variance_factor_pixel"][0]))
+        if sigma.attitude_deg and att_eff > _starts.MAX_ATTITUDE_OVER_STATED * sigma.attitude_deg:
+            return res
+    out = _learned.replace_with_learned(ex, tau, att, lls, chi2, m)
     out.update({k: exg[k] for k in ("variance_factor_pixel", "variance_factor_range", "sigma0_sq", "vce_rounds")})
+    # the attitude sigma the chosen model carries (variance components scale the whole pixel covariance)
+    out["error_model_attitude_deg"] = out["error_model_attitude_deg"] * np.sqrt(exg["variance_factor_pixel"])
     cov = cov * out["covariance_inflation"][0]
     return Xg, it + res[1], status, cond, cov, out
 
@@ -376,6 +455,10 @@ def solve(method: str, obs: Observations, **options) -> Estimate:
     status = Status(int(be.status[0]))
     info = {k: v[0] for k, v in be.extras.items()}
     if status == Status.DEGENERATE:
+        starts = info.get("starts")
+        if starts is not None and starts["not_determined"]:
+            raise GeometryError(f"mle: not determined by this flight: every start's fit explains the pixels away "
+                                f"({starts['not_determined']})")
         if method in _USES_PIXELS and info["behind_camera"]:
             raise GeometryError(f"{method}: the estimate lies behind the camera of a frame with a target "
                                 "pixel (check the pixels and the sign convention of P)")
@@ -411,8 +494,11 @@ def solve(method: str, obs: Observations, **options) -> Estimate:
             "vce_rounds": int(info["vce_rounds"]),
             "robust": o.get("robust", _mle.DEFAULT_ROBUST),
         })
+        if "starts" in info:
+            extras["starts"] = info["starts"]
         if "rejected" in info:  # the batched kernel's fit checks, bias, rejected rows and learned error model
-            extras.update(mle_outputs.problem_extras({k: v[None] for k, v in info.items()}, obs.t_ns))
+            extras.update(mle_outputs.problem_extras({k: v[None] for k, v in info.items() if k != "starts"},
+                                                     obs.t_ns))
     cov = None if be.covariance_m2 is None else be.covariance_m2[0]
     return Estimate(method=method, position_m=X, iterations=it, status=status,
                     residuals=_residuals(method, st, X), condition_number=cond, covariance_m2=cov, extras=extras)

@@ -140,7 +140,7 @@ def problem_extras(ex: dict, t_ns: np.ndarray) -> dict:
         from pipeline.solve.learned_tau import TAU_GRID_S
         out["error_model"] = {
             "attitude_tau_s": float(ex["error_model_tau_s"][0]), "position_tau_s": float(ex["error_model_tau_s"][0]),
-            "chosen_by": "likelihood",
+            "attitude_deg": float(ex["error_model_attitude_deg"][0]), "chosen_by": "likelihood",
             "log_likelihood": {f"{t:g}": _f(v) for t, v in zip(TAU_GRID_S, ex["error_model_log_likelihoods"][0],
                                                                  strict=True)}}
     return out

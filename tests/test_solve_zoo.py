@@ -1,0 +1,91 @@
+"""`mle` on flights it was not written for (issue 19): a handful of scripts/zoo.py's flights, each asserting the
+no-catastrophe rule, mle error <= 2 x median(the other methods' errors) + 5 m (methods that cannot solve a flight
+are left out of the median). The full zoo (210 flights, coverage, the median rule) is `python scripts/zoo.py`;
+docs/zoo.md has its figures.
+
+The flights: the issue's named shapes (the continuous-video arc, the straight pass with two laser returns and a
+1.5 s occlusion, the observation file) and zoo flights of every family, among them the ones where commit c9d7636's
+mle was far beyond the bound (z020: 27.7 km, here every third observation: 26.0 m against 11.3 m; z038: 6.3 km;
+z104, z132: 1.6-1.7 x the bound; docs/zoo.md)."""
+
+from __future__ import annotations
+
+import importlib.util
+import statistics
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.errors import RidgelocError
+from pipeline.solve import solve
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _zoo():
+    if "zoo" not in sys.modules:
+        spec = importlib.util.spec_from_file_location("zoo", ROOT / "scripts" / "zoo.py")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules["zoo"] = module  # registered before running it: its dataclasses look their module up
+        spec.loader.exec_module(module)
+    return sys.modules["zoo"]
+
+
+FLIGHTS = ["arc", "straight", "obsfile",  # the issue's named shapes
+           "z001", "z002", "z004", "z005", "z010",  # gauss_markov, bias, gnss_drift, range_outliers, random_walk
+           "z020/3", "z038", "z104", "z132"]  # mistracked, random_walk, mistracked, mistracked: c9d7636 failed these
+# "name/k": every k-th observation of the flight (z020 has 415; c9d7636's mle: 26.0 m against a bound of 11.3 m on
+# every third, 27.7 km against 12.0 m on all)
+OTHERS = ("dlt", "vision", "range", "los", "fusion-raw", "fusion", "ridge")
+
+
+def _error_m(method, obs):
+    try:
+        est = solve(method, obs)
+    except RidgelocError:  # this method cannot solve this flight (too few ranges, degenerate geometry...)
+        return None
+    e = float(np.linalg.norm(est.position_m - obs.truth_m))
+    return e if np.isfinite(e) else None
+
+
+@pytest.mark.parametrize("name", FLIGHTS)
+def test_mle_is_no_catastrophe(name):
+    base, _, k = name.partition("/")
+    f = _zoo().flight(base, seed=0)
+    obs = f.obs.subset(np.arange(0, f.obs.n, int(k or 1)))
+    others = [e for e in (_error_m(m, obs) for m in OTHERS) if e is not None]
+    assert len(others) >= 3, f"{name}: only {len(others)} other methods solved"
+    bound = 2 * statistics.median(others) + 5.0
+    mle = _error_m("mle", obs)
+    assert mle is not None, f"{name}: mle did not solve"
+    assert mle <= bound, (f"{name} ({f.family}, {f.shape}, n={obs.n}): mle error {mle:.1f} m > 2 x median "
+                          f"of the others' errors + 5 m = {bound:.1f} m")
+
+
+def test_zoo_is_deterministic_and_as_specified():
+    zoo = _zoo()
+    a, b = zoo.flight("z017", seed=3), zoo.flight("z017", seed=3)
+    np.testing.assert_array_equal(a.obs.P, b.obs.P)
+    np.testing.assert_array_equal(a.obs.pixel, b.obs.pixel)
+    assert not np.array_equal(zoo.flight("z017", seed=4).obs.pixel[:5], a.obs.pixel[:5])
+    for i in range(21):  # three rounds of the family x shape cycle
+        f = zoo.random_flight(0, i)
+        m = f.meta
+        assert 10.0 <= m["gamma_deg"] <= 80.0 and 1000.0 <= m["fx_px"] <= 12000.0 and 2000 <= m["slant_m"] <= 10000
+        assert m["fps"] in (25.0, 29.97, 30.0) and f.obs.n <= 600
+        dt_s = np.diff(f.obs.t_ns) / 1e9
+        assert dt_s.min() >= 1 / 30.0 - 1e-6  # frames on the video's grid
+        assert f.obs.has_range.sum() <= (f.obs.t_ns[-1] - f.obs.t_ns[0]) / 1e9 + 1  # the laser at 1 Hz
+        assert int(f.bad_range.sum()) == m["bad_ranges"] <= 3
+        if f.family == "mistracked":
+            assert f.bad_pixel.any()
+        assert (f.obs.sigma.pixel_px is None) == (not m["pixel_stated"])
+        assert f.obs.sigma.attitude_tau_s is None and f.obs.sigma.position_tau_s is None
+    arc = zoo.flight("arc")
+    assert (arc.obs.n, arc.meta["gamma_deg"], arc.meta["fx_px"], arc.meta["image"]) == (58, 35.0, 10000.0, [600, 400])
+    straight = zoo.flight("straight")
+    assert straight.obs.has_range.sum() == 2 and straight.meta["occlusion_s"] == 1.5
+    gap_s = np.diff(straight.obs.t_ns).max() / 1e9
+    assert 1.5 <= gap_s < 1.6

@@ -22,6 +22,7 @@ import yaml
 
 from pipeline.config_schema import load_dataclass, read_yaml
 from pipeline.errors import ConfigError
+from pipeline.targets import TargetEntry  # issue 21: many targets per flight
 from pipeline.track.sift import TrackerSettings
 
 # ---- the flight configuration ------------------------------------------------------------------------------
@@ -264,9 +265,14 @@ class FlightConfig:
     truth_file: str | None = None
     solve: Solve = field(default_factory=Solve)
     sigma: SigmaPriors = field(default_factory=SigmaPriors)
+    # issue 21: named targets (pipeline.targets); `target:` is the one-element case and excludes these two
+    targets: tuple[TargetEntry, ...] = ()
+    marks_file: str | None = None
     path: str | None = None
 
     def __post_init__(self):
+        if self.target is not None and (self.targets or self.marks_file is not None):  # issue 21
+            raise ValueError("give 'target' (one mark) or 'targets'/'marks_file', not both")
         if isinstance(self.origin, str) and self.origin != "auto":
             raise ValueError("'origin' must be 'auto' or {lat_deg, lon_deg, alt_m}")
         if not self.name or any(c in self.name for c in "/\\:") or self.name.startswith("."):
@@ -316,9 +322,12 @@ def flight_config_from_dict(doc: dict, path: str | PathLike | None = None) -> Fl
     target = cfg.target
     if target is not None and target.template is not None:
         target = dataclasses.replace(target, template=_resolve(base, target.template, "target.template", where))
-    return dataclasses.replace(cfg, files=files, target=target,
-                               truth_file=_resolve(base, cfg.truth_file, "truth_file", where),
-                               path=None if where is None else str(where.resolve()))
+    cfg = dataclasses.replace(cfg, files=files, target=target,
+                              truth_file=_resolve(base, cfg.truth_file, "truth_file", where),
+                              path=None if where is None else str(where.resolve()))
+    from pipeline.targets import resolve_config_targets  # issue 21: paths resolved, marks file read and checked
+
+    return resolve_config_targets(cfg, base, where, _resolve)
 
 
 def _read_yaml(path: Path) -> dict:

@@ -24,17 +24,16 @@ import numpy as np
 
 from pipeline.batch import report_stage
 from pipeline.check.conventions import current_reading
-from pipeline.check.flight import ResolvedFlight, outside_telemetry, refusal_reason
+from pipeline.check.flight import ResolvedFlight, outside_telemetry
 from pipeline.errors import ConfigError, InputError, RidgelocError
 from pipeline.flight_config import FlightConfig
-from pipeline.geometry.frames import ellipsoid_from_amsl_m, enu_from_lla
+from pipeline.geometry.frames import ellipsoid_from_amsl_m
 from pipeline.ingest.model import FlightLog, FrameSeries
-from pipeline.intrinsics import frame_K, resolve_camera
-from pipeline.results import GroupResult
-from pipeline.solve import mle_outputs
+from pipeline.intrinsics import resolve_camera
+from pipeline.results import FlightResult, GroupResult  # FlightResult: issue 21
 from pipeline.solve.estimate import Estimate
-from pipeline.solve.observations import Observations, Sigma
-from pipeline.sync.assemble import assemble_observations, frame_states
+from pipeline.solve.observations import Observations
+from pipeline.sync.assemble import frame_states
 from pipeline.sync.select import plan_observations
 from pipeline.track.sift import SiftTracker
 
@@ -181,18 +180,6 @@ def solve_all(obs: Observations, methods: Sequence[str], options: dict) -> tuple
     return estimates, failures
 
 
-def _frame_reason(lost: bool, via: str, inside: bool, used: bool) -> str | None:
-    """Why a planned observation frame lacks its pixel or is not used (None when it is whole)."""
-    why = []
-    if lost:
-        why.append(f"target lost: {via}")
-    if not inside:
-        why.append("outside the telemetry span: dropped")
-    elif not used:
-        why.append("neither a tracked pixel nor a valid range: dropped")
-    return "; ".join(why) or None
-
-
 def _estimate_clock(config, log, frames, cam, cam_source, plan, origin, decoder, tracker, mark_index, mark_px, notes):
     """clock.estimate: the video offset from the flight (`pipeline.sync.clock_estimate`); returns
     (the estimate, the observation plan at the estimated video offset, or the given plan when not determined)."""
@@ -210,8 +197,15 @@ def _estimate_clock(config, log, frames, cam, cam_source, plan, origin, decoder,
     return est, plan
 
 
-def process_group(config: FlightConfig) -> GroupResult:
-    """Ingest, track, synchronize and solve one flight group (see the module docstring)."""
+def process_group(config: FlightConfig) -> GroupResult | FlightResult:
+    """Ingest, track, synchronize and solve one flight group (see the module docstring). Logs are read, the
+    observations planned and the vehicle state interpolated once; then each target goes through
+    `pipeline.target_stage.locate_target` (issue 21): a GroupResult for the single `target:` (or the
+    crosshair), a FlightResult (one GroupResult per named target) for `targets:` / `marks_file:`."""
+    from pipeline.target_stage import SharedFlight, finish_settings, locate_target, locate_targets, resolve_mark
+    from pipeline.targets import check_marks_in_video, flight_targets
+    from pipeline.track.sift import ViewCache
+
     report_stage("ingest")
     timings: dict[str, float] = {}
     notes: list[str] = []
@@ -223,132 +217,50 @@ def process_group(config: FlightConfig) -> GroupResult:
     notes.extend(log.warnings)
     timings["ingest"] = time.perf_counter() - t0
     cpu["ingest"] = time.process_time() - c0
+    targets = flight_targets(config)  # issue 21: [] (crosshair), [one unnamed target], or named targets
+    named = bool(targets) and targets[0].name is not None
     try:
+        if named:  # every mark checked against the video before anything runs
+            check_marks_in_video(targets, frames.index, cam.width_px, cam.height_px, config.path)
         # Which frames are observations (needs only timestamps).
-        c, sel = config.clock, config.observations
+        c = config.clock
         plan = plan_flight_observations(config, frames, log)
         notes.extend(plan.notes)
         report_stage("track")
         t1, c1 = time.perf_counter(), time.process_time()
         tracker = SiftTracker(config.tracking)
-        if config.target is None:  # the boresighted laser's crosshair at the first observation
-            if plan.n == 0:
-                raise InputError("no observation frame to take the target from", config.path)
-            mark_index = int(plan.frame_index[0])
-            mark_px = (float(cam.cx_px), float(cam.cy_px))
-            notes.append(f"target: the image centre of frame {mark_index}, where the laser points (no mark given)")
-        elif config.target.template is not None:
-            template = cv2.imread(config.target.template, cv2.IMREAD_GRAYSCALE)
-            if template is None:
-                raise ConfigError("target.template: not a readable image", config.target.template)
-            mark_index, mark_px = tracker.acquire(template, config.target.template_pixel, decoder,
-                                                  plan.frame_index.tolist())
-        else:
-            mark_index, mark_px = config.target.frame_index, config.target.pixel
-            if mark_index not in set(np.asarray(frames.index).tolist()):
-                raise ConfigError(f"target.frame_index {mark_index} is not a frame of the video", config.path)
+        flight = SharedFlight(config, log, frames, decoder, cam, cam_source, plan, None, None, None, tracker,
+                              ViewCache(), notes, timings, cpu)
+        first = [resolve_mark(flight, m, notes) for m in (targets[0].marks if targets else [None])]
         separation_m = geoid_separation_m(config, log)
         if config.altitude.geoid_separation_m == "auto" and log.position.alt_datum == "amsl":
             notes.append(f"geoid separation {separation_m:.2f} m (altitude.geoid_separation_m: auto, EGM2008 at "
                          "the first position)")
         origin = _origin(config, log, separation_m)
-        clock_estimate = None
-        if c.estimate:
-            clock_estimate, plan = _estimate_clock(config, log, frames, cam, cam_source, plan, origin, decoder,
-                                                   tracker, mark_index, mark_px, notes)
-        track = tracker.track(decoder, mark_index, mark_px, plan.frame_index.tolist(),
-                              available=np.asarray(frames.index).tolist())
-        timings["decode"] = decoder.seconds
-        timings["track"] = time.perf_counter() - t1 - decoder.seconds
-        cpu["decode"] = decoder.cpu_seconds
-        cpu["track"] = time.process_time() - c1 - decoder.cpu_seconds
+        if c.estimate:  # the flight's clock, from the first target's first mark
+            flight.clock_estimate, plan = _estimate_clock(config, log, frames, cam, cam_source, plan, origin,
+                                                          decoder, tracker, first[0][0], first[0][1], notes)
+        timings["mark"] = time.perf_counter() - t1
+        cpu["mark"] = time.process_time() - c1
+        states = frame_states(log, plan.t_ns, position_offset_ns=c.offset_ns("position"),
+                              attitude_offset_ns=c.offset_ns("attitude"), gimbal_offset_ns=c.offset_ns("gimbal"),
+                              geoid_separation_m=separation_m)
+        if not states.inside.any():
+            resolved = ResolvedFlight(config, log, frames, cam, cam_source, current_reading(config, log), plan,
+                                      None, origin)
+            raise InputError(outside_telemetry(resolved), config.path)
+        flight.plan, flight.states, flight.origin, flight.separation_m = plan, states, origin, separation_m
+        if decoder.failed:
+            notes.append(f"{len(decoder.failed)} frame(s) could not be decoded (damaged or truncated stream)")
+        if named:
+            result = locate_targets(flight, targets, first)
+        else:
+            result = finish_settings(flight, locate_target(flight, targets[0] if targets else None, first))
     finally:
         close = getattr(closable, "close", None)
         if close is not None:
             close()
-    if decoder.failed:
-        notes.append(f"{len(decoder.failed)} frame(s) could not be decoded (damaged or truncated stream)")
-    if track.lost.any():
-        notes.append(f"target lost in {int(track.lost.sum())} of {plan.n} observation frames (pixel not used)")
-    range_m = plan.range_m.copy()
-    if sel.max_laser_offset_px is not None:
-        # The laser is boresighted: when the target is far from the principal point the shot is not on it.
-        where = np.where(np.isnan(track.pixel_px), track.predicted_px, track.pixel_px)
-        offset = np.hypot(where[:, 0] - cam.cx_px, where[:, 1] - cam.cy_px)
-        off_target = (offset > sel.max_laser_offset_px) & ~np.isnan(range_m)
-        if off_target.any():
-            range_m[off_target] = np.nan
-            notes.append(f"{int(off_target.sum())} range(s) not used: the target was more than "
-                         f"{sel.max_laser_offset_px:g} px from the image centre, off the laser's axis")
-
-    report_stage("sync")
-    t2, c2 = time.perf_counter(), time.process_time()
-    states = frame_states(log, plan.t_ns, position_offset_ns=c.offset_ns("position"),
-                          attitude_offset_ns=c.offset_ns("attitude"), gimbal_offset_ns=c.offset_ns("gimbal"),
-                          geoid_separation_m=separation_m)
-    resolved = ResolvedFlight(config, log, frames, cam, cam_source, current_reading(config, log), plan, None, origin)
-    if not states.inside.any():
-        raise InputError(outside_telemetry(resolved), config.path)
-    if not states.inside.all():
-        notes.append(f"{int((~states.inside).sum())} observation(s) outside the telemetry span were dropped")
-    truth_lla = config.truth_lla()
-    truth_m = None if truth_lla is None else enu_from_lla(*truth_lla, origin)
-    sigma = Sigma.from_dict(dataclasses.asdict(config.sigma), "sigma")
-    useful = states.inside & (~track.lost | ~np.isnan(range_m))
-    if (states.inside & ~useful).any():
-        notes.append(f"{int((states.inside & ~useful).sum())} observation(s) with neither pixel nor range dropped")
-    if not useful.any():
-        raise InputError("no usable observation: the target was never tracked and no laser range is valid",
-                         config.path)
-    # A wrong convention gives an answer kilometres off with nothing else to show for it: refuse the flight.
-    refusal = refusal_reason(resolved, plan.t_ns[useful], track.pixel_px[useful], range_m[useful])
-    if refusal is not None:
-        raise InputError(refusal, config.path)
-    sub = dataclasses.replace(states, inside=useful)
-    K_frames = frame_K(cam, cam_source, log, plan.t_ns)  # per frame when a zoom lens reports its field of view
-    obs, _ = assemble_observations(sub, track.pixel_px, range_m, K=K_frames, dist=cam.dist, origin_lla=origin,
-                                       R_optical_from_gimbal=np.array(cam.R_optical_from_gimbal),
-                                       lever_camera_m=config.lever_arms_m.camera,
-                                       lever_rangefinder_m=config.lever_arms_m.rangefinder, sigma=sigma,
-                                       truth_m=truth_m)
-    timings["sync"] = time.perf_counter() - t2
-    cpu["sync"] = time.process_time() - c2
-
-    report_stage("solve")
-    t3, c3 = time.perf_counter(), time.process_time()
-    estimates, failures = solve_all(obs, _methods(config), config.solve.options)
-    timings["solve"] = time.perf_counter() - t3
-    cpu["solve"] = time.process_time() - c3
-    if not estimates:
-        reasons = "; ".join(f"{m}: {f['reason']}" for m, f in failures.items())
-        raise InputError(f"no estimator could solve the flight: {reasons}", config.path)
-    if "mle" in estimates:  # its fit message, boresight bias and rejected observations
-        notes.extend(mle_outputs.notes(estimates["mle"].extras, obs.t_ns, plan.frame_index[useful]))
-
-    reference = truth_m
-    if reference is None:
-        best = estimates.get("mle") or next(iter(estimates.values()))
-        reference = best.position_m
-    gamma = intersection_angle_deg(obs.platform_m, reference) if obs.n >= 2 and np.isfinite(reference).all() else \
-        float("nan")
-    tracking = track.to_dict()  # every planned observation frame, the dropped ones included
-    tracking["used"] = [bool(u) for u in useful]  # True: a row of observations.json, in the same order
-    tracking["reason"] = [_frame_reason(lost, via, inside, use) for lost, via, inside, use in
-                          zip(track.lost, tracking["via"], states.inside, useful, strict=True)]
-    tracking["t_ns"] = [int(t) for t in plan.t_ns]
-    tracking["range_t_ns"] = [int(t) for t in plan.range_t_ns]
-    tracking["mark"] = {"frame_index": int(mark_index), "pixel_px": [float(mark_px[0]), float(mark_px[1])]}
-    settings = config.to_dict()
-    settings["camera_resolved"] = {"source": cam_source, **{k: getattr(cam, k) for k in (
-        "width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px", "dist")}}
-    settings["notes"] = notes
-    if clock_estimate is not None:
-        settings["clock_estimate"] = clock_estimate.to_dict()
-    settings["solve_failures"] = failures
-    settings["frames_decoded"] = decoder.decoded
-    settings["cpu_s"] = cpu
-    return GroupResult(name=config.name, origin_lla=origin, observations=obs, estimates=estimates, truth_m=truth_m,
-                       intersection_angle_deg=gamma, timings_s=timings, settings=settings, tracking=tracking)
+    return result
 
 
 # ---- outputs of one group ------------------------------------------------------------------------------------
@@ -373,10 +285,15 @@ def _json_default(o):
     raise TypeError(f"not JSON-serialisable: {type(o).__name__}")
 
 
-def group_files(result: GroupResult) -> dict[str, str]:
+def group_files(result: GroupResult | FlightResult) -> dict[str, str]:
     """The per-group files `ridgeloc run` writes, name -> text: observations.json (the `ridgeloc solve` input,
     to re-solve without re-processing video), estimates.json (its --json output) and tracking.json (per-frame
-    tracking quality). The report stage can pass them on as extra files of the group's folder."""
+    tracking quality). The report stage can pass them on as extra files of the group's folder. A flight with
+    named targets: `pipeline.target_stage.flight_files` (issue 21)."""
+    if isinstance(result, FlightResult):
+        from pipeline.target_stage import flight_files
+
+        return flight_files(result)
     return {
         "observations.json": json.dumps(result.observations.to_dict(), indent=1) + "\n",
         "estimates.json": json.dumps(estimates_document(result), indent=1, default=_json_default) + "\n",

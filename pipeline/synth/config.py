@@ -22,6 +22,20 @@ FORMATS = ("tlog", "ros1", "ros2-sqlite3", "ros2-mcap", "mcap", "klv")
 
 
 @dataclass(frozen=True)
+class ExtraTargetConfig:
+    """Another target of the flight (issue 21): a panel like the main one, east_m/north_m metres from it on the
+    ground, size_m across, contrast 0..1 of its pattern (1: the main panel's white and black; less: greyer),
+    hidden by a cloud around the listed observations. The laser aims at the main target only."""
+
+    name: str
+    east_m: float
+    north_m: float
+    size_m: float = 36.0
+    contrast: float = 1.0
+    occluded_observations: tuple[int, ...] = ()
+
+
+@dataclass(frozen=True)
 class SiteConfig:
     """Where the target stands. lat/lon WGS84 degrees, alt_m above the WGS84 ellipsoid (the ground there).
 
@@ -34,6 +48,8 @@ class SiteConfig:
     alt_m: float = 372.0
     geoid_separation_m: float = -28.0
     target_size_m: float = 36.0
+    target_name: str = "target"  # named only in flights with extra_targets
+    extra_targets: tuple[ExtraTargetConfig, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -261,6 +277,8 @@ class SynthConfig:
         d = to_plain(self)
         if not self.camera.zoom:  # a fixed lens: left out, so truth.json of flights without zoom keeps its keys
             del d["camera"]["zoom"]
+        if not self.site.extra_targets:  # one target: as before issue 21
+            del d["site"]["extra_targets"], d["site"]["target_name"]
         return d
 
 
@@ -329,6 +347,13 @@ def _check(c: SynthConfig) -> None:
         raise ConfigError("'video.images_in_bag' needs a bag format (ros1, ros2-sqlite3, ros2-mcap)")
     if not 1 <= c.video.jpeg_quality <= 100:
         raise ConfigError("'video.jpeg_quality' must be in [1, 100]")
+    names = [c.site.target_name, *[t.name for t in c.site.extra_targets]]  # issue 21 (minimal; pydantic elsewhere)
+    if len(set(names)) != len(names):
+        raise ConfigError(f"'site.extra_targets': target names must be unique, got {names}")
+    for t in c.site.extra_targets:
+        if not (0 < t.size_m and 0 < t.contrast <= 1) or any(not 0 <= i < o.count for i in t.occluded_observations):
+            raise ConfigError(f"'site.extra_targets' {t.name!r}: size_m > 0, contrast in (0, 1], "
+                              f"occluded_observations in 0..{o.count - 1}")
     s = c.scene
     if s.texture_px < 256 or s.texture_res_m <= 0 or s.supersample < 1:
         raise ConfigError("'scene' needs texture_px >= 256, texture_res_m > 0, supersample >= 1")

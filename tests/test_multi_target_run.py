@@ -142,3 +142,45 @@ def test_outputs_one_feature_per_target_and_method(runs, tmp_path):
             assert sum(any(p.split("= ", 1)[1].startswith(n) for n in est_names) and "ellipse" not in p
                        and "truth" not in p and "path" not in p and "lines of sight" not in p
                        for p in placemarks) == len(solved)
+
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="headless Chromium not installed (Debian: apt-get install chromium)")
+def test_the_report_map_shows_every_target_with_a_label_and_a_layer_per_method(runs, tmp_path):
+    import re
+    import tempfile
+
+    from pipeline.report.html import report_html
+
+    flight, *_ = runs
+    html = report_html([flight], [], {"config": "x"}, {r.label: {} for r in flight.targets})
+    probe = """<script>window.addEventListener('load', function () { setTimeout(function () {
+      var map = document.querySelector('.webmap');
+      var labels = Array.prototype.map.call(map.querySelectorAll('.leaflet-tooltip.ridgeloc-target-label'),
+                                            function (t) { return t.textContent.trim(); });
+      var layers = Array.prototype.map.call(map.querySelectorAll('.leaflet-control-layers-overlays label'),
+                                            function (l) { return l.textContent.trim(); });
+      document.body.setAttribute('data-probe', JSON.stringify({maps: document.querySelectorAll('.webmap').length,
+                                                               labels: labels, layers: layers}));
+    }, 1500); });</script>"""
+    (tmp_path / "report.html").write_text(html.replace("</body>", probe + "</body>"))
+    flags = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+             "--disable-background-networking", "--disable-component-update", "--disable-sync",
+             "--virtual-time-budget=8000")
+    with tempfile.TemporaryDirectory() as profile:
+        out = subprocess.run([CHROMIUM, *flags, f"--user-data-dir={profile}", "--dump-dom",
+                              (tmp_path / "report.html").as_uri()], capture_output=True, text=True, timeout=180)
+    m = re.search(r'data-probe="([^"]*)"', out.stdout)
+    assert m, (out.stdout[-1500:], out.stderr[-1500:])
+    from html import unescape
+
+    probe = json.loads(unescape(m.group(1)))
+    assert probe["maps"] == 1  # one map of the flight with all its targets
+    assert sorted(probe["labels"]) == ["far_north", "panel", "small_grey"]
+    from pipeline.report.labels import method_label
+
+    methods = {m for r in flight.targets for m, e in r.estimates.items() if np.isfinite(e.position_m).all()}
+    assert sorted(probe["layers"]) == sorted(["Flight path", "Lines of sight", "Truth", "Target names",
+                                              *[method_label(m) for m in methods]])

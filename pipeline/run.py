@@ -230,7 +230,7 @@ def process_group(config: FlightConfig) -> GroupResult | FlightResult:
         t1, c1 = time.perf_counter(), time.process_time()
         tracker = SiftTracker(config.tracking)
         flight = SharedFlight(config, log, frames, decoder, cam, cam_source, plan, None, None, None, tracker,
-                              ViewCache(), notes, timings, cpu)
+                              ViewCache(share_matches=named), notes, timings, cpu)
         first = [resolve_mark(flight, m, notes) for m in (targets[0].marks if targets else [None])]
         separation_m = geoid_separation_m(config, log)
         if config.altitude.geoid_separation_m == "auto" and log.position.alt_datum == "amsl":

@@ -135,10 +135,16 @@ class TrackResult:
 class ViewCache:
     """Decoded frames' features shared by every target of a flight: each frame is decoded and its SIFT features
     computed once, whatever the number of targets tracked through it. Holds (grayscale image, keypoints,
-    descriptors) per frame until dropped with the cache (a flight's observation frames and stepping stones)."""
+    descriptors) per frame until dropped with the cache (a flight's observation frames and stepping stones).
 
-    def __init__(self):
+    share_matches: also keep each frame pair's homography (matching and RANSAC), so that targets tracked
+    through the same key frames match each pair once. Each pair is then matched with FLANN's random trees seeded
+    by the pair itself, so a target's track does not depend on which targets were tracked before it (without
+    it, as for a flight's single `target:`, the seed is set once per track, as before many targets)."""
+
+    def __init__(self, share_matches: bool = False):
         self.views: dict[int, _View] = {}
+        self.pairs: dict[tuple[int, int], tuple] | None = {} if share_matches else None
 
     def get(self, tracker: SiftTracker, decode: Callable[[Sequence[int]], dict[int, np.ndarray]],
             indices: Sequence[int]) -> dict[int, _View]:
@@ -175,6 +181,7 @@ class SiftTracker:
     """Track one marked ground point through chosen frames of a flight (see the module docstring)."""
 
     def __init__(self, settings: TrackerSettings | None = None):
+        self._pairs: dict | None = None  # a ViewCache's shared homographies during track(), when it shares them
         self.s = settings or TrackerSettings()
         self._sift = cv2.SIFT_create(nfeatures=self.s.n_features)
         self._matcher = cv2.FlannBasedMatcher({"algorithm": 1, "trees": 4}, {"checks": 48})
@@ -195,6 +202,15 @@ class SiftTracker:
     def homography(self, src: _View, dst: _View) -> tuple[np.ndarray | None, int, float, float]:
         """H_dst_from_src by ratio-test matches and RANSAC: (H or None, inliers, inlier ratio, RMS reprojection
         px of the inliers)."""
+        if self._pairs is None or src.index < 0 or dst.index < 0:
+            return self._homography(src, dst)
+        key = (src.index, dst.index)
+        if key not in self._pairs:
+            cv2.setRNGSeed((0x5EED + 7919 * key[0] + 104729 * key[1]) & 0x7FFFFFFF)  # the pair's own seed
+            self._pairs[key] = self._homography(src, dst)
+        return self._pairs[key]
+
+    def _homography(self, src: _View, dst: _View) -> tuple[np.ndarray | None, int, float, float]:
         if src.descriptors is None or dst.descriptors is None or len(src.descriptors) < 4 or len(dst.descriptors) < 4:
             return None, 0, 0.0, float("nan")
         pairs = self._matcher.knnMatch(src.descriptors, dst.descriptors, k=2)
@@ -280,6 +296,13 @@ class SiftTracker:
         it only the mark and key frames are kept (memory stays flat). Returns the wanted frames' tracks in the
         order of `wanted`."""
         cv2.setRNGSeed(0x5EED)  # FLANN's randomised trees draw from OpenCV's RNG: same input, same answer
+        self._pairs = cache.pairs if cache is not None else None
+        try:
+            return self._track(decode, mark_index, mark_px, wanted, available, cache)
+        finally:
+            self._pairs = None
+
+    def _track(self, decode, mark_index, mark_px, wanted, available, cache) -> TrackResult:
         if cache is not None:
             def decode_views(indices):
                 return cache.get(self, decode, indices)

@@ -105,6 +105,7 @@ def locate_target(flight: SharedFlight, target: NamedTarget | None, marks: list[
     """Track, synchronise and solve one target of the flight (None: the crosshair). `marks`: the target's marks
     already resolved to (frame index, pixel) (the first target's are, for the clock estimate). Raises a
     RidgelocError when the target cannot be located."""
+    from pipeline.batch import report_stage
     from pipeline.run import _methods, intersection_angle_deg, solve_all
 
     config, plan, cam, states = flight.config, flight.plan, flight.cam, flight.states
@@ -112,7 +113,8 @@ def locate_target(flight: SharedFlight, target: NamedTarget | None, marks: list[
     notes: list[str] = []
     t1, c1 = time.perf_counter(), time.process_time()
     d0, dc0 = flight.decoder.seconds, flight.decoder.cpu_seconds
-    if marks is None:
+    if marks is None:  # (the first target's are resolved in process_group's "track" stage)
+        report_stage("track")
         marks = [resolve_mark(flight, m, notes) for m in (target.marks if target is not None else [None])]
     tracks = [(idx, flight.tracker.track(flight.decoder, idx, px, plan.frame_index.tolist(),
                                          available=np.asarray(flight.frames.index).tolist(), cache=flight.cache))
@@ -135,6 +137,7 @@ def locate_target(flight: SharedFlight, target: NamedTarget | None, marks: list[
             notes.append(f"{int(off_target.sum())} range(s) not used: the target was more than "
                          f"{sel.max_laser_offset_px:g} px from the image centre, off the laser's axis")
 
+    report_stage("sync")
     t2, c2 = time.perf_counter(), time.process_time()
     if not states.inside.all():
         notes.append(f"{int((~states.inside).sum())} observation(s) outside the telemetry span were dropped")
@@ -165,6 +168,7 @@ def locate_target(flight: SharedFlight, target: NamedTarget | None, marks: list[
     timings["sync"] = time.perf_counter() - t2
     cpu["sync"] = time.process_time() - c2
 
+    report_stage("solve")
     t3, c3 = time.perf_counter(), time.process_time()
     estimates, failures = solve_all(obs, _methods(config), config.solve.options)
     timings["solve"] = time.perf_counter() - t3

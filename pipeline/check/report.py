@@ -63,18 +63,22 @@ def _estimate_clock(r: ResolvedFlight):
     _, decoder, closable = open_frames(cfg, r.log)
     try:
         tracker = SiftTracker(cfg.tracking)
-        if cfg.target is None:  # the crosshair of the first observation frame, as `run` takes it
+        from pipeline.targets import flight_targets  # issue 21: the first target's first mark, as `run` takes it
+
+        targets = flight_targets(cfg)
+        mark = targets[0].marks[0] if targets else None
+        if mark is None:  # the crosshair of the first observation frame, as `run` takes it
             mark_index, mark_px = int(r.plan.frame_index[0]), (float(r.camera.cx_px), float(r.camera.cy_px))
-        elif cfg.target.template is not None:
+        elif mark.template is not None:
             import cv2
 
-            template = cv2.imread(cfg.target.template, cv2.IMREAD_GRAYSCALE)
+            template = cv2.imread(mark.template, cv2.IMREAD_GRAYSCALE)
             if template is None:
-                raise InputError("target.template: not a readable image", cfg.target.template)
-            mark_index, mark_px = tracker.acquire(template, cfg.target.template_pixel, decoder,
+                raise InputError("target.template: not a readable image", mark.template)
+            mark_index, mark_px = tracker.acquire(template, mark.template_pixel, decoder,
                                                   r.plan.frame_index.tolist())
         else:
-            mark_index, mark_px = cfg.target.frame_index, cfg.target.pixel
+            mark_index, mark_px = mark.frame_index, mark.pixel
         return estimate_clock(r, decoder, tracker, mark_index, mark_px)
     finally:
         close = getattr(closable, "close", None)

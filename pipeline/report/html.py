@@ -248,6 +248,7 @@ def report_html(results: Sequence[GroupResult], failures: Sequence[GroupFailure]
     missing from it are rendered here. `interactive`: a Leaflet map per group (webmap.py; Leaflet inline)."""
     from pipeline.report.figures import render_group_figures  # matplotlib only when a page is made
 
+    n_groups = len(results)
     not_located = target_failures(results)
     by_flight = {r.name: r.targets for r in results if isinstance(r, FlightResult)}
     results = per_target(results)  # a section and a column per target of a flight with named targets
@@ -256,7 +257,7 @@ def report_html(results: Sequence[GroupResult], failures: Sequence[GroupFailure]
         if r.label not in figures:
             figures[r.label] = render_group_figures(r)
     now = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    status = (f'<span class="pill ok">{len(results)} group(s) processed</span>'
+    status = (f'<span class="pill ok">{n_groups} group(s) processed</span>'
               + (f'<span class="pill bad">{len(failures)} failed</span>' if failures else ""))
     out = [f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>{escape(title)}</title>"
            f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><style>{_CSS}</style>"

@@ -3,6 +3,7 @@
 `process_group(config)` is a pure top-level function of a `FlightConfig` (picklable both ways), so a batch can
 run groups in worker processes. It returns a `GroupResult` with the wall time of each stage:
   ingest  reading telemetry and the frame index (no pixels decoded),
+  mark    the first target's marks resolved (a template searched for) and the clock estimated (clock.estimate),
   decode  decoding the frames the tracker asked for,
   track   SIFT, matching, homographies and refinement,
   sync    interpolation of the vehicle state, poses, projection matrices, undistortion,

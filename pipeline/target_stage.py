@@ -257,7 +257,8 @@ def locate_targets(flight: SharedFlight, targets: list[NamedTarget], first_marks
         for k, v in r.timings_s.items():
             if k not in flight.timings:
                 stage_sum[k] = stage_sum.get(k, 0.0) + v
-    flight_settings = dict(results[0].settings)
+    # the flight's own settings: a target's without its solve failures and CPU times, with the flight's notes
+    flight_settings = {k: v for k, v in results[0].settings.items() if k not in ("solve_failures", "cpu_s")}
     flight_settings["notes"] = list(flight.notes)
     return FlightResult(name=flight.config.name, targets=results, failed=failed,
                         timings_s={**flight.timings, **stage_sum}, settings=flight_settings)

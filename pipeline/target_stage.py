@@ -231,10 +231,18 @@ def finish_settings(flight: SharedFlight, r: GroupResult) -> GroupResult:
         settings["clock_estimate"] = flight.clock_estimate.to_dict()
     settings["solve_failures"] = r.settings["solve_failures"]
     settings["frames_decoded"] = flight.decoder.decoded
-    settings["cpu_s"] = {**flight.cpu, **r.settings["cpu_s"]}
+    settings["cpu_s"] = _add(flight.cpu, r.settings["cpu_s"])
     r.settings = settings
-    r.timings_s = {**flight.timings, **r.timings_s}
+    r.timings_s = _add(flight.timings, r.timings_s)  # the flight's "track" (marks, clock) counts in each target's
     return r
+
+
+def _add(a: dict[str, float], b: dict[str, float]) -> dict[str, float]:
+    """Stage times summed key by key (a's keys first)."""
+    out = dict(a)
+    for k, v in b.items():
+        out[k] = out.get(k, 0.0) + v
+    return out
 
 
 def locate_targets(flight: SharedFlight, targets: list[NamedTarget], first_marks) -> FlightResult:
@@ -251,17 +259,15 @@ def locate_targets(flight: SharedFlight, targets: list[NamedTarget], first_marks
     if not results:
         raise InputError("no target could be located: " + "; ".join(f"{f.target}: {f.message}" for f in failed),
                          flight.config.path)
-    stage_sum: dict[str, float] = {}
+    stage_sum = dict(flight.timings)  # the flight's stages once, each target's own added
     for r in results:
+        stage_sum = _add(stage_sum, r.timings_s)
         finish_settings(flight, r)
-        for k, v in r.timings_s.items():
-            if k not in flight.timings:
-                stage_sum[k] = stage_sum.get(k, 0.0) + v
     # the flight's own settings: a target's without its solve failures and CPU times, with the flight's notes
     flight_settings = {k: v for k, v in results[0].settings.items() if k not in ("solve_failures", "cpu_s")}
     flight_settings["notes"] = list(flight.notes)
-    return FlightResult(name=flight.config.name, targets=results, failed=failed,
-                        timings_s={**flight.timings, **stage_sum}, settings=flight_settings)
+    return FlightResult(name=flight.config.name, targets=results, failed=failed, timings_s=stage_sum,
+                        settings=flight_settings)
 
 
 def flight_files(result: FlightResult) -> dict[str, str]:

@@ -6,7 +6,7 @@ side by side in one run.
 
 Each case is `pipeline.run.process_group` (what `ridgeloc run` does before writing outputs) in a fresh child
 process, the cases alternating, N times each; per case the median wall time, the median stage times (ingest,
-mark, decode, track, sync, solve; a stage summed over the targets) and the median peak resident memory of the
+decode, track, sync, solve; a stage summed over the targets) and the median peak resident memory of the
 child (ru_maxrss, which includes the interpreter and libraries). The 10 targets are the flight's three and seven
 more points marked on a grid of frame 4; 1 target is the first of them. Prints the ratios 10 / 1.
 """
@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-STAGES = ("ingest", "mark", "decode", "track", "sync", "solve")
+STAGES = ("ingest", "decode", "track", "sync", "solve")
 GRID_PX = [(100.0, 100.0), (200.0, 300.0), (500.0, 120.0), (450.0, 330.0), (150.0, 220.0), (380.0, 60.0),
            (240.0, 150.0)]
 

@@ -29,6 +29,7 @@ from annotated_types import Ge, Gt, Le, Lt
 from pipeline.config_schema import load_dataclass, read_yaml
 from pipeline.errors import ConfigError, InputError
 from pipeline.solve_options import Method, SolveOptions, given_options
+from pipeline.targets import TargetEntry  # issue 21: many targets per flight
 
 NonNegative = Annotated[float, Ge(0)]
 Positive = Annotated[float, Gt(0)]
@@ -310,9 +311,14 @@ class FlightConfig:
     solve: Solve = field(default_factory=Solve)
     sigma: SigmaPriors = field(default_factory=SigmaPriors)
     terrain: Terrain | None = None  # issue 22 (terrain)
+    # issue 21: named targets (pipeline.targets); `target:` is the one-element case and excludes these two
+    targets: tuple[TargetEntry, ...] = ()
+    marks_file: str | None = None
     path: str | None = None
 
     def __post_init__(self):
+        if self.target is not None and (self.targets or self.marks_file is not None):  # issue 21
+            raise ValueError("give 'target' (one mark) or 'targets'/'marks_file', not both")
         if isinstance(self.origin, str) and self.origin != "auto":
             raise ValueError("'origin' must be 'auto' or {lat_deg, lon_deg, alt_m}")
         if not self.name or any(c in self.name for c in "/\\:") or self.name.startswith("."):
@@ -369,9 +375,12 @@ def flight_config_from_dict(doc: dict, path: str | PathLike | None = None) -> Fl
     if cfg.terrain is not None:  # issue 22 (terrain)
         cfg = dataclasses.replace(cfg, terrain=dataclasses.replace(
             cfg.terrain, dem=_resolve(base, cfg.terrain.dem, "terrain.dem", where)))
-    return dataclasses.replace(cfg, files=files, target=target,
-                               truth_file=_resolve(base, cfg.truth_file, "truth_file", where),
-                               path=None if where is None else str(where.resolve()))
+    cfg = dataclasses.replace(cfg, files=files, target=target,
+                              truth_file=_resolve(base, cfg.truth_file, "truth_file", where),
+                              path=None if where is None else str(where.resolve()))
+    from pipeline.targets import resolve_config_targets  # issue 21: paths resolved, marks file read and checked
+
+    return resolve_config_targets(cfg, base, where, _resolve)
 
 
 def _read_yaml(path: Path) -> dict:

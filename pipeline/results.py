@@ -26,6 +26,7 @@ class GroupResult:
         timings_s: stage name -> wall seconds (ingest, track, sync, solve, ...).
         settings: the flight's resolved configuration, JSON-serialisable, for the report.
         tracking: optional per-frame tracking quality (name -> (n,) list), JSON-serialisable.
+        target: the target's name when the flight names its targets (`targets:`, issue 21), else None.
     """
 
     name: str
@@ -37,10 +38,16 @@ class GroupResult:
     timings_s: dict[str, float] = field(default_factory=dict)
     settings: dict = field(default_factory=dict)
     tracking: dict = field(default_factory=dict)
+    target: str | None = None
 
     @property
     def n_observations(self) -> int:
         return self.observations.n
+
+    @property
+    def label(self) -> str:
+        """`group`, or `group:target` for a named target (its column in Table 4, its heading in the report)."""
+        return self.name if self.target is None else f"{self.name}:{self.target}"
 
     def errors_m(self) -> dict[str, float | None]:
         return {m: e.error_m(self.truth_m) for m, e in self.estimates.items()}
@@ -79,12 +86,67 @@ def _json_default(o):
     raise TypeError(f"not JSON-serialisable: {type(o).__name__}")
 
 
-def group_files(result: GroupResult) -> dict[str, str]:
+def group_files(result: GroupResult | FlightResult) -> dict[str, str]:
     """The per-group files `ridgeloc run` writes, name -> text: observations.json (the `ridgeloc solve` input,
     to re-solve without re-processing video), estimates.json (its --json output) and tracking.json (per-frame
-    tracking quality). The report stage can pass them on as extra files of the group's folder."""
+    tracking quality). The report stage can pass them on as extra files of the group's folder. A flight with
+    named targets: `flight_files`."""
+    if isinstance(result, FlightResult):
+        return flight_files(result)
     return {
         "observations.json": json.dumps(result.observations.to_dict(), indent=1) + "\n",
         "estimates.json": json.dumps(estimates_document(result), indent=1, default=_json_default) + "\n",
         "tracking.json": json.dumps(result.tracking, indent=1, default=_json_default) + "\n",
     }
+
+
+# ---- many targets per flight (issue 21) ---------------------------------------------------------------------
+
+
+@dataclass
+class TargetFailure:
+    """A named target of a flight that could not be located: its name and the one-line reason."""
+
+    target: str
+    message: str
+    methods: tuple[str, ...] = ()  # the methods the flight asked for: one row each in targets.csv
+
+
+@dataclass
+class FlightResult:
+    """One flight with named targets, processed: a GroupResult per located target (`target` set, `name` the
+    flight's), a TargetFailure per target that could not be located, the flight's stage timings (targets'
+    stages summed) and settings (notes: the flight-level ones)."""
+
+    name: str
+    targets: list[GroupResult]
+    failed: list[TargetFailure] = field(default_factory=list)
+    timings_s: dict[str, float] = field(default_factory=dict)
+    settings: dict = field(default_factory=dict)
+
+
+def per_target(results) -> list[GroupResult]:
+    """GroupResults and FlightResults flattened into one GroupResult per located target, in order."""
+    out: list[GroupResult] = []
+    for r in results:
+        out.extend(r.targets if isinstance(r, FlightResult) else [r])
+    return out
+
+
+def target_failures(results) -> list[tuple[str, TargetFailure]]:
+    """(flight name, TargetFailure) of every target that could not be located."""
+    return [(r.name, f) for r in results if isinstance(r, FlightResult) for f in r.failed]
+
+
+def flight_files(result: FlightResult) -> dict[str, str]:
+    """The per-flight files of a flight with named targets, name -> text: estimates.json keyed by target
+    ({"targets": {name: the single-target document | {"status": "not_located", "reason"}}}), and per located
+    target <target>/observations.json, <target>/estimates.json and <target>/tracking.json (as for one target)."""
+    doc: dict = {"targets": {}}
+    files: dict[str, str] = {}
+    for r in result.targets:
+        doc["targets"][r.target] = estimates_document(r)
+        files.update({f"{r.target}/{k}": v for k, v in group_files(r).items()})
+    for f in result.failed:
+        doc["targets"][f.target] = {"status": "not_located", "reason": f.message}
+    return {"estimates.json": json.dumps(doc, indent=1, default=_json_default) + "\n", **files}

@@ -34,7 +34,8 @@ from pipeline.synth.writers.video import read_video_frames  # noqa: E402
 
 SAMPLE_DATA = ROOT / "sample_data"
 FLIGHT_CONFIGS = ROOT / "configs" / "flights"
-GROUPS = ("group1", "group2", "group3", "group4", "group5", "group6", "hard_outliers", "angle10", "fmv")
+GROUPS = ("group1", "group2", "group3", "group4", "group5", "group6", "hard_outliers", "angle10", "fmv",
+          "three_targets")
 
 
 def decoded_video_sha256(path: Path) -> str:

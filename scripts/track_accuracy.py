@@ -68,7 +68,7 @@ def main(argv=None) -> int:
           f"{'max px':>7}")
     for entry in load_run_config(args.config):
         cfg = entry.config
-        if cfg is None or cfg.truth_file is None:
+        if cfg is None or cfg.truth_file is None or cfg.target is None:  # named targets: tests/test_multi_target_run
             continue
         truth = json.loads(Path(cfg.truth_file).read_text())
         by_index = {f["frame_index"]: f for f in truth["frames"]}

@@ -122,7 +122,8 @@ def test_the_bundled_sample_configs_load():
     entries = load_run_config(root / "configs" / "sample.yaml")
     assert [e.error for e in entries] == [None] * len(entries)
     names = [e.config.name for e in entries]
-    assert names == ["group1", "group2", "group3", "group4", "group5", "group6", "hard_outliers", "angle10", "fmv"]
+    assert names == ["group1", "group2", "group3", "group4", "group5", "group6", "hard_outliers", "angle10", "fmv",
+                     "three_targets"]  # three_targets: issue 21
     for e in entries:
         assert Path(e.config.truth_file).parent.name == e.config.name
         # fmv: continuous full-motion video, every laser shot an observation; the others: triggered bursts

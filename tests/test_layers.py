@@ -19,6 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("base", ("pipeline", "errors", "atomic", "progress")),
     ("config schema", ("config_schema", "solve_options")),
+    ("targets", ("targets",)),
     ("config", ("flight_config",)),
     ("geometry", ("geometry",)),
     ("readers and pure stages", ("ingest", "track", "solve")),
@@ -26,6 +27,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("flight", ("flight",)),
     ("clock estimate", ("clock_estimate",)),
     ("check", ("check",)),
+    ("per-target stages", ("target_stage",)),
     ("report", ("report",)),
     ("photo flights", ("locate",)),
     ("run", ("run",)),
@@ -36,7 +38,12 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
 ]
 
 # Known upward imports, each with its reason; an entry that no longer occurs fails the test (delete it then).
-EXCEPTIONS: dict[tuple[str, str], str] = {}
+EXCEPTIONS: dict[tuple[str, str], str] = {
+    ("pipeline.targets", "pipeline.ingest.video"):
+        "a flight config's marks are checked against its frames CSV when it is loaded (issue 21), so a mark "
+        "outside the video stops a run before anything is written; ingest.video's reader is the one CSV parser "
+        "(deferred import; ingest.video imports only errors and ingest.model)",
+}
 
 
 def module_name(path: Path, package_root: Path) -> str:

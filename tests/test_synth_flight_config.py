@@ -14,7 +14,8 @@ from pipeline.run import process_group
 from pipeline.synth.flight_config import flight_config_text, operator_flight_config
 
 ROOT = Path(__file__).resolve().parents[1]
-GROUPS = ("group1", "group2", "group3", "group4", "group5", "group6", "hard_outliers", "angle10", "fmv")
+GROUPS = ("group1", "group2", "group3", "group4", "group5", "group6", "hard_outliers", "angle10", "fmv",
+          "three_targets")
 
 
 @pytest.mark.parametrize("group", GROUPS)
@@ -28,7 +29,10 @@ def test_committed_sample_configs_are_what_the_function_writes(group):
     # the values an operator knows, spelled out (the generator's noise of the sample flights = the paper's specs)
     # no correlation times: an operator does not know them (issue 12)
     assert committed["sigma"] == {"pixel_px": 0.5, "range_m": 5.0, "position_m": 2.0, "attitude_deg": 0.2}
-    assert committed["target"] == truth["target_mark"]
+    if "targets" in truth:  # issue 21: every target marked at its true pixel in its first visible observation
+        assert committed["targets"] == [{"name": t["name"], **t["mark"]} for t in truth["targets"]]
+    else:
+        assert committed["target"] == truth["target_mark"]
     assert committed["truth_file"] == f"../../sample_data/{group}/truth.json"
     assert load_flight_config(committed_path).name == group  # every listed file exists
 

@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "sample_data"
 TABLE3 = {"group1": (53.97, 16), "group2": (24.03, 17), "group3": (24.36, 34), "group4": (31.42, 11),
           "group5": (46.46, 18), "group6": (36.41, 11)}
-EXTRA = {"hard_outliers": (40.0, 14), "angle10": (10.0, 10), "fmv": (30.0, 10)}
+EXTRA = {"hard_outliers": (40.0, 14), "angle10": (10.0, 10), "fmv": (30.0, 10), "three_targets": (53.97, 16)}
 ALL = {**TABLE3, **EXTRA}
 
 
@@ -66,6 +66,31 @@ def test_hard_flight_has_outliers_and_lost_target():
     assert len(outliers) == 3 and all(abs(o["range_measured_m"] - o["range_true_m"]) > 200 for o in outliers)
     assert sum(not o["range_valid"] for o in obs) == 2
     assert sum(not o["target_visible"] for o in obs) == 2
+
+
+def test_three_target_flight_has_an_occluded_and_a_departing_target():
+    """issue 21: three targets of different sizes and contrasts; one hidden for a while (by its cloud) then seen
+    again, one leaving the view for good; each true pixel projects its true position (checked against the
+    frames' true poses and the camera's pinhole without distortion, within the distortion's few pixels)."""
+    truth = _truth("three_targets")
+    targets = {t["name"]: t for t in truth["targets"]}
+    assert len(targets) == 3 and len({(t["size_m"], t["contrast"]) for t in targets.values()}) == 3
+    n = truth["n_observations"]
+    assert targets["panel"]["visible_observations"] == list(range(n))
+    grey = targets["small_grey"]["visible_observations"]
+    assert [i for i in range(n) if i not in grey] == [6, 7, 8]  # occluded, then back
+    far = targets["far_north"]["visible_observations"]
+    assert far == list(range(far[-1] + 1)) and far[-1] < n - 1  # seen from the start, then out of the image
+    frames = truth["frames"]
+    obs = truth["observations"]
+    assert all(not frames[o["frame_index"]]["targets"]["far_north"]["visible"] for o in obs[far[-1] + 1:])
+    cam = truth["camera"]
+    for t in targets.values():  # the mark is the true pixel in the first frame showing it
+        f = frames[t["mark"]["frame_index"]]
+        X = np.array(pymap3d.geodetic2ecef(t["lat_deg"], t["lon_deg"], t["alt_m"]))
+        d = np.array(f["R_ecef_from_optical"]).T @ (X - np.array(f["camera_position_ecef_m"]))
+        u, v = cam["fx_px"] * d[0] / d[2] + cam["cx_px"], cam["fy_px"] * d[1] / d[2] + cam["cy_px"]
+        assert np.hypot(u - t["mark"]["pixel"][0], v - t["mark"]["pixel"][1]) < 5.0, t["name"]
 
 
 def test_manifest_matches_committed_files():

@@ -11,6 +11,7 @@ from pipeline.clock_estimate import ClockEstimate, estimate_clock
 from pipeline.errors import RidgelocError
 from pipeline.flight import Flight, acquire_mark
 from pipeline.flight_config import FlightConfig
+from pipeline.targets import first_mark
 from pipeline.track.sift import SiftTracker
 
 
@@ -63,9 +64,9 @@ def check_flight(config: FlightConfig, clock: bool = True) -> CheckResult:
 
 def _estimate_clock(r: Flight) -> ClockEstimate:
     tracker = SiftTracker(r.config.tracking)
-    mark = acquire_mark(r.config.target, frames=r.frames, plan_frame_index=r.plan.frame_index, camera=r.camera,
-                        decoder=r.decoder, tracker=tracker, config_path=r.config.path)
-    return estimate_clock(r, tracker, mark)
+    mark = acquire_mark(first_mark(r.config), frames=r.frames, plan_frame_index=r.plan.frame_index,
+                        camera=r.camera, decoder=r.decoder, tracker=tracker, config_path=r.config.path)
+    return estimate_clock(r, tracker, mark)  # issue 21: the first target's first mark, as `run` takes it
 
 
 def format_check(result: CheckResult) -> str:

@@ -46,7 +46,8 @@ def _resolve_config(arg: str) -> Path:
 def _input_files(cfg: FlightConfig) -> list[Path]:
     """The files a flight's outputs depend on (for re-run skipping); folders (ROS 2 bags) contribute their files."""
     listed = [*cfg.files.telemetry, cfg.files.video, cfg.files.frames_csv, cfg.truth_file,
-              cfg.target.template if cfg.target is not None else None]
+              cfg.target.template if cfg.target is not None else None,
+              cfg.marks_file, *[t.template for t in cfg.targets]]  # issue 21: the targets' marks
     files: list[Path] = []
     for f in listed:
         if f is None:
@@ -65,7 +66,7 @@ def group_summary(r, reused: bool = False) -> list[str]:
     errs = r.errors_m()
     shown = ", ".join(f"{m} {errs[m]:.2f} m" for m in ("ridge", "mle") if errs.get(m) is not None)
     state = "reused" if reused else f"{sum(r.timings_s.values()):.2f} s"
-    lines = [f"{r.name}: {r.n_observations} observations, {state}" + (f", error {shown}" if shown else "")]
+    lines = [f"{r.label}: {r.n_observations} observations, {state}" + (f", error {shown}" if shown else "")]
     lines += [f"  {n}" for n in r.settings.get("notes") or [] if str(n).startswith("mle: the error model does not fit")]
     mle = r.estimates.get("mle")
     rejected = mle.extras.get("rejected") if mle is not None and isinstance(mle.extras, dict) else None
@@ -110,14 +111,19 @@ def main(args) -> int:
     t1 = time.perf_counter()
     md, tab = write_table4(args.outdir, results, failures)
     t2 = time.perf_counter()
-    for r in results:
+    from pipeline.results import per_target, target_failures
+
+    for r in per_target(results):  # issue 21: a summary per target of a flight with named targets
         lines = group_summary(r, reused=r.name in reused)
         if not args.quiet:
             print("\n".join(lines))
         else:  # -q still says when an mle's error model does not fit: never a silently overconfident ellipse
             for ln in lines[1:]:
                 if ln.strip().startswith("mle: the error model does not fit"):
-                    print(f"{r.name}: {ln.strip()}")
+                    print(f"{r.label}: {ln.strip()}")
+    not_located = target_failures(results)
+    for name, f in not_located:  # issue 21: the flight's other targets are in the outputs
+        print(f"ridgeloc: {name}:{f.target}: not located: {f.message}", file=sys.stderr)
     for f in failures:  # one line each on stderr; the count goes to stdout with the rest of the summary
         print(f"ridgeloc: {f.name}: failed: {f.message}", file=sys.stderr)
     if not args.quiet:
@@ -125,4 +131,4 @@ def main(args) -> int:
               f"{t2 - t0:.2f} s (report.html, targets.*, run.json {t1 - t0:.2f}; report.md, table4.csv "
               f"{t2 - t1:.2f} s)")
     print(summarize_failures(failures, len(entries)).splitlines()[0])
-    return 1 if failures else 0
+    return 1 if failures or not_located else 0

@@ -10,6 +10,7 @@ import numpy as np
 from pipeline.errors import ConfigError, InputError
 from pipeline.flight_config import Camera, Target
 from pipeline.ingest.model import FrameSeries
+from pipeline.targets import Mark
 
 
 @dataclass(frozen=True)
@@ -25,12 +26,12 @@ class TargetMark:
         return {"frame_index": int(self.frame_index), "pixel_px": [float(self.pixel_px[0]), float(self.pixel_px[1])]}
 
 
-def acquire_mark(target: Target | None, *, frames: FrameSeries, plan_frame_index, camera: Camera, decoder,
+def acquire_mark(target: Target | Mark | None, *, frames: FrameSeries, plan_frame_index, camera: Camera, decoder,
                  tracker, config_path=None) -> TargetMark:
-    """The mark of `target` (a flight config's `target:`): the given frame and pixel (ConfigError when the frame is
-    not one of `frames`); the template found in the observation frames `plan_frame_index` (ConfigError when the
-    template is not a readable image); or, with no target, the laser's crosshair (the principal point) in the
-    first observation frame (InputError when there is none)."""
+    """The mark of `target` (a flight config's `target:`, or one mark of a named target, `pipeline.targets.Mark`):
+    the given frame and pixel (ConfigError when the frame is not one of `frames`); the template found in the
+    observation frames `plan_frame_index` (ConfigError when the template is not a readable image); or, with no target,
+    the laser's crosshair (the principal point) in the first observation frame (InputError when there is none)."""
     if target is None:
         if len(plan_frame_index) == 0:
             raise InputError("no observation frame to take the target from", config_path)
@@ -44,7 +45,9 @@ def acquire_mark(target: Target | None, *, frames: FrameSeries, plan_frame_index
         if template is None:
             raise ConfigError("target.template: not a readable image", target.template)
         index, pixel = tracker.acquire(template, target.template_pixel, decoder, np.asarray(plan_frame_index).tolist())
-        return TargetMark(index, pixel)
+        return TargetMark(int(index), (float(pixel[0]), float(pixel[1])))
     if target.frame_index not in set(np.asarray(frames.index).tolist()):
-        raise ConfigError(f"target.frame_index {target.frame_index} is not a frame of the video", config_path)
-    return TargetMark(target.frame_index, target.pixel)
+        source = getattr(target, "source", "target")
+        where = f"{source}: " if source and source != "target" else "target."
+        raise ConfigError(f"{where}frame_index {target.frame_index} is not a frame of the video", config_path)
+    return TargetMark(int(target.frame_index), (float(target.pixel[0]), float(target.pixel[1])))

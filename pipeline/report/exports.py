@@ -29,7 +29,7 @@ from pipeline.report.geometry import (
     uncertainty,
 )
 from pipeline.report.labels import METHOD_COLORS, method_label, ordered_methods
-from pipeline.results import GroupResult
+from pipeline.results import FlightResult, GroupResult, per_target
 
 # The documented columns of targets.csv, in order (docs/outputs.md describes each).
 TARGETS_CSV_COLUMNS = (
@@ -112,11 +112,40 @@ def group_methods(r: GroupResult) -> list[str]:
                                             if m not in r.estimates]])
 
 
-def target_rows(results: Iterable[GroupResult]) -> list[dict]:
-    """One dict per group and method with the keys of TARGETS_CSV_COLUMNS (None where undefined). A method that
-    could not run, or gave no finite position, keeps its row: empty values, its status and reason."""
-    rows = []
+def _units(results) -> list:
+    """GroupResults (one per located target) and (flight name, TargetFailure) of the targets not located, in the
+    run's order: a flight's located targets, then its failed ones."""
+    out: list = []
     for r in results:
+        if isinstance(r, FlightResult):
+            out += [*r.targets, *[(r.name, f) for f in r.failed]]
+        else:
+            out.append(r)
+    return out
+
+
+def has_named_targets(results) -> bool:
+    """Whether any flight names its targets: the outputs then carry a `target` column/property (absent
+    otherwise, so single-target runs keep their files as they were)."""
+    return any(isinstance(r, FlightResult) or getattr(r, "target", None) is not None for r in results)
+
+
+def _failed_rows(name: str, f) -> list[dict]:
+    """A target that could not be located: one row per method asked for, status `not_located`, the reason."""
+    return [{**dict.fromkeys(TARGETS_CSV_COLUMNS), "group": name, "target": f.target, "method": m,
+             "method_label": method_label(m), "alt_datum": ALT_DATUM, "alt_msl_datum": ALT_MSL_DATUM,
+             "status": "not_located", "reason": f.message, "n_observations": 0} for m in f.methods]
+
+
+def target_rows(results: Iterable[GroupResult | FlightResult]) -> list[dict]:
+    """One dict per group (target) and method with the keys of TARGETS_CSV_COLUMNS (None where undefined), and
+    `target` after `group` for a named target. A method that could not run, or gave no finite position, keeps
+    its row: empty values, its status and reason; so does a target that could not be located."""
+    rows = []
+    for r in _units(results):
+        if isinstance(r, tuple):
+            rows.extend(_failed_rows(*r))
+            continue
         lat0, lon0, alt0 = r.origin_lla
         geoid = _geoid(r)
         for method in group_methods(r):
@@ -132,7 +161,8 @@ def target_rows(results: Iterable[GroupResult]) -> list[dict]:
                 ("cep50_m", "cep90_m", "sigma_up_m", "ellipse95_semi_major_m", "ellipse95_semi_minor_m",
                  "ellipse95_azimuth_deg"))
             rows.append({
-                "group": r.name, "method": method, "method_label": method_label(method),
+                "group": r.name, **({} if r.target is None else {"target": r.target}),
+                "method": method, "method_label": method_label(method),
                 "lat_deg": _num(lla[0], DEG_DECIMALS), "lon_deg": _num(lla[1], DEG_DECIMALS),
                 "alt_m": _num(lla[2]), "alt_datum": ALT_DATUM,
                 "alt_msl_m": None if n_m is None else _num(lla[2] - n_m),
@@ -156,13 +186,20 @@ def target_rows(results: Iterable[GroupResult]) -> list[dict]:
 
 # ---- CSV -------------------------------------------------------------------------------------------------------
 
-def targets_csv_text(results: Iterable[GroupResult]) -> str:
+def csv_columns(named: bool) -> tuple[str, ...]:
+    """TARGETS_CSV_COLUMNS, with `target` after `group` when a flight names its targets."""
+    return ("group", "target", *TARGETS_CSV_COLUMNS[1:]) if named else TARGETS_CSV_COLUMNS
+
+
+def targets_csv_text(results: Iterable[GroupResult | FlightResult]) -> str:
+    results = list(results)
+    columns = csv_columns(has_named_targets(results))
     buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=TARGETS_CSV_COLUMNS, lineterminator="\n")
+    w = csv.DictWriter(buf, fieldnames=columns, lineterminator="\n")
     w.writeheader()
     for row in target_rows(results):
-        w.writerow({k: ("" if v is None else ("true" if v is True else "false" if v is False else v))
-                    for k, v in row.items()})
+        w.writerow({k: ("" if row.get(k) is None else
+                        ("true" if row[k] is True else "false" if row[k] is False else row[k])) for k in columns})
     return buf.getvalue()
 
 
@@ -226,6 +263,11 @@ def group_features(r: GroupResult, max_lines_of_sight: int | None = 200) -> list
                                "has_pixel": bool(obs.has_pixel[i]),
                                "range_m": _num(obs.range_m[i]) if obs.has_range[i] else None,
                                "mle_rejected": rejected.get(int(i))}))
+    if r.target is not None:  # every feature of a named target says which (and its name is group:target)
+        for f in feats:
+            p = f["properties"]
+            f["properties"] = {"group": p.get("group", r.name), "target": r.target, "name": r.label,
+                               **{k: v for k, v in p.items() if k not in ("group", "target")}}
     return feats
 
 
@@ -250,7 +292,7 @@ def _truth_props(r: GroupResult, lla: np.ndarray) -> dict:
 def targets_geojson(results: Iterable[GroupResult], max_lines_of_sight: int | None = 200) -> dict:
     """A GeoJSON FeatureCollection (RFC 7946: WGS84 lon/lat, ellipsoidal height, no `crs` member)."""
     feats = []
-    for r in results:
+    for r in per_target(results):
         feats.extend(group_features(r, max_lines_of_sight))
     return {"type": "FeatureCollection", "features": feats}
 
@@ -266,7 +308,8 @@ def write_targets_geojson(path: str | PathLike, results: Iterable[GroupResult],
 
 # KML SimpleField types of the attributes (KML 2.2 section 9.9: string, int, uint, short, ushort, float, double,
 # bool); GIS clients (GDAL's LIBKML driver, Google Earth) read the typed <Schema> instead of treating all as text.
-_KML_STRING_FIELDS = {"group", "method", "method_label", "alt_datum", "alt_msl_datum", "status", "reason", "kind"}
+_KML_STRING_FIELDS = {"group", "target", "method", "method_label", "alt_datum", "alt_msl_datum", "status", "reason",
+                      "kind"}
 _KML_INT_FIELDS = {"iterations", "n_observations", "n_positions", "frame_count"}
 _KML_BOOL_FIELDS = {"converged"}
 ESTIMATE_KML_FIELDS = tuple(c for c in TARGETS_CSV_COLUMNS if c not in ("lat_deg", "lon_deg"))
@@ -314,9 +357,16 @@ def _geometry(parent: ET.Element, tag: str, lla_msl: np.ndarray) -> ET.Element:
     return g
 
 
-def _schema_data(pm: ET.Element, schema: str, props: dict) -> None:
+def kml_schemas(named: bool) -> dict[str, tuple[str, ...]]:
+    """KML_SCHEMAS, each with `target` after `group` when a flight names its targets."""
+    if not named:
+        return KML_SCHEMAS
+    return {k: tuple(x for f in v for x in ((f, "target") if f == "group" else (f,))) for k, v in KML_SCHEMAS.items()}
+
+
+def _schema_data(pm: ET.Element, schema: str, props: dict, schemas=KML_SCHEMAS) -> None:
     sd = _sub(_sub(pm, "ExtendedData"), "SchemaData", schemaUrl=f"#{schema}")
-    for k in KML_SCHEMAS[schema]:
+    for k in schemas[schema]:
         v = props.get(k)
         if v is None:
             continue  # an absent SimpleData is a null attribute
@@ -324,12 +374,12 @@ def _schema_data(pm: ET.Element, schema: str, props: dict) -> None:
 
 
 def _placemark(folder: ET.Element, name: str, style: str, schema: str | None = None,
-               props: dict | None = None) -> ET.Element:
+               props: dict | None = None, schemas=KML_SCHEMAS) -> ET.Element:
     pm = _sub(folder, "Placemark")
     _sub(pm, "name", name)
     _sub(pm, "styleUrl", f"#{style}")
     if schema is not None:
-        _schema_data(pm, schema, props or {})
+        _schema_data(pm, schema, props or {}, schemas)
     return pm
 
 
@@ -339,13 +389,15 @@ def targets_kml(results: Iterable[GroupResult], max_lines_of_sight: int | None =
     geoid undulation), as KML defines altitude (above sea level). Attributes are typed by a <Schema> per kind
     of placemark (estimate, truth, error_ellipse); the ellipsoidal height is kept in `alt_m`."""
     results = list(results)
+    schemas = kml_schemas(has_named_targets(results))
+    results = per_target(results)
     ET.register_namespace("", KML_NS)
     root = ET.Element(f"{{{KML_NS}}}kml")
     doc = _sub(root, "Document")
     _sub(doc, "name", "ridgeloc targets")
     _sub(doc, "description", f"Target estimates per flight group and method. Coordinates: {ALT_MSL_DATUM} "
                              f"(altitudeMode absolute); attribute alt_m: {ALT_DATUM}.")
-    for sid, fields in KML_SCHEMAS.items():
+    for sid, fields in schemas.items():
         schema = _sub(doc, "Schema", name=sid, id=sid)
         for f in fields:
             _sub(schema, "SimpleField", name=f, type=kml_field_type(f))
@@ -368,7 +420,8 @@ def targets_kml(results: Iterable[GroupResult], max_lines_of_sight: int | None =
         _sub(ls, "width", width)
     for r in results:
         folder = _sub(doc, "Folder")
-        _sub(folder, "name", r.name)
+        _sub(folder, "name", r.label)
+        tgt = {} if r.target is None else {"target": r.target}
         geoid = _geoid(r)
         rows = {row["method"]: row for row in target_rows([r])}
         for method in ordered_methods(r.estimates):
@@ -377,34 +430,35 @@ def targets_kml(results: Iterable[GroupResult], max_lines_of_sight: int | None =
                 continue  # targets.csv keeps its row, with its status and reason
             row = rows[method]
             style = f"est-{method}" if method in METHOD_COLORS else "truth"
-            pm = _placemark(folder, f"{r.name}: {method_label(method)}", style, "estimate", row)
+            pm = _placemark(folder, f"{r.label}: {method_label(method)}", style, "estimate", row, schemas)
             _geometry(pm, "Point", msl_lla(geodetic_from_enu(e.position_m, r.origin_lla), geoid))
             if row["ellipse95_semi_major_m"] is not None and row["ellipse95_semi_major_m"] >= MIN_ELLIPSE_M:
                 ring_en = ellipse_points_en_m(np.asarray(e.covariance_m2)[:2, :2], ELLIPSE_CONFIDENCE)
                 ring_enu = np.column_stack([ring_en + e.position_m[:2], np.full(len(ring_en), e.position_m[2])])
                 ring_msl = msl_lla(geodetic_from_enu(ring_enu, r.origin_lla), geoid)
                 ring_msl[-1] = ring_msl[0]
-                pm = _placemark(folder, f"{r.name}: {method_label(method)} 95 % error ellipse", style,
+                pm = _placemark(folder, f"{r.label}: {method_label(method)} 95 % error ellipse", style,
                                 "error_ellipse", {
-                                    "group": r.name, "method": method, "method_label": method_label(method),
+                                    "group": r.name, **tgt, "method": method, "method_label": method_label(method),
                                     "confidence": ELLIPSE_CONFIDENCE, "semi_major_m": row["ellipse95_semi_major_m"],
                                     "semi_minor_m": row["ellipse95_semi_minor_m"],
-                                    "azimuth_deg": row["ellipse95_azimuth_deg"], "alt_msl_m": row["alt_msl_m"]})
+                                    "azimuth_deg": row["ellipse95_azimuth_deg"], "alt_msl_m": row["alt_msl_m"]},
+                                schemas)
                 poly = _sub(pm, "Polygon")
                 _sub(poly, "altitudeMode", "absolute")
                 ring = _sub(_sub(poly, "outerBoundaryIs"), "LinearRing")
                 _sub(ring, "coordinates", _kml_coords(ring_msl))
         if r.truth_m is not None:
             lla = geodetic_from_enu(r.truth_m, r.origin_lla)
-            pm = _placemark(folder, f"{r.name}: truth", "truth", "truth", _truth_props(r, lla))
+            pm = _placemark(folder, f"{r.label}: truth", "truth", "truth", {**_truth_props(r, lla), **tgt}, schemas)
             _geometry(pm, "Point", msl_lla(lla, geoid))
         obs = r.observations
         if obs.n >= 2:
-            pm = _placemark(folder, f"{r.name}: flight path", "path")
+            pm = _placemark(folder, f"{r.label}: flight path", "path")
             _geometry(pm, "LineString", msl_lla(geodetic_from_enu(obs.platform_m, r.origin_lla), geoid))
         seg, _ = lines_of_sight_m(obs, best_reference_m(r), max_lines_of_sight)
         if len(seg):
-            pm = _placemark(folder, f"{r.name}: lines of sight", "los")
+            pm = _placemark(folder, f"{r.label}: lines of sight", "los")
             multi = _sub(pm, "MultiGeometry")
             seg_msl = msl_lla(geodetic_from_enu(seg, r.origin_lla), geoid)
             for s in seg_msl:

@@ -185,7 +185,7 @@ def map_figure(r: GroupResult) -> Figure:
     fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncol=min(6, len(handles)),
                frameon=False, fontsize=9)
     angle = f", intersection angle {r.intersection_angle_deg:.1f}°" if np.isfinite(r.intersection_angle_deg) else ""
-    fig.suptitle(f"{r.name}: {obs.n} observations{angle}", fontsize=13)
+    fig.suptitle(f"{r.label}: {obs.n} observations{angle}", fontsize=13)
     return fig
 
 
@@ -213,7 +213,7 @@ def view3d_figure(r: GroupResult) -> Figure:
     ax.set_xlabel("East (m)", labelpad=10)
     ax.set_ylabel("North (m)", labelpad=10)
     ax.set_zlabel("Up (m)", labelpad=8)
-    ax.set_title(f"{r.name}: 3D view")
+    ax.set_title(f"{r.label}: 3D view")
     fig.legend(loc="outside lower center", ncol=4, frameon=False, fontsize=9)
     return fig
 
@@ -299,7 +299,7 @@ def residuals_figure(r: GroupResult) -> Figure:
             ax.text(0.5, 0.5, "no observations of this kind", transform=ax.transAxes, ha="center")
     if handles:
         fig.legend(handles, labels, loc="outside lower center", ncol=2, frameon=False, fontsize=9)
-    fig.suptitle(f"{r.name}: residuals per frame", fontsize=13)
+    fig.suptitle(f"{r.label}: residuals per frame", fontsize=13)
     return fig
 
 

@@ -23,7 +23,7 @@ from pipeline.report.exports import ALT_MSL_DATUM, failure_status_reason, target
 from pipeline.report.geometry import ALT_DATUM
 from pipeline.report.labels import METHOD_COLORS, method_label, ordered_methods
 from pipeline.report.versions import software_versions
-from pipeline.results import GroupFailure, GroupResult
+from pipeline.results import FlightResult, GroupFailure, GroupResult, per_target, target_failures
 
 _CSS = """
 body { font-family: -apple-system, "Segoe UI", Roboto, "Helvetica Neue", Arial, sans-serif; margin: 0;
@@ -86,7 +86,7 @@ def _summary_table(results: Sequence[GroupResult]) -> str:
 
     methods = ordered_methods(dict.fromkeys(m for r in results
                                             for m in (*r.estimates, *(r.settings.get("solve_failures") or {}))))
-    head = "".join(f'<th>{escape(r.name)}</th>' for r in results)
+    head = "".join(f'<th>{escape(r.label)}</th>' for r in results)
     rows = [f'<tr><th class="l">Group</th>{head}</tr>']
     rows.append('<tr><td class="l">Intersection angle /°</td>'
                 + "".join(f"<td>{_fmt(float(r.intersection_angle_deg))}"
@@ -94,11 +94,11 @@ def _summary_table(results: Sequence[GroupResult]) -> str:
     rows.append('<tr><td class="l">Observations</td>'
                 + "".join(f"<td>{r.n_observations}{_paper(r.name, PAPER_TABLE3, 'observations', 0)}</td>"
                           for r in results) + "</tr>")
-    errors = {r.name: r.errors_m() for r in results}
+    errors = {r.label: r.errors_m() for r in results}
     best = {}
     for r in results:
-        finite = {m: e for m, e in errors[r.name].items() if e is not None and np.isfinite(e)}
-        best[r.name] = min(finite, key=finite.get) if finite else None
+        finite = {m: e for m, e in errors[r.label].items() if e is not None and np.isfinite(e)}
+        best[r.label] = min(finite, key=finite.get) if finite else None
     for m in methods:
         color = METHOD_COLORS.get(m, "#000")
         cells = []
@@ -108,7 +108,7 @@ def _summary_table(results: Sequence[GroupResult]) -> str:
                     m, "the estimator gave no answer"))
                 cells.append(f'<td class="na" title="{escape(why)}">no estimate ({escape(status)})</td>')
                 continue
-            e = errors[r.name][m]
+            e = errors[r.label][m]
             if r.truth_m is None:
                 cells.append('<td class="na">no truth</td>')
             elif e is None:
@@ -118,7 +118,7 @@ def _summary_table(results: Sequence[GroupResult]) -> str:
                 misfit = _misfit(r.estimates[m])
                 if misfit:
                     flag += " ‡"
-                cls = ' class="best"' if best[r.name] == m else ""
+                cls = ' class="best"' if best[r.label] == m else ""
                 title = f' title="{escape(misfit)}"' if misfit else ""
                 cells.append(f"<td{cls}{title}>{_fmt(e)}{flag}{_paper(r.name, PAPER_TABLE4_M, m)}</td>")
         rows.append(f'<tr><td class="l"><span class="swatch" style="background:{color}"></span>'
@@ -190,15 +190,19 @@ def relative_paths(settings: Mapping) -> dict:
     return out
 
 
-def _group_section(r: GroupResult, figures: Mapping[str, bytes], interactive: bool = True) -> str:
-    parts = [f'<h2 id="group-{escape(r.name)}">{escape(r.name)}</h2>']
+def _group_section(r: GroupResult, figures: Mapping[str, bytes], interactive: bool = True,
+                   flight_map: list[GroupResult] | None = None) -> str:
+    """A group's section, or a named target's (`flight_map`: its flight's targets, for the one map of them all
+    shown in the flight's first target's section; [] for the others)."""
+    parts = [f'<h2 id="group-{escape(r.label)}">{escape(r.label)}</h2>']
     angle = _fmt(float(r.intersection_angle_deg))
     parts.append(f'<p class="meta">{r.n_observations} observations, intersection angle {angle}°'
                  + ("" if r.truth_m is not None else ", target truth unknown") + "</p>")
-    if interactive:
+    if interactive and flight_map != []:
         from pipeline.report.webmap import map_fragment
 
-        parts.append("<h3>Interactive map</h3>" + map_fragment(r)
+        which = "" if not flight_map else f" (every target of {escape(r.name)})"
+        parts.append(f"<h3>Interactive map{which}</h3>" + map_fragment(flight_map or r)
                      + '<p class="note">Zoom and pan; tick a layer to show or hide a method. Basemap: OpenStreetMap '
                      "when online, a plain grid when not (everything else is in this file).</p>")
     if "map" in figures:
@@ -244,19 +248,23 @@ def report_html(results: Sequence[GroupResult], failures: Sequence[GroupFailure]
     missing from it are rendered here. `interactive`: a Leaflet map per group (webmap.py; Leaflet inline)."""
     from pipeline.report.figures import render_group_figures  # matplotlib only when a page is made
 
+    n_groups = len(results)
+    not_located = target_failures(results)
+    by_flight = {r.name: r.targets for r in results if isinstance(r, FlightResult)}
+    results = per_target(results)  # a section and a column per target of a flight with named targets
     figures = dict(figures or {})
     for r in results:
-        if r.name not in figures:
-            figures[r.name] = render_group_figures(r)
+        if r.label not in figures:
+            figures[r.label] = render_group_figures(r)
     now = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    status = (f'<span class="pill ok">{len(results)} group(s) processed</span>'
+    status = (f'<span class="pill ok">{n_groups} group(s) processed</span>'
               + (f'<span class="pill bad">{len(failures)} failed</span>' if failures else ""))
     out = [f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>{escape(title)}</title>"
            f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><style>{_CSS}</style>"
            + (_leaflet_head() if interactive and results else "") + "</head>"
            f"<body><main><h1>{escape(title)}</h1><p class=\"meta\">Generated {now}. {status}</p>"]
     if results:
-        nav = " · ".join(f'<a href="#group-{escape(r.name)}">{escape(r.name)}</a>' for r in results)
+        nav = " · ".join(f'<a href="#group-{escape(r.label)}">{escape(r.label)}</a>' for r in results)
         out.append(f'<p class="meta">Groups: {nav}</p>')
         out.append("<h2>Localization error per group (as the paper's Table 4)</h2>" + _summary_table(results))
     if failures:
@@ -265,8 +273,16 @@ def report_html(results: Sequence[GroupResult], failures: Sequence[GroupFailure]
         out.append(f"<h2>Failed groups ({len(failures)})</h2><p class=\"note\">These groups were skipped; the other "
                    'groups are complete.</p><table class="fail"><tr><th class="l">Group</th><th class="l">Source</th>'
                    f'<th class="l">Error</th></tr>{rows}</table>')
+    if not_located:
+        rows = "".join(f'<tr><td class="l">{escape(n)}</td><td class="l">{escape(f.target)}</td>'
+                       f'<td class="l">{escape(f.message)}</td></tr>' for n, f in not_located)
+        out.append(f"<h2>Targets not located ({len(not_located)})</h2><p class=\"note\">The other targets of "
+                   'these flights are complete.</p><table class="fail"><tr><th class="l">Group</th>'
+                   f'<th class="l">Target</th><th class="l">Reason</th></tr>{rows}</table>')
     for r in results:
-        out.append(_group_section(r, figures[r.name], interactive))
+        flight = by_flight.get(r.name)
+        fm = None if flight is None else (flight if r is flight[0] else [])
+        out.append(_group_section(r, figures[r.label], interactive, fm))
     out.append("<h2>Run settings</h2><pre>" + escape(json.dumps(dict(settings), indent=2, default=str)) + "</pre>")
     out.append("<h2>Software</h2>" + _kv_table(software_versions()))
     out.append("</main></body></html>\n")

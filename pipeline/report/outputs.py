@@ -35,7 +35,7 @@ from pipeline.report.exports import targets_geojson, write_targets_csv, write_ta
 from pipeline.report.html import write_report_html
 from pipeline.report.store import load_group_result, save_group_result
 from pipeline.report.versions import software_versions
-from pipeline.results import GroupFailure, GroupResult
+from pipeline.results import FlightResult, GroupFailure, GroupResult, per_target
 
 RESULT_FILE = "result.json"
 
@@ -52,12 +52,16 @@ def write_group_outputs(outdir: str | PathLike, r: GroupResult, config_digest: s
     from pipeline.report.figures import render_group_figures  # matplotlib: its import counts as report time
 
     final = group_dir(outdir, r.name)
-    pngs = render_group_figures(r) if figures else {}
+    pngs = {}
+    for t in per_target([r]):  # a flight with named targets: <target>/map.png ... per target
+        prefix = "" if t.target is None else f"{t.target}/"
+        pngs.update({f"{prefix}{k}": v for k, v in (render_group_figures(t) if figures else {}).items()})
     geojson = json.dumps(targets_geojson([r]), allow_nan=False) + "\n"
     r.timings_s["report"] = time.perf_counter() - t0  # the group's figures and GeoJSON, itemised with the stages
     with atomic_dir(final) as tmp:
         save_group_result(tmp / RESULT_FILE, r)
         for name, png in pngs.items():
+            (tmp / f"{name}.png").parent.mkdir(parents=True, exist_ok=True)
             (tmp / f"{name}.png").write_bytes(png)
         (tmp / "targets.geojson").write_text(geojson)
         for name, content in (extra_files or {}).items():
@@ -80,10 +84,10 @@ def load_finished_group(outdir: str | PathLike, name: str, config_digest: str | 
         return None
 
 
-def _group_figures(outdir: Path, name: str) -> dict[str, bytes]:
+def _group_figures(outdir: Path, name: str, target: str | None = None) -> dict[str, bytes]:
     out = {}
     for key in ("map", "view3d", "residuals"):
-        p = outdir / name / f"{key}.png"
+        p = outdir / name / ("" if target is None else target) / f"{key}.png"
         if p.is_file():
             out[key] = p.read_bytes()
     return out
@@ -103,7 +107,8 @@ def write_run_outputs(outdir: str | PathLike, results: Sequence[GroupResult], fa
         if not is_done(group_dir(outdir, r.name)):
             write_group_outputs(outdir, r, figures=figures)
         # figures missing from a folder are rendered by the page itself
-        pngs[r.name] = _group_figures(outdir, r.name) if figures else {}
+        for t in per_target([r]):
+            pngs[t.label] = _group_figures(outdir, t.name, t.target) if figures else {}
     paths = {k: outdir / f for k, f in (("csv", "targets.csv"), ("geojson", "targets.geojson"),
                                         ("kml", "targets.kml"), ("html", "report.html"), ("run", "run.json"))}
     write_targets_csv(paths["csv"], results)
@@ -117,6 +122,9 @@ def write_run_outputs(outdir: str | PathLike, results: Sequence[GroupResult], fa
                       **({"traceback": f.detail} if getattr(f, "detail", "") else {})} for f in failures],
         "settings": dict(settings),
         "clock_estimates": {r.name: r.settings["clock_estimate"] for r in results if r.settings.get("clock_estimate")},
+        **({"targets": {r.name: {"located": [t.target for t in r.targets], "not_located": {
+            f.target: f.message for f in r.failed}} for r in results if isinstance(r, FlightResult)}}
+           if any(isinstance(r, FlightResult) for r in results) else {}),
         "software": software_versions(),
     }, indent=1, default=str) + "\n")
     return paths

@@ -13,12 +13,13 @@ import numpy as np
 
 from pipeline.atomic import atomic_write_text
 from pipeline.errors import InputError
-from pipeline.results import GroupResult
+from pipeline.results import FlightResult, GroupResult, TargetFailure
 from pipeline.solve.estimate import Estimate, Status
 from pipeline.solve.observations import Observations
 
 FORMAT = "ridgeloc-group-result"
 VERSION = 1
+FLIGHT_FORMAT = "ridgeloc-flight-targets"  # a flight with named targets (issue 21): a group result per target
 
 
 def _nan_to_none(values) -> list:
@@ -66,10 +67,29 @@ def group_result_to_json(r: GroupResult) -> dict:
         "timings_s": {k: float(v) for k, v in r.timings_s.items()},
         "settings": r.settings,
         "tracking": r.tracking,
+        **({} if r.target is None else {"target": r.target}),
     }
 
 
-def group_result_from_json(doc: dict) -> GroupResult:
+def flight_result_to_json(r: FlightResult) -> dict:
+    return {"format": FLIGHT_FORMAT, "version": VERSION, "name": r.name,
+            "targets": [group_result_to_json(t) for t in r.targets],
+            "failed": [{"target": f.target, "message": f.message, "methods": list(f.methods)} for f in r.failed],
+            "timings_s": {k: float(v) for k, v in r.timings_s.items()}, "settings": r.settings}
+
+
+def flight_result_from_json(doc: dict) -> FlightResult:
+    if doc.get("version") != VERSION:
+        raise InputError(f"unsupported {FLIGHT_FORMAT} version {doc.get('version')!r} (expected {VERSION})")
+    return FlightResult(name=doc["name"], targets=[group_result_from_json(t) for t in doc["targets"]],
+                        failed=[TargetFailure(f["target"], f["message"], tuple(f.get("methods") or ()))
+                                for f in doc.get("failed", [])],
+                        timings_s=dict(doc.get("timings_s", {})), settings=doc.get("settings", {}))
+
+
+def group_result_from_json(doc: dict) -> GroupResult | FlightResult:
+    if isinstance(doc, dict) and doc.get("format") == FLIGHT_FORMAT:
+        return flight_result_from_json(doc)
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise InputError(f"not a {FORMAT} document")
     if doc.get("version") != VERSION:
@@ -86,12 +106,14 @@ def group_result_from_json(doc: dict) -> GroupResult:
         timings_s=dict(doc.get("timings_s", {})),
         settings=doc.get("settings", {}),
         tracking=doc.get("tracking", {}),
+        target=doc.get("target"),
     )
 
 
-def save_group_result(path: str | PathLike, r: GroupResult) -> None:
+def save_group_result(path: str | PathLike, r: GroupResult | FlightResult) -> None:
     """Write `r` as JSON to `path` (atomically)."""
-    atomic_write_text(path, json.dumps(group_result_to_json(r), indent=1, allow_nan=False))
+    doc = flight_result_to_json(r) if isinstance(r, FlightResult) else group_result_to_json(r)
+    atomic_write_text(path, json.dumps(doc, indent=1, allow_nan=False))
 
 
 def load_group_result(path: str | PathLike) -> GroupResult:

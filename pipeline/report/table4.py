@@ -21,7 +21,7 @@ import numpy as np
 
 from pipeline.geometry.frames import lla_from_enu
 from pipeline.report.exports import unsolved_methods
-from pipeline.results import GroupFailure, GroupResult
+from pipeline.results import FlightResult, GroupFailure, GroupResult, per_target, target_failures
 
 # Table-4 order, then ours.
 METHOD_ROWS = ("vision", "range", "los", "fusion-raw", "fusion", "ridge", "dlt", "mle")
@@ -60,15 +60,22 @@ def _fmt(x, nd=2) -> str:
     return "" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{nd}f}"
 
 
-def table4_rows(results: Sequence[GroupResult]) -> list[list[str]]:
-    """The table4.csv rows (header first)."""
-    rows = [["method", *[r.name for r in results]]]
-    for m in _methods(results):
-        rows.append([m, *[_fmt(r.errors_m().get(m), 3) for r in results]])
-    rows.append(["intersection_angle_deg", *[_fmt(r.intersection_angle_deg, 2) for r in results]])
-    rows.append(["observations", *[str(r.n_observations) for r in results]])
-    unsolved = [unsolved_methods(r) for r in results]
-    for m in _methods(results):
+def table4_rows(results: Sequence[GroupResult | FlightResult]) -> list[list[str]]:
+    """The table4.csv rows (header first): a column per group, or per target (`group:target`) of a flight that
+    names its targets; a target that could not be located keeps its column, status `not_located` and reason."""
+    failed = target_failures(results)
+    located = per_target(results)
+    methods = _methods(located)
+    methods += [m for _, f in failed for m in f.methods if m not in methods]
+    rows = [["method", *[r.label for r in located], *[f"{n}:{f.target}" for n, f in failed]]]
+    for m in methods:
+        rows.append([m, *[_fmt(r.errors_m().get(m), 3) for r in located], *[""] * len(failed)])
+    rows.append(["intersection_angle_deg", *[_fmt(r.intersection_angle_deg, 2) for r in located],
+                 *[""] * len(failed)])
+    rows.append(["observations", *[str(r.n_observations) for r in located], *["0"] * len(failed)])
+    unsolved = [unsolved_methods(r) for r in located] + [{m: ("not_located", f.message) for m in f.methods}
+                                                         for _, f in failed]
+    for m in methods:
         if any(m in u for u in unsolved):
             rows.append([f"status:{m}", *[u[m][0] if m in u else "" for u in unsolved]])
             rows.append([f"reason:{m}", *[u[m][1] if m in u else "" for u in unsolved]])
@@ -92,12 +99,14 @@ def _best(values: list[float | None]) -> float | None:
     return min(finite) if finite else None
 
 
-def report_markdown(results: Sequence[GroupResult], failures: Sequence[GroupFailure] = ()) -> str:
+def report_markdown(results: Sequence[GroupResult | FlightResult], failures: Sequence[GroupFailure] = ()) -> str:
     out = ["# ridgeloc run report", ""]
+    not_located = target_failures(results)
+    results = per_target(results)  # a column per target of a flight with named targets (label group:target)
     if results:
-        names = [r.name for r in results]
+        names = [r.label for r in results]
         methods = _methods(results)
-        errs = {r.name: r.errors_m() for r in results}
+        errs = {r.label: r.errors_m() for r in results}
         has_truth = any(r.truth_m is not None for r in results)
         out += ["## Localization error (m), as the paper's Table 4", ""]
         if not has_truth:
@@ -140,7 +149,7 @@ def report_markdown(results: Sequence[GroupResult], failures: Sequence[GroupFail
                 "WGS84 latitude/longitude (deg) and ellipsoidal height (m); ENU metres relative to each group's "
                 "origin. The MLE's 1-sigma is the square root of its covariance's diagonal (E, N, U).", ""]
         for r in results:
-            out += [f"### {r.name}", "",
+            out += [f"### {r.label}", "",
                     f"Origin (lat, lon, h): {r.origin_lla[0]:.7f}, {r.origin_lla[1]:.7f}, {r.origin_lla[2]:.2f} m", ""]
             rows = []
             failed = unsolved_methods(r)
@@ -179,7 +188,7 @@ def report_markdown(results: Sequence[GroupResult], failures: Sequence[GroupFail
                     if c is not None and not lost]
             lost = r.tracking.get("lost")
             n_lost = int(sum(bool(v) for v in lost)) if lost is not None else int((~r.observations.has_pixel).sum())
-            rows.append([r.name, str(r.n_observations), str(n_lost),
+            rows.append([r.label, str(r.n_observations), str(n_lost),
                          _fmt(float(np.median(corr)) if corr else None, 3),
                          *[_fmt(t.get(k), 3) for k in ("ingest", "decode", "track", "sync", "solve", "report")],
                          _fmt(total, 3), _fmt(10 * total / max(r.n_observations, 1), 3)])
@@ -187,6 +196,8 @@ def report_markdown(results: Sequence[GroupResult], failures: Sequence[GroupFail
                 "including those then dropped for having no valid range either; `obs`: observations solved.", ""]
         out += [_md_table(["group", "obs", "lost", "median NCC", "ingest s", "decode s", "track s", "sync s", "solve s",
                            "report s", "total s", "s per 10 obs"], rows), ""]
+    if not_located:
+        out += ["## Targets not located", ""] + [f"- {n}:{f.target}: {f.message}" for n, f in not_located] + [""]
     if failures:
         out += ["## Failed groups", ""] + [f"- {f.name} ({f.source}): {f.message}" for f in failures] + [""]
     return "\n".join(out)

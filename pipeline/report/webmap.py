@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import functools
 import re
+from collections.abc import Sequence
 from html import escape
 from pathlib import Path
 
@@ -76,10 +77,15 @@ def _latlon(lla: np.ndarray) -> list[list[float]]:
     return [[round(float(a), 8), round(float(b), 8)] for a, b in np.atleast_2d(lla)[:, :2]]
 
 
-def group_map(r: GroupResult, tiles: bool = True):
-    """A folium.Map of one group (see the module docstring); its CDN links are removed."""
+def group_map(r: GroupResult | Sequence[GroupResult], tiles: bool = True):
+    """A folium.Map of one group (see the module docstring); its CDN links are removed. A list of GroupResults
+    (the named targets of one flight) gives one map of them all: the flight path and lines of sight of the first,
+    each target's truth, a layer per method holding every target's estimate and ellipse, and a permanent label
+    per target (at its mle, else its first estimate)."""
     import folium
 
+    targets = [r] if isinstance(r, GroupResult) else list(r)
+    r = targets[0]
     obs = r.observations
     path = geodetic_from_enu(obs.platform_m, r.origin_lla)
     m = folium.Map(location=[float(r.origin_lla[0]), float(r.origin_lla[1])], zoom_start=14, tiles=None,
@@ -105,37 +111,61 @@ def group_map(r: GroupResult, tiles: bool = True):
             folium.PolyLine(_latlon(s), color="#7F7F7F", weight=1, opacity=0.7).add_to(layer)
         layer.add_to(m)
 
-    if r.truth_m is not None:  # under the estimates, which are drawn after it
-        lla = geodetic_from_enu(r.truth_m, r.origin_lla)
+    truths = [t for t in targets if t.truth_m is not None]
+    if truths:  # under the estimates, which are drawn after it
         layer = folium.FeatureGroup(name="Truth", show=True)
-        folium.CircleMarker(_latlon(lla)[0], radius=9, color="#000000", weight=2, fill=True, fill_color="#FFD700",
-                            fill_opacity=1.0, tooltip=f"truth: {lla[0]:.7f}°, {lla[1]:.7f}°").add_to(layer)
+        for t in truths:
+            lla = geodetic_from_enu(t.truth_m, t.origin_lla)
+            who = "" if t.target is None else f"{escape(t.target)} "
+            folium.CircleMarker(_latlon(lla)[0], radius=9, color="#000000", weight=2, fill=True,
+                                fill_color="#FFD700", fill_opacity=1.0,
+                                tooltip=f"{who}truth: {lla[0]:.7f}°, {lla[1]:.7f}°").add_to(layer)
+            bounds += _latlon(lla)
         layer.add_to(m)
-        bounds += _latlon(lla)
 
-    for method in ordered_methods(r.estimates):
-        e = r.estimates[method]
-        if not np.isfinite(e.position_m).all():
-            continue
+    for method in ordered_methods(dict.fromkeys(k for t in targets for k in t.estimates)):
         color = METHOD_COLORS.get(method, "#000000")
-        lla = geodetic_from_enu(e.position_m, r.origin_lla)
-        err = e.error_m(r.truth_m)
-        tip = (f"{escape(method_label(method))} ({method}): {lla[0]:.7f}°, {lla[1]:.7f}°"
-               + ("" if err is None else f", error {err:.2f} m") + f", {e.status.name.lower()}")
         swatch = (f'<span style="display:inline-block;width:10px;height:10px;border-radius:50%;background:{color};'
                   'border:1px solid #000;margin-right:4px"></span>')
         layer = folium.FeatureGroup(name=f"{swatch}{escape(method_label(method))}", show=True)
-        folium.CircleMarker(_latlon(lla)[0], radius=8 if method == "mle" else 6, color="#000000", weight=1,
-                            fill=True, fill_color=color, fill_opacity=0.95, tooltip=tip).add_to(layer)
-        cov = e.covariance_m2
-        if cov is not None and np.isfinite(cov).all():
-            ring_en = ellipse_points_en_m(np.asarray(cov)[:2, :2], ELLIPSE_CONFIDENCE) + e.position_m[:2]
-            ring = geodetic_from_enu(np.column_stack([ring_en, np.full(len(ring_en), e.position_m[2])]),
-                                     r.origin_lla)
-            folium.Polygon(_latlon(ring), color=color, weight=2, dash_array="6 4", fill=True, fill_opacity=0.08,
-                           tooltip=f"{escape(method_label(method))}: 95 % error ellipse").add_to(layer)
+        drawn = False
+        for t in targets:
+            e = t.estimates.get(method)
+            if e is None or not np.isfinite(e.position_m).all():
+                continue
+            lla = geodetic_from_enu(e.position_m, t.origin_lla)
+            err = e.error_m(t.truth_m)
+            who = "" if t.target is None else f"{escape(t.target)}: "
+            tip = (f"{who}{escape(method_label(method))} ({method}): {lla[0]:.7f}°, {lla[1]:.7f}°"
+                   + ("" if err is None else f", error {err:.2f} m") + f", {e.status.name.lower()}")
+            folium.CircleMarker(_latlon(lla)[0], radius=8 if method == "mle" else 6, color="#000000", weight=1,
+                                fill=True, fill_color=color, fill_opacity=0.95, tooltip=tip).add_to(layer)
+            cov = e.covariance_m2
+            if cov is not None and np.isfinite(cov).all():
+                ring_en = ellipse_points_en_m(np.asarray(cov)[:2, :2], ELLIPSE_CONFIDENCE) + e.position_m[:2]
+                ring = geodetic_from_enu(np.column_stack([ring_en, np.full(len(ring_en), e.position_m[2])]),
+                                         t.origin_lla)
+                folium.Polygon(_latlon(ring), color=color, weight=2, dash_array="6 4", fill=True,
+                               fill_opacity=0.08,
+                               tooltip=f"{who}{escape(method_label(method))}: 95 % error ellipse").add_to(layer)
+            bounds += _latlon(lla)
+            drawn = True
+        if drawn:
+            layer.add_to(m)
+
+    named = [t for t in targets if t.target is not None]
+    if named:  # a label per target, always shown, at its mle (else its first finite estimate)
+        layer = folium.FeatureGroup(name="Target names", show=True)
+        for t in named:
+            finite = [e for k, e in sorted(t.estimates.items(), key=lambda kv: kv[0] != "mle")
+                      if np.isfinite(e.position_m).all()]
+            if not finite:
+                continue
+            lla = geodetic_from_enu(finite[0].position_m, t.origin_lla)
+            folium.CircleMarker(_latlon(lla)[0], radius=1, opacity=0, fill=False,
+                                tooltip=folium.Tooltip(escape(t.target), permanent=True, direction="right",
+                                                       class_name="ridgeloc-target-label")).add_to(layer)
         layer.add_to(m)
-        bounds += _latlon(lla)
 
     folium.LayerControl(collapsed=False, position="topleft").add_to(m)
     b = np.array(bounds)
@@ -145,10 +175,11 @@ def group_map(r: GroupResult, tiles: bool = True):
     return m
 
 
-def map_fragment(r: GroupResult, height_px: int = 520, tiles: bool = True) -> str:
+def map_fragment(r: GroupResult | Sequence[GroupResult], height_px: int = 520, tiles: bool = True) -> str:
     """The <div> and <script> of `group_map(r)` for a page whose <head> has `leaflet_head()` (folium's page-wide
     header, which restyles html and body, is left out: only the map's own size is kept)."""
     m = group_map(r, tiles=tiles)
+    r = r if isinstance(r, GroupResult) else r[0]
     root = m.get_root()
     root.render()
     name = m.get_name()

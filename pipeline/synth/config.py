@@ -15,7 +15,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Annotated, Literal
 
-from annotated_types import Ge, Gt, Le, Lt
+from annotated_types import Ge, Gt, Le, Lt, MinLen
 
 from pipeline.config_schema import load_dataclass, read_yaml, to_plain
 from pipeline.errors import ConfigError
@@ -27,6 +27,20 @@ Positive = Annotated[float, Gt(0)]
 Index = Annotated[int, Ge(0)]
 Vec3 = tuple[float, float, float]
 Rate = Annotated[float, Gt(0), Le(200)]
+
+
+@dataclass(frozen=True)
+class ExtraTargetConfig:
+    """Another target of the flight (issue 21): a panel like the main one, east_m/north_m metres from it on the
+    ground, size_m across, contrast 0..1 of its pattern (1: the main panel's white and black; less: greyer),
+    hidden by a cloud around the listed observations. The laser aims at the main target only."""
+
+    name: Annotated[str, MinLen(1)]
+    east_m: float
+    north_m: float
+    size_m: Positive = 36.0
+    contrast: Annotated[float, Gt(0), Le(1)] = 1.0
+    occluded_observations: tuple[Index, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -42,6 +56,8 @@ class SiteConfig:
     alt_m: float = 372.0
     geoid_separation_m: float = -28.0
     target_size_m: float = 36.0
+    target_name: str = "target"  # named only in flights with extra_targets
+    extra_targets: tuple[ExtraTargetConfig, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -269,6 +285,8 @@ class SynthConfig:
         d = to_plain(self)
         if not self.camera.zoom:  # a fixed lens: left out, so truth.json of flights without zoom keeps its keys
             del d["camera"]["zoom"]
+        if not self.site.extra_targets:  # one target: as before issue 21
+            del d["site"]["extra_targets"], d["site"]["target_name"]
         return d
 
 
@@ -303,7 +321,9 @@ def _check(c: SynthConfig) -> None:
     for name, idx in (("laser.outlier_observations", c.laser.outlier_observations),
                       ("laser.dropped_observations", c.laser.dropped_observations),
                       ("lost_target.occluded_observations", c.lost_target.occluded_observations),
-                      ("lost_target.slipped_observations", c.lost_target.slipped_observations)):
+                      ("lost_target.slipped_observations", c.lost_target.slipped_observations),
+                      *((f"site.extra_targets.{t.name}.occluded_observations", t.occluded_observations)
+                        for t in c.site.extra_targets)):
         bad = [i for i in idx if not i < o.count]
         if bad:
             raise ConfigError(f"'{name}' has indices outside 0..{o.count - 1}: {bad}")
@@ -311,3 +331,6 @@ def _check(c: SynthConfig) -> None:
         raise ConfigError("'laser.outlier_offset_m' must list at least one offset")
     if c.video.images_in_bag and c.format in ("tlog", "mcap"):
         raise ConfigError("'video.images_in_bag' needs a bag format (ros1, ros2-sqlite3, ros2-mcap)")
+    names = [c.site.target_name, *[t.name for t in c.site.extra_targets]]  # issue 21
+    if len(set(names)) != len(names):
+        raise ConfigError(f"'site.extra_targets': target names must be unique, got {names}")

@@ -72,7 +72,8 @@ class FrameSource:
         tex = ground_texture(cfg.scene.seed, cfg.scene.texture_px, cfg.scene.texture_res_m)
         self.renderer = Renderer(camera_matrix(cfg), cfg.camera.dist, (cfg.camera.width_px, cfg.camera.height_px),
                                  tex, cfg.scene.texture_res_m, cfg.site.target_size_m, cfg.scene.supersample,
-                                 cfg.scene.haze_km)
+                                 cfg.scene.haze_km, [(t.east_m, t.north_m, t.size_m, t.contrast)
+                                                     for t in cfg.site.extra_targets])
         self.n = len(tl.written_frames)
         self.zoom = zoom_factors(cfg, tl.frame_pts_ns(tl.written_frames))
 
@@ -83,8 +84,9 @@ class FrameSource:
             ft = self.truth_frames[k]
             rng = np.random.default_rng([cfg.seed, RNG_STREAMS.index("pixels"), int(self.tl.written_frames[k])])
             cloud = tuple(ft["true_target_pixel"]) if ft["occluded"] else None
+            more = [tuple(x["pixel"]) for x in ft.get("targets", {}).values() if x["occluded"]]
             yield self.renderer.render(R_cam_from_enu, self.states.camera_enu[k], rng, cfg.noise.pixel_noise_dn,
-                                       cloud, zoom=float(self.zoom[k]))
+                                       cloud, zoom=float(self.zoom[k]), more_clouds_px=more)
 
 
 def generate(cfg: SynthConfig, out_dir: str | Path, overwrite: bool = False,

@@ -78,11 +78,20 @@ def operator_flight_config(truth: dict, flight_dir: str | os.PathLike, relative_
         "lever_arms_m": {"camera": [float(v) for v in arms["camera"]],
                          "rangefinder": [float(v) for v in arms["rangefinder"]]},
         "clock": {"video_to_telemetry_offset_ns": int(meta["clock"]["video_to_telemetry_offset_ns"])},
-        "target": {"frame_index": int(mark["frame_index"]), "pixel": [float(v) for v in mark["pixel"]]},
+        **_targets(truth, mark),
         "observations": _observations(truth),
         "sigma": sensor_sigmas(truth),
         "truth_file": _rel(flight_dir / "truth.json", relative_to),
     }
+
+
+def _targets(truth: dict, mark: dict) -> dict:
+    """`target:` (one mark), or `targets:` when the flight has several (issue 21): each named target marked at
+    its true pixel in the first observation frame showing it (a target never visible is left out)."""
+    if not truth.get("targets"):
+        return {"target": {"frame_index": int(mark["frame_index"]), "pixel": [float(v) for v in mark["pixel"]]}}
+    return {"targets": [{"name": t["name"], "frame_index": int(t["mark"]["frame_index"]),
+                         "pixel": [float(v) for v in t["mark"]["pixel"]]} for t in truth["targets"] if t["mark"]]}
 
 
 def _observations(truth: dict) -> dict:
@@ -140,8 +149,8 @@ def flight_config_text(doc: dict, title: str) -> str:
         "lever_arms_m:",
         *(f"  {k}: {_flow(v)}" for k, v in doc["lever_arms_m"].items()),
         f"clock: {_flow(doc['clock'])}",
-        "target:",
-        *(f"  {k}: {_flow(v)}" for k, v in doc["target"].items()),
+        *(["target:", *(f"  {k}: {_flow(v)}" for k, v in doc["target"].items())] if "target" in doc else
+          ["targets:", *(f"- {_flow(t)}".replace("- ", "  - ", 1) for t in doc["targets"])]),
         f"observations: {_flow(doc['observations'])}",
         *_comment(tau_note),
         "sigma: {" + ", ".join(f"{k}: {_flow(v)}" for k, v in s.items()) + "}",

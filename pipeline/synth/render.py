@@ -179,8 +179,10 @@ class Renderer:
     """Renders frames of one camera over one ground texture. K (3, 3), dist (5,), size (w, h) px."""
 
     def __init__(self, K: np.ndarray, dist, size_px: tuple[int, int], texture: np.ndarray, texture_res_m: float,
-                 target_size_m: float, supersample: int = 2, haze_km: float = 16.0):
+                 target_size_m: float, supersample: int = 2, haze_km: float = 16.0, extra_targets=()):
+        """extra_targets: (east_m, north_m, size_m, contrast) of further panels on the ground (issue 21)."""
         self.K = K
+        self.extra_targets = tuple(extra_targets)
         self.w, self.h = size_px
         self.tex = texture
         self.res = texture_res_m
@@ -228,7 +230,7 @@ class Renderer:
 
     def render(self, R_cam_from_enu: np.ndarray, centre_enu: np.ndarray, rng: np.random.Generator,
                pixel_noise_dn: float = 1.5, cloud_at_px: tuple[float, float] | None = None,
-               zoom: float = 1.0) -> np.ndarray:
+               zoom: float = 1.0, more_clouds_px=()) -> np.ndarray:
         """(h, w, 3) uint8 BGR frame of a camera at centre_enu (3,) with rotation R_cam_from_enu (3, 3); `zoom`
         multiplies the focal lengths (a distortion-free camera only)."""
         e, n, dist_m = self.ground_points(R_cam_from_enu, centre_enu, zoom)
@@ -237,6 +239,8 @@ class Renderer:
         my = np.nan_to_num(-n / self.res + (n_tex / 2 - 0.5), nan=-1e6).astype(np.float32)
         img = cv2.remap(self.tex, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
         self._composite_target(img, e, n)
+        for east_m, north_m, size_m, contrast in self.extra_targets:
+            self._composite_target(img, e - east_m, n - north_m, size_m, contrast)
         out = cv2.resize(img, (self.w, self.h), interpolation=cv2.INTER_AREA).astype(np.float32)
         # smooth effects at output resolution: haze with distance, vignetting, cloud, sensor noise
         d = cv2.resize(np.minimum(dist_m, 1e7).astype(np.float32), (self.w, self.h), interpolation=cv2.INTER_AREA)
@@ -245,20 +249,28 @@ class Renderer:
         out *= self.vignette
         if cloud_at_px is not None:
             out = _cloud(out, cloud_at_px, rng)
+        for at in more_clouds_px:  # clouds over other targets (issue 21)
+            out = _cloud(out, at, rng)
         if pixel_noise_dn > 0:
             out += rng.normal(0, pixel_noise_dn, out.shape).astype(np.float32)
         return np.clip(np.rint(out), 0, 255).astype(np.uint8)
 
-    def _composite_target(self, img: np.ndarray, e: np.ndarray, n: np.ndarray) -> None:
-        """Blend the target pattern into the supersampled frame `img` (in place), within its bounding box."""
-        half = self.target_size_m / 2 + 2 * self.res
+    def _composite_target(self, img: np.ndarray, e: np.ndarray, n: np.ndarray, size_m: float | None = None,
+                          contrast: float = 1.0) -> None:
+        """Blend the target pattern (centred at e = n = 0, `size_m` across, default the main target's; its grey
+        levels scaled towards mid-grey by `contrast`) into the supersampled frame `img` (in place)."""
+        size_m = self.target_size_m if size_m is None else size_m
+        half = size_m / 2 + 2 * self.res
         near = (np.abs(e) < half) & (np.abs(n) < half)
         if not near.any():
             return
         rows, cols = np.flatnonzero(near.any(axis=1)), np.flatnonzero(near.any(axis=0))
         r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
         pat = target_pattern()
-        scale = TARGET_PATTERN_PX / self.target_size_m
+        if contrast != 1.0:
+            pat = pat.copy()
+            pat[..., :3] = 130.0 + contrast * (pat[..., :3] - 130.0)
+        scale = TARGET_PATTERN_PX / size_m
         tx = (e[r0:r1, c0:c1] * scale + (pat.shape[1] / 2 - 0.5)).astype(np.float32)
         ty = (-n[r0:r1, c0:c1] * scale + (pat.shape[0] / 2 - 0.5)).astype(np.float32)
         tgt = cv2.remap(pat, tx, ty, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=(0, 0, 0, 0))

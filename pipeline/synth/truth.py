@@ -24,12 +24,13 @@ def _ecef(lla: np.ndarray) -> np.ndarray:
     return np.stack(pymap3d.geodetic2ecef(lla[..., 0], lla[..., 1], lla[..., 2]), axis=-1)
 
 
-def project_target_px(cfg: SynthConfig, K: np.ndarray, states: TrueState) -> tuple[np.ndarray, np.ndarray]:
-    """(n, 2) distorted pixels of the target (target ENU origin) and (n,) whether it is in front of the camera.
-    K: (3, 3), or (n, 3, 3) per frame (zoom)."""
+def project_target_px(cfg: SynthConfig, K: np.ndarray, states: TrueState, point_enu=(0.0, 0.0, 0.0)
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 2) distorted pixels of the target (target ENU origin, or `point_enu`) and (n,) whether it is in front
+    of the camera. K: (3, 3), or (n, 3, 3) per frame (zoom)."""
     K = np.broadcast_to(np.asarray(K, dtype=np.float64), (len(states.camera_enu), 3, 3))
     R_cam_from_enu = np.swapaxes(states.R_enu_from_optical, -1, -2)
-    t = -np.einsum("nij,nj->ni", R_cam_from_enu, states.camera_enu)
+    t = -np.einsum("nij,nj->ni", R_cam_from_enu, states.camera_enu - np.asarray(point_enu, dtype=np.float64))
     px = np.empty((len(t), 2))
     dist = np.asarray(cfg.camera.dist, dtype=np.float64)
     for i in range(len(t)):  # cv2.projectPoints takes one pose per call
@@ -46,6 +47,14 @@ def frame_truth(cfg: SynthConfig, tl: Timeline, flight: Flight, states: TrueStat
     occluded = np.zeros(len(px), bool)
     for k in cfg.lost_target.occluded_observations:
         occluded |= np.abs(states.t_ns - tl.obs_t_ns[k]) <= LOST_WINDOW_NS
+    extra = {}  # issue 21: the other targets' pixels, visibility and occlusion per frame
+    for x in cfg.site.extra_targets:
+        xpx, xfront = project_target_px(cfg, K, states, (x.east_m, x.north_m, 0.0))
+        xin = xfront & (xpx[:, 0] >= 0) & (xpx[:, 0] <= w - 1) & (xpx[:, 1] >= 0) & (xpx[:, 1] <= h - 1)
+        xocc = np.zeros(len(xpx), bool)
+        for k in x.occluded_observations:
+            xocc |= np.abs(states.t_ns - tl.obs_t_ns[k]) <= LOST_WINDOW_NS
+        extra[x.name] = (xpx, xin, xocc)
     cam_lla = flight.enu_to_lla(states.camera_enu)
     cam_ecef = _ecef(cam_lla)
     R_ecef_from_optical = flight.R_ecef_from_enu_t @ states.R_enu_from_optical
@@ -60,6 +69,33 @@ def frame_truth(cfg: SynthConfig, tl: Timeline, flight: Flight, states: TrueStat
             "true_target_pixel": [float(v) for v in px[k]],
             "target_visible": bool(inside[k] and not occluded[k]), "occluded": bool(occluded[k]),
         })
+        if extra:
+            out[-1]["targets"] = {name: {"pixel": [float(v) for v in xpx[k]], "visible": bool(xin[k] and not xocc[k]),
+                                         "occluded": bool(xocc[k])} for name, (xpx, xin, xocc) in extra.items()}
+    return out
+
+
+def targets_truth(cfg: SynthConfig, flight: Flight, frames: list[dict], obs: list[dict]) -> list[dict]:
+    """Every target of a flight with extra targets (the main one first): name, true position (WGS84, ellipsoid
+    height), size, contrast, its mark (the first observation frame showing it, at its true pixel) and in which
+    observations it is visible."""
+    s = cfg.site
+    main_vis = [o["target_visible"] for o in obs]
+    main_mark = next((frames[o["frame_index"]] for o in obs if o["target_visible"]), None)
+    out = [{"name": s.target_name, "lat_deg": s.lat_deg, "lon_deg": s.lon_deg, "alt_m": s.alt_m,
+            "east_m": 0.0, "north_m": 0.0, "size_m": s.target_size_m, "contrast": 1.0,
+            "mark": None if main_mark is None else {"frame_index": main_mark["frame_index"], "pixel": [
+                round(v, 2) for v in main_mark["true_target_pixel"]]},
+            "visible_observations": [i for i, v in enumerate(main_vis) if v]}]
+    for x in s.extra_targets:
+        lla = flight.enu_to_lla(np.array([[x.east_m, x.north_m, 0.0]]))[0]
+        vis = [frames[o["frame_index"]]["targets"][x.name]["visible"] for o in obs]
+        first = next((o["frame_index"] for o, v in zip(obs, vis, strict=True) if v), None)
+        out.append({"name": x.name, "lat_deg": float(lla[0]), "lon_deg": float(lla[1]), "alt_m": float(lla[2]),
+                    "east_m": x.east_m, "north_m": x.north_m, "size_m": x.size_m, "contrast": x.contrast,
+                    "mark": None if first is None else {"frame_index": first, "pixel": [
+                        round(v, 2) for v in frames[first]["targets"][x.name]["pixel"]]},
+                    "visible_observations": [i for i, v in enumerate(vis) if v]})
     return out
 
 
@@ -134,6 +170,7 @@ def build_truth(cfg: SynthConfig, tl: Timeline, flight: Flight, laser: LaserTrut
                         if mark else None),
         "intersection_angle_deg": gamma,
         "n_observations": len(obs),
+        **({"targets": targets_truth(cfg, flight, frames, obs)} if s.extra_targets else {}),
         "laser_shots": {"t_ns": laser.t_ns.tolist(), "range_true_m": np.round(laser.range_true_m, 4).tolist(),
                         "logged": laser.logged.tolist(), "outlier": laser.outlier.tolist()},
         "frames": frames,

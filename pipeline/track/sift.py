@@ -100,6 +100,30 @@ class TrackResult:
         return out
 
 
+class ViewCache:
+    """Decoded frames' features shared by every target of a flight: each frame is decoded and its SIFT features
+    computed once, whatever the number of targets tracked through it. Holds (grayscale image, keypoints,
+    descriptors) per frame until dropped with the cache (a flight's observation frames and stepping stones).
+
+    share_matches: also keep each frame pair's homography (matching and RANSAC), so that targets tracked
+    through the same key frames match each pair once. Each pair is then matched with FLANN's random trees seeded
+    by the pair itself, so a target's track does not depend on which targets were tracked before it (without
+    it, as for a flight's single `target:`, the seed is set once per track, as before many targets)."""
+
+    def __init__(self, share_matches: bool = False):
+        self.views: dict[int, _View] = {}
+        self.pairs: dict[tuple[int, int], tuple] | None = {} if share_matches else None
+
+    def get(self, tracker: SiftTracker, decode: Callable[[Sequence[int]], dict[int, np.ndarray]],
+            indices: Sequence[int]) -> dict[int, _View]:
+        """{index: view} of the frames among `indices` that decode, decoding only those not seen before."""
+        missing = [int(i) for i in indices if int(i) not in self.views]
+        if missing:
+            for i, img in decode(missing).items():
+                self.views[int(i)] = tracker.view(int(i), img)
+        return {int(i): self.views[int(i)] for i in indices if int(i) in self.views}
+
+
 def to_gray(image: np.ndarray) -> np.ndarray:
     if image.ndim == 2:
         return image
@@ -125,6 +149,7 @@ class SiftTracker:
     """Track one marked ground point through chosen frames of a flight (see the module docstring)."""
 
     def __init__(self, settings: TrackerSettings | None = None):
+        self._pairs: dict | None = None  # a ViewCache's shared homographies during track(), when it shares them
         self.s = settings or TrackerSettings()
         self._sift = cv2.SIFT_create(nfeatures=self.s.n_features)
         self._matcher = cv2.FlannBasedMatcher({"algorithm": 1, "trees": 4}, {"checks": 48})
@@ -145,6 +170,15 @@ class SiftTracker:
     def homography(self, src: _View, dst: _View) -> tuple[np.ndarray | None, int, float, float]:
         """H_dst_from_src by ratio-test matches and RANSAC: (H or None, inliers, inlier ratio, RMS reprojection
         px of the inliers)."""
+        if self._pairs is None or src.index < 0 or dst.index < 0:
+            return self._homography(src, dst)
+        key = (src.index, dst.index)
+        if key not in self._pairs:
+            cv2.setRNGSeed((0x5EED + 7919 * key[0] + 104729 * key[1]) & 0x7FFFFFFF)  # the pair's own seed
+            self._pairs[key] = self._homography(src, dst)
+        return self._pairs[key]
+
+    def _homography(self, src: _View, dst: _View) -> tuple[np.ndarray | None, int, float, float]:
         if src.descriptors is None or dst.descriptors is None or len(src.descriptors) < 4 or len(dst.descriptors) < 4:
             return None, 0, 0.0, float("nan")
         pairs = self._matcher.knnMatch(src.descriptors, dst.descriptors, k=2)
@@ -220,21 +254,36 @@ class SiftTracker:
         return ft, H_cur_from_mark
 
     def track(self, decode: Callable[[Sequence[int]], dict[int, np.ndarray]], mark_index: int,
-              mark_px: Sequence[float], wanted: Sequence[int], available: Sequence[int] | None = None
-              ) -> TrackResult:
+              mark_px: Sequence[float], wanted: Sequence[int], available: Sequence[int] | None = None,
+              cache: ViewCache | None = None) -> TrackResult:
         """Track the point marked at `mark_px` (image pixel) in frame `mark_index` through the `wanted` frames.
 
         `decode(indices)` returns {index: image} (BGR or gray) for frame numbers; `available` lists every frame
         number that could be decoded, from which stepping stones are taken when a wanted frame cannot be matched
-        directly. Returns the wanted frames' tracks in the order of `wanted`."""
+        directly. `cache`: frames' features shared with other targets' tracks (each frame decoded once); without
+        it only the mark and key frames are kept (memory stays flat). Returns the wanted frames' tracks in the
+        order of `wanted`."""
         cv2.setRNGSeed(0x5EED)  # FLANN's randomised trees draw from OpenCV's RNG: same input, same answer
+        self._pairs = cache.pairs if cache is not None else None
+        try:
+            return self._track(decode, mark_index, mark_px, wanted, available, cache)
+        finally:
+            self._pairs = None
+
+    def _track(self, decode, mark_index, mark_px, wanted, available, cache) -> TrackResult:
+        if cache is not None:
+            def decode_views(indices):
+                return cache.get(self, decode, indices)
+        else:
+            def decode_views(indices):
+                return {i: self.view(i, img) for i, img in decode(indices).items()}
         wanted = [int(i) for i in wanted]
         mark_index = int(mark_index)
         p0 = np.asarray(mark_px, dtype=np.float64)
-        images = decode([mark_index])  # the others one at a time as the loop reaches them: memory stays flat
-        if mark_index not in images:
+        got0 = decode_views([mark_index])  # the others one at a time as the loop reaches them
+        if mark_index not in got0:
             raise InputError(f"the target's mark frame {mark_index} cannot be decoded")
-        mark = self.view(mark_index, images[mark_index])
+        mark = got0[mark_index]
         if not self._in_image(p0, mark):
             raise InputError(f"the target mark {p0.tolist()} is not inside frame {mark_index} "
                              f"({mark.image.shape[1]}x{mark.image.shape[0]} px) with a {self.s.patch_half_px} px "
@@ -254,18 +303,18 @@ class SiftTracker:
                 for j in [j for j in views if j not in (mark_index, key.view.index)]:
                     del views[j]  # only the mark and the key frame are needed from here on
                 if idx not in views:
-                    got = decode([idx])
+                    got = decode_views([idx])
                     if idx not in got:
                         out[idx] = FrameTrack(idx, via="not decodable")
                         continue
-                    views[idx] = self.view(idx, got[idx])
+                    views[idx] = got[idx]
                 cur = views[idx]
                 ft, H = self._attempt(key, mark, p0, cur, "key")
                 if H is None and key.view is not mark:  # re-acquisition against the mark itself
                     ft2, H = self._attempt(_Key(mark, np.eye(3)), mark, p0, cur, "reacquired")
                     ft = ft2 if H is not None else ft
                 if H is None:
-                    ft, H = self._bridge(decode, key, mark, p0, cur, avail, direction, views, ft)
+                    ft, H = self._bridge(decode_views, key, mark, p0, cur, avail, direction, views, ft)
                 out[idx] = ft
                 if H is None:
                     continue
@@ -278,10 +327,10 @@ class SiftTracker:
                     ft.keyframe = True
         return TrackResult([out[i] if i in out else FrameTrack(i, via="not tracked") for i in wanted])
 
-    def _bridge(self, decode, key: _Key, mark: _View, p0: np.ndarray, cur: _View, avail: list[int], direction: int,
-                views: dict[int, _View], failed: FrameTrack) -> tuple[FrameTrack, np.ndarray | None]:
+    def _bridge(self, decode_views, key: _Key, mark: _View, p0: np.ndarray, cur: _View, avail: list[int],
+                direction: int, views: dict[int, _View], failed: FrameTrack) -> tuple[FrameTrack, np.ndarray | None]:
         """Try intermediate frames between the key frame and `cur` as stepping stones (nearest to the key first,
-        at most `neighbours` of them)."""
+        at most `neighbours` of them); `decode_views(indices)` -> {index: view}."""
         lo, hi = sorted((key.view.index, cur.index))
         between = [i for i in avail if lo < i < hi]
         if not between or self.s.neighbours <= 0:
@@ -289,13 +338,13 @@ class SiftTracker:
         between.sort(key=lambda i: abs(i - key.view.index))
         step = max(1, len(between) // (self.s.neighbours + 1))
         stones = between[step - 1::step][: self.s.neighbours] or between[:1]
-        images = decode([i for i in stones if i not in views])
+        images = decode_views([i for i in stones if i not in views])
         k = key
         for i in stones:
             if i not in views:
                 if i not in images:
                     continue
-                views[i] = self.view(i, images[i])
+                views[i] = images[i]
             ft, H = self._attempt(k, mark, p0, views[i], "bridge")
             if H is not None:
                 k = _Key(views[i], H)

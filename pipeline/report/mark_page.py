@@ -1,0 +1,135 @@
+"""The marking page of `ridgeloc mark`: one self-contained HTML file (frames inline as JPEG data URIs, plain
+JavaScript, no network) that shows frames of a flight, lets the user click points, name them, and download the
+marks CSV (`name,frame_or_image,x_px,y_px`, pipeline/targets.py) for the flight config's `marks_file:`.
+
+Pixel convention (as everywhere in ridgeloc): (0, 0) is the centre of the top-left pixel, so a click at
+CSS offset (ox, oy) on an image drawn s times its natural size is the pixel (ox / s - 0.5, oy / s - 0.5).
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+from collections.abc import Mapping, Sequence
+from html import escape
+
+import cv2
+import numpy as np
+
+from pipeline.targets import MARKS_CSV_HEADER
+
+_CSS = """
+body { font: 14px system-ui, sans-serif; margin: 1em; color: #222; }
+#wrap { position: relative; display: inline-block; border: 1px solid #888; cursor: crosshair; }
+#frame { display: block; max-width: 100%; image-rendering: pixelated; }
+.pin { position: absolute; width: 11px; height: 11px; margin: -6px 0 0 -6px; border: 2px solid #ff0;
+       border-radius: 50%; box-shadow: 0 0 0 1px #000; pointer-events: none; }
+.pin span { position: absolute; left: 12px; top: -6px; color: #ff0; font-weight: bold; text-shadow: 0 0 2px #000;
+            white-space: nowrap; }
+table { border-collapse: collapse; margin-top: .5em; } td, th { border: 1px solid #ccc; padding: 2px 6px; }
+textarea { width: 40em; height: 8em; font: 12px monospace; }
+"""
+
+_JS = r"""
+(function () {
+  var FRAMES = %(frames)s;            // [{index, src, width, height}]
+  var marks = %(marks)s;              // [{name, frame, x, y}]
+  var current = 0;
+  var img = document.getElementById('frame'), wrap = document.getElementById('wrap');
+  var sel = document.getElementById('frames'), nameBox = document.getElementById('name');
+  var csvBox = document.getElementById('csv'), err = document.getElementById('error');
+  FRAMES.forEach(function (f, i) {
+    var o = document.createElement('option'); o.value = i; o.textContent = 'frame ' + f.index; sel.appendChild(o);
+  });
+  function csvText() {
+    var lines = ['name,frame_or_image,x_px,y_px'];
+    marks.forEach(function (m) { lines.push([m.name, m.frame, m.x.toFixed(2), m.y.toFixed(2)].join(',')); });
+    return lines.join('\n') + '\n';
+  }
+  function draw() {
+    var f = FRAMES[current];
+    if (img.getAttribute('src') !== f.src) { img.src = f.src; }
+    Array.prototype.slice.call(wrap.querySelectorAll('.pin')).forEach(function (p) { p.remove(); });
+    var s = img.clientWidth / f.width;
+    marks.forEach(function (m) {
+      if (m.frame !== f.index) { return; }
+      var p = document.createElement('div'); p.className = 'pin';
+      p.style.left = ((m.x + 0.5) * s) + 'px'; p.style.top = ((m.y + 0.5) * s) + 'px';
+      var t = document.createElement('span'); t.textContent = m.name; p.appendChild(t); wrap.appendChild(p);
+    });
+    var rows = marks.map(function (m, i) {
+      return '<tr><td>' + esc(m.name) + '</td><td>' + m.frame + '</td><td>' + m.x.toFixed(2) + '</td><td>' +
+        m.y.toFixed(2) + '</td><td><button data-i="' + i + '">remove</button></td></tr>';
+    });
+    document.getElementById('list').innerHTML =
+      '<tr><th>name</th><th>frame</th><th>x_px</th><th>y_px</th><th></th></tr>' + rows.join('');
+    csvBox.value = csvText();
+    document.body.setAttribute('data-marks', String(marks.length));
+  }
+  function esc(s) { return s.replace(/[&<>"]/g, function (c) { return '&#' + c.charCodeAt(0) + ';'; }); }
+  function nextName() {
+    var n = marks.length + 1;
+    while (marks.some(function (m) { return m.name === 'T' + n; })) { n++; }
+    return 'T' + n;
+  }
+  // A click: the image pixel under it (pixel centres at integers); the name from the box, else T<n>.
+  window.ridgelocMark = function (x, y, name) {
+    var f = FRAMES[current];
+    name = (name || '').trim() || nextName();
+    if (/[,\/\\:]/.test(name)) { err.textContent = 'a name must not contain , / \\ or :'; return false; }
+    if (x < 0 || y < 0 || x > f.width - 1 || y > f.height - 1) { err.textContent = 'outside the image'; return false; }
+    if (marks.some(function (m) { return m.name === name && m.frame === f.index; })) {
+      err.textContent = 'duplicate name ' + name + ' on frame ' + f.index; return false;
+    }
+    err.textContent = '';
+    marks.push({name: name, frame: f.index, x: x, y: y}); nameBox.value = ''; draw(); return true;
+  };
+  img.addEventListener('click', function (ev) {
+    var r = img.getBoundingClientRect(), f = FRAMES[current], s = r.width / f.width;
+    window.ridgelocMark((ev.clientX - r.left) / s - 0.5, (ev.clientY - r.top) / s - 0.5, nameBox.value);
+  });
+  document.getElementById('list').addEventListener('click', function (ev) {
+    var i = ev.target.getAttribute('data-i');
+    if (i !== null) { marks.splice(Number(i), 1); draw(); }
+  });
+  sel.addEventListener('change', function () { current = Number(sel.value); draw(); });
+  img.addEventListener('load', draw);
+  window.addEventListener('resize', draw);
+  document.getElementById('save').addEventListener('click', function () {
+    var a = document.createElement('a');
+    a.href = 'data:text/csv;charset=utf-8,' + encodeURIComponent(csvText());
+    a.download = %(csv_name)s; document.body.appendChild(a); a.click(); a.remove();
+  });
+  draw();
+})();
+"""
+
+
+def jpeg_data_uri(image: np.ndarray, quality: int = 92) -> str:
+    ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    if not ok:
+        raise ValueError("cannot encode the frame as JPEG")
+    return "data:image/jpeg;base64," + base64.b64encode(buf.tobytes()).decode("ascii")
+
+
+def mark_page(frames: Mapping[int, np.ndarray], title: str, marks: Sequence[dict] = (),
+              csv_name: str = "marks.csv") -> str:
+    """The page: `frames` {frame index: image (gray or BGR)}, `marks` already known ({name, frame, x, y})."""
+    items = [{"index": int(i), "src": jpeg_data_uri(img), "width": int(img.shape[1]), "height": int(img.shape[0])}
+             for i, img in sorted(frames.items())]
+    if not items:
+        raise ValueError("no frame to mark")
+    js = _JS % {"frames": json.dumps(items), "marks": json.dumps(list(marks)), "csv_name": json.dumps(csv_name)}
+    return (f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>{escape(title)}</title>"
+            f"<style>{_CSS}</style></head><body><h1>{escape(title)}</h1>"
+            "<p>Choose a frame, type a name (or leave it empty for T1, T2 ...) and click the point. A target may be "
+            "marked in several frames under the same name. Then save the marks CSV and set <code>marks_file:</code> "
+            "in the flight config to it.</p>"
+            "<p><label>Frame <select id=\"frames\"></select></label> "
+            "<label>Name <input id=\"name\" size=\"16\"></label> "
+            f"<button id=\"save\">Save {escape(csv_name)}</button> <span id=\"error\" style=\"color:#b00\"></span></p>"
+            "<div id=\"wrap\"><img id=\"frame\" alt=\"frame\"></div>"
+            "<table id=\"list\"></table>"
+            f"<p>{escape(','.join(MARKS_CSV_HEADER))} (what Save writes):<br>"
+            "<textarea id=\"csv\" readonly></textarea></p>"
+            f"<script>{js}</script></body></html>\n")

@@ -1,0 +1,305 @@
+"""The per-target stages of a flight: track -> on-axis ranges -> synchronize -> solve -> result, for each target.
+
+`pipeline.run.process_group` opens the `Flight` once (logs, frame index, camera, plan, origin), acquires the first
+target's marks and estimates the clock once, into a `FlightPass`; `locate_target` then tracks one target from its
+mark(s) through the planned frames (decoded frames and their SIFT features come from the pass's `ViewCache`: each
+frame is decoded and described once whatever the number of targets), drops the ranges not on it, assembles its
+observations and solves them with every method. `locate_targets` runs every named target of a flight: one that
+cannot be located becomes a `TargetFailure` (status and reason) and the others go on.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.check.flight import outside_telemetry, refusal_reason
+from pipeline.clock_estimate import ClockEstimate
+from pipeline.errors import ConfigError, InputError, RidgelocError
+from pipeline.flight import Flight, TargetMark, acquire_mark
+from pipeline.flight_config import FlightConfig
+from pipeline.geometry.frames import enu_from_lla
+from pipeline.geometry.rays import intersection_angle_deg
+from pipeline.intrinsics import frame_K
+from pipeline.progress import report_stage
+from pipeline.results import FlightResult, GroupResult, TargetFailure
+from pipeline.solve import mle_outputs
+from pipeline.solve.estimate import Estimate
+from pipeline.solve.observations import Observations, Sigma
+from pipeline.sync.assemble import assemble_observations
+from pipeline.sync.select import ObservationPlan
+from pipeline.targets import Mark, NamedTarget
+from pipeline.terrain.flight import add_dem_estimate, terrain_solve_options
+from pipeline.track.sift import SiftTracker, TrackResult, ViewCache
+
+
+class StageTimes:
+    """Wall and process-CPU seconds (all threads: the wall times' counterpart under load) of each stage; a stage
+    is entered with `with times("track", decoder):` (the decoder's time is booked as "decode"). Entering a stage
+    again adds to it."""
+
+    def __init__(self):
+        self.wall: dict[str, float] = {}
+        self.cpu: dict[str, float] = {}
+
+    def _add(self, stage: str, wall: float, cpu: float) -> None:
+        self.wall[stage] = self.wall.get(stage, 0.0) + wall
+        self.cpu[stage] = self.cpu.get(stage, 0.0) + cpu
+
+    @contextlib.contextmanager
+    def __call__(self, stage: str, decoder=None):
+        report_stage(stage)
+        t, c = time.perf_counter(), time.process_time()
+        d, dc = (decoder.seconds, decoder.cpu_seconds) if decoder is not None else (0.0, 0.0)
+        yield
+        if decoder is not None:
+            d, dc = decoder.seconds - d, decoder.cpu_seconds - dc
+            self._add("decode", d, dc)
+        self._add(stage, time.perf_counter() - t - d, time.process_time() - c - dc)
+
+    def plus(self, other: StageTimes) -> StageTimes:
+        """These times and `other`'s summed stage by stage (this one's stages first)."""
+        out = StageTimes()
+        for s in (self, other):
+            for k in s.wall:
+                out._add(k, s.wall[k], s.cpu[k])
+        return out
+
+
+@dataclass
+class FlightPass:
+    """What every target of one flight shares: the open flight, the observation plan (final: after a clock
+    estimate), the ENU origin, the tracker and its cache of decoded frames' features, the DEM (terrain, or None),
+    and the flight-level notes, stage times and clock estimate."""
+
+    flight: Flight
+    plan: ObservationPlan
+    origin: tuple[float, float, float]
+    tracker: SiftTracker
+    cache: ViewCache | None
+    dem: object = None
+    notes: list[str] = field(default_factory=list)
+    times: StageTimes = field(default_factory=StageTimes)
+    clock_estimate: ClockEstimate | None = None
+
+    def acquire(self, mark: Mark | None, notes: list[str]) -> TargetMark:
+        """A mark as a frame and pixel (`pipeline.flight.acquire_mark`), its note added to `notes`."""
+        f = self.flight
+        m = acquire_mark(mark, frames=f.frames, plan_frame_index=self.plan.frame_index, camera=f.camera,
+                         decoder=f.decoder, tracker=self.tracker, config_path=f.config.path)
+        notes += [m.note] if m.note else []
+        return m
+
+
+def methods_of(config: FlightConfig) -> list[str]:
+    from pipeline.solve import METHODS
+
+    if config.solve.methods == "all":
+        return list(METHODS)
+    methods = [config.solve.methods] if isinstance(config.solve.methods, str) else list(config.solve.methods)
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        raise ConfigError(f"solve.methods: unknown method(s) {unknown} (known: {', '.join(METHODS)})", config.path)
+    return methods
+
+
+def solve_all(obs: Observations, methods: Sequence[str], options: dict) -> tuple[dict[str, Estimate], dict]:
+    """Every method on one problem: (estimates, {method: {"status", "reason"}} for those that could not run)."""
+    from pipeline.solve import solve, unsolved_status
+
+    estimates, failures = {}, {}
+    for m in methods:
+        try:
+            estimates[m] = solve(m, obs, **dict(options.get(m) or {}))
+        except (RidgelocError, ValueError, np.linalg.LinAlgError) as exc:
+            failures[m] = {"status": unsolved_status(exc), "reason": str(exc)}
+    return estimates, failures
+
+
+def _frame_reason(lost: bool, via: str, inside: bool, used: bool) -> str | None:
+    """Why a planned observation frame lacks its pixel or is not used (None when it is whole)."""
+    why = []
+    if lost:
+        why.append(f"target lost: {via}")
+    if not inside:
+        why.append("outside the telemetry span: dropped")
+    elif not used:
+        why.append("neither a tracked pixel nor a valid range: dropped")
+    return "; ".join(why) or None
+
+
+def _combine(tracks: list[tuple[int, TrackResult]]) -> TrackResult:
+    """Per frame, the track from the nearest mark frame that holds the target there (the first mark's when none
+    does): several marks of one point re-acquire it where one mark's track loses it."""
+    if len(tracks) == 1:
+        return tracks[0][1]
+    out = []
+    for k in range(len(tracks[0][1].frames)):
+        options = sorted(tracks, key=lambda mt: abs(mt[1].frames[k].frame_index - mt[0]))
+        found = [t.frames[k] for _, t in options if not t.frames[k].lost]
+        out.append(found[0] if found else tracks[0][1].frames[k])
+    return TrackResult(out)
+
+
+def _on_axis_ranges(flight: Flight, plan: ObservationPlan, track: TrackResult, notes: list[str]) -> np.ndarray:
+    """The planned ranges (m,), NaN where the target was more than observations.max_laser_offset_px from the
+    principal point: the laser is boresighted, so the shot was not on the target."""
+    range_m, limit, cam = plan.range_m.copy(), flight.config.observations.max_laser_offset_px, flight.camera
+    if limit is None:
+        return range_m
+    where = np.where(np.isnan(track.pixel_px), track.predicted_px, track.pixel_px)
+    off_target = (np.hypot(where[:, 0] - cam.cx_px, where[:, 1] - cam.cy_px) > limit) & ~np.isnan(range_m)
+    if off_target.any():
+        range_m[off_target] = np.nan
+        notes.append(f"{int(off_target.sum())} range(s) not used: the target was more than {limit:g} px from the "
+                     "image centre, off the laser's axis")
+    return range_m
+
+
+def _synchronize(flight: Flight, plan: ObservationPlan, track: TrackResult, range_m: np.ndarray, truth_m,
+                 notes: list[str]) -> tuple[Observations, np.ndarray, np.ndarray]:
+    """(observations, useful (m,), inside (m,)): the observations of the planned frames the telemetry covers with a
+    tracked pixel or a range, after the geometry check (`pipeline.check.flight.refusal_reason`)."""
+    config = flight.config
+    poses, inside = flight.poses(plan.t_ns)
+    if not inside.any():
+        raise InputError(outside_telemetry(flight), config.path)
+    if not inside.all():
+        notes.append(f"{int((~inside).sum())} observation(s) outside the telemetry span were dropped")
+    sigma = Sigma.from_dict(dataclasses.asdict(config.sigma), "sigma")
+    useful = inside & (~track.lost | ~np.isnan(range_m))
+    if (inside & ~useful).any():
+        notes.append(f"{int((inside & ~useful).sum())} observation(s) with neither pixel nor range dropped")
+    if not useful.any():
+        raise InputError("no usable observation: the target was never tracked and no laser range is valid",
+                         config.path)
+    # A wrong convention gives an answer kilometres off with nothing else to show for it: refuse the flight.
+    refusal = refusal_reason(flight, plan.t_ns[useful], track.pixel_px[useful], range_m[useful])
+    if refusal is not None:
+        raise InputError(refusal, config.path)
+    K = frame_K(flight.camera, flight.camera_source, flight.log, plan.t_ns)  # per frame when a zoom reports its FOV
+    obs = assemble_observations(poses.subset(useful[inside]), plan.t_ns[useful], track.pixel_px[useful],
+                                range_m[useful], K=K[useful], dist=flight.camera.dist,
+                                sigma=sigma, truth_m=truth_m)
+    return obs, useful, inside
+
+
+def named_truth_lla(config: FlightConfig, name: str) -> tuple[float, float, float] | None:
+    """A named target's truth from the config's truth_file: its `targets` list ({name, lat_deg, lon_deg, alt_m})
+    when it has one (synthetic flights with several targets), else None."""
+    if config.truth is not None or config.truth_file is None:
+        return None
+    try:
+        doc = json.loads(Path(config.truth_file).read_text())
+        for t in doc.get("targets") or []:
+            if t.get("name") == name:
+                return float(t["lat_deg"]), float(t["lon_deg"]), float(t["alt_m"])
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise ConfigError(f"cannot read the targets' truth: {exc}", config.truth_file) from None
+    return None
+
+
+def _truth_lla(config: FlightConfig, target: NamedTarget | None):
+    if target is not None and target.truth_lla is not None:
+        return target.truth_lla
+    if target is None or target.name is None:
+        return config.truth_lla()
+    return named_truth_lla(config, target.name)
+
+
+def locate_target(fp: FlightPass, target: NamedTarget | None, marks: list[TargetMark] | None = None
+                  ) -> tuple[GroupResult, StageTimes]:
+    """Track, synchronise and solve one target of the flight (None: the crosshair): (its result with the flight's
+    settings, notes and times added, its own stage times). `marks`: the target's marks already acquired (the
+    first target's are, for the clock estimate). Raises a RidgelocError when the target cannot be located."""
+    flight, plan, config = fp.flight, fp.plan, fp.flight.config
+    times, notes = StageTimes(), []
+    with times("track", flight.decoder):
+        if marks is None:
+            marks = [fp.acquire(m, notes) for m in (target.marks if target is not None else [None])]
+        tracks = [(m.frame_index, fp.tracker.track(flight.decoder, m.frame_index, m.pixel_px,
+                                                   plan.frame_index.tolist(),
+                                                   available=np.asarray(flight.frames.index).tolist(),
+                                                   cache=fp.cache)) for m in marks]
+        track = _combine(tracks)
+    if flight.decoder.failed:
+        notes.append(f"{len(flight.decoder.failed)} frame(s) could not be decoded (damaged or truncated stream)")
+    if track.lost.any():
+        notes.append(f"target lost in {int(track.lost.sum())} of {plan.n} observation frames (pixel not used)")
+    range_m = _on_axis_ranges(flight, plan, track, notes)
+    truth_lla = _truth_lla(config, target)
+    truth_m = None if truth_lla is None else enu_from_lla(*truth_lla, fp.origin)
+    with times("sync"):
+        obs, useful, inside = _synchronize(flight, plan, track, range_m, truth_m, notes)
+    with times("solve"):  # with terrain: the `dem` method and the MLE's terrain prior
+        estimates, failures = solve_all(obs, methods_of(config),
+                                        terrain_solve_options(fp.dem, config.terrain, fp.origin, config.solve.options))
+        add_dem_estimate(fp.dem, obs, fp.origin, estimates, failures, [f"frame {i}" for i in plan.frame_index[useful]])
+    if not estimates:
+        reasons = "; ".join(f"{m}: {f['reason']}" for m, f in failures.items())
+        raise InputError(f"no estimator could solve the flight: {reasons}", config.path)
+    if "mle" in estimates:  # its fit message, boresight bias and rejected observations
+        notes.extend(mle_outputs.notes(estimates["mle"].extras, obs.t_ns, plan.frame_index[useful]))
+
+    reference = truth_m
+    if reference is None:
+        best = estimates.get("mle") or next(iter(estimates.values()))
+        reference = best.position_m
+    gamma = intersection_angle_deg(obs.platform_m, reference) if obs.n >= 2 and np.isfinite(reference).all() else \
+        float("nan")
+    tracking = track.to_dict()  # every planned observation frame, the dropped ones included
+    tracking["used"] = [bool(u) for u in useful]  # True: a row of observations.json, in the same order
+    tracking["reason"] = [_frame_reason(lost, via, ins, use) for lost, via, ins, use in
+                          zip(track.lost, tracking["via"], inside, useful, strict=True)]
+    tracking["t_ns"] = [int(t) for t in plan.t_ns]
+    tracking["range_t_ns"] = [int(t) for t in plan.range_t_ns]
+    tracking["mark"] = marks[0].to_dict()
+    if len(marks) > 1:
+        tracking["marks"] = [m.to_dict() for m in marks]
+    total = fp.times.plus(times)  # the flight's ingest and track (marks, clock) count in each target's
+    cam = flight.camera
+    settings = config.to_dict()
+    settings["camera_resolved"] = {"source": flight.camera_source, **{k: getattr(cam, k) for k in (
+        "width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px", "dist")}}
+    settings["notes"] = [*fp.notes, *notes]
+    if fp.clock_estimate is not None:
+        settings["clock_estimate"] = fp.clock_estimate.to_dict()
+    settings["solve_failures"] = failures
+    settings["frames_decoded"] = flight.decoder.decoded
+    settings["cpu_s"] = total.cpu
+    return GroupResult(name=config.name, origin_lla=fp.origin, observations=obs, estimates=estimates,
+                       truth_m=truth_m, intersection_angle_deg=gamma, timings_s=total.wall, settings=settings,
+                       tracking=tracking, target=None if target is None else target.name), times
+
+
+def locate_targets(fp: FlightPass, targets: list[NamedTarget], first_marks: list[TargetMark]) -> FlightResult:
+    """Every named target of the flight; those that cannot be located become TargetFailures. Raises InputError
+    when none can."""
+    results, failed = [], []
+    total = fp.times
+    for i, t in enumerate(targets):
+        try:
+            r, own = locate_target(fp, t, first_marks if i == 0 else None)
+        except RidgelocError as exc:
+            failed.append(TargetFailure(t.name, str(exc), tuple(methods_of(fp.flight.config))))
+            continue
+        total = total.plus(own)  # the flight's stages once, each target's own added
+        results.append(r)
+    if not results:
+        raise InputError("no target could be located: " + "; ".join(f"{f.target}: {f.message}" for f in failed),
+                         fp.flight.config.path)
+    for r in results:
+        r.settings["frames_decoded"] = fp.flight.decoder.decoded  # the flight's frames, decoded once for all
+    # the flight's own settings: a target's without its solve failures and CPU times, with the flight's notes
+    flight_settings = {k: v for k, v in results[0].settings.items() if k not in ("solve_failures", "cpu_s")}
+    flight_settings["notes"] = list(fp.notes)
+    flight_settings["frames_decoded"] = fp.flight.decoder.decoded
+    return FlightResult(name=fp.flight.config.name, targets=results, failed=failed, timings_s=total.wall,
+                        settings=flight_settings)

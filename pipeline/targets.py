@@ -1,0 +1,347 @@
+"""Many targets per flight: the flight config's `targets:` list and the marks files it may point at.
+
+A target is a name and one or more marks. A mark is a pixel (x_px, y_px; image pixels, (0, 0) the centre of the
+top-left pixel) in one frame of the flight's video, or a template image (a view of the target area, the target at
+`template_pixel`, default its centre) searched for in the observation frames. Sources, all giving `NamedTarget`s:
+
+- `target:` (the single mark of old configs): one target, name None; its outputs are those of ridgeloc before
+  `targets:` existed (no target column).
+- `targets:` in the flight config: a list of {name, frame_index + pixel | template (+ template_pixel), marks,
+  truth}; `marks` lists further {frame_index, pixel} marks of the same point.
+- `marks_file:` a CSV with the header `name,frame_or_image,x_px,y_px`, one row per mark (several rows per target
+  allowed): `frame_or_image` is a frame number of the video, or an image file (relative to the CSV) used as a
+  template with the target at (x_px, y_px) in it.
+- `marks_file:` an OpenDroneMap `gcp_list.txt`: a projection line, then `geo_x geo_y geo_z im_x im_y image
+  [name]` rows. The image is an image file beside the list (a template) or a frame named by its number
+  (`123`, `frame_123.png`, `frame123.jpg`). The surveyed coordinates are kept only as the target's truth (the
+  error columns, as `truth_file`), when the projection is geographic WGS84 (EPSG:4326, lon lat, ellipsoid
+  height); other projections keep the marks and drop the truth with a note.
+
+Errors are one line naming the file, the row and the problem (`marks_error`).
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from pipeline.errors import ConfigError
+
+MARKS_CSV_HEADER = ("name", "frame_or_image", "x_px", "y_px")
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
+
+
+@dataclass(frozen=True)
+class Mark:
+    """One mark: a pixel in a frame, or a template image (absolute path once resolved) with the target's pixel in
+    it. `source` names where it came from ("file, row N" or "targets[i]"), for error messages."""
+
+    frame_index: int | None = None
+    pixel: tuple[float, float] | None = None
+    template: str | None = None
+    template_pixel: tuple[float, float] | None = None
+    source: str = ""
+
+    def __post_init__(self):
+        if self.template is None and (self.frame_index is None or self.pixel is None):
+            raise ValueError("give either 'frame_index' and 'pixel', or 'template'")
+        if self.template is not None and self.pixel is not None:
+            raise ValueError("give either 'frame_index' and 'pixel', or 'template', not both")
+
+
+@dataclass(frozen=True)
+class NamedTarget:
+    """A target of a flight: its name (None for the old single `target:`), its marks (the first is the primary one,
+    the others re-acquire it), and its true position (lat_deg, lon_deg, ellipsoid alt_m) when known."""
+
+    name: str | None
+    marks: tuple[Mark, ...]
+    truth_lla: tuple[float, float, float] | None = None
+
+
+# ---- the `targets:` list of a flight config ----------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class FramePixel:
+    frame_index: int
+    pixel: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class TargetTruth:
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+
+
+@dataclass(frozen=True)
+class TargetEntry:
+    """One entry of the flight config's `targets:` list."""
+
+    name: str
+    frame_index: int | None = None
+    pixel: tuple[float, float] | None = None
+    template: str | None = None
+    template_pixel: tuple[float, float] | None = None
+    marks: tuple[FramePixel, ...] = field(default_factory=tuple)
+    truth: TargetTruth | None = None
+
+    def __post_init__(self):
+        check_name(self.name)
+        if self.template is None and (self.frame_index is None or self.pixel is None) and not self.marks:
+            raise ValueError("give 'frame_index' and 'pixel', 'template', or 'marks'")
+        if self.template is not None and self.pixel is not None:
+            raise ValueError("give either 'frame_index' and 'pixel', or 'template', not both")
+
+
+def check_name(name: str) -> str:
+    if not isinstance(name, str) or not name.strip() or any(c in name for c in "/\\:\n\r\t,") \
+            or name.startswith("."):
+        raise ValueError(f"a target name must be a non-empty folder-safe name without , / \\ :, got {name!r}")
+    return name
+
+
+def entries_to_targets(entries: Sequence[TargetEntry], where=None) -> list[NamedTarget]:
+    out = []
+    for i, t in enumerate(entries):
+        src = (f"{where}: " if where else "") + f"targets[{i}] ({t.name})"
+        marks = []
+        if t.template is not None:
+            marks.append(Mark(template=t.template, template_pixel=t.template_pixel, source=src))
+        elif t.frame_index is not None:
+            marks.append(Mark(frame_index=t.frame_index, pixel=t.pixel, source=src))
+        marks += [Mark(frame_index=m.frame_index, pixel=m.pixel, source=f"{src}.marks[{j}]")
+                  for j, m in enumerate(t.marks)]
+        truth = None if t.truth is None else (t.truth.lat_deg, t.truth.lon_deg, t.truth.alt_m)
+        out.append(NamedTarget(t.name, tuple(marks), truth))
+    return out
+
+
+def check_unique(targets: Sequence[NamedTarget], where) -> None:
+    seen: set[str] = set()
+    for t in targets:
+        if t.name in seen:
+            raise ConfigError(f"two targets are named {t.name!r}", where)
+        seen.add(t.name)
+
+
+# ---- marks files --------------------------------------------------------------------------------------------
+
+
+def marks_error(path, row: int, problem: str) -> ConfigError:
+    return ConfigError(f"row {row}: {problem}", path)
+
+
+_FRAME_NAME = re.compile(r"^(?:frame[_-]?)?(\d+)(?:\.[A-Za-z]+)?$")
+
+
+def _frame_or_image(value: str, base: Path, path, row: int, digits_only: bool) -> tuple[int | None, str | None]:
+    """(frame index, None) or (None, absolute template path) for a marks file's image column."""
+    v = value.strip()
+    if re.fullmatch(r"[+-]?\d+", v):
+        idx = int(v)
+        if idx < 0:
+            raise marks_error(path, row, f"frame index {idx} is negative")
+        return idx, None
+    candidate = (base / v) if not Path(v).is_absolute() else Path(v)
+    if Path(v).suffix.lower() in IMAGE_SUFFIXES and candidate.is_file():
+        return None, str(candidate.resolve())
+    m = None if digits_only else _FRAME_NAME.match(v)
+    if m is not None:
+        return int(m.group(1)), None
+    raise marks_error(path, row, f"unknown image {v!r}: neither a frame number nor an image file beside the "
+                                 "marks file")
+
+
+def _pixel(x: str, y: str, path, row: int) -> tuple[float, float]:
+    try:
+        px = (float(x), float(y))
+    except ValueError:
+        raise marks_error(path, row, f"pixel ({x!r}, {y!r}) is not two numbers") from None
+    if not all(abs(v) < float("inf") for v in px):
+        raise marks_error(path, row, f"pixel {px} is not finite")
+    if px[0] < 0 or px[1] < 0:
+        raise marks_error(path, row, f"pixel ({px[0]:g}, {px[1]:g}) is outside the image (negative)")
+    return px
+
+
+def _group(rows: list[tuple[str, Mark]], truths: dict[str, tuple | None]) -> list[NamedTarget]:
+    order: dict[str, list[Mark]] = {}
+    for name, mark in rows:
+        order.setdefault(name, []).append(mark)
+    return [NamedTarget(n, tuple(ms), truths.get(n)) for n, ms in order.items()]
+
+
+def read_marks_csv(path: str | Path) -> list[NamedTarget]:
+    """Targets of a marks CSV (`name,frame_or_image,x_px,y_px`); ConfigError naming file, row and problem.
+    Row numbers count the header as row 1. A name may repeat (several marks of one target) but not with the
+    same frame twice (a duplicate)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"cannot read the marks file: {exc}", path) from None
+    reader = csv.reader(text.splitlines())
+    header = next(reader, None)
+    if header is None or tuple(h.strip() for h in header) != MARKS_CSV_HEADER:
+        raise marks_error(path, 1, f"the header must be {','.join(MARKS_CSV_HEADER)}, got {','.join(header or [])!r}")
+    rows: list[tuple[str, Mark]] = []
+    seen: dict[tuple[str, object], int] = {}
+    for row_no, cells in enumerate(reader, start=2):
+        if not cells or all(not c.strip() for c in cells):
+            continue
+        if len(cells) != 4:
+            raise marks_error(path, row_no, f"expected 4 columns ({','.join(MARKS_CSV_HEADER)}), got {len(cells)}")
+        name, where, x, y = (c.strip() for c in cells)
+        try:
+            check_name(name)
+        except ValueError as exc:
+            raise marks_error(path, row_no, str(exc)) from None
+        frame, image = _frame_or_image(where, path.parent, path, row_no, digits_only=True)
+        px = _pixel(x, y, path, row_no)
+        key = (name, frame if image is None else image)
+        if key in seen:
+            raise marks_error(path, row_no, f"duplicate name {name!r} (already marked in row {seen[key]} on the "
+                                            "same frame or image)")
+        seen[key] = row_no
+        src = f"{path}: row {row_no}"
+        rows.append((name, Mark(frame_index=frame, pixel=px, source=src) if image is None else
+                     Mark(template=image, template_pixel=px, source=src)))
+    if not rows:
+        raise ConfigError("the marks file lists no mark", path)
+    return _group(rows, {})
+
+
+_GEOGRAPHIC = ("EPSG:4326", "WGS84", "+PROJ=LONGLAT", "+PROJ=LATLONG")
+
+
+def read_gcp_list(path: str | Path) -> tuple[list[NamedTarget], list[str]]:
+    """Targets of an OpenDroneMap gcp_list.txt (see the module docstring) and notes. A row without a name gets
+    `gcp<row>`; rows with the same name are marks of one point (their coordinates must agree)."""
+    path = Path(path)
+    try:
+        lines = path.read_text(encoding="utf-8-sig").splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"cannot read the GCP list: {exc}", path) from None
+    if not lines or not lines[0].strip():
+        raise marks_error(path, 1, "the first line must name the projection (e.g. EPSG:4326)")
+    projection = lines[0].strip()
+    geographic = projection.upper().replace(" ", "").startswith(tuple(p.replace(" ", "") for p in _GEOGRAPHIC))
+    notes = [] if geographic else [f"{path.name}: projection {projection!r} is not geographic WGS84 (EPSG:4326): "
+                                   "its surveyed coordinates are not used as truth"]
+    rows: list[tuple[str, Mark]] = []
+    truths: dict[str, tuple | None] = {}
+    seen: dict[tuple[str, object], int] = {}
+    for row_no, line in enumerate(lines[1:], start=2):
+        cells = line.split()
+        if not cells or line.lstrip().startswith("#"):
+            continue
+        if len(cells) < 6:
+            raise marks_error(path, row_no, "expected geo_x geo_y geo_z im_x im_y image [name]")
+        try:
+            geo = tuple(float(c) for c in cells[:3])
+        except ValueError:
+            raise marks_error(path, row_no, f"surveyed coordinates {cells[:3]} are not numbers") from None
+        px = _pixel(cells[3], cells[4], path, row_no)
+        frame, image = _frame_or_image(cells[5], path.parent, path, row_no, digits_only=False)
+        name = cells[6] if len(cells) > 6 else f"gcp{row_no}"
+        try:
+            check_name(name)
+        except ValueError as exc:
+            raise marks_error(path, row_no, str(exc)) from None
+        key = (name, frame if image is None else image)
+        if key in seen:
+            raise marks_error(path, row_no, f"duplicate name {name!r} (already marked in row {seen[key]} on the "
+                                            "same image)")
+        seen[key] = row_no
+        truth = (geo[1], geo[0], geo[2]) if geographic else None
+        if geographic and not (-90 <= truth[0] <= 90 and -180 <= truth[1] <= 360):
+            raise marks_error(path, row_no, f"latitude/longitude out of range: {truth[0]}, {truth[1]}")
+        if name in truths and truths[name] != truth:
+            raise marks_error(path, row_no, f"{name!r} has other surveyed coordinates in an earlier row")
+        truths[name] = truth
+        src = f"{path}: row {row_no}"
+        rows.append((name, Mark(frame_index=frame, pixel=px, source=src) if image is None else
+                     Mark(template=image, template_pixel=px, source=src)))
+    if not rows:
+        raise ConfigError("the GCP list holds no point", path)
+    return _group(rows, truths), notes
+
+
+def read_marks_file(path: str | Path) -> tuple[list[NamedTarget], list[str]]:
+    """A marks CSV or an OpenDroneMap gcp_list.txt (told apart by the CSV header): (targets, notes)."""
+    path = Path(path)
+    try:
+        first = path.read_text(encoding="utf-8-sig").split("\n", 1)[0]
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"cannot read the marks file: {exc}", path) from None
+    if first.strip().startswith("name,") or path.suffix.lower() == ".csv":
+        return read_marks_csv(path), []
+    return read_gcp_list(path)
+
+
+def check_marks_in_video(targets: Sequence[NamedTarget], frame_indices, width_px: int | None,
+                         height_px: int | None, where=None) -> None:
+    """ConfigError (naming the mark's file and row) for a mark on a frame the video does not have or a pixel
+    outside the image (`width_px` x `height_px`, when known)."""
+    frames = set(int(i) for i in frame_indices) if frame_indices is not None else None
+    for t in targets:
+        for m in t.marks:
+            if m.template is not None:
+                continue
+            src = m.source or str(where or "")
+            if frames is not None and m.frame_index not in frames:
+                lo, hi = (min(frames), max(frames)) if frames else (None, None)
+                raise ConfigError(f"{src}: frame index {m.frame_index} out of range (the video has frames "
+                                  f"{lo}..{hi})")
+            if width_px is not None and not (0 <= m.pixel[0] <= width_px - 1 and 0 <= m.pixel[1] <= height_px - 1):
+                raise ConfigError(f"{src}: pixel ({m.pixel[0]:g}, {m.pixel[1]:g}) is outside the image "
+                                  f"({width_px}x{height_px} px)")
+
+
+def flight_targets(config) -> list[NamedTarget]:
+    """Every target of a flight config: `targets:` entries, then the marks file's, or the single `target:`
+    (name None), or [] when no mark is given (the crosshair of the first observation)."""
+    if config.targets or config.marks_file:
+        out = entries_to_targets(config.targets, config.path)
+        if config.marks_file:
+            out += read_marks_file(config.marks_file)[0]
+        check_unique(out, config.path)
+        return out
+    if config.target is None:
+        return []
+    t = config.target
+    mark = (Mark(template=t.template, template_pixel=t.template_pixel, source="target") if t.template is not None
+            else Mark(frame_index=t.frame_index, pixel=t.pixel, source="target"))
+    return [NamedTarget(None, (mark,), None)]
+
+
+def first_mark(config) -> Mark | None:
+    """The first target's first mark (None: the crosshair): the one the clock estimate tracks."""
+    targets = flight_targets(config)
+    return targets[0].marks[0] if targets else None
+
+
+def resolve_config_targets(cfg, base: Path, where, resolve):
+    """The flight config with its targets' template paths and marks file made absolute (`resolve(base, p, what,
+    where)`), the marks file read (its errors raised now, before anything runs) and, when the config gives the
+    image size and a frames CSV, every mark checked against them."""
+    import dataclasses
+
+    if not cfg.targets and cfg.marks_file is None:
+        return cfg
+    entries = tuple(t if t.template is None else
+                    dataclasses.replace(t, template=resolve(base, t.template, f"targets[{i}].template", where))
+                    for i, t in enumerate(cfg.targets))
+    cfg = dataclasses.replace(cfg, targets=entries, marks_file=resolve(base, cfg.marks_file, "marks_file", where))
+    frames = None
+    if cfg.files.frames_csv is not None:  # the frame numbers too (else once `run` reads the video's index)
+        from pipeline.ingest.video import _read_frames_csv
+
+        frames = _read_frames_csv(Path(cfg.files.frames_csv))[0]
+    check_marks_in_video(flight_targets(cfg), frames, cfg.camera.width_px, cfg.camera.height_px, where)
+    return cfg

@@ -1,0 +1,100 @@
+"""`ridgeloc mark` (issue 21): the offline marking page, driven in headless Chromium: clicks on the frame become
+marks at the clicked image pixels, named, listed and written as the marks CSV that pipeline.targets reads."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from html import unescape
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.report.mark_page import mark_page
+from pipeline.targets import read_marks_csv
+
+ROOT = Path(__file__).resolve().parents[1]
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+needs_chromium = pytest.mark.skipif(
+    CHROMIUM is None, reason="headless Chromium not installed (Debian: apt-get install chromium; .ci/run installs it)")
+FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+         "--disable-background-networking", "--disable-component-update", "--disable-sync", "--hide-scrollbars",
+         "--virtual-time-budget=8000", "--window-size=1400,1000")
+
+# After load: click the image at CSS offsets (11, 21) and (251, 101) from its corner (drawn at its natural size: the
+# image pixels (10.5, 20.5) and (250.5, 100.5), pixel centres at integers), the second named "mast", then a
+# duplicate, then a click on frame 7. MouseEvent coordinates are whole CSS pixels: the image's corner is too.
+_CLICKS = """<script>
+window.addEventListener('load', function () { setTimeout(function () {
+  var img = document.getElementById('frame');
+  document.getElementById('wrap').style.cssText += 'position: fixed; left: 0; top: 0;';  // a whole-pixel corner
+  function click(x, y) {
+    var r = img.getBoundingClientRect();
+    img.dispatchEvent(new MouseEvent('click', {bubbles: true, clientX: r.left + x, clientY: r.top + y}));
+  }
+  click(11, 21);
+  document.getElementById('name').value = 'mast'; click(251, 101);
+  document.getElementById('name').value = 'mast'; click(30, 30);
+  var dup = document.getElementById('error').textContent;
+  var sel = document.getElementById('frames'); sel.value = '1'; sel.dispatchEvent(new Event('change'));
+  setTimeout(function () {
+    document.getElementById('name').value = 'mast'; click(40, 41);
+    var r = img.getBoundingClientRect();
+    document.body.setAttribute('data-result', JSON.stringify({csv: document.getElementById('csv').value, dup: dup,
+      corner: [r.left, r.top],
+      pins: document.querySelectorAll('.pin').length, img: img.naturalWidth + 'x' + img.naturalHeight,
+      css: img.clientWidth}));
+  }, 300);
+}, 500); });
+</script>"""
+
+
+def _frames() -> dict[int, np.ndarray]:
+    rng = np.random.default_rng(3)
+    return {4: rng.integers(0, 255, (120, 300, 3), dtype=np.uint8), 7: rng.integers(0, 255, (120, 300), np.uint8)}
+
+
+def test_the_page_is_self_contained():
+    html = mark_page(_frames(), "t", [{"name": "A", "frame": 4, "x": 1.0, "y": 2.0}])
+    assert "data:image/jpeg;base64," in html and html.count("data:image/jpeg") == 2
+    assert not re.search(r"""(src|href)=["']https?://""", html)  # nothing from the network
+
+
+@needs_chromium
+def test_clicks_become_the_marks_csv(tmp_path):
+    page = tmp_path / "marks.html"
+    page.write_text(mark_page(_frames(), "test").replace("</body>", _CLICKS + "</body>"))
+    with tempfile.TemporaryDirectory() as profile:
+        out = subprocess.run([CHROMIUM, *FLAGS, f"--user-data-dir={profile}", "--dump-dom", page.as_uri()],
+                             capture_output=True, text=True, timeout=180)
+    m = re.search(r'data-result="([^"]*)"', out.stdout)
+    assert m, (out.stdout[-1500:], out.stderr[-1500:])
+    import json
+
+    res = json.loads(unescape(m.group(1)))
+    assert res["img"] == "300x120" and res["css"] == 300  # drawn at natural size: offsets are pixels + 0.5
+    assert all(float(v).is_integer() for v in res["corner"])
+    assert res["dup"].startswith("duplicate name mast on frame 4")
+    assert res["pins"] == 1  # frame 7 shows its own mark only
+    assert res["csv"] == ("name,frame_or_image,x_px,y_px\nT1,4,10.50,20.50\nmast,4,250.50,100.50\n"
+                          "mast,7,39.50,40.50\n")
+    (tmp_path / "marks.csv").write_text(res["csv"])
+    targets = read_marks_csv(tmp_path / "marks.csv")  # what the page saves is what a flight reads
+    assert [(t.name, [(m.frame_index, m.pixel) for m in t.marks]) for t in targets] == [
+        ("T1", [(4, (10.5, 20.5))]), ("mast", [(4, (250.5, 100.5)), (7, (39.5, 40.5))])]
+
+
+def test_mark_command_writes_the_page_of_a_flight(tmp_path):
+    out = tmp_path / "m.html"
+    r = subprocess.run([sys.executable, "-m", "pipeline", "mark", str(ROOT / "configs" / "flights" /
+                        "three_targets.yaml"), "-o", str(out), "--max-frames", "3"], cwd=ROOT, capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    html = out.read_text()
+    assert html.count("data:image/jpeg") == 3  # frames 4 (the marks' frame), and three spread observation frames
+    for name in ("panel", "small_grey", "far_north"):  # the config's marks, to edit
+        assert f'"name": "{name}"' in html

@@ -1,0 +1,119 @@
+"""Marks of many targets (issue 21): the `targets:` list, marks CSV and OpenDroneMap gcp_list.txt, and their
+one-line errors naming file, row and problem (pipeline/targets.py)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from pipeline.errors import ConfigError
+from pipeline.flight_config import load_flight_config
+from pipeline.targets import flight_targets, read_gcp_list, read_marks_csv
+
+ROOT = Path(__file__).resolve().parents[1]
+GROUP1 = ROOT / "sample_data" / "group1"
+
+
+def _flight(tmp_path: Path, **keys) -> Path:
+    """A flight config of sample flight group1 (600x400 px, frames 0..143) without its `target:`, plus `keys`."""
+    doc = yaml.safe_load((ROOT / "configs" / "flights" / "group1.yaml").read_text())
+    doc.pop("target")
+    doc["files"] = {"telemetry": [str(GROUP1 / "flight.tlog")], "video": str(GROUP1 / "video.mp4"),
+                    "frames_csv": str(GROUP1 / "video.frames.csv")}
+    doc["truth_file"] = str(GROUP1 / "truth.json")
+    doc.update(keys)
+    path = tmp_path / "flight.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_marks_csv_groups_rows_by_name_and_reads_templates(tmp_path):
+    (tmp_path / "chip.png").write_bytes((ROOT / "docs" / "sample_frame.png").read_bytes())
+    p = tmp_path / "marks.csv"
+    p.write_text("name,frame_or_image,x_px,y_px\npole1,4,300.5,200\npole2,4,100,50\npole1,40,310,190.25\n"
+                 "roof,chip.png,12,13\n")
+    targets = read_marks_csv(p)
+    assert [t.name for t in targets] == ["pole1", "pole2", "roof"]
+    assert [(m.frame_index, m.pixel) for m in targets[0].marks] == [(4, (300.5, 200.0)), (40, (310.0, 190.25))]
+    assert targets[2].marks[0].template == str((tmp_path / "chip.png").resolve())
+    assert targets[2].marks[0].template_pixel == (12.0, 13.0)
+    assert targets[0].marks[1].source == f"{p}: row 4"
+
+
+def test_gcp_list_marks_with_their_surveyed_truth(tmp_path):
+    (tmp_path / "frame_0040.png").write_bytes((ROOT / "docs" / "sample_frame.png").read_bytes())
+    p = tmp_path / "gcp_list.txt"
+    p.write_text("EPSG:4326\n108.7601 34.3602 372.5 300 200 4 gcpA\n108.7601 34.3602 372.5 310 190 frame_40.jpg gcpA\n"
+                 "108.7700 34.3700 371.0 20 30 frame_0040.png\n")
+    targets, notes = read_gcp_list(p)
+    assert notes == []
+    a, b = targets
+    assert a.name == "gcpA" and a.truth_lla == (34.3602, 108.7601, 372.5)  # lon lat order in the file
+    assert [m.frame_index for m in a.marks] == [4, 40]  # a frame named by its number
+    assert b.name == "gcp4" and b.marks[0].template.endswith("frame_0040.png")  # an image beside the list
+    p.write_text("+proj=utm +zone=49 +datum=WGS84\n500000 3800000 372 300 200 4 gcpA\n")
+    targets, notes = read_gcp_list(p)
+    assert targets[0].truth_lla is None and "not geographic" in notes[0]
+
+
+@pytest.mark.parametrize("rows, problem", [
+    ("B,9999,10,10", "row 3: frame index 9999 out of range (the video has frames 0..143)"),
+    ("A,4,310,200", "row 3: duplicate name 'A'"),
+    ("B,nope.png,10,10", "row 3: unknown image 'nope.png'"),
+    ("B,5,700,10", "row 3: pixel (700, 10) is outside the image (600x400 px)"),
+    ("B,5,-1,10", "row 3: pixel (-1, 10) is outside the image"),
+    ("B,5,ten,10", "row 3: pixel ('ten', '10') is not two numbers"),
+    ("B,5,10", "row 3: expected 4 columns"),
+])
+def test_a_bad_marks_file_is_one_line_naming_file_row_and_problem(tmp_path, rows, problem):
+    marks = tmp_path / "marks.csv"
+    marks.write_text(f"name,frame_or_image,x_px,y_px\nA,4,300,200\n{rows}\n")
+    with pytest.raises(ConfigError) as exc:
+        load_flight_config(_flight(tmp_path, marks_file="marks.csv"))
+    msg = str(exc.value)
+    assert msg.startswith(f"{marks}: {problem}") and "\n" not in msg, msg
+
+
+def test_a_bad_marks_file_stops_the_run_before_anything_is_written(tmp_path):
+    (tmp_path / "marks.csv").write_text("name,frame_or_image,x_px,y_px\nA,4,300,200\nB,200,10,10\n")
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "pipeline", "run", str(_flight(tmp_path, marks_file="marks.csv")),
+                        "-o", str(out), "-q"], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert r.returncode != 0 and not out.exists()
+    assert r.stderr.strip().splitlines() == [
+        f"ridgeloc: error: {tmp_path / 'marks.csv'}: row 3: frame index 200 out of range (the video has frames 0..143)"]
+
+
+def test_targets_list_with_several_marks_and_truth(tmp_path):
+    cfg = load_flight_config(_flight(tmp_path, targets=[
+        {"name": "A", "frame_index": 4, "pixel": [300.0, 200.0], "marks": [{"frame_index": 50, "pixel": [290, 210]}],
+         "truth": {"lat_deg": 34.36, "lon_deg": 108.76, "alt_m": 372.0}},
+        {"name": "B", "frame_index": 4, "pixel": [100.0, 100.0]}]))
+    a, b = flight_targets(cfg)
+    assert [(m.frame_index, m.pixel) for m in a.marks] == [(4, (300.0, 200.0)), (50, (290.0, 210.0))]
+    assert a.truth_lla == (34.36, 108.76, 372.0) and b.truth_lla is None
+
+
+def test_single_target_stays_a_one_element_unnamed_list(tmp_path):
+    cfg = load_flight_config(ROOT / "configs" / "flights" / "group1.yaml")
+    (t,) = flight_targets(cfg)
+    assert t.name is None and (t.marks[0].frame_index, t.marks[0].pixel) == (4, (304.02, 200.08))
+
+
+@pytest.mark.parametrize("keys, problem", [
+    ({"target": {"frame_index": 4, "pixel": [1.0, 1.0]}, "targets": [{"name": "A", "frame_index": 4,
+                                                                      "pixel": [300.0, 200.0]}]}, "not both"),
+    ({"targets": [{"name": "A", "frame_index": 4, "pixel": [300.0, 200.0]},
+                  {"name": "A", "frame_index": 5, "pixel": [300.0, 200.0]}]}, "two targets are named 'A'"),
+    ({"targets": [{"name": "a/b", "frame_index": 4, "pixel": [300.0, 200.0]}]}, "folder-safe"),
+    ({"targets": [{"name": "A", "frame_index": 400, "pixel": [300.0, 200.0]}]},
+     "targets[0] (A): frame index 400 out of range"),
+])
+def test_targets_list_errors(tmp_path, keys, problem):
+    with pytest.raises(ConfigError, match=None) as exc:
+        load_flight_config(_flight(tmp_path, **keys))
+    assert problem in str(exc.value)

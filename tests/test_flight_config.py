@@ -123,9 +123,12 @@ def test_the_bundled_sample_configs_load():
     assert [e.error for e in entries] == [None] * len(entries)
     names = [e.config.name for e in entries]
     assert names == ["group1", "group2", "group3", "group4", "group5", "group6", "hard_outliers", "angle10", "fmv",
-                     "three_targets"]  # three_targets: issue 21
+                     "three_targets", "h20_laser"]  # three_targets: issue 21; h20_laser: drone photos, issue 22
     for e in entries:
         assert Path(e.config.truth_file).parent.name == e.config.name
+        if e.config.files.photos:  # a photo flight: photos, marks and a DEM, no video or observation plan
+            assert e.config.terrain is not None and e.config.files.marks
+            continue
         # fmv: continuous full-motion video, every laser shot an observation; the others: triggered bursts
         mode = "range_times" if e.config.name == "fmv" else "bursts"
         assert e.config.observations.mode == mode and e.config.sigma.range_m == 5.0

@@ -16,6 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.errors import RidgelocError
 from pipeline.geometry.camera import intrinsics_matrix, look_at_rotation, project, projection_matrix
+from pipeline.geometry.rays import intersection_angle_deg as los_angle_deg
 from pipeline.results import GroupResult
 from pipeline.solve.observations import Observations, Sigma
 
@@ -82,7 +83,7 @@ def synthetic_group(name: str, *, seed: int = 0, intersection_angle_deg: float =
     return GroupResult(
         name=name, origin_lla=origin_lla, observations=obs, estimates=estimates,
         truth_m=target if truth_known else None,
-        intersection_angle_deg=intersection_angle_deg(obs.platform_m, target),
+        intersection_angle_deg=los_angle_deg(obs.platform_m, target),
         timings_s={"synthesize": t_obs, "solve": t_solve},
         settings={"synthetic": {"seed": seed, "intersection_angle_deg": intersection_angle_deg,
                                 "n_frames": n_frames}},

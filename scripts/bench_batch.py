@@ -23,8 +23,9 @@ import time
 from pathlib import Path
 
 from pipeline.batch import Job, discover_flights, run_jobs
+from pipeline.geometry.rays import intersection_angle_deg
 from pipeline.report.outputs import write_group_outputs
-from pipeline.report.synthetic import DEFAULT_ORIGIN_LLA, los_intersection_angle_deg, solve_all, synthetic_observations
+from pipeline.report.synthetic import DEFAULT_ORIGIN_LLA, solve_all, synthetic_observations
 from pipeline.results import GroupResult
 from pipeline.solve.observations import Observations
 
@@ -33,7 +34,7 @@ def standin_job(payload: dict) -> str:
     obs = Observations.load(payload["observations"])
     estimates, t = solve_all(obs)
     r = GroupResult(name=payload["name"], origin_lla=DEFAULT_ORIGIN_LLA, observations=obs, estimates=estimates,
-                    truth_m=obs.truth_m, intersection_angle_deg=los_intersection_angle_deg(obs.platform_m, obs.truth_m),
+                    truth_m=obs.truth_m, intersection_angle_deg=intersection_angle_deg(obs.platform_m, obs.truth_m),
                     timings_s={"solve": t})
     write_group_outputs(payload["outdir"], r)
     return r.name

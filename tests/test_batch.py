@@ -13,10 +13,10 @@ import pytest
 
 from pipeline.batch import Job, discover_flights, report_stage, run_jobs, summarize_failures
 from pipeline.errors import ConfigError, InputError
+from pipeline.geometry.rays import intersection_angle_deg
 from pipeline.report import write_run_outputs
 from pipeline.report.synthetic import (
     DEFAULT_ORIGIN_LLA,
-    los_intersection_angle_deg,
     solve_all,
     synthetic_observations,
 )
@@ -33,8 +33,7 @@ def solve_flight(path: str) -> GroupResult:
     report_stage("solve")
     estimates, t_solve = solve_all(obs)
     return GroupResult(name=Path(path).stem, origin_lla=DEFAULT_ORIGIN_LLA, observations=obs, estimates=estimates,
-                       truth_m=obs.truth_m, intersection_angle_deg=los_intersection_angle_deg(obs.platform_m,
-                                                                                               obs.truth_m),
+                       truth_m=obs.truth_m, intersection_angle_deg=intersection_angle_deg(obs.platform_m, obs.truth_m),
                        timings_s={"solve": t_solve})
 
 

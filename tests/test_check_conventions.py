@@ -10,7 +10,7 @@ import re
 import numpy as np
 import pytest
 
-from pipeline.check.geometry import cluster, range_bias_problem
+from pipeline.check.geometry import cluster, meet_undetermined_warning, range_bias_problem
 from pipeline.check.report import check_flight, format_check
 from pipeline.cli import main as cli_main
 from pipeline.errors import InputError
@@ -186,7 +186,30 @@ def test_cluster_sizes_and_range_bias():
     assert good.consistent and good.spread_m < 20 and range_bias_problem(good) is None
     biased = cluster(origins, d, dist + 400.0)
     assert biased.consistent and re.search(r"\b(39\d|40\d) m longer", range_bias_problem(biased))
+    assert biased.meet_along_sigma_m < 200 and meet_undetermined_warning(biased) is None  # 45 deg apart: determined
     flipped = cluster(origins, -d, dist)  # rays pointing up and away
     assert flipped.inconsistent and not flipped.ahead
     yawed = cluster(origins, d @ np.array([[0, -1.0, 0], [1, 0, 0], [0, 0, 1]]).T, dist)  # 90 deg yaw off
     assert yawed.inconsistent and math.isfinite(yawed.spread_m)
+
+
+def test_range_bias_not_flagged_where_nearly_parallel_rays_do_not_fix_the_meeting_point():
+    """A 40 m pass at 1.7 km (lines of sight 1-2 deg apart) with a pointing error drifting 0 -> 0.6 deg (as a
+    gimbal's does): the rays meet ~500 m beyond the target, far outside their statistical error, but a 1.1 deg
+    pointing error moves that point by ~700 m along them: no problem, a warning. Ranges in feet still are one."""
+    n = 40
+    origins = np.c_[np.linspace(-20, 20, n), np.full(n, -1650.0), np.full(n, 400.0)]
+    d = -origins
+    dist = np.linalg.norm(d, axis=1)
+    d /= dist[:, None]
+    a = np.radians(np.linspace(0.0, 0.6, n))  # drift about the vertical
+    d = np.c_[np.cos(a) * d[:, 0] - np.sin(a) * d[:, 1], np.sin(a) * d[:, 0] + np.cos(a) * d[:, 1], d[:, 2]]
+    c = cluster(origins, d, dist)
+    assert c.consistent and c.gamma_deg < 2.5
+    # the statistical test alone would call it a range bias
+    assert abs(c.range_bias_m) > max(5 * c.range_bias_sigma_m, 0.03 * c.distance_m) and c.range_bias_m > 400
+    assert c.meet_undetermined and range_bias_problem(c) is None
+    assert re.search(r"nearly parallel .* undetermined along them .* cannot be checked", meet_undetermined_warning(c))
+    feet = cluster(origins, d, dist * 3.2808)
+    assert not feet.meet_undetermined and re.search(r"km longer than the distance", range_bias_problem(feet))
+    assert meet_undetermined_warning(feet) is None

@@ -160,3 +160,16 @@ def test_geoid_separation_auto_is_the_geoid_model_at_the_first_position(flight_d
     doc["altitude"] = {"geoid_separation_m": "egm96"}
     with pytest.raises(ConfigError, match=r"altitude: geoid_separation_m must be a number \(m\) or .auto."):
         load_flight_config(_write(flight_dir / "bad.yaml", doc))
+
+
+def test_camera_default_mounting_is_the_geometry_convention():
+    """flight_config sits below geometry in the layers, so Camera keeps its own literal: it must stay the one
+    pipeline.geometry.pose uses (optical x = gimbal right (y), optical y = down (z), optical z = forward (x))."""
+    import numpy as np
+
+    from pipeline.flight_config import Camera
+    from pipeline.geometry.pose import R_OPTICAL_FROM_GIMBAL_DEFAULT
+
+    expected = [[0, 1, 0], [0, 0, 1], [1, 0, 0]]
+    np.testing.assert_array_equal(Camera().R_optical_from_gimbal, expected)
+    np.testing.assert_array_equal(R_OPTICAL_FROM_GIMBAL_DEFAULT, expected)

@@ -103,7 +103,7 @@ def test_dataflash_rfnd_orientation_and_instance(tmp_path):
     _write(p, with_mnt=False, orient=25)
     log = read_flight([p])
     assert log.range is None
-    assert any("10 of 10 RFND records" in w and "down-facing" in w for w in log.warnings)
+    assert any("10 of 10 RFND samples with orientation 25 ignored" in w and "down-facing" in w for w in log.warnings)
     log = read_flight([p], mapping={"dataflash": {"range": {"orientations": [25]}}})
     np.testing.assert_allclose(log.range.range_m[:3], [12.34, 12.35, 12.36])
     p = tmp_path / "two.bin"
@@ -113,6 +113,9 @@ def test_dataflash_rfnd_orientation_and_instance(tmp_path):
             w.write("RFND", 1_000_000 + i * 100_000, i % 2, 50_000 + i, 4, 0)  # instance 1 at 500.01 m, ...
     log = read_flight([p], mapping={"dataflash": {"range": {"instance": 1}}})
     np.testing.assert_allclose(log.range.range_m, [500.01, 500.03, 500.05])
+    log = read_flight([p])  # default: the lowest instance, with a warning naming the key
+    np.testing.assert_allclose(log.range.range_m, [500.00, 500.02, 500.04])
+    assert any("range from instance 0 (set dataflash.range.instance" in w for w in log.warnings)
 
 
 def test_dataflash_instances_are_never_interleaved(tmp_path):

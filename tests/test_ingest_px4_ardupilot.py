@@ -155,4 +155,13 @@ def test_ulog_distance_sensor_instances_by_orientation():
     np.testing.assert_allclose(log.range.range_m, [1520.0, 1519.5])
     log = FlightLog(path="x.ulg")
     fill_from_topics(log, {"distance_sensor": sensor([3.5, 3.6], 25)}, mapping_for("ulog"), Path("x.ulg"))
-    assert log.range is None and any("facing down or sideways ignored" in w for w in log.warnings)
+    assert log.range is None and any("2 of 2 distance_sensor samples with orientation 25 ignored" in w
+                                     for w in log.warnings)
+    data = {"distance_sensor": sensor([1500.0, 1500.5], 100), "distance_sensor[1]": sensor([1520.0, 1519.5], 0)}
+    log = FlightLog(path="x.ulg")
+    fill_from_topics(log, data, mapping_for("ulog"), Path("x.ulg"))  # two lasers: the lowest instance, a warning
+    np.testing.assert_allclose(log.range.range_m, [1500.0, 1500.5])
+    assert any("range from instance 0 (set ulog.range.instance" in w for w in log.warnings)
+    log = FlightLog(path="x.ulg")
+    fill_from_topics(log, data, mapping_for("ulog", {"ulog": {"range": {"instance": 1}}}), Path("x.ulg"))
+    np.testing.assert_allclose(log.range.range_m, [1520.0, 1519.5])

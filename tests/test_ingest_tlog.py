@@ -205,11 +205,15 @@ def test_distance_sensor_orientation_and_signal_quality(tmp_path):
     np.testing.assert_allclose(log.range.range_m, [456.78, 456.79, 456.80, 456.81])
     assert log.range.valid.tolist() == [True, True, False, True]
     assert any("4 of 8 DISTANCE_SENSOR samples with orientation 25 ignored" in w for w in log.warnings)
-    log = read_flight([p], mapping={"tlog": {"range": {"messages": ["DISTANCE_SENSOR"],
-                                                       "distance_sensor_orientations": None,
-                                                       "distance_sensor_id": 1}}})
+    log = read_flight([p], mapping={"tlog": {"range": {"messages": ["DISTANCE_SENSOR"], "orientations": None,
+                                                       "instance": 1}}})
     np.testing.assert_allclose(log.range.range_m, [2.5] * 4)
-    # both forward-facing: never interleaved, the sensor with more samples is used
+    with pytest.warns(FutureWarning, match=r"tlog.range.distance_sensor_\w+ is deprecated: use tlog.range.\w+$"):
+        log = read_flight([p], mapping={"tlog": {"range": {"messages": ["DISTANCE_SENSOR"],
+                                                           "distance_sensor_orientations": None,
+                                                           "distance_sensor_id": 1}}})
+    np.testing.assert_allclose(log.range.range_m, [2.5] * 4)  # the old key names still work
+    # both forward-facing: never interleaved; the lowest sensor by default, or the one with most samples
     with TlogWriter(p) as w:
         for i in range(5):
             t, boot = T0_US + i * 100_000, 1000 + i * 100
@@ -217,8 +221,11 @@ def test_distance_sensor_orientation_and_signal_quality(tmp_path):
                 w.write(t, ml.MAVLink_distance_sensor_message(boot, 10, 4000, 250, 0, 1, 0, 0))
             w.write(t + 1, ml.MAVLink_distance_sensor_message(boot, 10, 60000, 45678, 0, 2, 0, 0))
     log = read_flight([p], mapping={"tlog": {"range": {"messages": ["DISTANCE_SENSOR"]}}})
+    np.testing.assert_allclose(log.range.range_m, [2.5] * 2)
+    assert any("range from component 1 sensor id 1 (set tlog.range.instance" in w for w in log.warnings)
+    log = read_flight([p], mapping={"tlog": {"range": {"messages": ["DISTANCE_SENSOR"], "instance": "most_samples"}}})
     np.testing.assert_allclose(log.range.range_m, [456.78] * 5)
-    assert any("component 1 sensor id 2 for range" in w for w in log.warnings)
+    assert any("range from component 1 sensor id 2" in w for w in log.warnings)
 
 
 def test_two_gimbals_are_not_interleaved(tmp_path):

@@ -21,7 +21,7 @@ from pipeline.check.conventions import (
     mount_matrix,
     reinterpret,
 )
-from pipeline.check.geometry import Cluster, _fmt_m, cluster, range_bias_problem
+from pipeline.check.geometry import Cluster, _fmt_m, cluster, meet_undetermined_warning, range_bias_problem
 from pipeline.errors import RidgelocError
 from pipeline.flight import Flight
 from pipeline.flight_config import CLOCK_SOURCES
@@ -275,6 +275,9 @@ def geometry_checks(r: Flight, pixel_px: np.ndarray | None = None, t_ns: np.ndar
     rb = range_bias_problem(c)
     if rb and not alts:
         problems.append(rb)
+    undetermined = meet_undetermined_warning(c)
+    if undetermined and c.consistent:
+        warnings.append(undetermined)
     p, w = mark_checks(r, c.centre_m if c.consistent else (alts[0].cluster.centre_m if alts else None),
                        alts[0].convention if alts and not c.consistent else None, now)
     if c.consistent or alts:

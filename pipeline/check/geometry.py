@@ -7,6 +7,9 @@ Per frame i a ray (origin o_i, unit direction d_i, ENU metres) and optionally a 
   against (independent of them).
 A right convention gives a spread of the attitude error times the distance (tens of metres at 5 km); a wrong one
 scatters the points over kilometres, or puts the meeting point behind the cameras.
+Where the rays are nearly parallel (a short clip, a distant target) their meeting point is not determined along
+them: a pointing error delta moves it by about |X - o| delta / sin(gamma) (gamma the angle between the first and
+last ray), which does not average out over frames when the error drifts slowly, as gimbal errors do.
 """
 
 from __future__ import annotations
@@ -23,6 +26,10 @@ from pipeline.geometry.rays import meeting_point
 INCONSISTENT_REL = 0.05
 CONSISTENT_REL = 0.02
 MIN_RAYS = 3
+# The pointing error (rad) taken for where the rays meet along them: the largest attitude error with which the
+# cluster still counts as consistent (CONSISTENT_REL of the distance), so the range check asks no more of the
+# meeting point than the convergence check does.
+POINTING_ERROR_RAD = CONSISTENT_REL
 
 
 @dataclass(frozen=True)
@@ -31,7 +38,8 @@ class Cluster:
     "ray intersection"); centre_m (3,) the cluster's centre (median laser-sphere point, else X); meet_m (3,) the
     rays' meeting point X; distance_m the median distance from the origins to the centre; ahead: X lies in front
     of the cameras (positive depth along the median ray) and below the highest origin; range_bias_m the median of
-    r_i - |X - o_i| and range_bias_sigma_m its standard error (NaN without ranges)."""
+    r_i - |X - o_i| and range_bias_sigma_m its standard error (NaN without ranges); gamma_deg the angle between the
+    first and the last ray and meet_along_sigma_m how far a POINTING_ERROR_RAD error moves X along the rays."""
 
     n: int
     n_ranged: int
@@ -43,6 +51,13 @@ class Cluster:
     ahead: bool
     range_bias_m: float
     range_bias_sigma_m: float
+    gamma_deg: float = math.nan
+    meet_along_sigma_m: float = math.nan
+
+    @property
+    def meet_undetermined(self) -> bool:
+        """Where the rays meet is not determined along them: its uncertainty there exceeds the range bias."""
+        return bool(abs(self.range_bias_m) <= self.meet_along_sigma_m)
 
     @property
     def relative_spread(self) -> float:
@@ -84,6 +99,9 @@ def cluster(origins: np.ndarray, dirs: np.ndarray, ranges_m: np.ndarray | None =
     depth = (X - o) @ d_med if finite_X else np.full(len(o), -1.0)
     ahead = finite_X and float(np.median(depth)) > 0 and float(X[2]) < float(o[:, 2].max())
     bias = sigma = math.nan
+    gamma = math.acos(float(np.clip(d[0] @ d[-1], -1.0, 1.0)))
+    meet_along = (float(np.median(np.linalg.norm(X - o, axis=1))) * POINTING_ERROR_RAD / max(math.sin(gamma), 1e-12)
+                  if finite_X else math.inf)
     if ranged.sum() >= MIN_RAYS:
         P = o[ranged] + r[ranged, None] * d[ranged]
         centre = np.median(P, axis=0)
@@ -106,13 +124,15 @@ def cluster(origins: np.ndarray, dirs: np.ndarray, ranges_m: np.ndarray | None =
         metric = "ray intersection"
         distance = float(np.median(np.linalg.norm(X - o, axis=1))) if finite_X else math.nan
     return Cluster(n=len(o), n_ranged=int(ranged.sum()), metric=metric, spread_m=spread, centre_m=centre,
-                   meet_m=X, distance_m=distance, ahead=bool(ahead), range_bias_m=bias, range_bias_sigma_m=sigma)
+                   meet_m=X, distance_m=distance, ahead=bool(ahead), range_bias_m=bias, range_bias_sigma_m=sigma,
+                   gamma_deg=math.degrees(gamma), meet_along_sigma_m=meet_along)
 
 
 def range_bias_problem(c: Cluster) -> str | None:
     """A one-line problem when the laser ranges disagree with the distance to where the rays meet beyond their
-    uncertainty (5 sigma) and by more than 3 % of the range (a bias, a wrong range source or unit), else None."""
-    if not math.isfinite(c.range_bias_m) or not c.ahead:
+    uncertainty (5 sigma) and by more than 3 % of the range (a bias, a wrong range source or unit), else None.
+    None too where the meeting point is undetermined along the rays (see `meet_undetermined_warning`)."""
+    if not math.isfinite(c.range_bias_m) or not c.ahead or c.meet_undetermined:
         return None
     if abs(c.range_bias_m) <= max(5 * c.range_bias_sigma_m, 0.03 * c.distance_m):
         return None
@@ -122,3 +142,16 @@ def range_bias_problem(c: Cluster) -> str | None:
     return (f"the laser ranges are {_fmt_m(abs(c.range_bias_m))} {longer} than the distance to where the lines "
             f"of sight meet (+-{_fmt_m(c.range_bias_sigma_m)}): a range bias, a wrong range source{hint} or a "
             "wrong clock.range offset")
+
+
+def meet_undetermined_warning(c: Cluster) -> str | None:
+    """A one-line warning when the laser ranges disagree with where the rays meet beyond the statistical check
+    but within how far a pointing error moves that point along nearly parallel rays, else None."""
+    if not math.isfinite(c.range_bias_m) or not c.ahead or not c.meet_undetermined:
+        return None
+    if abs(c.range_bias_m) <= max(5 * c.range_bias_sigma_m, 0.03 * c.distance_m):
+        return None
+    return (f"the lines of sight are nearly parallel (first to last {c.gamma_deg:.1f} deg): where they meet is "
+            f"undetermined along them (+-{_fmt_m(c.meet_along_sigma_m)} for a {math.degrees(POINTING_ERROR_RAD):.1f} "
+            f"deg pointing error), so the laser ranges ({_fmt_m(abs(c.range_bias_m))} "
+            f"{'longer' if c.range_bias_m > 0 else 'shorter'}) cannot be checked against it")

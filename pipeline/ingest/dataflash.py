@@ -34,6 +34,7 @@ from pipeline.ingest.model import (
     RangeSeries,
     StreamInfo,
 )
+from pipeline.ingest.rangefinder import laser_facing, one_instance
 
 SUPPLIES = {"GPS": ("position", "clock"), "POS": ("position",), "ATT": ("attitude",), "MNT": ("gimbal", "range"),
             "RFND": ("range",), "CAM": ("camera_events",), "TRIG": ("camera_events",)}
@@ -343,14 +344,8 @@ def _assemble(log: FlightLog, arrays: dict[str, dict], mapping: dict, path: Path
     c = mapping["range"]
     a = arrays.get(c["message"])
     if a is not None and "range_m" in a and a["t"].size:
-        if "orient" in a and c["orientations"] is not None:
-            keep = np.isin(a["orient"], [int(o) for o in c["orientations"]])
-            if not keep.all():
-                warnings.append(f"{path}: {int((~keep).sum())} of {keep.size} {c['message']} records from "
-                                "rangefinders not facing forward (a down-facing one is an altimeter) ignored; see "
-                                "dataflash.range.orientations")
-                a = {k: v[keep] for k, v in a.items()}
-        a = _one_instance(a, c, "range", warnings, path)
+        a = laser_facing(a, c["orientations"], c["message"], "dataflash", warnings, path)
+        a = one_instance(a, c["instance"], c["message"], "dataflash", warnings, path)
     if a is not None and "range_m" in a and a["t"].size:
         r = a["range_m"]
         valid = np.isfinite(r) & (r > float(c["min_m"])) & (r <= float(c["max_m"]))

@@ -14,6 +14,7 @@ from importlib import resources
 import yaml
 
 from pipeline.errors import ConfigError
+from pipeline.ingest.rangefinder import rename_deprecated_range_keys
 
 FORMATS = ("tlog", "dataflash", "ulog", "ros", "mcap", "video", "srt")
 
@@ -60,5 +61,5 @@ def mapping_for(fmt: str, override: dict | None = None) -> dict:
             raise ConfigError(f"ingest mapping: unknown format {key!r} (known: {', '.join(FORMATS)})")
     base = default_mapping(fmt)
     if override and override.get(fmt) is not None:
-        return _merge(base, override[fmt], fmt)
+        return _merge(base, rename_deprecated_range_keys(fmt, override[fmt]), fmt)
     return base

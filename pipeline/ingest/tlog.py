@@ -30,6 +30,7 @@ from pipeline.ingest.model import (
     RangeSeries,
     StreamInfo,
 )
+from pipeline.ingest.rangefinder import laser_facing, one_instance
 
 SUPPLIES = {
     "GLOBAL_POSITION_INT": "position", "GPS_RAW_INT": "position",
@@ -158,8 +159,8 @@ class _Collector:
                                                             lo=0.0, hi=np.inf)
 
     def _distance_sensor(self, m, rec, sysid, compid):
-        want = self.mapping["range"]["distance_sensor_id"]
-        if want is not None and m.id != want:
+        want = self.mapping["range"]["instance"]
+        if isinstance(want, int) and m.id != want:
             return
         r = np.nan if m.current_distance == 65535 else m.current_distance * 0.01
         self._c("DISTANCE_SENSOR", r="d", lo="d", hi="d", orient="q", quality="q").add(
@@ -303,8 +304,14 @@ def _pick(coll: _Collector, names: list[str], mapping: dict, what: str, warnings
 def _one_device(a: dict, name: str, what: str, mapping: dict, warnings: list[str], path: Path) -> dict:
     """Samples of one device: a vehicle may carry two gimbals (components) or several rangefinders (DISTANCE_SENSOR
     ids); interleaving them would make one jumping series. `tlog.gimbal.component_id` chooses the gimbal, else the
-    device with the most samples is used, with a warning."""
-    want = mapping["gimbal"]["component_id"] if what == "gimbal" else None
+    device with the most samples is used, with a warning; the rangefinder follows pipeline.ingest.rangefinder."""
+    if what == "range":
+        want = mapping["range"]["instance"]  # an int (DISTANCE_SENSOR.id) was applied while decoding
+        label = ((lambda d: f"component {d // 256} sensor id {d % 256}") if name == "DISTANCE_SENSOR"
+                 else (lambda d: f"component {d}"))
+        return one_instance({**a, "instance": a["dev"]}, None if isinstance(want, int) else want, name, "tlog",
+                            warnings, path, label)
+    want = mapping["gimbal"]["component_id"]
     if want is not None:
         keep = a["dev"] == int(want)
     else:
@@ -312,11 +319,9 @@ def _one_device(a: dict, name: str, what: str, mapping: dict, warnings: list[str
         if devs.size == 1:
             return a
         keep = a["dev"] == devs[np.argmax(n)]
-        label = ([f"component {d // 256} sensor id {d % 256}" for d in devs] if name == "DISTANCE_SENSOR"
-                 else [f"component {d}" for d in devs])
-        key = "tlog.range.distance_sensor_id" if name == "DISTANCE_SENSOR" else "tlog.gimbal.component_id"
+        label = [f"component {d}" for d in devs]
         warnings.append(f"{path}: {name} from several devices ({', '.join(label)}); using "
-                        f"{label[int(np.argmax(n))]} for {what} (set {key})")
+                        f"{label[int(np.argmax(n))]} for {what} (set tlog.gimbal.component_id)")
     return {k: v[keep] for k, v in a.items()}
 
 
@@ -333,19 +338,13 @@ def _times(a: dict, mapping: dict, link: ClockLink | None, name: str = "", warni
 
 
 def _distance_sensor_orientation(coll: _Collector, mapping: dict, warnings: list[str], path: Path) -> None:
-    """Keep only DISTANCE_SENSOR samples whose orientation is the laser's (forward or custom, e.g. on the
-    gimbal): a down-facing sensor (25) is the terrain altimeter, not the range to the target."""
-    cols, allowed = coll.cols.get("DISTANCE_SENSOR"), mapping["range"]["distance_sensor_orientations"]
-    if cols is None or not len(cols) or allowed is None:
+    """Keep only DISTANCE_SENSOR samples facing as the laser does (before the message is picked, so that a log
+    with only a down-facing altimeter falls through to the next range message)."""
+    cols = coll.cols.get("DISTANCE_SENSOR")
+    if cols is None or not len(cols):
         return
-    a = cols.arrays()
-    keep = np.isin(a["orient"], [int(o) for o in allowed])
-    if not keep.all():
-        found = ", ".join(str(int(o)) for o in np.unique(a["orient"][~keep]))
-        warnings.append(f"{path}: {int((~keep).sum())} of {keep.size} DISTANCE_SENSOR samples with orientation "
-                        f"{found} ignored (not the laser: 25 = down-facing altimeter; see "
-                        "tlog.range.distance_sensor_orientations)")
-    coll.cols["DISTANCE_SENSOR"] = _Kept({k: v[keep] for k, v in a.items()})
+    coll.cols["DISTANCE_SENSOR"] = _Kept(laser_facing(cols.arrays(), mapping["range"]["orientations"],
+                                                      "DISTANCE_SENSOR", "tlog", warnings, path))
 
 
 class _Kept:

@@ -26,6 +26,7 @@ from pipeline.ingest.model import (
     RangeSeries,
     StreamInfo,
 )
+from pipeline.ingest.rangefinder import laser_facing, one_instance
 from pipeline.ingest.tlog import GIMBAL_FLAG_YAW_IN_EARTH, GIMBAL_FLAG_YAW_IN_VEHICLE, GIMBAL_FLAG_YAW_LOCK
 
 SUPPLIES = {"vehicle_global_position": "position", "sensor_gps": "position", "vehicle_gps_position": "position",
@@ -162,25 +163,21 @@ def series_to_clock_scalar(t_ns: int, link: ClockLink) -> int:
     return int(map_clock(np.array([t_ns], np.int64), link)[0])
 
 
-def _laser_instance(name: str, data: dict[str, dict], orientations, warnings: list[str], path: Path) -> dict | None:
-    """Samples of the first instance of a distance_sensor topic (`name`, `name[1]`, ...) whose orientation is
-    the laser's (0 forward, 100 custom): a down-facing one (25) is the terrain altimeter. None if there is none."""
-    keys = [k for k in data if k == name or (k.startswith(name + "[") and k.endswith("]"))]
-    ignored = 0
-    for k in sorted(keys, key=len):
-        d = data[k]
-        if orientations is None or "orientation" not in d:
-            return d
-        keep = np.isin(d["orientation"], [int(o) for o in orientations])
-        ignored += int((~keep).sum())
-        if keep.any():
-            if not keep.all():
-                warnings.append(f"{path}: {k}: {int((~keep).sum())} samples with another orientation ignored")
-            return {f: v[keep] for f, v in d.items()}
-    if ignored:
-        warnings.append(f"{path}: {ignored} {name} samples facing down or sideways ignored (not the laser; see "
-                        "ulog.range.orientations)")
-    return None
+def _laser_instance(name: str, data: dict[str, dict], rng: dict, warnings: list[str], path: Path) -> dict | None:
+    """Samples of the laser among the instances of a distance_sensor topic (`name`, `name[1]`, ...), chosen by
+    pipeline.ingest.rangefinder (orientation, then `ulog.range.instance`). None if there is none."""
+    keys = sorted((k for k in data if k == name or (k.startswith(name + "[") and k.endswith("]"))), key=len)
+    if not keys:
+        return None
+    fields = set.intersection(*(set(data[k]) for k in keys))
+    a = {f: np.concatenate([np.asarray(data[k][f]) for k in keys]) for f in fields}
+    a["instance"] = np.concatenate([np.full(len(data[k]["timestamp"]), 0 if k == name else int(k[len(name) + 1:-1]))
+                                    for k in keys])
+    if "orientation" in a:
+        a["orient"] = a["orientation"]
+    a = laser_facing(a, rng["orientations"], name, "ulog", warnings, path)
+    a = one_instance(a, rng["instance"], name, "ulog", warnings, path)
+    return a if a["instance"].size else None
 
 
 def fill_from_topics(log: FlightLog, data: dict[str, dict], mapping: dict, path: Path) -> None:
@@ -224,7 +221,7 @@ def fill_from_topics(log: FlightLog, data: dict[str, dict], mapping: dict, path:
             log.gimbal = GimbalSeries(t, q, veh, source=f"{src}:{name}", clock="boot")
             break
     for name in mapping["range"]["topics"]:
-        d = _laser_instance(name, data, mapping["range"]["orientations"], warnings, path)
+        d = _laser_instance(name, data, mapping["range"], warnings, path)
         if d is not None:
             r = d["current_distance"].astype(float)
             lo = np.maximum(d["min_distance"].astype(float), float(mapping["range"]["min_m"]))

@@ -16,6 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.errors import RidgelocError
 from pipeline.geometry.camera import intrinsics_matrix, look_at_rotation, project, projection_matrix
+from pipeline.geometry.rays import intersection_angle_deg as los_angle_deg
 from pipeline.results import GroupResult
 from pipeline.solve.observations import Observations, Sigma
 
@@ -56,13 +57,6 @@ def synthetic_observations(*, seed: int = 0, intersection_angle_deg: float = 40.
     return obs, target
 
 
-def los_intersection_angle_deg(platform_m: np.ndarray, target_m: np.ndarray) -> float:
-    """Angle between the first and the last line of sight (the paper's gamma), degrees."""
-    a, b = target_m - platform_m[0], target_m - platform_m[-1]
-    c = np.dot(a, b) / (np.linalg.norm(a) * np.linalg.norm(b))
-    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
-
-
 def solve_all(obs: Observations, methods=None) -> tuple[dict, float]:
     """Every estimator that succeeds on `obs` (a failing one is left out) and the wall seconds it took."""
     from pipeline.solve import METHODS, solve
@@ -89,7 +83,7 @@ def synthetic_group(name: str, *, seed: int = 0, intersection_angle_deg: float =
     return GroupResult(
         name=name, origin_lla=origin_lla, observations=obs, estimates=estimates,
         truth_m=target if truth_known else None,
-        intersection_angle_deg=los_intersection_angle_deg(obs.platform_m, target),
+        intersection_angle_deg=los_angle_deg(obs.platform_m, target),
         timings_s={"synthesize": t_obs, "solve": t_solve},
         settings={"synthetic": {"seed": seed, "intersection_angle_deg": intersection_angle_deg,
                                 "n_frames": n_frames}},

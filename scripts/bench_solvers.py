@@ -33,8 +33,10 @@ import dataclasses
 import itertools
 import os
 import statistics
+import sys
 import time
 import timeit
+from pathlib import Path
 
 import numpy as np
 import scipy.linalg
@@ -43,8 +45,11 @@ from scipy.optimize import least_squares
 from pipeline.geometry.camera import project
 from pipeline.solve import METHODS, solve, solve_batch
 from pipeline.solve.mle import HUBER_C, base_variances
-from pipeline.solve.scenes import paper_batch, paper_problem
 from pipeline.solve.stacked import Stacked
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test support: support.scenes
+
+from support.scenes import paper_batch, paper_problem
 
 
 def _time_calls(fn, items, repeats: int) -> tuple[float, float]:

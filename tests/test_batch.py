@@ -14,14 +14,14 @@ import pytest
 from pipeline.batch import Job, discover_flights, report_stage, run_jobs, summarize_failures
 from pipeline.errors import ConfigError, InputError
 from pipeline.report import write_run_outputs
-from pipeline.report.synthetic import (
+from pipeline.results import GroupResult
+from pipeline.solve.observations import Observations
+from support.synthetic import (
     DEFAULT_ORIGIN_LLA,
     los_intersection_angle_deg,
     solve_all,
     synthetic_observations,
 )
-from pipeline.results import GroupResult
-from pipeline.solve.observations import Observations
 
 STAGES = ("load", "solve")
 

@@ -25,9 +25,12 @@ from pathlib import Path
 from pipeline.batch import Job, discover_flights, run_jobs
 from pipeline.geometry.rays import intersection_angle_deg
 from pipeline.report.outputs import write_group_outputs
-from pipeline.report.synthetic import DEFAULT_ORIGIN_LLA, solve_all, synthetic_observations
 from pipeline.results import GroupResult
 from pipeline.solve.observations import Observations
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test support: support.synthetic
+
+from support.synthetic import DEFAULT_ORIGIN_LLA, solve_all, synthetic_observations
 
 
 def standin_job(payload: dict) -> str:

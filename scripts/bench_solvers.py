@@ -33,8 +33,10 @@ import dataclasses
 import itertools
 import os
 import statistics
+import sys
 import time
 import timeit
+from pathlib import Path
 
 import numpy as np
 import scipy.linalg
@@ -43,8 +45,11 @@ from scipy.optimize import least_squares
 from pipeline.geometry.camera import project
 from pipeline.solve import METHODS, solve, solve_batch
 from pipeline.solve.mle import HUBER_C, base_variances
-from pipeline.solve.scenes import paper_batch, paper_problem
 from pipeline.solve.stacked import Stacked
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test support: support.scenes
+
+from support.scenes import paper_batch, paper_problem
 
 
 def _time_calls(fn, items, repeats: int) -> tuple[float, float]:
@@ -147,7 +152,8 @@ def _calibration_us() -> float:
 
 def _import_baseline(commit: str, workdir: str, name: str = "baseline_pipeline"):
     """The solvers of another commit, importable next to this checkout's: `git archive` of its pipeline/ into
-    workdir, renamed to the package `name` (its imports rewritten)."""
+    workdir, renamed to the package `name` (its imports rewritten), and the problem generator on its types (its
+    pipeline/solve/scenes.py, or this checkout's tests/support/scenes.py for commits after the move)."""
     import importlib
     import re
     import subprocess
@@ -163,6 +169,8 @@ def _import_baseline(commit: str, workdir: str, name: str = "baseline_pipeline")
         tar.extractall(workdir, filter="data")
     src = Path(workdir) / "pipeline"
     dst = src.rename(Path(workdir) / name)
+    if not (dst / "solve" / "scenes.py").exists():
+        (dst / "solve" / "scenes.py").write_text((repo / "tests" / "support" / "scenes.py").read_text())
     for f in dst.rglob("*.py"):
         text = f.read_text()
         text = re.sub(r"\bfrom pipeline([. ])", rf"from {name}\1", text)

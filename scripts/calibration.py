@@ -35,7 +35,9 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -44,7 +46,10 @@ from pipeline.geometry.camera import look_at_rotation, project, projection_matri
 from pipeline.solve import solve, solve_batch
 from pipeline.solve.mle import CHI2_3_95
 from pipeline.solve.observations import ObservationBatch, Observations, Sigma
-from pipeline.solve.scenes import PAPER_K, arc_platforms_m, gauss_markov
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test support: support.scenes
+
+from support.scenes import PAPER_K, arc_platforms_m, gauss_markov
 
 TOLD = Sigma(pixel_px=0.5, range_m=5.0, position_m=2.0, attitude_deg=0.2)
 FAMILIES = ("independent", "gauss_markov", "bias", "random_walk", "gnss_drift", "range_outliers", "mistracked")

@@ -12,11 +12,14 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
 
-from pipeline.solve.scenes import PAPER_SIGMA, paper_problem
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test support: support.scenes
+
+from support.scenes import PAPER_SIGMA, paper_problem
 
 SEED = 2026
 DEFAULT_OUT = Path(__file__).resolve().parent.parent / "configs" / "example_observations.json"

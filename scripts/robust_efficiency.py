@@ -9,12 +9,17 @@ angles 10-80 deg, n = 5, 10, 20, 50 observations and slant ranges 2, 5 and 10 km
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
 from pipeline.solve import solve_batch
-from pipeline.solve.scenes import paper_batch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test support: support.scenes
+
+from support.scenes import paper_batch
 
 ANGLES = (10, 20, 30, 40, 50, 60, 70, 80)
 NS = (5, 10, 20, 50)

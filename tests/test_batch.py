@@ -15,13 +15,13 @@ from pipeline.batch import Job, discover_flights, report_stage, run_jobs, summar
 from pipeline.errors import ConfigError, InputError
 from pipeline.geometry.rays import intersection_angle_deg
 from pipeline.report import write_run_outputs
-from pipeline.report.synthetic import (
+from pipeline.results import GroupResult
+from pipeline.solve.observations import Observations
+from support.synthetic import (
     DEFAULT_ORIGIN_LLA,
     solve_all,
     synthetic_observations,
 )
-from pipeline.results import GroupResult
-from pipeline.solve.observations import Observations
 
 STAGES = ("load", "solve")
 

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from pipeline.report.exports import targets_geojson, write_targets_geojson
-from pipeline.report.synthetic import synthetic_observations
 from pipeline.results import GroupResult
 from pipeline.solve.estimate import Estimate, Status
+from support.synthetic import synthetic_observations
 
 GEOMETRY_TYPES = {"Point", "MultiPoint", "LineString", "MultiLineString", "Polygon", "MultiPolygon",
                   "GeometryCollection"}

@@ -1,7 +1,8 @@
 """The installed package needs nothing from the checkout: no module under pipeline/ builds a path that leaves
 the package from its own file (the repository root, configs/, sample_data/, tests/) or names ../shared, and the
-test support (fuzz targets, test-only writers) lives in tests/support/. scripts/check_installed.py proves it on
-a real wheel (a fresh venv outside the checkout, `ridgeloc run` on a copied sample flight)."""
+test support (fuzz targets, test-only writers, the noisy-scene generators of tests and benchmarks) lives in
+tests/support/. scripts/check_installed.py proves it on a real wheel (a fresh venv outside the checkout,
+`ridgeloc run` on a copied sample flight)."""
 
 from __future__ import annotations
 
@@ -47,3 +48,6 @@ def test_the_checker_sees_a_path_out_of_the_package():
 def test_test_support_is_not_in_the_package():
     assert not (PACKAGE / "fuzz_targets.py").exists() and not (PACKAGE / "ingest" / "writers.py").exists()
     assert (PACKAGE.parent / "tests" / "support" / "fuzz_targets.py").is_file()
+    assert not (PACKAGE / "solve" / "scenes.py").exists() and not (PACKAGE / "report" / "synthetic.py").exists()
+    assert (PACKAGE.parent / "tests" / "support" / "scenes.py").is_file()
+    assert (PACKAGE.parent / "tests" / "support" / "synthetic.py").is_file()

@@ -8,7 +8,7 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from pipeline.report.figures import map_figure, residuals_figure, view3d_figure
-from pipeline.report.synthetic import synthetic_group
+from support.synthetic import synthetic_group
 
 UNIT = re.compile(r"\((m|px|s)\)$")
 

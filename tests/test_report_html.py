@@ -12,8 +12,8 @@ import pytest
 
 from pipeline.atomic import is_done
 from pipeline.report import load_finished_group, write_group_outputs, write_run_outputs
-from pipeline.report.synthetic import synthetic_group
 from pipeline.results import GroupFailure
+from support.synthetic import synthetic_group
 
 
 @pytest.fixture(scope="module")

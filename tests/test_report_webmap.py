@@ -14,8 +14,8 @@ import pytest
 
 from pipeline.report.html import report_html
 from pipeline.report.labels import METHOD_COLORS, method_label, ordered_methods
-from pipeline.report.synthetic import synthetic_group
 from pipeline.report.webmap import ASSETS, MAX_LINES_OF_SIGHT, leaflet_head, map_fragment
+from support.synthetic import synthetic_group
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 needs_chromium = pytest.mark.skipif(

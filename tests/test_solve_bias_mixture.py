@@ -10,7 +10,7 @@ import numpy as np
 from pipeline.solve import solve, solve_batch
 from pipeline.solve.bias_mixture import PHI_GRID, RATIO_FLOOR, mixture
 from pipeline.solve.mle_outputs import DETERMINED_BELOW, notes
-from pipeline.solve.scenes import PAPER_SIGMA, paper_batch, paper_problem
+from support.scenes import PAPER_SIGMA, paper_batch, paper_problem
 
 
 def _dense(J, r, a, w, share):

@@ -6,7 +6,7 @@ import pytest
 
 from pipeline.solve import METHODS, solve_batch
 from pipeline.solve import methods as solve_pkg
-from pipeline.solve.scenes import paper_batch
+from support.scenes import paper_batch
 
 
 @pytest.mark.parametrize("method", METHODS)

@@ -126,7 +126,7 @@ def test_unknown_method_is_rejected_by_argparse(capsys):
 def test_a_gross_pixel_outlier_is_listed_with_its_time_in_the_table_and_json(tmp_path, capsys):
     """Issue 12: a mis-tracked pixel (60 px off, ~17 sigma) gets zero weight in mle; the console names the
     observation, which residual, its time in the flight and its size; --json lists it under `rejected`."""
-    from pipeline.solve.scenes import paper_problem
+    from support.scenes import paper_problem
 
     doc = paper_problem(n=20, gamma_deg=30.0, seed=5).to_dict()  # frames 1 s apart
     doc["observations"][6]["pixel"][0] += 60.0

@@ -12,8 +12,8 @@ from pipeline.solve import METHODS, solve, solve_batch
 from pipeline.solve.estimate import Status
 from pipeline.solve.iterate import iterate
 from pipeline.solve.observations import ObservationBatch, Observations
-from pipeline.solve.scenes import paper_problem
 from pipeline.solve.stacked import Stacked
+from support.scenes import paper_problem
 
 
 @pytest.fixture

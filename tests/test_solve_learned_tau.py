@@ -8,8 +8,8 @@ import pytest
 
 from pipeline.solve import learned_tau
 from pipeline.solve.observations import Sigma
-from pipeline.solve.scenes import PAPER_SIGMA, correlated_problems
 from pipeline.solve.stacked import Stacked
+from support.scenes import PAPER_SIGMA, correlated_problems
 
 TRUE_TAU_S = 20.0
 

@@ -10,8 +10,8 @@ from pipeline.geometry.camera import project
 from pipeline.solve import solve, solve_batch
 from pipeline.solve.mle import CAUCHY_C, HUBER_C, base_variances, cep_m
 from pipeline.solve.observations import Sigma
-from pipeline.solve.scenes import PAPER_SIGMA, paper_batch, paper_problem
 from pipeline.solve.stacked import Stacked
+from support.scenes import PAPER_SIGMA, paper_batch, paper_problem
 
 UNIT = Sigma(pixel_px=1.0, range_m=1.0, position_m=0.0, attitude_deg=0.0)
 

@@ -11,7 +11,7 @@ import pytest
 from pipeline.solve import fit_checks, solve, solve_batch
 from pipeline.solve.mle import REDESCEND_A_PIXEL, REDESCEND_B, _redescending, pixel_pair_redescending
 from pipeline.solve.observations import Observations
-from pipeline.solve.scenes import PAPER_SIGMA, paper_batch, paper_problem
+from support.scenes import PAPER_SIGMA, paper_batch, paper_problem
 
 
 def test_redescending_loss_is_quadratic_then_flat():
@@ -115,7 +115,7 @@ def test_drifting_errors_get_a_correlation_time_learned_from_the_flight():
     """Gauss-Markov attitude (0.2 deg, tau 20 s) and position (5 m, tau 60 s) errors, frames 1 s apart, the
     sigma without correlation times: the residuals drift, the MLE picks a tau by likelihood (generalized least
     squares) and its 95 % ellipsoid holds the truth about as often as with the true correlation times."""
-    from pipeline.solve.scenes import correlated_problems
+    from support.scenes import correlated_problems
 
     inside, taus = [], []
     for obs in correlated_problems(40, seed=7):

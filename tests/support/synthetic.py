@@ -1,10 +1,10 @@
 """A synthetic flight group like the paper's flight experiments (section 3.2), solved by every estimator.
 
-For the outputs' tests, the batch benchmark and a demo run (`python -m pipeline.report.synthetic OUTDIR` writes
-a whole run folder for six groups shaped like the paper's Table 3): a curving, climbing leg about 5 km from the
-target at an observation angle of 66.42 deg off nadir, a 600 x 400 px camera kept on the target,
-noise as in the paper (pixel 1 px, range 5 m, position 2 m, attitude 0.2 deg). Not a replacement for the
-simulation (`ridgeloc simulate`), which follows the paper's protocol exactly.
+Test and benchmark support, not part of the package: for the outputs' tests, the batch benchmark and a demo run
+(`python scripts/demo_run.py OUTDIR` writes a whole run folder for six groups shaped like the paper's Table 3):
+a curving, climbing leg about 5 km from the target at an observation angle of 66.42 deg off nadir, a 600 x 400 px
+camera kept on the target, noise as in the paper (pixel 1 px, range 5 m, position 2 m, attitude 0.2 deg). Not a
+replacement for the simulation (`ridgeloc simulate`), which follows the paper's protocol exactly.
 """
 
 from __future__ import annotations
@@ -100,10 +100,4 @@ def demo_run(outdir) -> None:
 
     results = [synthetic_group(f"group{i + 1}", seed=i, intersection_angle_deg=a, n_frames=n)
                for i, (a, n) in enumerate(TABLE3_GROUPS)]
-    write_run_outputs(outdir, results, [], {"demo": "python -m pipeline.report.synthetic " + str(outdir)})
-
-
-if __name__ == "__main__":
-    import sys
-
-    demo_run(sys.argv[1] if len(sys.argv) > 1 else "out/demo")
+    write_run_outputs(outdir, results, [], {"demo": "python scripts/demo_run.py " + str(outdir)})

@@ -1,5 +1,6 @@
 """Synthetic problems on the paper's simulation geometry (section 3.1), for tests, benchmarks and the example
-observations file.
+observations file (test support, not part of the package; `ridgeloc simulate` draws its own trials in
+pipeline/simulate/scenario.py).
 
 The platform flies a circular arc around the target at a fixed height, so that every frame sees the target at
 the same slant range; the arc's extent is set so that the first and last lines of sight make the intersection

@@ -39,7 +39,9 @@ def test_committed_sample_configs_are_what_the_function_writes(group):
 
 def test_sample_run_config_lists_exactly_the_written_configs():
     entries = load_run_config(ROOT / "configs" / "sample.yaml")
-    assert [e.config.name for e in entries] == list(GROUPS)
+    assert [e.config.name for e in entries if not e.config.files.photos] == list(GROUPS)
+    # and the photo flight written by `ridgeloc synth --photos` (tests/test_photo_sample.py)
+    assert [e.config.name for e in entries if e.config.files.photos] == ["h20_laser"]
 
 
 # The tiny flight of tests/test_run_e2e.py (2048 px texture, one frame per burst, 120 m/s): a few seconds to make.

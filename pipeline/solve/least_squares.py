@@ -62,6 +62,7 @@ def collinear_platforms(platform_m: np.ndarray, used: np.ndarray, sigma_position
     k = w.sum(axis=1)
     mean = (platform_m * w[..., None]).sum(axis=1) / np.maximum(k, 1.0)[:, None]
     sv = np.linalg.svd((platform_m - mean[:, None, :]) * w[..., None], compute_uv=False)
+    sv = np.pad(sv, ((0, 0), (0, 3 - sv.shape[1])))  # fewer than three frames: the missing values are zero
     flat = sv[:, 1] <= 1e-9 * sv[:, 0]
     if sigma_position_m:
         dof = 2 * (k - 2)

@@ -266,11 +266,46 @@ def _mle_dispatch(st: Stacked, o: dict):
             return _correlated.mle_gls(st, x0[0], model, robust, vce, tol, itmax)[0]
         sigma = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
     res = _mle.mle(st, x0, sigma, robust, vce, tol, itmax, init_status, bias_deg, size_unknown, o.get("terrain"))
+    if bias_deg and size_unknown:
+        # the stated attitude sigma is the largest bias: a bias estimated far beyond it (as the learned drift
+        # model's limit) is the bias explaining the pixels away, not a bias of this flight; refit without it
+        far = np.abs(res[5]["bias_deg"]).max(axis=1) > _starts.MAX_ATTITUDE_OVER_STATED * bias_deg
+        if far.any():
+            idx = np.flatnonzero(far)
+            sub = st.take(idx)
+            r2 = _mle.mle(sub, x0[idx], sigma, robust, vce, tol, itmax, None if init_status is None
+                          else init_status[idx], None, False, o.get("terrain"))
+            # the error model is wrong here either way: the covariance keeps the spread between the two answers
+            # (the between-model term of a model average), so that the refit claims no accuracy it lacks, and
+            # the GNSS error shared by the segment (position_m^2 I) the bias's answer carries (`mle.mle`)
+            d = res[0][idx] - r2[0]
+            d = np.where(np.isfinite(d), d, 0.0)
+            shared = (sigma.position_m or 0.0) ** 2 * np.eye(3)
+            r2 = (*r2[:4], r2[4] + shared + d[:, :, None] * d[:, None, :], r2[5])
+            res = _replace_rows(res, r2, idx)
     # the learned drift model (generalized least squares) takes no terrain prior: the first answer stands
     if (st.size == 1 and st.t_ns is not None and size_unknown and o.get("terrain") is None and _drifts(res[5])
             and _real_times(st)):
         res = _learned_tau(st, res, sigma, robust, vce, tol, itmax)
     return res
+
+
+def _replace_rows(res: tuple, sub: tuple, idx: np.ndarray) -> tuple:
+    """The mle answer res (X, it, status, cond, cov, extras) with problems idx replaced by sub's; an extra sub
+    lacks (the bias's) is NaN there."""
+    if idx.size == res[0].shape[0]:
+        return sub
+    out = []
+    for a, b in zip(res[:5], sub[:5], strict=True):
+        a = a.copy()
+        a[idx] = b
+        out.append(a)
+    ex = {}
+    for k, v in res[5].items():
+        v = np.array(v, dtype=np.float64 if k not in sub[5] and v.dtype.kind in "iub" else v.dtype, copy=True)
+        v[idx] = sub[5][k] if k in sub[5] else np.nan
+        ex[k] = v
+    return (*out, ex)
 
 
 def _mle_multistart(st: Stacked, o: dict):

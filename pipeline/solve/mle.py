@@ -494,8 +494,10 @@ class _Iteration:
         with np.errstate(divide="ignore", invalid="ignore"):
             sigma0_sq = np.where(dof > 0, chi2 / dof, np.nan)
         p = fit_checks.chi_square_p(chi2, dof)
-        rho_pix, pairs_pix = fit_checks.lag1_autocorrelation(E, use, slice(0, 2))
-        rho_rng, pairs_rng = fit_checks.lag1_autocorrelation(E, use, slice(2, 3))
+        # the residuals as the fit weighs them: a run of frames the robust loss (partly) rejects is no drift
+        Ew = E if wr is None else np.sqrt(wr) * E
+        rho_pix, pairs_pix = fit_checks.lag1_autocorrelation(Ew, use, slice(0, 2))
+        rho_rng, pairs_rng = fit_checks.lag1_autocorrelation(Ew, use, slice(2, 3))
         acf_pix = fit_checks.acf_significant(rho_pix, pairs_pix)
         acf_rng = fit_checks.acf_significant(rho_rng, pairs_rng)
         infl_pix = fit_checks.acf_inflation(rho_pix, acf_pix)

@@ -28,7 +28,7 @@ _OPTIONS = {
     "dlt": set(), "los": set(),
     "vision": _COMMON, "range": _COMMON, "fusion-raw": _COMMON, "fusion": _COMMON,
     "ridge": _COMMON | {"hkb", "k"},
-    "mle": _COMMON | {"robust", "sigma", "estimate_variance_components", "bias_prior_deg"},
+    "mle": _COMMON | {"robust", "sigma", "estimate_variance_components", "bias_prior_deg", "terrain"},
 }
 _USES_PIXELS = {"dlt", "vision", "fusion-raw", "fusion", "ridge", "mle"}
 
@@ -58,6 +58,14 @@ def _check_options(method: str, options: dict) -> dict:
     b = o.get("bias_prior_deg")
     if b is not None and (isinstance(b, bool) or not isinstance(b, (int, float)) or not np.isfinite(b) or b < 0):
         raise ValueError(f"bias_prior_deg must be a finite number >= 0 (0: no bias estimation), got {b!r}")
+    t = o.get("terrain")
+    if t is not None:
+        ok = isinstance(t, (tuple, list)) and len(t) == 2 and callable(t[0])
+        sm = t[1] if ok else None
+        if not ok or isinstance(sm, bool) or not isinstance(sm, (int, float)) or not (np.isfinite(sm) and sm > 0):
+            raise ValueError("terrain must be (fn, sigma_m): fn(e_m, n_m) -> (up_m, dup_de, dup_dn) in the "
+                             f"solve's ENU frame and a finite vertical sigma_m > 0, got {t!r}")
+        o["terrain"] = (t[0], float(sm))
     s = o.get("sigma")
     if isinstance(s, dict):
         o["sigma"] = Sigma.from_dict(s, "sigma option")
@@ -188,11 +196,49 @@ def _mle_start(st: Stacked, o: dict):
         if need.any():
             Xl, sl, _, _ = linear.los(st.take(np.flatnonzero(need)))
             x0[need], init_status[need] = Xl, sl
+        if o.get("terrain") is not None:
+            need = ~np.isfinite(x0).all(axis=1)
+            if need.any():
+                x0[need], init_status[need] = _terrain_start(st.take(np.flatnonzero(need)), o["terrain"][0])
     sigma = o.get("sigma") or st.sigma
     vce = o.get("estimate_variance_components")
     if vce is None:
         vce = sigma.pixel_px is None or sigma.range_m is None
     return x0, init_status, sigma, bool(vce)
+
+
+def _terrain_start(st: Stacked, fn) -> tuple[np.ndarray, np.ndarray]:
+    """(B,3) starts and their status: the first pixel's line of sight met with the terrain fn (Newton on the
+    distance t along the ray, from the terrain below the camera); NaN and DEGENERATE where it does not meet it
+    in front of the camera."""
+    B = st.size
+    X = np.full((B, 3), np.nan)
+    status = np.full(B, Status.DEGENERATE, dtype=np.int8)
+    for b in range(B):
+        k = np.flatnonzero(st.has_pix[b])
+        if k.size == 0:
+            continue
+        M, p4, uv = st.M[b, k[0]], st.p4[b, k[0]], st.pix[b, k[0]]
+        c = -np.linalg.solve(M, p4)
+        d = np.linalg.solve(M, np.array([uv[0], uv[1], 1.0]))
+        d = d * np.sign(np.linalg.det(M))  # in front of the camera: positive depth
+        d = d / np.linalg.norm(d)
+        t = 0.0
+        for _ in range(50):
+            x = c + t * d
+            up, de, dn = (float(np.asarray(v).reshape(-1)[0]) for v in fn(np.array([x[0]]), np.array([x[1]])))
+            f = x[2] - up
+            df = d[2] - de * d[0] - dn * d[1]
+            if not (np.isfinite(f) and np.isfinite(df)) or df == 0:
+                break
+            dt = -f / df
+            t += dt
+            if abs(dt) < 1e-6 * (1.0 + abs(t)):
+                break
+        x = c + t * d
+        if t > 0 and np.isfinite(x).all():
+            X[b], status[b] = x, Status.CONVERGED
+    return X, status
 
 
 def _mle_dispatch(st: Stacked, o: dict):
@@ -212,13 +258,53 @@ def _mle_dispatch(st: Stacked, o: dict):
                     {"variance_factor_pixel": np.ones(1), "variance_factor_range": np.ones(1),
                      "sigma0_sq": np.full(1, np.nan), "vce_rounds": np.zeros(1, dtype=np.int64)})
         model = _correlated.problem_model(st, x0[0], sigma)
+        if model.correlated and o.get("terrain") is not None:
+            raise ValueError("mle: the terrain option is not available with time-correlated errors (sigma "
+                             "attitude_tau_s / position_tau_s)")
         if model.correlated:
             return _correlated.mle_gls(st, x0[0], model, robust, vce, tol, itmax)[0]
         sigma = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
-    res = _mle.mle(st, x0, sigma, robust, vce, tol, itmax, init_status, bias_deg, size_unknown)
-    if st.size == 1 and st.t_ns is not None and size_unknown and _drifts(res[5]) and _real_times(st):
+    res = _mle.mle(st, x0, sigma, robust, vce, tol, itmax, init_status, bias_deg, size_unknown, o.get("terrain"))
+    if bias_deg and size_unknown:
+        # the stated attitude sigma is the largest bias: a bias estimated far beyond it (as the learned drift
+        # model's limit) is the bias explaining the pixels away, not a bias of this flight; refit without it
+        far = np.abs(res[5]["bias_deg"]).max(axis=1) > _starts.MAX_ATTITUDE_OVER_STATED * bias_deg
+        if far.any():
+            idx = np.flatnonzero(far)
+            sub = st.take(idx)
+            r2 = _mle.mle(sub, x0[idx], sigma, robust, vce, tol, itmax, None if init_status is None
+                          else init_status[idx], None, False, o.get("terrain"))
+            # the error model is wrong here either way: the covariance keeps the spread between the two answers
+            # (the between-model term of a model average), so that the refit claims no accuracy it lacks, and
+            # the GNSS error shared by the segment (position_m^2 I) the bias's answer carries (`mle.mle`)
+            d = res[0][idx] - r2[0]
+            d = np.where(np.isfinite(d), d, 0.0)
+            shared = (sigma.position_m or 0.0) ** 2 * np.eye(3)
+            r2 = (*r2[:4], r2[4] + shared + d[:, :, None] * d[:, None, :], r2[5])
+            res = _replace_rows(res, r2, idx)
+    # the learned drift model (generalized least squares) takes no terrain prior: the first answer stands
+    if (st.size == 1 and st.t_ns is not None and size_unknown and o.get("terrain") is None and _drifts(res[5])
+            and _real_times(st)):
         res = _learned_tau(st, res, sigma, robust, vce, tol, itmax)
     return res
+
+
+def _replace_rows(res: tuple, sub: tuple, idx: np.ndarray) -> tuple:
+    """The mle answer res (X, it, status, cond, cov, extras) with problems idx replaced by sub's; an extra sub
+    lacks (the bias's) is NaN there."""
+    if idx.size == res[0].shape[0]:
+        return sub
+    out = []
+    for a, b in zip(res[:5], sub[:5], strict=True):
+        a = a.copy()
+        a[idx] = b
+        out.append(a)
+    ex = {}
+    for k, v in res[5].items():
+        v = np.array(v, dtype=np.float64 if k not in sub[5] and v.dtype.kind in "iub" else v.dtype, copy=True)
+        v[idx] = sub[5][k] if k in sub[5] else np.nan
+        ex[k] = v
+    return (*out, ex)
 
 
 def _mle_multistart(st: Stacked, o: dict):
@@ -339,6 +425,8 @@ def solve_batch(method: str, batch: ObservationBatch, **options) -> BatchEstimat
     """Solve B problems with one estimator. Problems it cannot solve get status DEGENERATE (geometry does not
     determine the target, too few observations, target behind a camera) or DIVERGED, and NaN positions."""
     o = _check_options(method, options)
+    if o.get("terrain") is not None:
+        raise ValueError("solve_batch: the terrain option takes one problem's ENU frame; use solve() per problem")
     if not isinstance(batch, ObservationBatch):
         raise TypeError(f"solve_batch wants an ObservationBatch, got {type(batch).__name__}")
     x0 = _initial(o, batch.size)  # validated once; chunks get their rows
@@ -399,15 +487,16 @@ def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
             raise ObservationError(f"mle: the sigma gives correlation times (attitude_tau_s, position_tau_s) but "
                                    f"the frames' t_ns span only {span_ns} ns: they need real timestamps (without "
                                    "t_ns the frames are numbered 0, 1, 2, ... ns)")
-        if not has_init and npix < 2 and nboth == 0:
+        terrain = int(o.get("terrain") is not None)
+        if not has_init and npix < 2 and nboth == 0 and not (terrain and npix):
             # ranges alone do fix a point (range does), but so poorly along one axis that the problem is far from
             # linear there and the linearized covariance is no honest ellipse (docs/solvers.md, range)
             raise ObservationError(f"mle starts from the linear intersection (two or more pixels) or a line of "
                                    f"sight (a pixel and a range in one frame); there are {npix} pixel(s) and "
                                    f"no frame with both (ranges alone: see range, which gives no covariance)")
-        if 2 * npix + nrng < 3:
-            raise ObservationError(f"mle needs at least three observations (2 per pixel, 1 per range), got "
-                                   f"{2 * npix + nrng}")
+        if 2 * npix + nrng + terrain < 3:
+            raise ObservationError(f"mle needs at least three observations (2 per pixel, 1 per range, 1 for the "
+                                   f"terrain), got {2 * npix + nrng + terrain}")
         return
     needs_pixels = method in ("dlt", "vision") or not has_init
     if needs_pixels and npix < 2 and method != "range":  # range without pixels starts from the ranges

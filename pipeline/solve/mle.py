@@ -240,7 +240,7 @@ def _solve3(N, g, lam=None):
 
 def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
         max_iterations: int, init_status: np.ndarray | None = None, bias_deg: float | None = None,
-        bias_size_unknown: bool = True):
+        bias_size_unknown: bool = True, terrain=None):
     """Returns X (B,3), iterations (B,), status (B,) int8, cond (B,) of the weighted design W^1/2 J,
     covariance (B,3,3) m^2, and extras (B, ...) arrays: variance_factor_pixel, variance_factor_range, sigma0_sq,
     vce_rounds, rejected (B,n,3) bool (u, v, range rows with zero weight), residual_sigmas (B,n,3) (the
@@ -257,6 +257,12 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     then averaged over the bias's size (`bias_mixture`, the stated attitude variance split between the bias and
     the frame-to-frame part unless the residuals drift), and position_m^2 I, a GNSS offset shared by the
     segment, is added to the covariance.
+
+    terrain=(fn, sigma_m): a soft prior on the target's height, fn(e_m, n_m) -> (up_m, dup_de, dup_dn) the
+    terrain in the problems' (shared) ENU frame: one more residual (fn(e, n) - up) / sigma_m per problem, with
+    its row [-dup_de, -dup_dn, 1] / sigma_m, in the normal equations (Gauss-Newton, never robustified), the
+    covariance, the chi-square (one more observation) and the variance components' leverages; none where fn
+    is not finite (off the terrain model).
 
     Works on planes (`_Planes`): the normal equations as six (B,) entries, the 3x3 steps in closed form.
     Converged problems are frozen once fewer than all are active.
@@ -276,6 +282,7 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     else:
         a = None
     it = _Iteration(st, pl, a, X, status, bad, X0, tol_m, max_iterations, vce)
+    it.terrain = terrain
     it.bias_sigma_deg = bias_deg
     it.bias_size_unknown = bias_size_unknown
     # the stated attitude sigma is split between the bias and the frame-to-frame error (it is the largest bias)
@@ -317,6 +324,7 @@ class _Iteration:
         self.bias_size_unknown = False
         self.split_attitude = False
         self.guard = np.ones((B, 2))  # `robust_scale`'s factors: a misfit, unlike variance components
+        self.terrain = None
 
     def _eval(self, pl, a, X, z, robust):
         """J, bias-corrected E, ok, z, cost, IRLS weights at X (the sub-batch of pl, a, z)."""
@@ -326,6 +334,8 @@ class _Iteration:
         cost, w = _cost_weights(E, robust)
         if a is not None:
             cost = cost + 0.5 * (z * z).sum(axis=0)
+        if self.terrain is not None:
+            cost = cost + 0.5 * _terrain_rows(self.terrain, X)[1] ** 2
         return J, E, ok, z, cost, w
 
     def restart(self):
@@ -386,6 +396,8 @@ class _Iteration:
                 N, g = _normal(Ji, Ei, wi, np.where(nok, curv, wi))
             if ai is not None:
                 _bias_schur(N, Ji, ai, wi)
+            if self.terrain is not None:
+                _add_terrain(N, g, *_terrain_rows(self.terrain, X if full else X[idx]))
             lam_i = lam if full else lam[idx]
             dX, singular, _, _ = _solve3(N, g, lam_i)
             self.iterations[idx] += 1
@@ -434,7 +446,9 @@ class _Iteration:
                 d_idx = idx[inner_done]
                 J, E, ok = self.J, self.E, self.ok
                 factors, usable = _vce_factors(J[..., d_idx], E[..., d_idx], ok[..., d_idx], robust,
-                                               None if a is None else a[..., d_idx])
+                                               None if a is None else a[..., d_idx],
+                                               None if self.terrain is None else
+                                               _terrain_rows(self.terrain, X[d_idx]))
                 more = (np.abs(factors - 1) > VCE_TOL) & usable
                 again = more.any(axis=1) & (self.vce_rounds[d_idx] < VCE_MAX_ROUNDS)
                 change = np.where(usable & again[:, None], factors, 1.0)
@@ -473,11 +487,17 @@ class _Iteration:
         dof = m - 3  # a bias angle costs a degree of freedom, its prior gives one back
         if a is not None:
             chi2 = chi2 + (self.z * self.z).sum(axis=0)
+        tr = None if self.terrain is None else _terrain_rows(self.terrain, X)
+        if tr is not None:  # the terrain prior is one more observation
+            chi2 = chi2 + tr[1] ** 2
+            dof = dof + tr[2]
         with np.errstate(divide="ignore", invalid="ignore"):
             sigma0_sq = np.where(dof > 0, chi2 / dof, np.nan)
         p = fit_checks.chi_square_p(chi2, dof)
-        rho_pix, pairs_pix = fit_checks.lag1_autocorrelation(E, use, slice(0, 2))
-        rho_rng, pairs_rng = fit_checks.lag1_autocorrelation(E, use, slice(2, 3))
+        # the residuals as the fit weighs them: a run of frames the robust loss (partly) rejects is no drift
+        Ew = E if wr is None else np.sqrt(wr) * E
+        rho_pix, pairs_pix = fit_checks.lag1_autocorrelation(Ew, use, slice(0, 2))
+        rho_rng, pairs_rng = fit_checks.lag1_autocorrelation(Ew, use, slice(2, 3))
         acf_pix = fit_checks.acf_significant(rho_pix, pairs_pix)
         acf_rng = fit_checks.acf_significant(rho_rng, pairs_rng)
         infl_pix = fit_checks.acf_inflation(rho_pix, acf_pix)
@@ -485,10 +505,14 @@ class _Iteration:
         N6, _ = _normal(J, E, wr)
         if a is not None:
             hs = _bias_schur(N6, J, a, wr)
+        if tr is not None:
+            _add_terrain(N6, None, *tr)
         g = np.sqrt(np.stack([self.guard[:, 0], self.guard[:, 0], self.guard[:, 1]]))[:, None, :]
         N60, _ = _normal(J * g, E, wr)
         if a is not None:
             _bias_schur(N60, J * g, a * g, wr)
+        if tr is not None:
+            _add_terrain(N60, None, *tr)
         cov0 = _cov_from_six(N60)[0]  # the covariance the model as stated gives
         # inflate: the drifting groups' variances by their autocorrelation factor, then everything by the
         # chi-square's variance factor when the test fails
@@ -498,6 +522,8 @@ class _Iteration:
         N6s, _ = _normal(Js, Es, wr)
         if a is not None:
             hs = _bias_schur(N6s, Js, a * s, wr)
+        if tr is not None:
+            _add_terrain(N6s, None, *tr)
         chi2_s = _dot_rows(Es if wr is None else wr * Es, Es) + (0.0 if a is None else (self.z ** 2).sum(axis=0))
         p_fail = np.isfinite(p) & (p < fit_checks.CHI2_ALPHA)
         # what `robust_scale` already folded in counts towards the chi-square's variance factor
@@ -543,6 +569,24 @@ class _Iteration:
             extras.update(_bias_summary(self, cov, hs, vf_chi))
         return X, self.iterations, status, cond, cov, extras
 
+    def _with_terrain(self, J, E, a, w, share):
+        """The mixture's arguments with the terrain prior (if any) at self.X as one more frame: its range row
+        the terrain residual, no pixel, no bias column, unit weight."""
+        if self.terrain is None:
+            return J, E, a, w, share
+        jt, et, _ = _terrain_rows(self.terrain, self.X)
+        b = E.shape[-1]
+        Jt = np.zeros((3, 3, 1, b))
+        Jt[:, 2, 0] = jt
+        Et = np.zeros((3, 1, b))
+        Et[2, 0] = et
+        pad = np.zeros((3, 1, b))
+        wt = np.zeros((3, 1, b))
+        wt[2] = 1.0
+        return (np.concatenate([J, Jt], axis=2), np.concatenate([E, Et], axis=1), np.concatenate([a, pad], axis=1),
+                np.concatenate([w, wt], axis=1),
+                None if share is None else np.concatenate([share, np.zeros((2, 1, b))], axis=1))
+
     def _mixture(self, s, s_bias, g, failed, drift_pix):
         """`bias_mixture.mixture` at the solution, twice (the second at the first's step), with the final IRLS
         weights, the standardized rows scaled by s (3,1,B) (their sigmas divided by s) and the bias columns by
@@ -563,11 +607,11 @@ class _Iteration:
             # the attitude's share of each row's variance, as the columns passed weigh it (a bias at the
             # largest prior is the whole attitude error); none where the residuals drift
             share = np.where(drift_pix, 0.0, np.minimum(a_mix[:2] ** 2, 1.0)) if self.split_attitude else None
-            mix = bias_mixture.mixture(J * s, E * s, a_mix, w, share)
+            mix = bias_mixture.mixture(*self._with_terrain(J * s, E * s, a_mix, w, share))
             step = np.where(keep[:, None] & np.isfinite(mix["step"]), mix["step"], 0.0)
             self.X += step
         share0 = np.where(drift_pix, 0.0, np.minimum((a0 * g)[:2] ** 2, 1.0)) if self.split_attitude else None
-        mix0 = bias_mixture.mixture(J * g, E * g, a0 * g, w, share0)  # the same point, as stated
+        mix0 = bias_mixture.mixture(*self._with_terrain(J * g, E * g, a0 * g, w, share0))  # the same point, as stated
         # the bias in units of the stated prior: the columns passed carry the misfit's scaling s_bias / s
         unit = (s_bias / s)[0, 0]
         mix["bias"] = mix["bias"] * unit[:, None]
@@ -577,6 +621,28 @@ class _Iteration:
         E_report = _evaluate(self.pl, self.X)[1]
         E_report[:2] -= a0[:2] * mix["bias"].T[:, None, :]
         return mix, mix0, E_report
+
+
+def _terrain_rows(terrain, X: np.ndarray):
+    """The terrain prior's standardized row jt (3,b) (d residual model / dX over sigma: [-dup_de, -dup_dn, 1] /
+    sigma_m), residual et (b,) ((fn(e, n) - up) / sigma_m) and whether it is in use (b,) int (fn finite) at
+    X (b,3); zero where not in use."""
+    fn, sigma_m = terrain
+    b = X.shape[0]
+    up, de, dn = (np.broadcast_to(np.asarray(v, dtype=np.float64), (b,)) for v in fn(X[:, 0], X[:, 1]))
+    use = np.isfinite(up) & np.isfinite(de) & np.isfinite(dn) & np.isfinite(X).all(axis=1)
+    jt = np.where(use, np.stack([-de, -dn, np.ones(b)]), 0.0) / sigma_m
+    et = np.where(use, up - X[:, 2], 0.0) / sigma_m
+    return jt, et, use.astype(np.int64)
+
+
+def _add_terrain(N, g, jt, et, use=None):
+    """Add the terrain row jt (3,b), residual et (b,) to the six normal-matrix entries N and g (in place)."""
+    for e, (c, d) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
+        N[e] = N[e] + jt[c] * jt[d]
+    if g is not None:
+        for c in range(3):
+            g[c] = g[c] + jt[c] * et
 
 
 def _full3(N6):
@@ -653,15 +719,18 @@ def _inverse_spd(N: np.ndarray):
     return 0.5 * (inv + np.swapaxes(inv, 1, 2)), singular
 
 
-def _vce_factors(J, E, ok, robust, a=None):
+def _vce_factors(J, E, ok, robust, a=None, terrain_rows=None):
     """Helmert/Foerstner variance component factors (b, 2) = (sum_g w e^2) / r_g with the redundancy numbers
     r_g = sum_g (1 - w_i h_i) over the usable rows of each group (pixels: the u and v rows, ranges; rows a
     redescending loss rejected do not count), h_i the leverage of row i in the joint problem (target, and the
-    bias columns a when given), from the standardized J (3,3,n,b), E (3,n,b); and a (b, 2) flag 'usable'
+    bias columns a when given, the terrain prior's `_terrain_rows` when given), from the standardized J (3,3,n,b),
+    E (3,n,b); and a (b, 2) flag 'usable'
     (redundancy of the group >= 0.5)."""
     _, w = _cost_weights(E, robust)
     N, _ = _normal(J, E, w)
     hs = _bias_schur(N, J, a, w) if a is not None else None
+    if terrain_rows is not None:
+        _add_terrain(N, None, *terrain_rows)
     _, singular, (A0, B0, C0, D0, E0, F0), det = _solve3(N, [N[0]] * 3)
     inv = [np.where(singular, np.nan, x / det) for x in (A0, B0, C0, D0, E0, F0)]
     j0, j1, j2 = J

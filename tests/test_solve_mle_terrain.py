@@ -6,7 +6,7 @@ import pytest
 
 from pipeline.solve import methods, solve, solve_batch
 from pipeline.solve.observations import Observations, Sigma
-from pipeline.solve.scenes import paper_batch
+from support.scenes import paper_batch
 
 F_PX, CX, CY = 1000.0, 640.0, 360.0
 K = np.array([[F_PX, 0.0, CX], [0.0, F_PX, CY], [0.0, 0.0, 1.0]])

@@ -99,6 +99,11 @@ OPTIONS: dict[str, tuple[Option, ...]] = {
 }
 
 
+# Options `solve` takes that a config's `solve.options` cannot state: a Python value built from another part of the
+# flight config (terrain: the DEM's height function from `terrain:`, docs/terrain.md).
+NOT_IN_CONFIG: dict[str, frozenset[str]] = {"mle": frozenset({"terrain"})}
+
+
 def _schema_name(method: str) -> str:
     return "".join(p.capitalize() for p in method.split("-")) + "Options"
 

@@ -29,7 +29,7 @@ from annotated_types import Ge, Gt, Le, Lt
 from pipeline.config_schema import load_dataclass, read_yaml
 from pipeline.errors import ConfigError, InputError
 from pipeline.solve_options import Method, SolveOptions, given_options
-from pipeline.targets import TargetEntry  # issue 21: many targets per flight
+from pipeline.targets import TargetEntry, check_mark
 
 NonNegative = Annotated[float, Ge(0)]
 Positive = Annotated[float, Gt(0)]
@@ -222,10 +222,7 @@ class Target:
     template_pixel: tuple[float, float] | None = None
 
     def __post_init__(self):
-        if self.template is None and (self.frame_index is None or self.pixel is None):
-            raise ValueError("give either 'frame_index' and 'pixel', or 'template'")
-        if self.template is not None and self.pixel is not None:
-            raise ValueError("give either 'frame_index' and 'pixel', or 'template', not both")
+        check_mark(self)
 
 
 @dataclass(frozen=True)

@@ -46,10 +46,16 @@ class Mark:
     source: str = ""
 
     def __post_init__(self):
-        if self.template is None and (self.frame_index is None or self.pixel is None):
-            raise ValueError("give either 'frame_index' and 'pixel', or 'template'")
-        if self.template is not None and self.pixel is not None:
-            raise ValueError("give either 'frame_index' and 'pixel', or 'template', not both")
+        check_mark(self)
+
+
+def check_mark(mark) -> None:
+    """A mark (this module's TargetMark, or the flight config's single `target:`) is a pixel in a frame or a
+    template image: ValueError otherwise."""
+    if mark.template is None and (mark.frame_index is None or mark.pixel is None):
+        raise ValueError("give either 'frame_index' and 'pixel', or 'template'")
+    if mark.template is not None and mark.pixel is not None:
+        raise ValueError("give either 'frame_index' and 'pixel', or 'template', not both")
 
 
 @dataclass(frozen=True)

@@ -42,7 +42,7 @@ class Files:
     telemetry: tuple[str, ...] = ()
     video: str | None = None
     frames_csv: str | None = None
-    # issue 22 (photos): drone photos as the flight (a folder or a list of JPEGs), and their marks CSV
+    # drone photos as the flight (a folder or a list of JPEGs), and their marks CSV
     # (photo,x_px,y_px; none: every image centre, where the laser points). docs/locate.md
     photos: tuple[str, ...] = ()
     marks: str | None = None
@@ -271,7 +271,6 @@ class SigmaPriors:
     position_tau_s: NonNegative | None = None
 
 
-# ---- issue 22 (terrain helper): `terrain:`, a DEM for the `dem` method and the MLE's terrain prior ----------
 @dataclass(frozen=True)
 class Terrain:
     """A GeoTIFF DEM of the target's area (docs/terrain.md). `vertical_datum` overrides what the file says
@@ -285,7 +284,6 @@ class Terrain:
     def __post_init__(self):
         if self.vertical_sigma_m is not None and not (np.isfinite(self.vertical_sigma_m) and self.vertical_sigma_m > 0):
             raise ValueError(f"'vertical_sigma_m' must be a positive number of metres, got {self.vertical_sigma_m}")
-# ---- end of issue 22 (terrain) -------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -307,14 +305,14 @@ class FlightConfig:
     truth_file: str | None = None
     solve: Solve = field(default_factory=Solve)
     sigma: SigmaPriors = field(default_factory=SigmaPriors)
-    terrain: Terrain | None = None  # issue 22 (terrain)
-    # issue 21: named targets (pipeline.targets); `target:` is the one-element case and excludes these two
+    terrain: Terrain | None = None
+    # named targets (pipeline.targets); `target:` is the one-element case and excludes these two
     targets: tuple[TargetEntry, ...] = ()
     marks_file: str | None = None
     path: str | None = None
 
     def __post_init__(self):
-        if self.target is not None and (self.targets or self.marks_file is not None):  # issue 21
+        if self.target is not None and (self.targets or self.marks_file is not None):
             raise ValueError("give 'target' (one mark) or 'targets'/'marks_file', not both")
         if isinstance(self.origin, str) and self.origin != "auto":
             raise ValueError("'origin' must be 'auto' or {lat_deg, lon_deg, alt_m}")
@@ -357,7 +355,7 @@ def flight_config_from_dict(doc: dict, path: str | PathLike | None = None) -> Fl
     if isinstance(doc, dict) and "path" in doc:
         raise ConfigError("path: unknown key", where)
     if isinstance(doc, dict) and isinstance(doc.get("files"), dict) and isinstance(doc["files"].get("photos"), str):
-        doc = {**doc, "files": {**doc["files"], "photos": [doc["files"]["photos"]]}}  # issue 22 (photos): a folder
+        doc = {**doc, "files": {**doc["files"], "photos": [doc["files"]["photos"]]}}  # a folder
     cfg = load_dataclass(FlightConfig, doc, source=where, integral_floats=True)
     files = dataclasses.replace(
         cfg.files,
@@ -369,13 +367,13 @@ def flight_config_from_dict(doc: dict, path: str | PathLike | None = None) -> Fl
     target = cfg.target
     if target is not None and target.template is not None:
         target = dataclasses.replace(target, template=_resolve(base, target.template, "target.template", where))
-    if cfg.terrain is not None:  # issue 22 (terrain)
+    if cfg.terrain is not None:
         cfg = dataclasses.replace(cfg, terrain=dataclasses.replace(
             cfg.terrain, dem=_resolve(base, cfg.terrain.dem, "terrain.dem", where)))
     cfg = dataclasses.replace(cfg, files=files, target=target,
                               truth_file=_resolve(base, cfg.truth_file, "truth_file", where),
                               path=None if where is None else str(where.resolve()))
-    from pipeline.targets import resolve_config_targets  # issue 21: paths resolved, marks file read and checked
+    from pipeline.targets import resolve_config_targets  # paths resolved, marks file read and checked
 
     return resolve_config_targets(cfg, base, where, _resolve)
 
@@ -403,7 +401,7 @@ def flight_config_for_video(path: str | PathLike) -> FlightConfig:
     if not path.is_file():
         raise ConfigError("no such file", path)
     name = "".join(c if c.isalnum() or c in "-_" else "_" for c in path.stem) or "flight"
-    # i23: MSL altitudes (EG 0104, ST 0601 tag 15 alone) converted with the EGM2008 geoid; unused for ellipsoid heights
+    # MSL altitudes (EG 0104, ST 0601 tag 15 alone) converted with the EGM2008 geoid; unused for ellipsoid heights
     return FlightConfig(name=name.lstrip("."), files=Files(telemetry=(str(path),)), path=str(path),
                         altitude=Altitude(geoid_separation_m="auto"))
 

@@ -66,7 +66,7 @@ def _estimate_clock(r: Flight) -> ClockEstimate:
     tracker = SiftTracker(r.config.tracking)
     mark = acquire_mark(first_mark(r.config), frames=r.frames, plan_frame_index=r.plan.frame_index,
                         camera=r.camera, decoder=r.decoder, tracker=tracker, config_path=r.config.path)
-    return estimate_clock(r, tracker, mark)  # issue 21: the first target's first mark, as `run` takes it
+    return estimate_clock(r, tracker, mark)  # the first target's first mark, as `run` takes it
 
 
 def format_check(result: CheckResult) -> str:

@@ -39,7 +39,7 @@ def main(args) -> int:
     return 1 if result.problems else 0
 
 
-def _klv_kind(path) -> str | None:  # i23
+def _klv_kind(path) -> str | None:
     """"video" or "klv" when `path` is a video or a raw KLV dump rather than a YAML config, else None."""
     from pathlib import Path
 
@@ -54,7 +54,7 @@ def _klv_kind(path) -> str | None:  # i23
     return "klv" if detect_format(p) == "klv" else None
 
 
-def _check_klv_dump(args) -> int:  # i23
+def _check_klv_dump(args) -> int:
     """A raw KLV dump has no frames to check: the frame-centre check alone."""
     from pipeline.check.frame_centre import LARGE_M, check_file, frame_centre_document
 

@@ -47,7 +47,7 @@ def _input_files(cfg: FlightConfig) -> list[Path]:
     """The files a flight's outputs depend on (for re-run skipping); folders (ROS 2 bags) contribute their files."""
     listed = [*cfg.files.telemetry, cfg.files.video, cfg.files.frames_csv, cfg.truth_file,
               cfg.target.template if cfg.target is not None else None,
-              cfg.marks_file, *[t.template for t in cfg.targets]]  # issue 21: the targets' marks
+              cfg.marks_file, *[t.template for t in cfg.targets]]  # the targets' marks
     files: list[Path] = []
     for f in listed:
         if f is None:
@@ -113,7 +113,7 @@ def main(args) -> int:
     t2 = time.perf_counter()
     from pipeline.results import per_target, target_failures
 
-    for r in per_target(results):  # issue 21: a summary per target of a flight with named targets
+    for r in per_target(results):  # a summary per target of a flight with named targets
         lines = group_summary(r, reused=r.name in reused)
         if not args.quiet:
             print("\n".join(lines))
@@ -122,7 +122,7 @@ def main(args) -> int:
                 if ln.strip().startswith("mle: the error model does not fit"):
                     print(f"{r.label}: {ln.strip()}")
     not_located = target_failures(results)
-    for name, f in not_located:  # issue 21: the flight's other targets are in the outputs
+    for name, f in not_located:  # the flight's other targets are in the outputs
         print(f"ridgeloc: {name}:{f.target}: not located: {f.message}", file=sys.stderr)
     for f in failures:  # one line each on stderr; the count goes to stdout with the rest of the summary
         print(f"ridgeloc: {f.name}: failed: {f.message}", file=sys.stderr)

@@ -50,7 +50,7 @@ def merge_logs(logs: list[FlightLog]) -> FlightLog:
             out.camera_info = log.camera_info
     for q in QUANTITIES:
         found = [getattr(log, q) for log in logs if getattr(log, q) is not None]
-        if q == "position" and any(s.alt_datum != "missing" for s in found):  # i23: a track without altitude
+        if q == "position" and any(s.alt_datum != "missing" for s in found):  # a track without altitude
             out.warnings += [f"position: {s.source} has no altitudes; the positions of "
                              f"{', '.join(o.source for o in found if o.alt_datum != 'missing')} are used"
                              for s in found if s.alt_datum == "missing"]

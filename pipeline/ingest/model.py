@@ -19,7 +19,7 @@ import numpy as np
 
 from pipeline.errors import InputError
 
-ALT_DATUMS = ("amsl", "ellipsoid", "relative", "missing")  # i23: "missing": a horizontal track, altitudes NaN
+ALT_DATUMS = ("amsl", "ellipsoid", "relative", "missing")  # "missing": a horizontal track, altitudes NaN
 CLOCKS = ("unix", "boot", "video", "unknown")
 
 
@@ -203,6 +203,6 @@ class FlightLog:
         needed = {"position": self.position, "attitude": self.attitude, "gimbal": self.gimbal,
                   "range": self.range, "frames": self.frames}
         out = [k for k, v in needed.items() if v is None]
-        if self.position is not None and self.position.alt_datum == "missing":  # i23
+        if self.position is not None and self.position.alt_datum == "missing":
             out.append("altitude")
         return out

@@ -31,7 +31,7 @@ Rate = Annotated[float, Gt(0), Le(200)]
 
 @dataclass(frozen=True)
 class ExtraTargetConfig:
-    """Another target of the flight (issue 21): a panel like the main one, east_m/north_m metres from it on the
+    """Another target of the flight: a panel like the main one, east_m/north_m metres from it on the
     ground, size_m across, contrast 0..1 of its pattern (1: the main panel's white and black; less: greyer),
     hidden by a cloud around the listed observations. The laser aims at the main target only."""
 
@@ -285,7 +285,7 @@ class SynthConfig:
         d = to_plain(self)
         if not self.camera.zoom:  # a fixed lens: left out, so truth.json of flights without zoom keeps its keys
             del d["camera"]["zoom"]
-        if not self.site.extra_targets:  # one target: as before issue 21
+        if not self.site.extra_targets:  # one target: as before many targets
             del d["site"]["extra_targets"], d["site"]["target_name"]
         return d
 
@@ -331,6 +331,6 @@ def _check(c: SynthConfig) -> None:
         raise ConfigError("'laser.outlier_offset_m' must list at least one offset")
     if c.video.images_in_bag and c.format in ("tlog", "mcap"):
         raise ConfigError("'video.images_in_bag' needs a bag format (ros1, ros2-sqlite3, ros2-mcap)")
-    names = [c.site.target_name, *[t.name for t in c.site.extra_targets]]  # issue 21
+    names = [c.site.target_name, *[t.name for t in c.site.extra_targets]]
     if len(set(names)) != len(names):
         raise ConfigError(f"'site.extra_targets': target names must be unique, got {names}")

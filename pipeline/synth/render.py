@@ -180,7 +180,7 @@ class Renderer:
 
     def __init__(self, K: np.ndarray, dist, size_px: tuple[int, int], texture: np.ndarray, texture_res_m: float,
                  target_size_m: float, supersample: int = 2, haze_km: float = 16.0, extra_targets=()):
-        """extra_targets: (east_m, north_m, size_m, contrast) of further panels on the ground (issue 21)."""
+        """extra_targets: (east_m, north_m, size_m, contrast) of further panels on the ground."""
         self.K = K
         self.extra_targets = tuple(extra_targets)
         self.w, self.h = size_px
@@ -249,7 +249,7 @@ class Renderer:
         out *= self.vignette
         if cloud_at_px is not None:
             out = _cloud(out, cloud_at_px, rng)
-        for at in more_clouds_px:  # clouds over other targets (issue 21)
+        for at in more_clouds_px:  # clouds over other targets
             out = _cloud(out, at, rng)
         if pixel_noise_dn > 0:
             out += rng.normal(0, pixel_noise_dn, out.shape).astype(np.float32)

@@ -47,7 +47,7 @@ def frame_truth(cfg: SynthConfig, tl: Timeline, flight: Flight, states: TrueStat
     occluded = np.zeros(len(px), bool)
     for k in cfg.lost_target.occluded_observations:
         occluded |= np.abs(states.t_ns - tl.obs_t_ns[k]) <= LOST_WINDOW_NS
-    extra = {}  # issue 21: the other targets' pixels, visibility and occlusion per frame
+    extra = {}  # the other targets' pixels, visibility and occlusion per frame
     for x in cfg.site.extra_targets:
         xpx, xfront = project_target_px(cfg, K, states, (x.east_m, x.north_m, 0.0))
         xin = xfront & (xpx[:, 0] >= 0) & (xpx[:, 0] <= w - 1) & (xpx[:, 1] >= 0) & (xpx[:, 1] <= h - 1)

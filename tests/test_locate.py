@@ -104,3 +104,14 @@ def test_run_treats_a_photo_flight_config_as_a_flight(tmp_path, capsys):
     assert np.linalg.norm((result.estimates["mle"].position_m - truth)[:2]) < \
         np.linalg.norm((result.estimates["dji"].position_m - truth)[:2])
     assert result.settings["solve_failures"]["dem"]["status"] == "insufficient_data"
+
+
+def test_nothing_located_is_a_failure(tmp_path, capsys):
+    """One photo without laser and without a DEM determines no point: every method unsolved, with its reason, and
+    exit 1 (as `ridgeloc solve` when no method solves)."""
+    out = tmp_path / "p"
+    assert cli_main(["synth", "--photos", "2", "--no-laser", "-o", str(out), "--seed", "3"]) == 0
+    capsys.readouterr()
+    rc, doc = _locate(capsys, out / "DJI_0001.JPG")
+    assert rc == 1
+    assert all("status" in r and "lat_deg" not in r for r in doc["estimates"].values())

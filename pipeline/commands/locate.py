@@ -77,4 +77,8 @@ def main(args) -> int:
                       f"{r['alt_msl_m']:.1f} m MSL{cep}")
             else:
                 print(f"  {m:10s} {r['status']}: {r['reason']}")
+    if not loc.estimates:  # like `ridgeloc solve`: exit 0 only when at least one method located the target
+        print("ridgeloc: error: no method located the target from these photos (the reasons above; several "
+              "photos need the target marked in each: --marks or --pixel)", file=sys.stderr)
+        return 1
     return 1 if bad else 0

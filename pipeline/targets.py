@@ -175,6 +175,13 @@ def _pixel(x: str, y: str, path, row: int) -> tuple[float, float]:
     return px
 
 
+def _file_mark(frame: int | None, image: str | None, pixel_px: tuple[float, float], source: str) -> Mark:
+    """A marks-file row's mark: a pixel in a video frame, or in an image (a template)."""
+    if image is None:
+        return Mark(frame_index=frame, pixel=pixel_px, source=source)
+    return Mark(template=image, template_pixel=pixel_px, source=source)
+
+
 def _group(rows: list[tuple[str, Mark]], truths: dict[str, tuple | None]) -> list[NamedTarget]:
     order: dict[str, list[Mark]] = {}
     for name, mark in rows:
@@ -214,9 +221,7 @@ def read_marks_csv(path: str | Path) -> list[NamedTarget]:
             raise marks_error(path, row_no, f"duplicate name {name!r} (already marked in row {seen[key]} on the "
                                             "same frame or image)")
         seen[key] = row_no
-        src = f"{path}: row {row_no}"
-        rows.append((name, Mark(frame_index=frame, pixel=px, source=src) if image is None else
-                     Mark(template=image, template_pixel=px, source=src)))
+        rows.append((name, _file_mark(frame, image, px, f"{path}: row {row_no}")))
     if not rows:
         raise ConfigError("the marks file lists no mark", path)
     return _group(rows, {})
@@ -270,9 +275,7 @@ def read_gcp_list(path: str | Path) -> tuple[list[NamedTarget], list[str]]:
         if name in truths and truths[name] != truth:
             raise marks_error(path, row_no, f"{name!r} has other surveyed coordinates in an earlier row")
         truths[name] = truth
-        src = f"{path}: row {row_no}"
-        rows.append((name, Mark(frame_index=frame, pixel=px, source=src) if image is None else
-                     Mark(template=image, template_pixel=px, source=src)))
+        rows.append((name, _file_mark(frame, image, px, f"{path}: row {row_no}")))
     if not rows:
         raise ConfigError("the GCP list holds no point", path)
     return _group(rows, truths), notes

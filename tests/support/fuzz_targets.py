@@ -69,6 +69,13 @@ def _read_frames_csv(path: Path) -> None:
     read_video(video, frames_csv=path)
 
 
+def _read_marks(path: Path) -> None:
+    """A flight's marks file (a marks CSV or an ODM gcp_list.txt), as `marks_file:` reads it."""
+    from pipeline.targets import read_marks_file
+
+    read_marks_file(path)
+
+
 def _read_flight_config(path: Path) -> None:
     from pipeline.flight_config import load_flight_config
 
@@ -315,6 +322,21 @@ def _seed_frames_csv(folder: Path) -> Path:
     return path
 
 
+def _seed_marks_csv(folder: Path) -> Path:
+    (folder / "chip.jpg").write_bytes(_tiny_jpeg())
+    path = folder / "marks.csv"
+    path.write_text("name,frame_or_image,x_px,y_px\npanel,4,301.5,198.0\npanel,9,310.0,190.5\n"
+                    "pole_1,chip.jpg,12.0,8.5\n")
+    return path
+
+
+def _seed_gcp_list(folder: Path) -> Path:
+    path = folder / "gcp_list.txt"
+    path.write_text("EPSG:4326\n112.9390 28.2284 61.5 301.5 198.0 4 panel\n112.9391 28.2285 60.0 120.0 80.5 9 pole_1\n"
+                    "112.9390 28.2284 61.5 310.0 190.5 9 panel\n")
+    return path
+
+
 def _seed_flight_config(folder: Path) -> Path:
     import yaml
 
@@ -412,6 +434,8 @@ TARGETS: tuple[Target, ...] = (
     Target("eg0104-dump", _seed_eg0104_dump, _read_klv_checked),
     Target("video", _seed_video, _read_video),
     Target("frames-csv", _seed_frames_csv, _read_frames_csv),
+    Target("marks-csv", _seed_marks_csv, _read_marks),
+    Target("gcp-list", _seed_gcp_list, _read_marks),
     Target("flight-config", _seed_flight_config, _read_flight_config, tree="yaml"),
     Target("run-config", _seed_run_config, _read_run_config, tree="yaml"),
     Target("observations", _seed_observations, _read_observations, tree="json"),

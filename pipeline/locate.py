@@ -69,12 +69,9 @@ def _file_pixels(photos: list[Photo], pixel_px) -> np.ndarray:
 
 def mle_options(bias_prior_deg: float | None = None, terrain=None) -> dict:
     """Options for solve("mle"): a fixed bias prior when given (else the MLE learns the bias's size up to the
-    attitude sigma), and the terrain prior `terrain=(fn, sigma_m)` only where the MLE takes that option (the MLE
-    rebuild adds it; until then the DEM enters through `dem` alone)."""
-    from pipeline.solve.methods import _OPTIONS
-
+    attitude sigma), and the terrain prior `terrain=(fn, sigma_m)` when a DEM is given."""
     o = {} if bias_prior_deg is None else {"bias_prior_deg": float(bias_prior_deg)}
-    if terrain is not None and "terrain" in _OPTIONS["mle"]:
+    if terrain is not None:
         o["terrain"] = terrain
     return o
 

@@ -23,11 +23,9 @@ def open_flight_dem(terrain) -> Dem | None:
 
 def terrain_solve_options(dem: Dem | None, terrain, origin_lla, options: dict) -> dict:
     """`options` (method -> options) with the MLE's terrain prior `terrain=(fn, vertical_sigma_m)` added, fn the
-    DEM in the ENU frame at the origin (Dem.local), when there is a DEM with a stated vertical sigma and the MLE
-    takes a `terrain` option (an option the MLE rebuild adds); otherwise `options` unchanged."""
-    from pipeline.solve.methods import _OPTIONS
-
-    if dem is None or terrain.vertical_sigma_m is None or "terrain" not in _OPTIONS.get("mle", ()):
+    DEM in the ENU frame at the origin (Dem.local), when there is a DEM with a stated vertical sigma; otherwise
+    `options` unchanged."""
+    if dem is None or terrain.vertical_sigma_m is None:
         return options
     mle = dict(options.get("mle") or {})
     mle.setdefault("terrain", (dem.local(*origin_lla), float(terrain.vertical_sigma_m)))

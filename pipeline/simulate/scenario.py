@@ -24,22 +24,29 @@ from pipeline.solve.observations import ObservationBatch, Sigma
 TARGET_M = np.zeros(3)
 
 
+def arc_path_m(n: int, intersection_angle_deg: float, height_m: float, slant_m: float) -> np.ndarray:
+    """(n, 3) platform positions on a horizontal arc around the origin, every one slant_m from it and height_m
+    above it, evenly spaced in azimuth so that the first and last lines of sight make the intersection angle."""
+    gamma = math.radians(intersection_angle_deg)
+    h, d = height_m, slant_m
+    r = math.sqrt(d * d - h * h)  # horizontal distance at the nominal observation angle
+    # LOS to azimuth phi: (-r sin phi, r cos phi, -h)/d, so cos(gamma) = (r^2 cos(dphi) + h^2) / d^2.
+    dphi = math.acos((d * d * math.cos(gamma) - h * h) / (r * r))
+    phi = np.linspace(-dphi / 2, dphi / 2, n)
+    return np.stack([r * np.sin(phi), -r * np.cos(phi), np.full(n, h)], axis=1)
+
+
 def platform_path_m(g: GeometryConfig, intersection_angle_deg: float) -> np.ndarray:
     """(n, 3) true platform positions whose first and last lines of sight to the target (the origin) make
     `intersection_angle_deg`, evenly spaced along the path (arc: in azimuth; straight: in distance)."""
-    gamma = math.radians(intersection_angle_deg)
-    h, d = g.height_m, g.slant_distance_m
-    r = math.sqrt(d * d - h * h)  # horizontal distance at the nominal observation angle
-    n = g.n_observations
     if g.path == "arc":
-        # LOS to azimuth phi: (-r sin phi, r cos phi, -h)/d, so cos(gamma) = (r^2 cos(dphi) + h^2) / d^2.
-        dphi = math.acos((d * d * math.cos(gamma) - h * h) / (r * r))
-        phi = np.linspace(-dphi / 2, dphi / 2, n)
-        return np.stack([r * np.sin(phi), -r * np.cos(phi), np.full(n, h)], axis=1)
+        return arc_path_m(g.n_observations, intersection_angle_deg, g.height_m, g.slant_distance_m)
     # Straight level line y = -r, z = h: end points at x = +-a with cos(gamma) = (d^2 - a^2) / (d^2 + a^2).
-    a = d * math.tan(gamma / 2)
-    x = np.linspace(-a, a, n)
-    return np.stack([x, np.full(n, -r), np.full(n, h)], axis=1)
+    d = g.slant_distance_m
+    r = math.sqrt(d * d - g.height_m ** 2)
+    a = d * math.tan(math.radians(intersection_angle_deg) / 2)
+    x = np.linspace(-a, a, g.n_observations)
+    return np.stack([x, np.full(g.n_observations, -r), np.full(g.n_observations, g.height_m)], axis=1)
 
 
 def intersection_angle_deg(platform_m: np.ndarray, target_m: np.ndarray = TARGET_M) -> float:

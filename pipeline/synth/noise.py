@@ -8,13 +8,21 @@ import numpy as np
 from scipy.signal import lfilter
 
 
+def gauss_markov_filter(w: np.ndarray, dt_s: float, tau_s: float, axis: int = 0) -> np.ndarray:
+    """A first-order Gauss-Markov process from white draws w (any shape; time along `axis`, steps dt_s apart)
+    with the draws' scale as its stationary std and time constant `tau_s`: the exact discretization
+    x[0] = w[0], x[k] = a x[k-1] + sqrt(1 - a^2) w[k], a = exp(-dt/tau) (started from its stationary
+    distribution)."""
+    a = math.exp(-dt_s / tau_s)
+    v = np.moveaxis(np.array(w, dtype=np.float64), axis, 0)
+    v[1:] *= math.sqrt(1.0 - a * a)
+    return np.moveaxis(lfilter([1.0], [1.0, -a], v, axis=0), 0, axis)
+
+
 def gauss_markov(rng: np.random.Generator, n: int, dims: int, sigma: float, tau_s: float, dt_s: float) -> np.ndarray:
     """(n, dims) first-order Gauss-Markov process, stationary std `sigma`, time constant `tau_s`, step `dt_s`
-    (x[k+1] = a x[k] + sqrt(1 - a^2) sigma w, a = exp(-dt/tau); started from its stationary distribution)."""
-    a = math.exp(-dt_s / tau_s)
-    w = rng.standard_normal((n, dims))
-    w[1:] *= math.sqrt(1.0 - a * a)
-    return sigma * lfilter([1.0], [1.0, -a], w, axis=0)
+    (`gauss_markov_filter` of standard normal draws)."""
+    return sigma * gauss_markov_filter(rng.standard_normal((n, dims)), dt_s, tau_s)
 
 
 def smooth_gauss_markov(rng: np.random.Generator, n: int, dims: int, sigma: float, tau_s: float, smooth_s: float,

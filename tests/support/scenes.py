@@ -15,7 +15,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pipeline.geometry.camera import intrinsics_matrix, look_at_rotation, project, projection_matrix
+from pipeline.simulate.scenario import arc_path_m
 from pipeline.solve.observations import ObservationBatch, Observations, Sigma
+from pipeline.synth.noise import gauss_markov_filter
 
 PAPER_SIGMA = Sigma(pixel_px=0.1, range_m=2.5, position_m=5.0, attitude_deg=0.2)
 #: a 600 x 400 px camera (the paper's flight experiment resolution) with f = 1000 px
@@ -24,15 +26,10 @@ PAPER_K = intrinsics_matrix(1000.0, 1000.0, 300.0, 200.0)
 
 def arc_platforms_m(n: int = 10, gamma_deg: float = 30.0, height_m: float = 2000.0, slant_m: float = 5000.0,
                     target_m=(0.0, 0.0, 0.0)) -> np.ndarray:
-    """(n,3) platform positions on a horizontal arc around the target: first and last lines of sight make
-    gamma_deg, every one has length slant_m, height_m above the target."""
-    target = np.asarray(target_m, dtype=np.float64)
-    horiz = np.sqrt(slant_m ** 2 - height_m ** 2)
-    # angle between two lines of sight with azimuth difference a: cos g = (horiz^2 cos a + h^2) / slant^2
-    cos_a = (np.cos(np.deg2rad(gamma_deg)) * slant_m ** 2 - height_m ** 2) / horiz ** 2
-    a = np.arccos(np.clip(cos_a, -1.0, 1.0))
-    az = np.linspace(-a / 2, a / 2, n) + np.pi / 2
-    return target + np.stack([horiz * np.cos(az), -horiz * np.sin(az), np.full(n, height_m)], axis=1)
+    """(n,3) platform positions on a horizontal arc around the target (`ridgeloc simulate`'s arc, flown the other
+    way round): first and last lines of sight make gamma_deg, every one has length slant_m, height_m above the
+    target."""
+    return np.asarray(target_m, dtype=np.float64) + arc_path_m(n, gamma_deg, height_m, slant_m)[::-1]
 
 
 def paper_batch(B: int, n: int = 10, gamma_deg: float = 30.0, sigma: Sigma | None = PAPER_SIGMA,
@@ -66,18 +63,15 @@ def paper_problem(n: int = 10, gamma_deg: float = 30.0, sigma: Sigma | None = PA
 
 
 def gauss_markov(rng: np.random.Generator, shape: tuple, t_s: np.ndarray, sigma: float, tau_s: float | None):
-    """First-order Gauss-Markov samples (*shape, n) at times t_s (n,), stationary with standard deviation sigma
-    and correlation exp(-|dt| / tau_s) (exact discretization x_k = a x_(k-1) + sqrt(1 - a^2) sigma w_k,
-    a = exp(-dt / tau)); white noise when tau_s is None."""
+    """First-order Gauss-Markov samples (*shape, n) at evenly spaced times t_s (n,), stationary with standard
+    deviation sigma and correlation exp(-|dt| / tau_s); white noise when tau_s is None."""
     w = rng.normal(0.0, sigma, (*shape, t_s.size))
-    if not tau_s:
+    if not tau_s or t_s.size < 2:
         return w
-    x = np.empty_like(w)
-    x[..., 0] = w[..., 0]
-    for k in range(1, t_s.size):
-        a = np.exp(-(t_s[k] - t_s[k - 1]) / tau_s)
-        x[..., k] = a * x[..., k - 1] + np.sqrt(1.0 - a * a) * w[..., k]
-    return x
+    dt_s = np.diff(t_s)
+    if not np.allclose(dt_s, dt_s[0]):
+        raise ValueError("gauss_markov: the times must be evenly spaced")
+    return gauss_markov_filter(w, float(dt_s[0]), tau_s, axis=-1)
 
 
 def correlated_problems(B: int, n: int = 10, gamma_deg: float = 30.0, sigma: Sigma = PAPER_SIGMA,

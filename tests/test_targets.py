@@ -117,3 +117,18 @@ def test_targets_list_errors(tmp_path, keys, problem):
     with pytest.raises(ConfigError, match=None) as exc:
         load_flight_config(_flight(tmp_path, **keys))
     assert problem in str(exc.value)
+
+
+def test_check_names_a_target_marked_on_a_frame_the_video_does_not_have(tmp_path):
+    """Without a frames CSV the frame numbers are known only once the video is opened: `ridgeloc check` then
+    checks every target's marks (not only the first), naming the target."""
+    path = _flight(tmp_path, targets=[{"name": "panel", "frame_index": 4, "pixel": [303.0, 198.6]},
+                                      {"name": "pole", "frame_index": 500, "pixel": [100.0, 100.0]}])
+    doc = yaml.safe_load(path.read_text())
+    del doc["files"]["frames_csv"]
+    path.write_text(yaml.safe_dump(doc))
+    r = subprocess.run([sys.executable, "-m", "pipeline", "check", str(path), "--no-clock"], cwd=ROOT,
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode != 0, r.stdout + r.stderr
+    assert "problem: target 'pole' (" in r.stdout and "frame 500 is not a frame of the video" in r.stdout, r.stdout
+    assert "'panel'" not in r.stdout

@@ -25,6 +25,7 @@ from pipeline.check.geometry import Cluster, _fmt_m, cluster, meet_undetermined_
 from pipeline.errors import RidgelocError
 from pipeline.flight import Flight
 from pipeline.flight_config import CLOCK_SOURCES
+from pipeline.targets import flight_targets
 
 # ---- the resolved mapping ---------------------------------------------------------------------------------------
 
@@ -191,36 +192,56 @@ def _rarity(conv: Convention) -> tuple[int, int]:
 
 def mark_checks(r: Flight, centre_m: np.ndarray | None, conv: Convention | None = None,
                 now: Reading | None = None) -> tuple[list[str], list[str]]:
-    """The marked target pixel against the image bounds and the principal point, and (with the cluster's centre)
-    whether its line of sight passes near the cluster. Returns (problems, warnings)."""
+    """Every pixel mark of every target against the image bounds and the video's frames; the first target's
+    first mark (the one the clock estimate tracks, where the gimbal and the laser point) also against the
+    principal point and, with the cluster's centre, whether its line of sight passes near the cluster.
+    Returns (problems, warnings)."""
     problems, warnings = [], []
-    t = r.config.target
     cam = r.camera
-    if t is None or t.pixel is None:
-        return problems, warnings
-    u, v = t.pixel
     w, h = cam.width_px, cam.height_px
+    frame_numbers = {int(k): i for i, k in enumerate(np.asarray(r.frames.index))} if r.frames is not None else None
 
     def inside(a, b):  # OpenCV convention: integer coordinates at pixel centres, the image spans -0.5 .. size-0.5
         return -0.5 <= a <= w - 0.5 and -0.5 <= b <= h - 0.5
-    if not inside(u, v):
-        hint = (" it looks like [row, column]: give target.pixel as [x (column), y (row)]" if inside(v, u) else "")
-        problems.append(f"target.pixel [{u:g}, {v:g}] is outside the {w}x{h} image (x in -0.5..{w - 0.5:g}, y in "
-                        f"-0.5..{h - 0.5:g}; OpenCV pixel centres at integers);{hint}".rstrip(";"))
-        return problems, warnings
+
+    first = True
+    for target in flight_targets(r.config):
+        for m in target.marks:
+            primary, first = first, False
+            if m.pixel is None:
+                continue
+            what = "target.pixel" if target.name is None else f"target '{target.name}' ({m.source}): pixel"
+            u, v = m.pixel
+            if not inside(u, v):
+                hint = (f" it looks like [row, column]: give {'target.pixel' if target.name is None else 'the pixel'}"
+                        " as [x (column), y (row)]" if inside(v, u) else "")
+                problems.append(f"{what} [{u:g}, {v:g}] is outside the {w}x{h} image (x in -0.5..{w - 0.5:g}, y "
+                                f"in -0.5..{h - 0.5:g}; OpenCV pixel centres at integers);{hint}".rstrip(";"))
+                continue
+            if frame_numbers is not None and m.frame_index is not None and m.frame_index not in frame_numbers:
+                key = "target.frame_index" if target.name is None else f"target '{target.name}' ({m.source}): frame"
+                problems.append(f"{key} {m.frame_index} is not a frame of the video")
+                continue
+            if primary:
+                warnings += _primary_mark_checks(r, m, centre_m, conv, now, frame_numbers, problems)
+    return problems, warnings
+
+
+def _primary_mark_checks(r: Flight, m, centre_m, conv, now, frame_numbers, problems: list[str]) -> list[str]:
+    """The first mark against the principal point (a warning, returned) and the cluster of the lines of sight
+    (a problem, appended)."""
+    cam = r.camera
+    u, v = m.pixel
+    warnings = []
     off = math.hypot(u - cam.cx_px, v - cam.cy_px)
-    if off > 0.25 * min(w, h):
+    if off > 0.25 * min(cam.width_px, cam.height_px):
         warnings.append(f"target.pixel [{u:g}, {v:g}] is {off:.0f} px from the principal point "
                         f"({cam.cx_px:.1f}, {cam.cy_px:.1f}): the laser may not be on the target")
-    if centre_m is None or r.plan is None or t.frame_index is None:
-        return problems, warnings
-    lookup = {int(k): i for i, k in enumerate(np.asarray(r.frames.index))}
-    if t.frame_index not in lookup:
-        problems.append(f"target.frame_index {t.frame_index} is not a frame of the video")
-        return problems, warnings
-    t_mark = np.array([int(r.frames.t_ns[lookup[t.frame_index]]) + r.config.clock.offset_ns("video")])
+    if centre_m is None or r.plan is None or m.frame_index is None or frame_numbers is None:
+        return warnings
+    t_mark = np.array([int(r.frames.t_ns[frame_numbers[m.frame_index]]) + r.config.clock.offset_ns("video")])
     cands = {"as given": (u, v)}
-    if inside(v, u):
+    if -0.5 <= v <= cam.width_px - 0.5 and -0.5 <= u <= cam.height_px - 0.5:
         cands["swapped (row, column)"] = (v, u)
     miss = {}
     for name, px in cands.items():
@@ -230,11 +251,11 @@ def mark_checks(r: Flight, centre_m: np.ndarray | None, conv: Convention | None 
     if "as given" in miss:
         dist = float(np.linalg.norm(centre_m - o[0]))
         if miss["as given"] > 0.05 * dist:
-            better = {k: m for k, m in miss.items() if k != "as given" and m < 0.3 * miss["as given"]}
+            better = {k: mm for k, mm in miss.items() if k != "as given" and mm < 0.3 * miss["as given"]}
             hint = f"; swapped to [{v:g}, {u:g}] it misses by {_fmt_m(min(better.values()))}" if better else ""
-            problems.append(f"the line of sight through target.pixel [{u:g}, {v:g}] in frame {t.frame_index} "
+            problems.append(f"the line of sight through target.pixel [{u:g}, {v:g}] in frame {m.frame_index} "
                             f"misses where the lines of sight meet by {_fmt_m(miss['as given'])}{hint}")
-    return problems, warnings
+    return warnings
 
 
 def geometry_checks(r: Flight, pixel_px: np.ndarray | None = None, t_ns: np.ndarray | None = None,
@@ -247,7 +268,8 @@ def geometry_checks(r: Flight, pixel_px: np.ndarray | None = None, t_ns: np.ndar
     now = current_reading(r.config, r.log)
     what = "optical axes" if pixel_px is None else "lines of sight through the tracked target"
     o, d, inside = rays(r, t_ns, pixel_px)
-    problems, warnings = [], []
+    problems, warnings = mark_checks(r, None)  # every mark against the image and the frames
+    marks_ok = not problems
     if not inside.any():
         problems.append(outside_telemetry(r))
         return GeometryResult(None, [], problems, warnings, what)
@@ -278,11 +300,9 @@ def geometry_checks(r: Flight, pixel_px: np.ndarray | None = None, t_ns: np.ndar
     undetermined = meet_undetermined_warning(c)
     if undetermined and c.consistent:
         warnings.append(undetermined)
-    p, w = mark_checks(r, c.centre_m if c.consistent else (alts[0].cluster.centre_m if alts else None),
-                       alts[0].convention if alts and not c.consistent else None, now)
-    if c.consistent or alts:
-        problems += p
-    warnings += w
+    if marks_ok and (c.consistent or alts):  # the first mark's line of sight against where the others meet
+        problems += mark_checks(r, c.centre_m if c.consistent else (alts[0].cluster.centre_m if alts else None),
+                                alts[0].convention if alts and not c.consistent else None, now)[0]
     return GeometryResult(c, alts, problems, warnings, what)
 
 

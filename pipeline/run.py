@@ -59,7 +59,7 @@ def process_group(config: FlightConfig) -> GroupResult | FlightResult:
             check_marks_in_video(targets, flight.frames.index, flight.camera.width_px, flight.camera.height_px,
                                  config.path)
         notes += flight.notes + plan.notes
-        notes += [r.line() for _, r in frame_centre_checks(config, flight.log.formats)]  # the payload's own fix
+        notes += [r.line() for _, r in frame_centre_checks(flight.log)]  # the payload's own fix
         with times("track", flight.decoder):
             fp = FlightPass(flight, plan, None, SiftTracker(config.tracking), ViewCache(share_matches=named),
                             notes=notes, times=times)

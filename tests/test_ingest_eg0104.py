@@ -182,8 +182,19 @@ def test_run_on_a_clip_locates_the_crosshair_near_the_frame_centre(name):
     from pipeline.flight_config import load_run_config
     from pipeline.run import process_group
 
+    import pipeline.ingest.klv as klv
+
     (entry,) = load_run_config(_clip(name))
-    result = process_group(entry.config)
+    tables, real_table = [], klv._fmv_table
+
+    def fmv_table(*a, **k):  # the clip's KLV stream is demuxed and decoded once: the frame-centre check reuses it
+        tables.append(a[0])
+        return real_table(*a, **k)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(klv, "_fmv_table", fmv_table)
+        result = process_group(entry.config)
+    assert len(tables) == 1
     from pipeline.geometry.frames import lla_from_enu
 
     lat, lon, _ = lla_from_enu(result.estimates["los"].position_m, result.origin_lla)

@@ -199,26 +199,14 @@ def check_file(path, index=None) -> FrameCentreCheck | None:
     return check_frame_centre(table)
 
 
-def frame_centre_checks(config, formats=("fmv", "klv")) -> list[tuple[str, FrameCentreCheck]]:
-    """(file, check) for every KLV-carrying file of a flight config (its telemetry files and video that are raw
-    KLV dumps or videos with a KLV stream holding frame centres). `formats`: the reader formats of the flight's
-    read log (`FlightLog.formats`); without "fmv" or "klv" nothing is read again."""
-    from pipeline.errors import RidgelocError
-    from pipeline.ingest.dispatch import detect_format
-
+def frame_centre_checks(log) -> list[tuple[str, FrameCentreCheck]]:
+    """(file, check) for every KLV stream a flight's read log holds (`FlightLog.klv_tables`: raw KLV dumps and
+    full-motion videos, decoded once by the reader) that has frame centres."""
     out = []
-    if not {"fmv", "klv"} & set(formats):
-        return out
-    paths = [*config.files.telemetry, *([config.files.video] if config.files.video else [])]
-    for p in dict.fromkeys(paths):
-        try:
-            if detect_format(p) not in ("klv", "video"):
-                continue
-            r = check_file(p)
-        except RidgelocError:
-            continue  # a video without KLV, or a file the reader refuses (reported by the reader itself)
+    for path, table in log.klv_tables.items():
+        r = check_frame_centre(table)
         if r is not None:
-            out.append((str(p), r))
+            out.append((path, r))
     return out
 
 

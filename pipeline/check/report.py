@@ -48,7 +48,7 @@ def check_flight(config: FlightConfig, clock: bool = True) -> CheckResult:
         geo = geometry_checks(r)
         result = CheckResult(r, mapping_lines(r), geo, problems=list(geo.problems), warnings=list(geo.warnings))
         result.warnings[:0] = r.notes
-        add_frame_centre(result, frame_centre_checks(config, r.log.formats))
+        add_frame_centre(result, frame_centre_checks(r.log))
         if clock and r.plan is not None and not geo.problems:
             try:
                 result.clock = _estimate_clock(r)

@@ -394,6 +394,7 @@ def read_klv_dump(path) -> FlightLog:
     table, warnings = _dump_table(p)
     log = table_to_log(table, str(p), warnings)
     log.formats.append("klv")
+    log.klv_tables[str(p)] = table
     return log
 
 
@@ -413,4 +414,5 @@ def read_fmv(path, index=None) -> FlightLog:
     log.streams.append(StreamInfo(f"{p.name} video", "video", int(index.frames.t_ns.size),
                                   int(index.frames.t_ns[0]), int(index.frames.t_ns[-1]), ("frames",)))
     log.formats.append("fmv")
+    log.klv_tables[str(p)] = table
     return log

@@ -46,6 +46,7 @@ def merge_logs(logs: list[FlightLog]) -> FlightLog:
         out.streams += log.streams
         out.warnings += log.warnings
         out.formats += log.formats
+        out.klv_tables.update(log.klv_tables)
         if out.camera_info is None:
             out.camera_info = log.camera_info
     for q in QUANTITIES:

@@ -197,6 +197,7 @@ class FlightLog:
     formats: list[str] = field(default_factory=list)  # reader format of each file read ("tlog", "ros1", ...)
     frame_centre: PositionSeries | None = None  # where the payload says its optical axis meets the ground (KLV)
     payload_target: PositionSeries | None = None  # the payload's own target location (KLV tags 40-42)
+    klv_tables: dict = field(default_factory=dict)  # file -> its decoded KLV packets (klv.KlvTable), kept for checks
 
     def missing_for_localization(self) -> list[str]:
         """Quantities localization needs that this log does not supply."""

@@ -179,10 +179,9 @@ def test_check_json_on_a_clip_prints_frame_centre():
 
 @pytest.mark.parametrize("name", sorted(CLIPS))
 def test_run_on_a_clip_locates_the_crosshair_near_the_frame_centre(name):
+    import pipeline.ingest.klv as klv
     from pipeline.flight_config import load_run_config
     from pipeline.run import process_group
-
-    import pipeline.ingest.klv as klv
 
     (entry,) = load_run_config(_clip(name))
     tables, real_table = [], klv._fmv_table

@@ -28,7 +28,7 @@ from annotated_types import Ge, Gt, Le, Lt
 
 from pipeline.config_schema import load_dataclass, read_yaml
 from pipeline.errors import ConfigError, InputError
-from pipeline.solve_options import Method, SolveOptions, given_options
+from pipeline.solve_options import Method, SolveOptions, given_options, not_in_config_problem
 from pipeline.targets import TargetEntry, check_mark
 
 NonNegative = Annotated[float, Ge(0)]
@@ -356,6 +356,8 @@ def flight_config_from_dict(doc: dict, path: str | PathLike | None = None) -> Fl
         raise ConfigError("path: unknown key", where)
     if isinstance(doc, dict) and isinstance(doc.get("files"), dict) and isinstance(doc["files"].get("photos"), str):
         doc = {**doc, "files": {**doc["files"], "photos": [doc["files"]["photos"]]}}  # a folder
+    if (problem := not_in_config_problem(doc)) is not None:
+        raise ConfigError(problem, where)
     cfg = load_dataclass(FlightConfig, doc, source=where, integral_floats=True)
     files = dataclasses.replace(
         cfg.files,

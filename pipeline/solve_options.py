@@ -102,6 +102,20 @@ OPTIONS: dict[str, tuple[Option, ...]] = {
 # Options `solve` takes that a config's `solve.options` cannot state: a Python value built from another part of the
 # flight config (terrain: the DEM's height function from `terrain:`, docs/terrain.md).
 NOT_IN_CONFIG: dict[str, frozenset[str]] = {"mle": frozenset({"terrain"})}
+#: where a config states what a NOT_IN_CONFIG option is built from
+NOT_IN_CONFIG_WHERE = {
+    "terrain": "give the DEM as the flight config's top-level `terrain: {dem: DEM.tif, vertical_sigma_m: ...}`"}
+
+
+def not_in_config_problem(doc) -> str | None:
+    """'solve.options.METHOD.NAME: ...' for a parsed flight config that states a NOT_IN_CONFIG option, else None."""
+    options = (doc.get("solve") or {}).get("options") if isinstance(doc, dict) and isinstance(doc.get("solve"),
+                                                                                              dict) else None
+    for method, names in NOT_IN_CONFIG.items():
+        given = options.get(method) if isinstance(options, dict) else None
+        for name in sorted(names & set(given if isinstance(given, dict) else ())):
+            return f"solve.options.{method}.{name}: not an option of solve.options ({NOT_IN_CONFIG_WHERE[name]})"
+    return None
 
 
 def _schema_name(method: str) -> str:

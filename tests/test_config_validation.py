@@ -31,6 +31,9 @@ def _write(path: Path, doc) -> Path:
 MISTAKES = [  # (change, the whole message after "<file>: ")
     (lambda d: d.update(solve={"options": {"mle": {"robst": "huber"}}}),
      "solve.options.mle.robst: unknown key (did you mean 'robust'?)"),
+    (lambda d: d.update(solve={"options": {"mle": {"terrain": 5.0}}}),
+     "solve.options.mle.terrain: not an option of solve.options (give the DEM as the flight config's top-level "
+     "`terrain: {dem: DEM.tif, vertical_sigma_m: ...}`)"),
     (lambda d: d["sigma"].update(range_m=-1),
      "sigma.range_m: must be >= 0, got -1 (did you mean 1?)"),
     (lambda d: d.update(sigmas=d.pop("sigma")),

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from pipeline.errors import ConfigError
+from pipeline.frames_csv import read_frames_csv
 
 MARKS_CSV_HEADER = ("name", "frame_or_image", "x_px", "y_px")
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
@@ -349,8 +350,6 @@ def resolve_config_targets(cfg, base: Path, where, resolve):
     cfg = dataclasses.replace(cfg, targets=entries, marks_file=resolve(base, cfg.marks_file, "marks_file", where))
     frames = None
     if cfg.files.frames_csv is not None:  # the frame numbers too (else once `run` reads the video's index)
-        from pipeline.ingest.video import _read_frames_csv
-
-        frames = _read_frames_csv(Path(cfg.files.frames_csv))[0]
+        frames = read_frames_csv(Path(cfg.files.frames_csv))[0]
     check_marks_in_video(flight_targets(cfg), frames, cfg.camera.width_px, cfg.camera.height_px, where)
     return cfg

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.errors import LogReadError
+from pipeline.frames_csv import read_frames_csv
 from pipeline.ingest.model import FrameSeries
 
 VIDEO_SUFFIXES = {".mp4", ".mov", ".avi", ".mkv", ".m4v", ".mpg", ".mpeg", ".ts", ".webm"}
@@ -62,24 +63,6 @@ def frames_csv_for(path: Path, frames_csv="auto") -> Path | None:
         cand = path.with_suffix(".frames.csv")
         return cand if cand.is_file() else None
     return Path(frames_csv)
-
-
-def _read_frames_csv(csv_path: Path) -> tuple[np.ndarray, np.ndarray]:
-    try:
-        with open(csv_path) as f:
-            header = f.readline().strip().split(",")
-            if header[:2] != ["frame_index", "pts_ns"]:
-                raise LogReadError(f"expected header 'frame_index,pts_ns', got {','.join(header)!r}", path=csv_path)
-            data = np.loadtxt(f, delimiter=",", dtype=np.int64, ndmin=2)
-    except OSError as exc:
-        raise LogReadError(f"cannot read frames CSV: {exc.strerror}", path=csv_path) from None
-    except ValueError as exc:
-        raise LogReadError(f"malformed frames CSV: {exc}", path=csv_path) from None
-    if data.size == 0:
-        raise LogReadError("frames CSV has no rows", path=csv_path)
-    if data.shape[1] < 2:
-        raise LogReadError("malformed frames CSV: rows need frame_index,pts_ns", path=csv_path)
-    return data[:, 0].copy(), data[:, 1].copy()
 
 
 @dataclass
@@ -152,7 +135,7 @@ def read_video(path, frames_csv="auto", index: DemuxIndex | None = None) -> Fram
     csv_path = frames_csv_for(path, frames_csv)
     if csv_path is None:
         return index.frames
-    idx, t_ns = _read_frames_csv(csv_path)
+    idx, t_ns = read_frames_csv(csv_path)
     n = index.frames.t_ns.size
     if idx.max() >= n:
         raise LogReadError(f"frames CSV {csv_path.name} lists frame {int(idx.max())} but the video has {n} frames",

@@ -4,12 +4,12 @@ platform, the laser range where the photo's LRF status is Normal and the pixel i
 every estimator of `pipeline.solve` runs on them, plus `dem` (a GeoTIFF DEM, pipeline.terrain) and `dji` (the
 photos' own LRFTarget*, the maker's one-shot answer, for comparison).
 
-Error model for consumer drones (docs/locate.md): compass/gimbal yaw errors of 1-5 deg that stay constant over a
-flight are the MLE's boresight bias. PHOTO_SIGMA states the attitude sigma as the largest such bias (5 deg): the MLE
-then learns the bias's size from the flight (its bias mixture, docs/solvers.md) and carries the GNSS error as an
-offset shared by the photos; a fixed bias prior (bias_prior_deg) may be stated instead. An altitude datum offset
-shared by all photos moves every estimate by the same vector (no geometry sees it) except `dem`, which it moves
-horizontally by offset / tan(depression).
+Error model (docs/locate.md, "Error model"; pipeline.photo_errors): the sigmas per photo and the constant parts
+by source type, unless stated: the compass / gimbal-yaw bias constant over a flight is the MLE's boresight bias with
+a fixed prior (`bias_prior_deg`); the GNSS and altitude datum offsets shared by every photo move the estimate by
+the same vector and show in no residual, so their covariance is added to the MLE's; with a DEM the vertical part
+is also an error of the terrain prior, whose sigma grows by it. `dem` is moved horizontally by a datum offset
+/ tan(depression).
 """
 
 from __future__ import annotations
@@ -24,12 +24,10 @@ from pipeline.errors import InputError, RidgelocError
 from pipeline.geometry.frames import enu_from_lla
 from pipeline.ingest.photo import Photo
 from pipeline.ingest.photo_views import PhotoViews, photo_heights_ellipsoid_m, photo_views
+from pipeline.photo_errors import PhotoErrorModel, photo_error_model
 from pipeline.solve import METHODS, Estimate, Status, solve, unsolved_status
 from pipeline.solve.observations import Observations, Sigma
 
-#: consumer drone defaults: marking 2 px, DJI LRF ~1 m, GNSS 3 m, and the largest constant compass / gimbal-yaw
-#: bias over a flight, 5 deg (the MLE learns the bias's size up to it)
-PHOTO_SIGMA = Sigma(pixel_px=2.0, range_m=1.0, position_m=3.0, attitude_deg=5.0)
 #: a pixel within this fraction of the image width from the centre is taken to be where the laser points
 LASER_PIXEL_TOLERANCE = 0.01
 
@@ -41,11 +39,12 @@ class PhotoLocation:
 
     views: PhotoViews
     obs: Observations
+    errors: PhotoErrorModel
     estimates: dict[str, Estimate] = field(default_factory=dict)
     unsolved: dict[str, tuple[str, str]] = field(default_factory=dict)
 
 
-def photo_observations(views: PhotoViews, pixel_px=None, sigma: Sigma = PHOTO_SIGMA) -> Observations:
+def photo_observations(views: PhotoViews, pixel_px=None, sigma: Sigma | None = None) -> Observations:
     """Observations of photos' views: pixel_px (n, 2) in the files' frame (NaN row: not seen; None: every image
     centre); ranges where the LRF is valid and the pixel is the image centre."""
     photos = views.photos
@@ -56,6 +55,8 @@ def photo_observations(views: PhotoViews, pixel_px=None, sigma: Sigma = PHOTO_SI
     at_centre = np.linalg.norm(px - centre, axis=1) <= LASER_PIXEL_TOLERANCE * width
     rng = np.array([p.lrf_range_m if (p.lrf_valid and c) else np.nan for p, c in zip(photos, at_centre, strict=True)])
     t = np.array([p.t_ns if p.t_ns is not None else i for i, p in enumerate(photos)], dtype=np.int64)
+    if sigma is None:
+        sigma = photo_error_model(photos, rng).sigma
     return Observations(P=views.P, pixel=views.pinhole_pixels(px), platform_m=views.camera_m, range_m=rng,
                         t_ns=t, sigma=sigma)
 
@@ -67,13 +68,34 @@ def _file_pixels(photos: list[Photo], pixel_px) -> np.ndarray:
     return np.asarray(pixel_px, dtype=np.float64).reshape(len(photos), 2)
 
 
-def mle_options(bias_prior_deg: float | None = None, terrain=None) -> dict:
-    """Options for solve("mle"): a fixed bias prior when given (else the MLE learns the bias's size up to the
-    attitude sigma), and the terrain prior `terrain=(fn, sigma_m)` when a DEM is given."""
-    o = {} if bias_prior_deg is None else {"bias_prior_deg": float(bias_prior_deg)}
+def mle_options(errors: PhotoErrorModel, terrain=None) -> dict:
+    """Options for solve("mle"): the compass bias's fixed prior, and the terrain prior `terrain=(fn, sigma_m)` when
+    a DEM is given, its sigma grown by the shared vertical offset (the DEM is in the true datum, the photos' heights
+    are not)."""
+    o = {"bias_prior_deg": float(errors.bias_prior_deg)}
     if terrain is not None:
-        o["terrain"] = terrain
+        fn, sigma_m = terrain
+        o["terrain"] = (fn, float(np.hypot(sigma_m, errors.shared_v_m)))
     return o
+
+
+def with_shared_offset(e: Estimate, errors: PhotoErrorModel) -> Estimate:
+    """The MLE's estimate with the shared offset's covariance added (and its CEP and ellipsoid extras redone): every
+    camera off by the same vector puts the target off by it too, which no residual shows."""
+    import dataclasses
+
+    from pipeline.solve.mle import CHI2_3_95, cep_m, ellipsoid
+
+    if e.covariance_m2 is None or not np.isfinite(e.covariance_m2).all():
+        return e
+    cov = np.asarray(e.covariance_m2) + errors.shared_covariance_m2()
+    axes, vecs = ellipsoid(cov[None])
+    ax = axes[0].tolist()
+    extras = dict(e.extras, cep50_m=float(cep_m(cov[None, :2, :2], 0.5)[0]),
+                  cep90_m=float(cep_m(cov[None, :2, :2], 0.9)[0]), error_model=errors.to_dict(),
+                  ellipsoid={"semi_axes_1sigma_m": ax, "semi_axes_95pct_m": [v * np.sqrt(CHI2_3_95) for v in ax],
+                             "axes": vecs[0].T.tolist()})
+    return dataclasses.replace(e, covariance_m2=cov, extras=extras)
 
 
 def dji_estimate(views: PhotoViews) -> Estimate | None:
@@ -99,13 +121,15 @@ def _with_alt(p: Photo, lat, lon, alt) -> Photo:
     return dataclasses.replace(p, lat_deg=lat, lon_deg=lon, alt_m=alt)
 
 
-def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: int = 0, sigma: Sigma = PHOTO_SIGMA,
-                  bias_prior_deg: float | None = None, dem_sigma_m: float = 5.0,
-                  methods=None) -> PhotoLocation:
-    """Run every method (or `methods`) on the photos and one pixel per photo (see photo_observations)."""
+def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: int = 0,
+                  errors: PhotoErrorModel | None = None, dem_sigma_m: float = 5.0, methods=None) -> PhotoLocation:
+    """Run every method (or `methods`) on the photos and one pixel per photo (see photo_observations), under the
+    error model `errors` (default: the source's, pipeline.photo_errors)."""
     views = photo_views(photos, rotation_deg=rotation_deg)
-    obs = photo_observations(views, pixel_px, sigma)
-    out = PhotoLocation(views, obs)
+    obs = photo_observations(views, pixel_px, None if errors is None else errors.sigma)
+    if errors is None:
+        errors = photo_error_model(photos, obs.range_m)
+    out = PhotoLocation(views, obs, errors)
     wanted = list(methods) if methods is not None else [*METHODS, "dem", "dji"]
     terrain = None
     if dem is not None:
@@ -125,7 +149,7 @@ def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: in
                 e = locate_dem(obs, dem, views.origin_lla, labels=[p.name for p in photos],
                                pixels_shown=_file_pixels(photos, pixel_px))
             elif m == "mle":
-                e = solve("mle", obs, **mle_options(bias_prior_deg, terrain))
+                e = with_shared_offset(solve("mle", obs, **mle_options(errors, terrain)), errors)
             else:
                 e = solve(m, obs)
         except RidgelocError as exc:

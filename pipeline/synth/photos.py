@@ -4,9 +4,13 @@ DewarpData, LRF fields), as a DJI Enterprise camera writes them, with a known ta
 The truth: a target on the ground (on `Hills` terrain, pipeline.synth.dem, or a flat plane), n photos taken from
 positions around it (azimuths spread over `spread_deg`, 250-600 m away, 60-150 m above it), each pointed at the
 target (target at the principal point, where the laser points). The recorded tags carry the errors of a consumer
-drone: a compass bias constant over the flight added to every gimbal yaw, frame-to-frame attitude jitter, a GNSS
-error that is mostly an offset shared by the flight's photos (it drifts over minutes) plus a little noise per
-photo, an altitude datum offset shared by all photos, the laser's noise. DJI's own one-shot target
+drone without RTK, drawn from families of their own (not the error model `ridgeloc locate` assumes,
+pipeline.photo_errors): a compass bias constant over the flight (uniform 1-5 deg, random sign) added to every gimbal
+yaw and a smaller gimbal pitch bias (uniform +-0.5 deg), frame-to-frame attitude jitter; a horizontal GNSS error
+that wanders over minutes (first-order Gauss-Markov, 120 s correlation time, its sigma per axis drawn per flight
+uniform in 0.5-2 m: a scale mixture, heavier-tailed than one Gaussian) plus a little noise per photo; an altitude
+datum offset shared by all photos (uniform +-30 m); the laser's noise (DJI's +-(0.2 m + 0.15 %) read as 2 sigma).
+DJI's own one-shot target
 (LRFTargetLat/Lon/AbsAlt) is computed as the aircraft does: recorded position + recorded gimbal angles + range.
 
     from pipeline.synth.photos import PhotoFlightSpec, simulate_photo_flight, write_photo_flight
@@ -47,11 +51,14 @@ class PhotoFlightSpec:
     range_m: tuple[float, float] = (250.0, 600.0)  # horizontal distance to the target
     height_above_m: tuple[float, float] = (60.0, 150.0)
     compass_bias_deg: tuple[float, float] = (1.0, 5.0)  # |bias|, random sign, constant over the flight
+    pitch_bias_deg: float = 0.5  # gimbal pitch bias, uniform in +-this, constant over the flight
     attitude_jitter_deg: float = 0.3
-    gnss_offset_sigma_m: tuple[float, float] = (1.5, 2.0)  # shared by the flight's photos: horizontal, vertical
+    # the horizontal GNSS error: a Gauss-Markov process per axis, its sigma drawn per flight uniform in this range
+    gnss_offset_sigma_m: tuple[float, float] = (0.5, 2.0)
+    gnss_tau_s: float = 120.0
     gnss_noise_sigma_m: tuple[float, float] = (0.3, 0.5)  # photo to photo: horizontal, vertical
     datum_offset_m: tuple[float, float] = (-30.0, 30.0)  # added to every recorded altitude
-    laser_sigma_m: float = 0.5
+    laser_sigma_m: tuple[float, float] = (0.1, 0.00075)  # a + b * range (m): DJI's 0.2 m + 0.15 % as 2 sigma
     mark_sigma_px: float = 1.0
     mark_offset_px: float = 0.0  # without laser: the target up to this far from the centre (uniform per axis)
     dt_s: float = 20.0
@@ -93,9 +100,15 @@ def simulate_photo_flight(spec: PhotoFlightSpec) -> PhotoFlight:
     enu = np.c_[dist_h * np.sin(np.radians(az)), dist_h * np.cos(np.radians(az)), up]
     cams = lla_from_enu(enu, target)
     bias = rng.uniform(*spec.compass_bias_deg) * rng.choice([-1.0, 1.0])
+    pitch_bias = rng.uniform(-spec.pitch_bias_deg, spec.pitch_bias_deg)
     offset = rng.uniform(*spec.datum_offset_m)
-    # a consumer GNSS error drifts over minutes: over one photo flight it is mostly a shared offset
-    gnss_offset = rng.normal(0, 1, 3) * np.array([*[spec.gnss_offset_sigma_m[0]] * 2, spec.gnss_offset_sigma_m[1]])
+    # a consumer GNSS error wanders over minutes: over one photo flight it is mostly a shared offset
+    gnss_sigma = rng.uniform(*spec.gnss_offset_sigma_m)
+    a = np.exp(-spec.dt_s / spec.gnss_tau_s)
+    gnss = np.zeros((n, 3))
+    gnss[0, :2] = rng.normal(0, gnss_sigma, 2)
+    for i in range(1, n):
+        gnss[i, :2] = a * gnss[i - 1, :2] + np.sqrt(1 - a * a) * rng.normal(0, gnss_sigma, 2)
     geoid = patch_around(round(lat0, 1), round(lon0, 1))  # EGM2008 around the target, read once per area
     N = geoid(cams[:, 0], cams[:, 1])
     K = np.array([[spec.fx_px, 0, (spec.width_px - 1) / 2], [0, spec.fx_px, (spec.height_px - 1) / 2], [0, 0, 1]])
@@ -118,24 +131,25 @@ def simulate_photo_flight(spec: PhotoFlightSpec) -> PhotoFlight:
         marks.append(pix + rng.normal(0, spec.mark_sigma_px, 2))
         yaw_true, pitch_true = R.as_euler("ZYX", degrees=True)[:2]
         rec_yaw = yaw_true + bias + rng.normal(0, spec.attitude_jitter_deg)
-        rec_pitch = pitch_true + rng.normal(0, spec.attitude_jitter_deg)
+        rec_pitch = pitch_true + pitch_bias + rng.normal(0, spec.attitude_jitter_deg)
         rec_roll = rng.normal(0, spec.attitude_jitter_deg / 3)
         noise = rng.normal(0, 1, 3) * np.array([*[spec.gnss_noise_sigma_m[0]] * 2, spec.gnss_noise_sigma_m[1]])
-        rec = lla_from_enu(gnss_offset + noise + np.array([0.0, 0.0, offset]), tuple(cams[i]))
+        rec = lla_from_enu(gnss[i] + noise + np.array([0.0, 0.0, offset]), tuple(cams[i]))
         tag = {"lat_deg": float(rec[0]), "lon_deg": float(rec[1]), "abs_alt_m": float(rec[2] - N[i]),
                "relative_alt_m": float(up[i]), "gimbal_ypr_deg": (float(rec_yaw), float(rec_pitch), float(rec_roll)),
                "flight_ypr_deg": (float(rec_yaw + rng.normal(0, 2)), float(rng.normal(0, 2)), float(rng.normal(0, 2))),
                "t_unix_s": t0 + spec.dt_s * i, "fx_px": spec.fx_px, "cx_px": float(K[0, 2]), "cy_px": float(K[1, 2]),
                "dist": tuple(spec.dist), "width_px": spec.width_px, "height_px": spec.height_px}
         if spec.laser:
-            measured = true_range + rng.normal(0, spec.laser_sigma_m)
+            measured = true_range + rng.normal(0, spec.laser_sigma_m[0] + spec.laser_sigma_m[1] * true_range)
             dji = _point_along(rec, rec_yaw, rec_pitch, measured)
             n_dji = float(geoid(dji[0], dji[1]))
             tag.update(lrf_range_m=float(measured), lrf_status="Normal", dji_target=(float(dji[0]), float(dji[1]),
                                                                                       float(dji[2] - n_dji)))
         tags.append(tag)
     truth = {"target_lla": [lat0, lon0, h_t], "target_alt_datum": "ellipsoid", "compass_bias_deg": float(bias),
-             "datum_offset_m": float(offset), "gnss_offset_enu_m": gnss_offset.tolist(),
+             "pitch_bias_deg": float(pitch_bias), "datum_offset_m": float(offset),
+             "gnss_sigma_m": float(gnss_sigma), "gnss_error_enu_m": gnss.tolist(),
              "camera_lla_true": cams.tolist(), "spec": _spec_dict(spec)}
     return PhotoFlight(spec, tags, np.array(marks), truth)
 

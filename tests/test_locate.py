@@ -115,3 +115,35 @@ def test_nothing_located_is_a_failure(tmp_path, capsys):
     rc, doc = _locate(capsys, out / "DJI_0001.JPG")
     assert rc == 1
     assert all("status" in r and "lat_deg" not in r for r in doc["estimates"].values())
+
+
+def test_named_targets_of_a_photo_flight(tmp_path):
+    """`targets:` in a photo flight's config: a mark's frame_index is the photo's index in time order; a target
+    marked on a photo the flight does not have is listed as not located, the others are."""
+    import yaml
+
+    from pipeline.flight_config import load_flight_config
+    from pipeline.run import process_group
+
+    fl = simulate_photo_flight(PhotoFlightSpec(seed=13, extra_targets=(("post", 30.0, -10.0),)))
+    write_photo_flight(fl, tmp_path)
+    doc = yaml.safe_load((tmp_path / "flight.yaml").read_text())
+    assert doc["marks_file"] == "targets.csv" and "marks" not in doc["files"]
+    del doc["marks_file"]
+    post = fl.extra_marks_px["post"]
+    doc["targets"] = [
+        {"name": "post", "marks": [{"frame_index": i, "pixel": [float(u), float(v)]}
+                                   for i, (u, v) in enumerate(post) if np.isfinite(u)]},
+        {"name": "ghost", "marks": [{"frame_index": 7, "pixel": [10.0, 10.0]}]}]
+    (tmp_path / "named.yaml").write_text(yaml.safe_dump(doc))
+    result = process_group(load_flight_config(tmp_path / "named.yaml"))
+    assert [r.target for r in result.targets] == ["post"]
+    assert [f.target for f in result.failed] == ["ghost"]
+    assert "photo index 7 is not one of the flight's 5 readable photos" in result.failed[0].message
+    post_truth = next(t for t in fl.truth["targets"] if t["name"] == "post")
+    r = result.targets[0]
+    truth_m = enu_from_lla(post_truth["lat_deg"], post_truth["lon_deg"], post_truth["alt_m"], r.origin_lla)
+    assert np.linalg.norm(r.truth_m - truth_m) < 1e-6  # its truth is the post's (truth.json "targets")
+    spot = enu_from_lla(*fl.truth["target_lla"], r.origin_lla)  # the laser's spot, 32 m away: not what was marked
+    mle = r.estimates["mle"].position_m
+    assert np.linalg.norm(mle - r.truth_m) < np.linalg.norm(mle - spot)

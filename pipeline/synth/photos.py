@@ -61,6 +61,10 @@ class PhotoFlightSpec:
     laser_sigma_m: tuple[float, float] = (0.1, 0.00075)  # a + b * range (m): DJI's 0.2 m + 0.15 % as 2 sigma
     mark_sigma_px: float = 1.0
     mark_offset_px: float = 0.0  # without laser: the target up to this far from the centre (uniform per axis)
+    # further targets (name, east m, north m from the main one, on the terrain), marked where the photos see them;
+    # the main target (the laser's, at the image centre) is then named main_target_name
+    extra_targets: tuple[tuple[str, float, float], ...] = ()
+    main_target_name: str = "laser_spot"
     dt_s: float = 20.0
 
 
@@ -72,6 +76,7 @@ class PhotoFlight:
     tags: list[dict]
     marks_px: np.ndarray  # (n, 2) the target's pixel as marked (with marking noise)
     truth: dict = field(default_factory=dict)
+    extra_marks_px: dict = field(default_factory=dict)  # {name: (n, 2)} further targets' marks, NaN: not in view
 
 
 def _ypr_towards(camera_lla, target_lla) -> tuple[float, float]:
@@ -112,7 +117,7 @@ def simulate_photo_flight(spec: PhotoFlightSpec) -> PhotoFlight:
     geoid = patch_around(round(lat0, 1), round(lon0, 1))  # EGM2008 around the target, read once per area
     N = geoid(cams[:, 0], cams[:, 1])
     K = np.array([[spec.fx_px, 0, (spec.width_px - 1) / 2], [0, spec.fx_px, (spec.height_px - 1) / 2], [0, 0, 1]])
-    tags, marks = [], []
+    tags, marks, rotations = [], [], []
     t0 = 1_700_000_000
     for i in range(n):
         yaw, pitch = _ypr_towards(cams[i], target)
@@ -122,6 +127,7 @@ def simulate_photo_flight(spec: PhotoFlightSpec) -> PhotoFlight:
         d_yaw = np.degrees(np.arctan2(offset_px[0], spec.fx_px))
         d_pitch = -np.degrees(np.arctan2(offset_px[1], spec.fx_px))
         R = Rotation.from_euler("ZYX", [yaw - d_yaw, pitch - d_pitch, 0.0], degrees=True)
+        rotations.append(R)
         # target direction in the camera: optical (x right, y down, z forward) from gimbal FRD (x fwd, y right, z down)
         d_ned = _ned_towards(cams[i], target)
         d_g = R.inv().apply(d_ned)
@@ -151,7 +157,35 @@ def simulate_photo_flight(spec: PhotoFlightSpec) -> PhotoFlight:
              "pitch_bias_deg": float(pitch_bias), "datum_offset_m": float(offset),
              "gnss_sigma_m": float(gnss_sigma), "gnss_error_enu_m": gnss.tolist(),
              "camera_lla_true": cams.tolist(), "spec": _spec_dict(spec)}
-    return PhotoFlight(spec, tags, np.array(marks), truth)
+    extra = _extra_targets(spec, target, cams, rotations, K)
+    if extra:
+        truth["targets"] = [{"name": spec.main_target_name, "lat_deg": lat0, "lon_deg": lon0, "alt_m": h_t}] + [
+            {"name": name, "lat_deg": lla[0], "lon_deg": lla[1], "alt_m": lla[2]} for name, (lla, _) in extra.items()]
+    return PhotoFlight(spec, tags, np.array(marks), truth, {name: px for name, (_, px) in extra.items()})
+
+
+def _extra_targets(spec: PhotoFlightSpec, target, cams, rotations, K) -> dict:
+    """{name: ((lat, lon, h), (n, 2) marked pixels)} of spec.extra_targets as the true cameras see them (marking
+    noise from a generator of their own, so that the main flight's draws do not change); NaN where a target is
+    behind the camera or outside the image."""
+    rng = np.random.default_rng([spec.seed, 1])
+    out = {}
+    for name, e_m, n_m in spec.extra_targets:
+        lat, lon, _ = lla_from_enu(np.array([e_m, n_m, 0.0]), target)
+        h = float(spec.hills.h_wgs84_m(lat, lon)) if spec.hills is not None else spec.ground_h_m
+        lla = (float(lat), float(lon), h)
+        px = np.full((len(cams), 2), np.nan)
+        for i, R in enumerate(rotations):
+            d_g = R.inv().apply(_ned_towards(cams[i], lla))
+            d_opt = np.array([d_g[1], d_g[2], d_g[0]])
+            if d_opt[2] <= 0:
+                continue
+            pin = K @ (d_opt / d_opt[2])
+            pix = distort_pixels(pin[None, :2], K, spec.dist)[0] + rng.normal(0, spec.mark_sigma_px, 2)
+            if 0 <= pix[0] <= spec.width_px - 1 and 0 <= pix[1] <= spec.height_px - 1:
+                px[i] = pix
+        out[name] = (lla, px)
+    return out
 
 
 def _ned_towards(camera_lla, target_lla) -> np.ndarray:
@@ -227,9 +261,11 @@ def write_photo(path, tag: dict, rng: np.random.Generator) -> Path:
 
 
 def write_photo_flight(flight: PhotoFlight, out_dir) -> list[Path]:
-    """DJI_0001.JPG ... in out_dir, with marks.csv (photo,x_px,y_px: the target's pixel as marked), truth.json
-    (`target` {lat_deg, lon_deg, alt_m ellipsoidal}, the errors drawn, the tags written) and flight.yaml (its flight
-    config for `ridgeloc run`)."""
+    """DJI_0001.JPG ... in out_dir, with marks.csv (photo,x_px,y_px: the main target's pixel as marked), truth.json
+    (`target` {lat_deg, lon_deg, alt_m ellipsoidal}, with further targets `targets` [{name, lat_deg, lon_deg,
+    alt_m}], the errors drawn, the tags written), with further targets targets.csv (every target's marks,
+    `name,frame_or_image,x_px,y_px` with the photo's file name) and flight.yaml (its flight config for `ridgeloc
+    run`: files.marks, or marks_file targets.csv)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(flight.spec.seed + 1)
@@ -243,7 +279,40 @@ def write_photo_flight(flight: PhotoFlight, out_dir) -> list[Path]:
                  marks_px=flight.marks_px.tolist())
     (out / "truth.json").write_text(json.dumps(truth, indent=1, default=list))
     name = "".join(c if c.isalnum() or c in "-_" else "_" for c in out.name) or "photos"
+    if flight.extra_marks_px:  # every target in a marks file (docs/run.md, "Many targets per flight")
+        with open(out / "targets.csv", "w") as f:
+            f.write("name,frame_or_image,x_px,y_px\n")
+            marks = {flight.spec.main_target_name: flight.marks_px, **flight.extra_marks_px}
+            for target, px in marks.items():
+                for p, (u, v) in zip(paths, px, strict=True):
+                    if np.isfinite(u):
+                        f.write(f"{target},{p.name},{u:.2f},{v:.2f}\n")
+        marks_line = "marks_file: targets.csv\n"
+    else:
+        marks_line = ""
+    files = "files:\n  photos: .\n" + ("" if marks_line else "  marks: marks.csv\n")
     (out / "flight.yaml").write_text(f"# a synthetic DJI photo flight (pipeline/synth/photos.py): ridgeloc run this\n"
-                                     f"name: {name}\nfiles:\n  photos: .\n  marks: marks.csv\n"
-                                     f"truth_file: truth.json\n")
+                                     f"name: {name}\n{files}{marks_line}truth_file: truth.json\n")
     return paths
+
+
+def write_photo_sample(out_dir, spec: PhotoFlightSpec, dem: bool) -> PhotoFlight:
+    """A photo flight as `ridgeloc synth --photos` and scripts/make_sample_data.py write it: with dem, the target on
+    synthetic hills (pipeline.synth.dem.Hills at the spec's place) and their GeoTIFF dem.tif (4 km, 30 m posts, UTM
+    32N), named in flight.yaml's `terrain:` with a 2 m vertical sigma. out_dir must not exist or be empty."""
+    import dataclasses
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if dem:
+        from pipeline.synth.dem import Hills, write_dem
+
+        hills = Hills(spec.lat_deg, spec.lon_deg, base_m=spec.ground_h_m)
+        spec = dataclasses.replace(spec, hills=hills)
+        write_dem(out / "dem.tif", hills, extent_m=4000.0, post_m=30.0, crs="EPSG:32632")
+    flight = simulate_photo_flight(spec)
+    write_photo_flight(flight, out)
+    if dem:
+        with open(out / "flight.yaml", "a") as f:
+            f.write("terrain:\n  dem: dem.tif\n  vertical_sigma_m: 2.0\n")
+    return flight

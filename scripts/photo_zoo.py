@@ -12,7 +12,9 @@ hills with a GeoTIFF DEM), each written as JPEGs, read back and located by
 Prints horizontal and vertical median errors and, for the MLE rows, the share of flights whose truth lies in the
 95 % horizontal ellipse (chi-square 2 dof) and in the 95 % ellipsoid (3 dof).
 
-    python scripts/photo_zoo.py [--flights 100] [--seed 0] [--bias-prior-deg B] [--dem-sigma-m 5]
+    python scripts/photo_zoo.py [--flights 100] [--seed 0] [--bias-prior-deg B] [--dem-sigma-m 5] [--rtk]
+
+--rtk: RTK-fixed flights instead (pipeline.synth.photos.RTK_FIXED_ERRORS: GNSS error 1-5 cm, datum offset +-0.3 m).
 """
 
 from __future__ import annotations
@@ -32,7 +34,8 @@ CHI2_3DOF_95 = 7.814727903251178
 MLE_ROWS = ("mle", "mle+dem")
 
 
-def run(n_flights: int, seed: int, bias_prior_deg: float | None, dem_sigma_m: float, workdir: Path) -> dict:
+def run(n_flights: int, seed: int, bias_prior_deg: float | None, dem_sigma_m: float, workdir: Path,
+        rtk: bool = False) -> dict:
     import pymap3d
 
     from pipeline.geometry.frames import enu_from_lla
@@ -40,7 +43,7 @@ def run(n_flights: int, seed: int, bias_prior_deg: float | None, dem_sigma_m: fl
     from pipeline.locate import locate_photos
     from pipeline.photo_errors import photo_error_model
     from pipeline.synth.dem import Hills, write_dem
-    from pipeline.synth.photos import PhotoFlightSpec, simulate_photo_flight, write_photo_flight
+    from pipeline.synth.photos import RTK_FIXED_ERRORS, PhotoFlightSpec, simulate_photo_flight, write_photo_flight
     from pipeline.terrain import Dem
 
     hills = Hills(46.5, 7.5, base_m=600.0)
@@ -53,7 +56,8 @@ def run(n_flights: int, seed: int, bias_prior_deg: float | None, dem_sigma_m: fl
     for k in range(n_flights):
         e0, n0 = rng.uniform(-600, 600, 2)
         lat, lon, _ = np.ravel(pymap3d.enu2geodetic(e0, n0, 0.0, 46.5, 7.5, 0.0))
-        spec = PhotoFlightSpec(seed=seed * 100_000 + k, lat_deg=float(lat), lon_deg=float(lon), hills=hills)
+        spec = PhotoFlightSpec(seed=seed * 100_000 + k, lat_deg=float(lat), lon_deg=float(lon), hills=hills,
+                               **(RTK_FIXED_ERRORS if rtk else {}))
         flight = simulate_photo_flight(spec)
         folder = workdir / f"f{k:03d}"
         write_photo_flight(flight, folder)
@@ -100,9 +104,11 @@ def main() -> int:
     ap.add_argument("--bias-prior-deg", type=float, default=None,
                     help="the compass bias prior instead of the error model's (pipeline/photo_errors.py)")
     ap.add_argument("--dem-sigma-m", type=float, default=5.0, help="the DEM's stated vertical sigma (locate's default)")
+    ap.add_argument("--rtk", action="store_true",
+                    help="RTK-fixed flights (RtkFlag 50, centimetre GNSS, datum known to a decimetre)")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        res = run(args.flights, args.seed, args.bias_prior_deg, args.dem_sigma_m, Path(tmp))
+        res = run(args.flights, args.seed, args.bias_prior_deg, args.dem_sigma_m, Path(tmp), args.rtk)
     e = res["errors"]
     print(f"{args.flights} flights, seed {args.seed}; error model (the last flight's): {e.source}, compass bias prior "
           f"{e.bias_prior_deg} deg, shared offset {e.shared_h_m} m horizontal / {e.shared_v_m} m vertical, "

@@ -59,6 +59,10 @@ class PhotoFlightSpec:
     gnss_noise_sigma_m: tuple[float, float] = (0.3, 0.5)  # photo to photo: horizontal, vertical
     datum_offset_m: tuple[float, float] = (-30.0, 30.0)  # added to every recorded altitude
     laser_sigma_m: tuple[float, float] = (0.1, 0.00075)  # a + b * range (m): DJI's 0.2 m + 0.15 % as 2 sigma
+    # the RTK status written (drone-dji:RtkFlag, RtkStdLon/Lat/Hgt m): 16 single point, 50 fixed (the errors drawn
+    # above are the caller's to match: RTK_FIXED_ERRORS)
+    rtk_flag: int = 16
+    rtk_std_m: tuple[float, float, float] = (1.5, 1.5, 2.0)
     mark_sigma_px: float = 1.0
     mark_offset_px: float = 0.0  # without laser: the target up to this far from the centre (uniform per axis)
     # further targets (name, east m, north m from the main one, on the terrain), marked where the photos see them;
@@ -66,6 +70,12 @@ class PhotoFlightSpec:
     extra_targets: tuple[tuple[str, float, float], ...] = ()
     main_target_name: str = "laser_spot"
     dt_s: float = 20.0
+
+
+#: the errors of an RTK-fixed flight (PhotoFlightSpec changes): centimetre GNSS, the altitude's datum known to a
+#: decimetre; the compass and the laser as without RTK
+RTK_FIXED_ERRORS = {"rtk_flag": 50, "rtk_std_m": (0.02, 0.02, 0.03), "gnss_offset_sigma_m": (0.01, 0.05),
+                    "gnss_noise_sigma_m": (0.01, 0.02), "datum_offset_m": (-0.3, 0.3)}
 
 
 @dataclass
@@ -152,6 +162,7 @@ def simulate_photo_flight(spec: PhotoFlightSpec) -> PhotoFlight:
             n_dji = float(geoid(dji[0], dji[1]))
             tag.update(lrf_range_m=float(measured), lrf_status="Normal", dji_target=(float(dji[0]), float(dji[1]),
                                                                                       float(dji[2] - n_dji)))
+        tag.update(rtk_flag=spec.rtk_flag, rtk_std_m=tuple(spec.rtk_std_m))
         tags.append(tag)
     truth = {"target_lla": [lat0, lon0, h_t], "target_alt_datum": "ellipsoid", "compass_bias_deg": float(bias),
              "pitch_bias_deg": float(pitch_bias), "datum_offset_m": float(offset),
@@ -221,7 +232,9 @@ def dji_xmp(tag: dict) -> bytes:
         "CalibratedOpticalCenterY": f"{tag['cy_px']:.4f}",
         "DewarpData": f"2024-01-01;{tag['fx_px']:.4f},{tag['fx_px']:.4f},{dcx:.4f},{dcy:.4f},"
                       f"{k1:.6f},{k2:.6f},{p1:.6f},{p2:.6f},{k3:.6f}",
-        "RtkFlag": "16", "RtkStdLon": "1.500", "RtkStdLat": "1.500", "RtkStdHgt": "2.000",
+        "RtkFlag": str(tag.get("rtk_flag", 16)),
+        **dict(zip(("RtkStdLon", "RtkStdLat", "RtkStdHgt"), (f"{v:.3f}" for v in tag.get("rtk_std_m", (1.5, 1.5, 2.0))),
+                   strict=True)),
     }
     if "lrf_range_m" in tag:
         lat, lon, alt = tag["dji_target"]

@@ -58,6 +58,25 @@ def test_several_photos_every_method_mle_beats_the_one_shot_target(flight, capsy
     assert est["mle"]["ellipse95_semi_major_m"] >= est["mle"]["ellipse95_semi_minor_m"] > 0
 
 
+def test_stated_errors_replace_the_defaults(flight, capsys):
+    """--bias-prior-deg, --position-sigma-m and --alt-sigma-m replace the source's defaults (error_model in --json);
+    a tighter shared offset gives a smaller CEP at the same estimate; a negative sigma is refused."""
+    _, folder = flight
+    marks = ("--marks", folder / "marks.csv")
+    _, default = _locate(capsys, folder, *marks)
+    assert default["error_model"]["source"] == "GNSS without RTK, laser"
+    assert default["error_model"]["shared_offset_horizontal_m"] == 1.5
+    _, stated = _locate(capsys, folder, *marks, "--bias-prior-deg", "1", "--position-sigma-m", "0.1",
+                        "--alt-sigma-m", "2")
+    em = stated["error_model"]
+    assert (em["bias_prior_deg"], em["shared_offset_horizontal_m"], em["shared_offset_vertical_m"]) == (1.0, 0.1, 2.0)
+    assert "stated" in em["source"]
+    assert stated["estimates"]["mle"]["cep50_m"] < default["estimates"]["mle"]["cep50_m"]
+    assert cli_main(["locate", str(folder), "--alt-sigma-m", "-1"]) != 0
+    err = capsys.readouterr().err
+    assert "--alt-sigma-m must be a finite number >= 0, got -1" in err and len(err.strip().splitlines()) == 1
+
+
 def test_pixel_off_centre_drops_the_laser(flight, capsys):
     _, folder = flight
     rc, doc = _locate(capsys, folder, "--pixel", 100, 100)

@@ -13,7 +13,9 @@ Prints horizontal and vertical median errors and, for the MLE rows, the share of
 95 % horizontal ellipse (chi-square 2 dof) and in the 95 % ellipsoid (3 dof).
 
     python scripts/photo_zoo.py [--flights 100] [--seed 0] [--bias-prior-deg B] [--dem-sigma-m 5] [--rtk]
+                                [--no-laser]
 
+--no-laser: photos without LRF tags, the target marked up to 150 px from the image centre (no dji rows).
 --rtk: RTK-fixed flights instead (pipeline.synth.photos.RTK_FIXED_ERRORS: GNSS error 1-5 cm, datum offset +-0.3 m).
 """
 
@@ -35,7 +37,7 @@ MLE_ROWS = ("mle", "mle+dem")
 
 
 def run(n_flights: int, seed: int, bias_prior_deg: float | None, dem_sigma_m: float, workdir: Path,
-        rtk: bool = False) -> dict:
+        rtk: bool = False, laser: bool = True) -> dict:
     import pymap3d
 
     from pipeline.geometry.frames import enu_from_lla
@@ -57,6 +59,7 @@ def run(n_flights: int, seed: int, bias_prior_deg: float | None, dem_sigma_m: fl
         e0, n0 = rng.uniform(-600, 600, 2)
         lat, lon, _ = np.ravel(pymap3d.enu2geodetic(e0, n0, 0.0, 46.5, 7.5, 0.0))
         spec = PhotoFlightSpec(seed=seed * 100_000 + k, lat_deg=float(lat), lon_deg=float(lon), hills=hills,
+                               laser=laser, mark_offset_px=0.0 if laser else 150.0,
                                **(RTK_FIXED_ERRORS if rtk else {}))
         flight = simulate_photo_flight(spec)
         folder = workdir / f"f{k:03d}"
@@ -85,9 +88,10 @@ def run(n_flights: int, seed: int, bias_prior_deg: float | None, dem_sigma_m: fl
             cov = np.asarray(e.covariance_m2)
             inside[row][0].append(float(d[:2] @ np.linalg.solve(cov[:2, :2], d[:2])) <= CHI2_2DOF_95)
             inside[row][1].append(float(d @ np.linalg.solve(cov, d)) <= CHI2_3DOF_95)
-        pts = np.array(loc.estimates["dji"].extras["points_m"])
-        rows["dji"].append(err(loc.views, pts[0]))
-        rows["dji-mean"].append(err(loc.views, pts.mean(axis=0)))
+        if "dji" in loc.estimates:
+            pts = np.array(loc.estimates["dji"].extras["points_m"])
+            rows["dji"].append(err(loc.views, pts[0]))
+            rows["dji-mean"].append(err(loc.views, pts.mean(axis=0)))
         if "dem" in one.estimates:
             rows["dem"].append(err(one.views, one.estimates["dem"].position_m))
         else:
@@ -104,11 +108,14 @@ def main() -> int:
     ap.add_argument("--bias-prior-deg", type=float, default=None,
                     help="the compass bias prior instead of the error model's (pipeline/photo_errors.py)")
     ap.add_argument("--dem-sigma-m", type=float, default=5.0, help="the DEM's stated vertical sigma (locate's default)")
+    ap.add_argument("--no-laser", action="store_true",
+                    help="photos without laser (a consumer drone), the target up to 150 px from the centre")
     ap.add_argument("--rtk", action="store_true",
                     help="RTK-fixed flights (RtkFlag 50, centimetre GNSS, datum known to a decimetre)")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        res = run(args.flights, args.seed, args.bias_prior_deg, args.dem_sigma_m, Path(tmp), args.rtk)
+        res = run(args.flights, args.seed, args.bias_prior_deg, args.dem_sigma_m, Path(tmp), rtk=args.rtk,
+                  laser=not args.no_laser)
     e = res["errors"]
     print(f"{args.flights} flights, seed {args.seed}; error model (the last flight's): {e.source}, compass bias prior "
           f"{e.bias_prior_deg} deg, shared offset {e.shared_h_m} m horizontal / {e.shared_v_m} m vertical, "

@@ -4,12 +4,12 @@ platform, the laser range where the photo's LRF status is Normal and the pixel i
 every estimator of `pipeline.solve` runs on them, plus `dem` (a GeoTIFF DEM, pipeline.terrain) and `dji` (the
 photos' own LRFTarget*, the maker's one-shot answer, for comparison).
 
-Error model for consumer drones (docs/locate.md): compass/gimbal yaw errors of 1-5 deg that stay constant over a
-flight are the MLE's boresight bias. PHOTO_SIGMA states the attitude sigma as the largest such bias (5 deg): the MLE
-then learns the bias's size from the flight (its bias mixture, docs/solvers.md) and carries the GNSS error as an
-offset shared by the photos; a fixed bias prior (bias_prior_deg) may be stated instead. An altitude datum offset
-shared by all photos moves every estimate by the same vector (no geometry sees it) except `dem`, which it moves
-horizontally by offset / tan(depression).
+Error model (docs/locate.md, "Error model"; pipeline.photo_errors): the sigmas per photo and the constant parts
+by source type, unless stated: the compass / gimbal-yaw bias constant over a flight is the MLE's boresight bias with
+a fixed prior (`bias_prior_deg`); the GNSS and altitude datum offsets shared by every photo move the estimate by
+the same vector and show in no residual, so their covariance is added to the MLE's; with a DEM the vertical part
+is also an error of the terrain prior, whose sigma grows by it. `dem` is moved horizontally by a datum offset
+/ tan(depression).
 """
 
 from __future__ import annotations
@@ -24,12 +24,10 @@ from pipeline.errors import InputError, RidgelocError
 from pipeline.geometry.frames import enu_from_lla
 from pipeline.ingest.photo import Photo
 from pipeline.ingest.photo_views import PhotoViews, photo_heights_ellipsoid_m, photo_views
+from pipeline.photo_errors import PhotoErrorModel, photo_error_model
 from pipeline.solve import METHODS, Estimate, Status, solve, unsolved_status
 from pipeline.solve.observations import Observations, Sigma
 
-#: consumer drone defaults: marking 2 px, DJI LRF ~1 m, GNSS 3 m, and the largest constant compass / gimbal-yaw
-#: bias over a flight, 5 deg (the MLE learns the bias's size up to it)
-PHOTO_SIGMA = Sigma(pixel_px=2.0, range_m=1.0, position_m=3.0, attitude_deg=5.0)
 #: a pixel within this fraction of the image width from the centre is taken to be where the laser points
 LASER_PIXEL_TOLERANCE = 0.01
 
@@ -41,23 +39,31 @@ class PhotoLocation:
 
     views: PhotoViews
     obs: Observations
+    errors: PhotoErrorModel
     estimates: dict[str, Estimate] = field(default_factory=dict)
     unsolved: dict[str, tuple[str, str]] = field(default_factory=dict)
 
 
-def photo_observations(views: PhotoViews, pixel_px=None, sigma: Sigma = PHOTO_SIGMA) -> Observations:
+def photo_observations(views: PhotoViews, pixel_px=None, sigma: Sigma | None = None) -> Observations:
     """Observations of photos' views: pixel_px (n, 2) in the files' frame (NaN row: not seen; None: every image
     centre); ranges where the LRF is valid and the pixel is the image centre."""
     photos = views.photos
-    n = len(photos)
-    centre = np.array([[(p.width_px - 1) / 2.0, (p.height_px - 1) / 2.0] for p in photos])
-    px = centre.copy() if pixel_px is None else np.asarray(pixel_px, dtype=np.float64).reshape(n, 2)
-    width = np.array([p.width_px for p in photos], dtype=np.float64)
-    at_centre = np.linalg.norm(px - centre, axis=1) <= LASER_PIXEL_TOLERANCE * width
+    px = _file_pixels(photos, pixel_px)
+    at_centre = at_laser_pixel(photos, pixel_px)
     rng = np.array([p.lrf_range_m if (p.lrf_valid and c) else np.nan for p, c in zip(photos, at_centre, strict=True)])
     t = np.array([p.t_ns if p.t_ns is not None else i for i, p in enumerate(photos)], dtype=np.int64)
+    if sigma is None:
+        sigma = photo_error_model(photos, rng).sigma
     return Observations(P=views.P, pixel=views.pinhole_pixels(px), platform_m=views.camera_m, range_m=rng,
                         t_ns=t, sigma=sigma)
+
+
+def at_laser_pixel(photos: list[Photo], pixel_px) -> np.ndarray:
+    """(n,) bool: the photo's pixel is where its laser points (within LASER_PIXEL_TOLERANCE of the image width from
+    the image centre; every photo when pixel_px is None)."""
+    centre = _file_pixels(photos, None)
+    width = np.array([p.width_px for p in photos], dtype=np.float64)
+    return np.linalg.norm(_file_pixels(photos, pixel_px) - centre, axis=1) <= LASER_PIXEL_TOLERANCE * width
 
 
 def _file_pixels(photos: list[Photo], pixel_px) -> np.ndarray:
@@ -67,21 +73,43 @@ def _file_pixels(photos: list[Photo], pixel_px) -> np.ndarray:
     return np.asarray(pixel_px, dtype=np.float64).reshape(len(photos), 2)
 
 
-def mle_options(bias_prior_deg: float | None = None, terrain=None) -> dict:
-    """Options for solve("mle"): a fixed bias prior when given (else the MLE learns the bias's size up to the
-    attitude sigma), and the terrain prior `terrain=(fn, sigma_m)` when a DEM is given."""
-    o = {} if bias_prior_deg is None else {"bias_prior_deg": float(bias_prior_deg)}
+def mle_options(errors: PhotoErrorModel, terrain=None) -> dict:
+    """Options for solve("mle"): the compass bias's fixed prior, and the terrain prior `terrain=(fn, sigma_m)` when
+    a DEM is given, its sigma grown by the shared vertical offset (the DEM is in the true datum, the photos' heights
+    are not)."""
+    o = {"bias_prior_deg": float(errors.bias_prior_deg)}
     if terrain is not None:
-        o["terrain"] = terrain
+        fn, sigma_m = terrain
+        o["terrain"] = (fn, float(np.hypot(sigma_m, errors.shared_v_m)))
     return o
 
 
-def dji_estimate(views: PhotoViews) -> Estimate | None:
-    """The mean of the photos' own laser targets (LRFTargetLat/Lon/AbsAlt, on the photos' altitude datum) in ENU;
-    extras: per-photo points. None when no photo has one."""
+def with_shared_offset(e: Estimate, errors: PhotoErrorModel) -> Estimate:
+    """The MLE's estimate with the shared offset's covariance added (and its CEP and ellipsoid extras redone): every
+    camera off by the same vector puts the target off by it too, which no residual shows."""
+    import dataclasses
+
+    from pipeline.solve.mle import CHI2_3_95, cep_m, ellipsoid
+
+    if e.covariance_m2 is None or not np.isfinite(e.covariance_m2).all():
+        return e
+    cov = np.asarray(e.covariance_m2) + errors.shared_covariance_m2()
+    axes, vecs = ellipsoid(cov[None])
+    ax = axes[0].tolist()
+    extras = dict(e.extras, cep50_m=float(cep_m(cov[None, :2, :2], 0.5)[0]),
+                  cep90_m=float(cep_m(cov[None, :2, :2], 0.9)[0]), error_model=errors.to_dict(),
+                  ellipsoid={"semi_axes_1sigma_m": ax, "semi_axes_95pct_m": [v * np.sqrt(CHI2_3_95) for v in ax],
+                             "axes": vecs[0].T.tolist()})
+    return dataclasses.replace(e, covariance_m2=cov, extras=extras)
+
+
+def dji_estimate(views: PhotoViews, use=None) -> Estimate | None:
+    """The mean of the photos' own laser targets (LRFTargetLat/Lon/AbsAlt, on the photos' altitude datum) in ENU,
+    of the photos `use` (n,) bool (default all: those where the target is where the laser points); extras: per-photo
+    points. None when no such photo has one."""
     pts = []
-    for p in views.photos:
-        if p.dji_target_lla is None:
+    for p, ok in zip(views.photos, np.ones(len(views.photos), bool) if use is None else use, strict=True):
+        if p.dji_target_lla is None or not ok:
             continue
         lat, lon, alt = p.dji_target_lla
         h = photo_heights_ellipsoid_m([_with_alt(p, lat, lon, alt)])[0]
@@ -99,13 +127,15 @@ def _with_alt(p: Photo, lat, lon, alt) -> Photo:
     return dataclasses.replace(p, lat_deg=lat, lon_deg=lon, alt_m=alt)
 
 
-def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: int = 0, sigma: Sigma = PHOTO_SIGMA,
-                  bias_prior_deg: float | None = None, dem_sigma_m: float = 5.0,
-                  methods=None) -> PhotoLocation:
-    """Run every method (or `methods`) on the photos and one pixel per photo (see photo_observations)."""
+def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: int = 0,
+                  errors: PhotoErrorModel | None = None, dem_sigma_m: float = 5.0, methods=None) -> PhotoLocation:
+    """Run every method (or `methods`) on the photos and one pixel per photo (see photo_observations), under the
+    error model `errors` (default: the source's, pipeline.photo_errors)."""
     views = photo_views(photos, rotation_deg=rotation_deg)
-    obs = photo_observations(views, pixel_px, sigma)
-    out = PhotoLocation(views, obs)
+    obs = photo_observations(views, pixel_px, None if errors is None else errors.sigma)
+    if errors is None:
+        errors = photo_error_model(photos, obs.range_m)
+    out = PhotoLocation(views, obs, errors)
     wanted = list(methods) if methods is not None else [*METHODS, "dem", "dji"]
     terrain = None
     if dem is not None:
@@ -113,9 +143,10 @@ def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: in
     for m in wanted:
         try:
             if m == "dji":
-                e = dji_estimate(views)
+                e = dji_estimate(views, at_laser_pixel(photos, pixel_px))
                 if e is None:
-                    out.unsolved[m] = ("insufficient_data", "no photo has drone-dji:LRFTargetLat/Lon/AbsAlt")
+                    out.unsolved[m] = ("insufficient_data", "no photo with the target where its laser points has "
+                                                            "drone-dji:LRFTargetLat/Lon/AbsAlt")
                     continue
             elif m == "dem":
                 if dem is None:
@@ -125,7 +156,7 @@ def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: in
                 e = locate_dem(obs, dem, views.origin_lla, labels=[p.name for p in photos],
                                pixels_shown=_file_pixels(photos, pixel_px))
             elif m == "mle":
-                e = solve("mle", obs, **mle_options(bias_prior_deg, terrain))
+                e = with_shared_offset(solve("mle", obs, **mle_options(errors, terrain)), errors)
             else:
                 e = solve(m, obs)
         except RidgelocError as exc:
@@ -174,47 +205,100 @@ def check_pixels(photos: list[Photo], pixel_px) -> None:
 
 
 def process_photo_group(config):
-    """`ridgeloc run` of a flight config with `files: {photos: ..., marks: ...}` (issue 22): the photos located as
-    `ridgeloc locate` does (marks from files.marks, else every image centre), as a GroupResult for the report.
-    Unreadable photos are left out with a note each; none readable is an InputError naming the config."""
-    import time
-
-    from pipeline.geometry.rays import intersection_angle_deg
+    """`ridgeloc run` of a flight config with `files: {photos: ...}` (issue 22): the photos located as `ridgeloc
+    locate` does, marks from files.marks (else every image centre) as a GroupResult for the report; with named
+    targets (`targets:` / `marks_file:`, a mark's image the photo's file name or its frame_index the photo's index in
+    time order) a FlightResult of one GroupResult per target. Unreadable photos are left out with a note each; none
+    readable is an InputError naming the config."""
     from pipeline.ingest.photo import read_photos
-    from pipeline.results import GroupResult
+    from pipeline.results import FlightResult, TargetFailure
+    from pipeline.targets import flight_targets
 
-    t0 = time.perf_counter()
     photos, bad = read_photos(list(config.files.photos))
     notes = [f"photo left out: {err}" for _, err in bad]
     if not photos:
         raise InputError("no readable photo in files.photos", config.path)
-    pixels = read_marks(config.files.marks, photos) if config.files.marks else None
-    if pixels is not None:
-        check_pixels(photos, pixels)
-    dem = None
-    dem_sigma = 5.0
+    for p in photos:
+        notes.extend(f"{p.name}: {w}" for w in p.warnings)
+    dem, dem_sigma = None, 5.0
     terrain_cfg = getattr(config, "terrain", None)
     if terrain_cfg is not None:
         from pipeline.terrain import Dem
         dem = Dem.open(terrain_cfg.dem, vertical_datum=terrain_cfg.vertical_datum)
         dem_sigma = terrain_cfg.vertical_sigma_m or dem_sigma
+    if not (config.targets or config.marks_file):
+        pixels = read_marks(config.files.marks, photos) if config.files.marks else None
+        if pixels is not None:
+            check_pixels(photos, pixels)
+        return _photo_result(config, photos, pixels, dem, dem_sigma, notes, config.truth_lla(), None)
+    from pipeline.target_stage import named_truth_lla
+
+    results, failed = [], []
+    for t in flight_targets(config):
+        try:
+            pixels = target_pixels(t, photos)
+            check_pixels(photos, pixels)
+            truth = t.truth_lla if t.truth_lla is not None else named_truth_lla(config, t.name)
+            results.append(_photo_result(config, photos, pixels, dem, dem_sigma, notes, truth, t.name))
+        except RidgelocError as exc:
+            failed.append(TargetFailure(t.name, str(exc), tuple([*METHODS, "dem", "dji"])))
+    if not results:
+        raise InputError("no target could be located: " + "; ".join(f"{f.target}: {f.message}" for f in failed),
+                         config.path)
+    settings = {k: v for k, v in results[0].settings.items() if k != "solve_failures"}
+    timings = {"locate": sum(r.timings_s["locate"] for r in results)}
+    return FlightResult(name=config.name, targets=results, failed=failed, timings_s=timings, settings=settings)
+
+
+def target_pixels(target, photos: list[Photo]) -> np.ndarray:
+    """(n, 2) file pixels of a named target (pipeline.targets.NamedTarget) in the photos, NaN where it has no mark:
+    a mark's image (a marks file's frame_or_image) names the photo, a frame_index is the photo's index in time
+    order. ConfigError naming the mark's source for a photo not in the flight or marked twice."""
+    from pipeline.errors import ConfigError
+
+    by_path = {str(Path(p.path).resolve()): i for i, p in enumerate(photos)}
+    px = np.full((len(photos), 2), np.nan)
+    for m in target.marks:
+        if m.template is not None:
+            i = by_path.get(str(Path(m.template).resolve()))
+            where, xy = Path(m.template).name, m.template_pixel
+            if xy is None:
+                raise ConfigError(f"{m.source}: a photo mark needs the target's pixel in {where}")
+        else:
+            i = m.frame_index if 0 <= m.frame_index < len(photos) else None
+            where, xy = f"photo index {m.frame_index}", m.pixel
+        if i is None:
+            raise ConfigError(f"{m.source}: {where} is not one of the flight's {len(photos)} readable photos")
+        if np.isfinite(px[i]).all():
+            raise ConfigError(f"{m.source}: target {target.name!r} is marked twice in {photos[i].name}")
+        px[i] = xy
+    return px
+
+
+def _photo_result(config, photos, pixels, dem, dem_sigma, notes, truth, target):
+    """One target of a photo flight located: its GroupResult (target: its name, or None for the single target)."""
+    import time
+
+    from pipeline.geometry.rays import intersection_angle_deg
+    from pipeline.results import GroupResult
+
+    t0 = time.perf_counter()
     loc = locate_photos(photos, pixels, dem=dem, dem_sigma_m=dem_sigma)
     if not loc.estimates:
         reasons = "; ".join(f"{m}: {r}" for m, (_, r) in loc.unsolved.items())
         raise InputError(f"no method could locate the target from the photos: {reasons}", config.path)
-    truth = config.truth_lla()
     truth_m = None if truth is None else enu_from_lla(*truth, origin_lla=loc.views.origin_lla)
     ref = truth_m if truth_m is not None else next(iter(loc.estimates.values())).position_m
-    gamma = intersection_angle_deg(loc.obs.platform_m, ref) if loc.obs.n >= 2 else float("nan")
-    for p in photos:
-        notes.extend(f"{p.name}: {w}" for w in p.warnings)
+    seen = loc.obs.has_pixel | loc.obs.has_range
+    gamma = intersection_angle_deg(loc.obs.platform_m[seen], ref) if seen.sum() >= 2 else float("nan")
     settings = config.to_dict()
-    settings["notes"] = notes
+    settings["notes"] = list(notes)
     settings["solve_failures"] = {m: {"status": s, "reason": r} for m, (s, r) in loc.unsolved.items()}
     settings["photos"] = [p.path for p in photos]
+    settings["error_model"] = loc.errors.to_dict()
     return GroupResult(name=config.name, origin_lla=loc.views.origin_lla, observations=loc.obs,
                        estimates=loc.estimates, truth_m=truth_m, intersection_angle_deg=gamma,
-                       timings_s={"locate": time.perf_counter() - t0}, settings=settings)
+                       timings_s={"locate": time.perf_counter() - t0}, settings=settings, target=target)
 
 
 def read_marks(path: str, photos) -> list:

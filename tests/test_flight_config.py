@@ -127,7 +127,7 @@ def test_the_bundled_sample_configs_load():
     for e in entries:
         assert Path(e.config.truth_file).parent.name == e.config.name
         if e.config.files.photos:  # a photo flight: photos, marks and a DEM, no video or observation plan
-            assert e.config.terrain is not None and e.config.files.marks
+            assert e.config.terrain is not None and (e.config.files.marks or e.config.marks_file)
             continue
         # fmv: continuous full-motion video, every laser shot an observation; the others: triggered bursts
         mode = "range_times" if e.config.name == "fmv" else "bursts"

@@ -29,6 +29,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("check", ("check",)),
     ("per-target stages", ("target_stage",)),
     ("report", ("report",)),
+    ("photo error model", ("photo_errors",)),
     ("photo flights", ("locate",)),
     ("run", ("run",)),
     ("batch", ("batch",)),

@@ -58,6 +58,25 @@ def test_several_photos_every_method_mle_beats_the_one_shot_target(flight, capsy
     assert est["mle"]["ellipse95_semi_major_m"] >= est["mle"]["ellipse95_semi_minor_m"] > 0
 
 
+def test_stated_errors_replace_the_defaults(flight, capsys):
+    """--bias-prior-deg, --position-sigma-m and --alt-sigma-m replace the source's defaults (error_model in --json);
+    a tighter shared offset gives a smaller CEP at the same estimate; a negative sigma is refused."""
+    _, folder = flight
+    marks = ("--marks", folder / "marks.csv")
+    _, default = _locate(capsys, folder, *marks)
+    assert default["error_model"]["source"] == "GNSS without RTK, laser"
+    assert default["error_model"]["shared_offset_horizontal_m"] == 1.5
+    _, stated = _locate(capsys, folder, *marks, "--bias-prior-deg", "1", "--position-sigma-m", "0.1",
+                        "--alt-sigma-m", "2")
+    em = stated["error_model"]
+    assert (em["bias_prior_deg"], em["shared_offset_horizontal_m"], em["shared_offset_vertical_m"]) == (1.0, 0.1, 2.0)
+    assert "stated" in em["source"]
+    assert stated["estimates"]["mle"]["cep50_m"] < default["estimates"]["mle"]["cep50_m"]
+    assert cli_main(["locate", str(folder), "--alt-sigma-m", "-1"]) != 0
+    err = capsys.readouterr().err
+    assert "--alt-sigma-m must be a finite number >= 0, got -1" in err and len(err.strip().splitlines()) == 1
+
+
 def test_pixel_off_centre_drops_the_laser(flight, capsys):
     _, folder = flight
     rc, doc = _locate(capsys, folder, "--pixel", 100, 100)
@@ -115,3 +134,35 @@ def test_nothing_located_is_a_failure(tmp_path, capsys):
     rc, doc = _locate(capsys, out / "DJI_0001.JPG")
     assert rc == 1
     assert all("status" in r and "lat_deg" not in r for r in doc["estimates"].values())
+
+
+def test_named_targets_of_a_photo_flight(tmp_path):
+    """`targets:` in a photo flight's config: a mark's frame_index is the photo's index in time order; a target
+    marked on a photo the flight does not have is listed as not located, the others are."""
+    import yaml
+
+    from pipeline.flight_config import load_flight_config
+    from pipeline.run import process_group
+
+    fl = simulate_photo_flight(PhotoFlightSpec(seed=13, extra_targets=(("post", 30.0, -10.0),)))
+    write_photo_flight(fl, tmp_path)
+    doc = yaml.safe_load((tmp_path / "flight.yaml").read_text())
+    assert doc["marks_file"] == "targets.csv" and "marks" not in doc["files"]
+    del doc["marks_file"]
+    post = fl.extra_marks_px["post"]
+    doc["targets"] = [
+        {"name": "post", "marks": [{"frame_index": i, "pixel": [float(u), float(v)]}
+                                   for i, (u, v) in enumerate(post) if np.isfinite(u)]},
+        {"name": "ghost", "marks": [{"frame_index": 7, "pixel": [10.0, 10.0]}]}]
+    (tmp_path / "named.yaml").write_text(yaml.safe_dump(doc))
+    result = process_group(load_flight_config(tmp_path / "named.yaml"))
+    assert [r.target for r in result.targets] == ["post"]
+    assert [f.target for f in result.failed] == ["ghost"]
+    assert "photo index 7 is not one of the flight's 5 readable photos" in result.failed[0].message
+    post_truth = next(t for t in fl.truth["targets"] if t["name"] == "post")
+    r = result.targets[0]
+    truth_m = enu_from_lla(post_truth["lat_deg"], post_truth["lon_deg"], post_truth["alt_m"], r.origin_lla)
+    assert np.linalg.norm(r.truth_m - truth_m) < 1e-6  # its truth is the post's (truth.json "targets")
+    spot = enu_from_lla(*fl.truth["target_lla"], r.origin_lla)  # the laser's spot, 32 m away: not what was marked
+    mle = r.estimates["mle"].position_m
+    assert np.linalg.norm(mle - r.truth_m) < np.linalg.norm(mle - spot)

@@ -89,3 +89,25 @@ def test_folder_with_bad_photos_is_located_with_them_listed(flight, capsys):
     assert rc == 1 and len(doc["bad_photos"]) == 2
     assert "mle" in doc["estimates"] and np.isfinite(doc["estimates"]["mle"]["lat_deg"])
     assert out.err.count("ridgeloc: error:") == 2 and "DJI_0009.JPG" in out.err
+
+
+def test_run_of_a_photo_flight_with_bad_photos_lists_them(tmp_path):
+    """`ridgeloc run` of a photo flight whose folder holds a damaged photo and a non-image: both are left out with a
+    note naming them, every target is located from the others."""
+    import shutil
+
+    from pipeline.flight_config import load_flight_config
+    from pipeline.run import process_group
+
+    fl = simulate_photo_flight(PhotoFlightSpec(seed=6, extra_targets=(("post", 30.0, -10.0),)))
+    write_photo_flight(fl, tmp_path)
+    shutil.copy(tmp_path / "DJI_0005.JPG", tmp_path / "DJI_0006.JPG")
+    _rewrite(tmp_path / "DJI_0006.JPG", fl.tags[4], xmp=b"<x:xmpmeta")  # a corrupt XMP packet
+    (tmp_path / "DJI_0007.JPG").write_bytes(b"not a jpeg")
+    result = process_group(load_flight_config(tmp_path / "flight.yaml"))
+    assert [r.target for r in result.targets] == ["laser_spot", "post"] and not result.failed
+    for r in result.targets:
+        left_out = [n for n in r.settings["notes"] if n.startswith("photo left out")]
+        assert len(left_out) == 2 and "DJI_0006.JPG" in left_out[0] and "corrupt XMP" in left_out[0]
+        assert "DJI_0007.JPG" in left_out[1]
+        assert r.observations.n == 5

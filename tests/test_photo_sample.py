@@ -1,42 +1,62 @@
-"""The committed sample photo flight sample_data/photos/h20_laser (`ridgeloc synth --photos 5 --dem --seed 1`):
-its photos hold what the synth generates for that seed, and `ridgeloc run` of its flight.yaml locates the target."""
+"""The committed sample photo flight sample_data/photos/h20_laser (scripts/make_sample_data.py, PHOTO_SAMPLES): its
+files are what the generator writes for that spec, and `ridgeloc run` of configs/flights/h20_laser.yaml locates its
+three named targets, each MLE holding the truth in its 95 % ellipsoid."""
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data" / "photos" / "h20_laser"
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "sample_data" / "photos" / "h20_laser"
+CHI2_3_95 = 7.814727903251178
 
 
-def test_sample_photos_hold_the_synth_flight_of_seed_1():
+def test_sample_photos_are_what_the_script_writes(tmp_path):
     from pipeline.ingest.photo import read_photos
-    from pipeline.synth.dem import Hills
-    from pipeline.synth.photos import PhotoFlightSpec, simulate_photo_flight
 
-    spec = PhotoFlightSpec(seed=1)
-    flight = simulate_photo_flight(PhotoFlightSpec(seed=1, hills=Hills(spec.lat_deg, spec.lon_deg,
-                                                                        base_m=spec.ground_h_m)))
+    sys.path.insert(0, str(ROOT / "scripts"))
+    try:
+        import make_sample_data
+    finally:
+        sys.path.remove(str(ROOT / "scripts"))
+    truth = make_sample_data.make_photo_sample("h20_laser", tmp_path, write_config=False)
+    fresh = tmp_path / "photos" / "h20_laser"
+    for name in ("targets.csv", "marks.csv", "flight.yaml"):
+        assert (SAMPLE / name).read_text() == (fresh / name).read_text(), name
+    committed = json.loads((SAMPLE / "truth.json").read_text())
+    assert committed["targets"] == pytest.approx(truth["targets"])
     photos, bad = read_photos([SAMPLE])
+    again, _ = read_photos([fresh])
     assert bad == [] and len(photos) == 5
-    for p, tag in zip(photos, flight.tags, strict=True):
-        assert (p.lat_deg, p.lon_deg) == pytest.approx((tag["lat_deg"], tag["lon_deg"]), abs=1e-9)
-        assert p.gimbal_ypr_deg == pytest.approx(tag["gimbal_ypr_deg"], abs=0.006)
-        assert p.lrf_range_m == pytest.approx(tag["lrf_range_m"], abs=1e-3)
-    truth = json.loads((SAMPLE / "truth.json").read_text())
-    assert truth["target_lla"] == pytest.approx(flight.truth["target_lla"], abs=1e-9)
+    for p, q in zip(photos, again, strict=True):
+        assert (p.lat_deg, p.lon_deg, p.alt_m) == (q.lat_deg, q.lon_deg, q.alt_m)
+        assert (p.gimbal_ypr_deg, p.lrf_range_m, p.dji_target_lla) == (q.gimbal_ypr_deg, q.lrf_range_m,
+                                                                       q.dji_target_lla)
 
 
-def test_run_of_the_sample_flight(tmp_path):
+def test_run_of_the_sample_flight_locates_its_three_targets():
     from pipeline.flight_config import load_flight_config
     from pipeline.run import process_group
 
-    result = process_group(load_flight_config(SAMPLE / "flight.yaml"))
-    assert {"mle", "dem", "dji", "los"} <= set(result.estimates)
-    truth = np.asarray(result.truth_m)
+    result = process_group(load_flight_config(ROOT / "configs" / "flights" / "h20_laser.yaml"))
+    assert result.failed == []
+    assert [r.target for r in result.targets] == ["laser_spot", "cairn", "gate"]
+    for r in result.targets:
+        truth = np.asarray(r.truth_m)
+        e = r.estimates["mle"]
+        d = e.position_m - truth
+        assert float(d @ np.linalg.solve(e.covariance_m2, d)) < CHI2_3_95, r.target
 
-    def horizontal(m):
-        return float(np.linalg.norm((result.estimates[m].position_m - truth)[:2]))
+        def horizontal(m, r=r, truth=truth):
+            return float(np.linalg.norm((r.estimates[m].position_m - truth)[:2]))
 
-    assert horizontal("mle") < min(horizontal("dji"), horizontal("dem"))
+        assert horizontal("mle") < horizontal("dem"), r.target
+    laser = result.targets[0]
+    assert laser.observations.has_range.all()  # the laser's spot: every photo's range
+    assert {"los", "dji"} <= set(laser.estimates)
+    assert not any(r.observations.has_range.any() for r in result.targets[1:])  # the others: pixels only
+    assert "dji" not in result.targets[1].estimates  # DJI's laser target is not theirs
+    assert laser.estimates["mle"].extras["error_model"]["source"] == "GNSS without RTK, laser"

@@ -43,7 +43,8 @@ def test_marks_project_from_the_true_poses(tmp_path):
     views (reader + pose chain) triangulate the target exactly."""
     from pipeline.locate import locate_photos
 
-    spec = PhotoFlightSpec(seed=2, laser=False, compass_bias_deg=(0.0, 0.0), attitude_jitter_deg=0.0,
+    spec = PhotoFlightSpec(seed=2, laser=False, compass_bias_deg=(0.0, 0.0), pitch_bias_deg=0.0,
+                           attitude_jitter_deg=0.0,
                            gnss_offset_sigma_m=(0.0, 0.0), gnss_noise_sigma_m=(0.0, 0.0),
                            datum_offset_m=(0.0, 0.0), mark_sigma_px=0.0,
                            mark_offset_px=150.0)

@@ -22,21 +22,45 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="datum of drone-dji:AbsoluteAltitude / EXIF GPSAltitude (default amsl; docs/ingest.md)")
     parser.add_argument("--image-rotation", type=int, choices=(0, 180), default=0,
                         help="180 when the files were turned upside down after capture (docs/ingest.md)")
-    parser.add_argument("--largest-bias-deg", type=float, default=None,
-                        help="the largest constant compass/gimbal bias expected over the flight (default 5 deg); the "
-                             "MLE learns its size (docs/locate.md)")
     parser.add_argument("--bias-prior-deg", type=float, default=None,
-                        help="instead: a fixed 1-sigma prior of the constant bias (0: no bias state)")
+                        help="1-sigma prior of the compass/gimbal-yaw bias constant over the flight (default 3; 0: no "
+                             "bias state; docs/locate.md, \"Error model\")")
+    parser.add_argument("--position-sigma-m", type=float, default=None,
+                        help="1-sigma horizontal position offset shared by the photos, per axis (default by RtkFlag: "
+                             "1.5 without RTK, RtkStdLon/Lat or 0.5 float, 0.05 fixed)")
+    parser.add_argument("--alt-sigma-m", type=float, default=None,
+                        help="1-sigma altitude offset shared by the photos (GNSS and datum; default 15 without RTK, "
+                             "RtkStdHgt or 1 float, 0.3 fixed)")
     parser.add_argument("--dem-sigma-m", type=float, default=5.0, help="vertical sigma of the DEM (m)")
     parser.add_argument("--json", action="store_true", help="print one JSON document")
 
 
-def main(args) -> int:
+def stated_errors(photos, args):
+    """The photos' default error model (pipeline.photo_errors) with what the user stated on the command line."""
     import dataclasses
 
     from pipeline.errors import InputError
+    from pipeline.photo_errors import photo_error_model
+
+    errors = photo_error_model(photos)
+    given = {"bias_prior_deg": args.bias_prior_deg, "shared_h_m": args.position_sigma_m,
+             "shared_v_m": args.alt_sigma_m}
+    for key, flag in (("bias_prior_deg", "--bias-prior-deg"), ("shared_h_m", "--position-sigma-m"),
+                      ("shared_v_m", "--alt-sigma-m")):
+        v = given[key]
+        if v is not None and not (v >= 0 and v < float("inf")):
+            raise InputError(f"{flag} must be a finite number >= 0, got {v}")
+    given = {k: float(v) for k, v in given.items() if v is not None}
+    if given:
+        errors = dataclasses.replace(errors, source=errors.source + " (stated: " + ", ".join(
+            f"{k} {v:g}" for k, v in given.items()) + ")", **given)
+    return errors
+
+
+def main(args) -> int:
+    from pipeline.errors import InputError
     from pipeline.ingest.photo import read_photos
-    from pipeline.locate import PHOTO_SIGMA, check_pixels, estimate_row, locate_photos, read_marks
+    from pipeline.locate import check_pixels, estimate_row, locate_photos, read_marks
 
     photos, bad = read_photos(args.photos, alt_datum=args.alt_datum)
     for _path, err in bad:
@@ -55,15 +79,15 @@ def main(args) -> int:
     if args.dem:
         from pipeline.terrain import Dem
         dem = Dem.open(args.dem)
-    sigma = PHOTO_SIGMA if args.largest_bias_deg is None else \
-        dataclasses.replace(PHOTO_SIGMA, attitude_deg=args.largest_bias_deg)
-    loc = locate_photos(photos, pixels, dem=dem, rotation_deg=args.image_rotation, sigma=sigma,
-                        bias_prior_deg=args.bias_prior_deg, dem_sigma_m=args.dem_sigma_m)
+    errors = stated_errors(photos, args)
+    loc = locate_photos(photos, pixels, dem=dem, rotation_deg=args.image_rotation, errors=errors,
+                        dem_sigma_m=args.dem_sigma_m)
     rows = {m: estimate_row(e, loc.views) for m, e in loc.estimates.items()}
     for m, (status, reason) in loc.unsolved.items():
         rows[m] = {"status": status, "reason": reason}
     doc = {"photos": [p.path for p in photos], "bad_photos": [{"path": p, "error": e} for p, e in bad],
            "origin_lla": list(loc.views.origin_lla), "ranges_used": int(loc.obs.has_range.sum()),
+           "error_model": loc.errors.to_dict(),
            "estimates": rows}
     if args.json:
         print(json.dumps(doc, indent=2))

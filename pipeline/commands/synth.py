@@ -30,7 +30,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _photo_flight(args) -> int:
     import shutil
 
-    from pipeline.synth.photos import PhotoFlightSpec, simulate_photo_flight, write_photo_flight
+    from pipeline.synth.photos import PhotoFlightSpec, write_photo_sample
 
     out = Path(args.output)
     if out.exists():
@@ -39,18 +39,7 @@ def _photo_flight(args) -> int:
         shutil.rmtree(out)
     spec = PhotoFlightSpec(seed=args.seed or 0, n_photos=args.photos, laser=not args.no_laser,
                            mark_offset_px=0.0 if not args.no_laser else 150.0)
-    if args.dem:
-        from pipeline.synth.dem import Hills, write_dem
-
-        hills = Hills(spec.lat_deg, spec.lon_deg, base_m=spec.ground_h_m)
-        spec = PhotoFlightSpec(**{**spec.__dict__, "hills": hills})
-        out.mkdir(parents=True)
-        write_dem(out / "dem.tif", hills, extent_m=4000.0, post_m=30.0, crs="EPSG:32632")
-    flight = simulate_photo_flight(spec)
-    write_photo_flight(flight, out)
-    if args.dem:
-        with open(out / "flight.yaml", "a") as f:
-            f.write("terrain:\n  dem: dem.tif\n  vertical_sigma_m: 2.0\n")
+    flight = write_photo_sample(out, spec, dem=args.dem)
     t = flight.truth
     print(f"{args.photos} photos ({'with' if spec.laser else 'without'} laser), compass bias "
           f"{t['compass_bias_deg']:+.2f} deg, altitude datum offset {t['datum_offset_m']:+.1f} m -> {out}")

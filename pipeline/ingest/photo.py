@@ -43,9 +43,11 @@ class Photo:
     """What one drone photo states. Angles in degrees, (yaw, pitch, roll) ZYX in local NED; lengths in metres;
     NaN / None where the photo does not say.
 
-    t_ns: EXIF DateTimeOriginal (+ SubSecTimeOriginal), as UTC when `time_zone` is known (OffsetTimeOriginal),
-    else the camera's local clock read as if it were UTC (`time_zone` "unknown"): fine for ordering photos, not
-    for matching them with a log. alt_m is on `alt_datum` (see docs for what AbsoluteAltitude means)."""
+    t_ns: EXIF DateTimeOriginal (+ SubSecTimeOriginal), as UTC when `time_zone` is known (OffsetTimeOriginal, or
+    the zone the GPS time stamp implies), else the camera's local clock read as if it were UTC (`time_zone`
+    "unknown"): fine for ordering photos, not for matching them with a log; the GPS time stamp when there is no
+    DateTimeOriginal or it is off by no whole zone (see _photo_time). alt_m is on `alt_datum` (see docs for what
+    AbsoluteAltitude means)."""
 
     path: str
     make: str
@@ -70,6 +72,7 @@ class Photo:
     dji_target_lla: tuple[float, float, float] | None = None  # LRFTargetLat, Lon, AbsAlt (alt on alt_datum)
     rtk_flag: int | None = None
     rtk_std_m: tuple[float, float, float] | None = None  # RtkStdLon, RtkStdLat, RtkStdHgt
+    gps_t_ns: int | None = None  # EXIF GPSDateStamp + GPSTimeStamp (UTC)
     warnings: tuple[str, ...] = field(default_factory=tuple)
 
     @property
@@ -142,13 +145,45 @@ def _text(value) -> str:
     return str(value).replace("\x00", "").strip()
 
 
-def _photo_time(exif_ifd: dict, gps: dict) -> tuple[int | None, str]:
-    """(t_ns, time zone) from DateTimeOriginal (36867), SubSecTimeOriginal (37521), OffsetTimeOriginal (36881)."""
+#: DateTimeOriginal and the GPS time stamp (whole seconds each) agree when they are this close (s)
+TIME_TAG_TOLERANCE_S = 2.0
+#: time zones are whole quarter hours
+ZONE_STEP_S = 900
+
+
+def _gps_time_ns(gps: dict) -> int | None:
+    """UTC ns from EXIF GPSDateStamp (29, "YYYY:MM:DD") and GPSTimeStamp (7, hours, minutes, seconds rationals), or
+    None when either is missing or unreadable."""
+    try:
+        d = datetime.strptime(_text(gps.get(29, "")), "%Y:%m:%d").replace(tzinfo=timezone.utc)
+        h, m, sec = (_rational(x) for x in gps[7])
+    except (KeyError, TypeError, ValueError):
+        return None
+    if not (0 <= h < 24 and 0 <= m < 60 and 0 <= sec < 61):  # NaN fails too
+        return None
+    t_ns = int(d.timestamp()) * 1_000_000_000 + round((h * 3600 + m * 60 + sec) * 1e9)
+    return t_ns if 0 <= t_ns < 2**63 else None
+
+
+def _zone_name(offset_s: int) -> str:
+    sign = "-" if offset_s < 0 else "+"
+    return f"{sign}{abs(offset_s) // 3600:02d}:{abs(offset_s) % 3600 // 60:02d}"
+
+
+def _photo_time(exif_ifd: dict, gps: dict) -> tuple[int | None, str, int | None, str | None]:
+    """(t_ns UTC or the camera's clock, time zone, GPS time ns, warning) from DateTimeOriginal (36867),
+    SubSecTimeOriginal (37521), OffsetTimeOriginal (36881) and GPSDateStamp/GPSTimeStamp (docs/ingest.md, "Time").
+
+    With OffsetTimeOriginal the GPS time is a check (a warning when they differ by more than TIME_TAG_TOLERANCE_S);
+    without it the GPS time gives the zone (DateTimeOriginal minus the GPS time, whole quarter hours), or is the
+    time itself when the two differ by no whole zone (a camera clock set wrong), or when DateTimeOriginal is
+    missing."""
+    gps_ns = _gps_time_ns(gps)
     text = _text(exif_ifd.get(36867, ""))
     try:
         t = datetime.strptime(text, "%Y:%m:%d %H:%M:%S").replace(tzinfo=timezone.utc)
     except ValueError:
-        return None, "unknown"
+        return (gps_ns, "UTC (GPS time stamp)", gps_ns, None) if gps_ns is not None else (None, "unknown", None, None)
     sub = _text(exif_ifd.get(37521, ""))
     if sub.isdigit():
         t += timedelta(seconds=int(sub) / 10 ** len(sub))
@@ -160,8 +195,21 @@ def _photo_time(exif_ifd: dict, gps: dict) -> tuple[int | None, str]:
         zone = offset
     t_ns = int(t.timestamp()) * 1_000_000_000 + t.microsecond * 1000
     if not 0 <= t_ns < 2**63:  # before 1970 or past 2262: no int64 nanosecond time
-        return None, "unknown"
-    return t_ns, zone
+        return gps_ns, ("unknown" if gps_ns is None else "UTC (GPS time stamp)"), gps_ns, None
+    if gps_ns is None:
+        return t_ns, zone, None, None
+    diff_s = (t_ns - gps_ns) / 1e9
+    if zone != "unknown":
+        if abs(diff_s) > TIME_TAG_TOLERANCE_S:
+            return t_ns, zone, gps_ns, (f"DateTimeOriginal (UTC with OffsetTimeOriginal {zone}) and the GPS time "
+                                        f"stamp differ by {diff_s:+.0f} s: DateTimeOriginal used")
+        return t_ns, zone, gps_ns, None
+    step = round(diff_s / ZONE_STEP_S) * ZONE_STEP_S
+    if abs(diff_s - step) <= TIME_TAG_TOLERANCE_S and abs(step) <= 14 * 3600:
+        return t_ns - step * 1_000_000_000, f"{_zone_name(step)} (from the GPS time stamp)", gps_ns, None
+    return gps_ns, "UTC (GPS time stamp)", gps_ns, (
+        f"DateTimeOriginal is {diff_s:+.0f} s from the GPS time stamp, not a time-zone offset (the camera's clock "
+        "was set wrong?): the GPS time used")
 
 
 def _maker_note_attitude(path) -> tuple[tuple[float, float, float] | None, tuple[float, float, float] | None]:
@@ -274,9 +322,11 @@ def read_photo(path, alt_datum: str | None = None) -> Photo:
     if editor:
         warnings.append(f"re-saved after capture by {editor!r} (EXIF Software / xmp:CreatorTool): an editor may "
                         "have rotated the pixels against the recorded pose (see locate --image-rotation)")
-    t_ns, zone = _photo_time(exif_ifd, gps)
+    t_ns, zone, gps_t_ns, time_warning = _photo_time(exif_ifd, gps)
     if t_ns is None:
-        warnings.append("no EXIF DateTimeOriginal: photos are ordered by name")
+        warnings.append("no EXIF DateTimeOriginal or GPSDateStamp/GPSTimeStamp: photos are ordered by name")
+    if time_warning:
+        warnings.append(time_warning)
 
     lrf_range = _float(dji.get("LRFTargetDistance"))
     lrf_status = dji.get("LRFStatus", "").strip() if "LRFTargetDistance" in dji or "LRFStatus" in dji else ""
@@ -294,7 +344,8 @@ def read_photo(path, alt_datum: str | None = None) -> Photo:
         gimbal_ypr_deg=tuple(float(v) for v in gimbal), flight_ypr_deg=flight, attitude_source=attitude_source,
         intrinsics=intr, lrf_range_m=lrf_range, lrf_status=lrf_status, dji_target_lla=target,
         rtk_flag=int(rtk_flag) if math.isfinite(rtk_flag) else None,
-        rtk_std_m=rtk_std if all(math.isfinite(v) for v in rtk_std) else None, warnings=tuple(warnings))
+        rtk_std_m=rtk_std if all(math.isfinite(v) for v in rtk_std) else None, gps_t_ns=gps_t_ns,
+        warnings=tuple(warnings))
 
 
 def expand_photo_paths(paths) -> list[Path]:

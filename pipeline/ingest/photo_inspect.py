@@ -34,11 +34,15 @@ def is_photo_input(path) -> bool:
 
 def _time_text(p: Photo) -> str:
     if p.t_ns is None:
-        return "no time (EXIF DateTimeOriginal missing)"
+        return "no time (EXIF DateTimeOriginal and GPSDateStamp/GPSTimeStamp missing)"
     t = datetime.fromtimestamp(p.t_ns / 1e9, tz=timezone.utc).strftime("%Y-%m-%d %H:%M:%S.%f")[:-3]
+    gps = "" if p.gps_t_ns is None else ", GPS time stamp " + datetime.fromtimestamp(
+        p.gps_t_ns / 1e9, tz=timezone.utc).strftime("%H:%M:%S")
     if p.time_zone == "unknown":
-        return f"{t} camera local time (time zone unknown: no EXIF OffsetTimeOriginal)"
-    return f"{t} UTC (OffsetTimeOriginal {p.time_zone})"
+        return f"{t} camera local time (time zone unknown: no EXIF OffsetTimeOriginal, no GPS time stamp)"
+    if p.time_zone.startswith(("UTC", "+", "-")) and "(" in p.time_zone:
+        return f"{t} UTC (time zone {p.time_zone}{gps})"
+    return f"{t} UTC (OffsetTimeOriginal {p.time_zone}{gps})"
 
 
 def _num(v: float, fmt: str = ".2f") -> str:
@@ -80,8 +84,9 @@ def photo_as_dict(p: Photo) -> dict:
 
     k = p.intrinsics
     return {"path": p.path, "format": "photo", "make": p.make, "model": p.model, "width_px": p.width_px,
-            "height_px": p.height_px, "t_ns": p.t_ns, "time_zone": p.time_zone, "lat_deg": p.lat_deg,
-            "lon_deg": p.lon_deg, "alt_m": p.alt_m, "alt_datum": p.alt_datum, "alt_source": p.alt_source,
+            "height_px": p.height_px, "t_ns": p.t_ns, "time_zone": p.time_zone, "gps_t_ns": p.gps_t_ns,
+            "lat_deg": p.lat_deg, "lon_deg": p.lon_deg, "alt_m": p.alt_m, "alt_datum": p.alt_datum,
+            "alt_source": p.alt_source,
             "relative_alt_m": clean(p.relative_alt_m), "gps_alt_m": clean(p.gps_alt_m),
             "gimbal_ypr_deg": list(p.gimbal_ypr_deg),
             "flight_ypr_deg": None if p.flight_ypr_deg is None else list(p.flight_ypr_deg),

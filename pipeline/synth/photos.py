@@ -4,9 +4,13 @@ DewarpData, LRF fields), as a DJI Enterprise camera writes them, with a known ta
 The truth: a target on the ground (on `Hills` terrain, pipeline.synth.dem, or a flat plane), n photos taken from
 positions around it (azimuths spread over `spread_deg`, 250-600 m away, 60-150 m above it), each pointed at the
 target (target at the principal point, where the laser points). The recorded tags carry the errors of a consumer
-drone: a compass bias constant over the flight added to every gimbal yaw, frame-to-frame attitude jitter, a GNSS
-error that is mostly an offset shared by the flight's photos (it drifts over minutes) plus a little noise per
-photo, an altitude datum offset shared by all photos, the laser's noise. DJI's own one-shot target
+drone without RTK, drawn from families of their own (not the error model `ridgeloc locate` assumes,
+pipeline.photo_errors): a compass bias constant over the flight (uniform 1-5 deg, random sign) added to every gimbal
+yaw and a smaller gimbal pitch bias (uniform +-0.5 deg), frame-to-frame attitude jitter; a horizontal GNSS error
+that wanders over minutes (first-order Gauss-Markov, 120 s correlation time, its sigma per axis drawn per flight
+uniform in 0.5-2 m: a scale mixture, heavier-tailed than one Gaussian) plus a little noise per photo; an altitude
+datum offset shared by all photos (uniform +-30 m); the laser's noise (DJI's +-(0.2 m + 0.15 %) read as 2 sigma).
+DJI's own one-shot target
 (LRFTargetLat/Lon/AbsAlt) is computed as the aircraft does: recorded position + recorded gimbal angles + range.
 
     from pipeline.synth.photos import PhotoFlightSpec, simulate_photo_flight, write_photo_flight
@@ -47,14 +51,31 @@ class PhotoFlightSpec:
     range_m: tuple[float, float] = (250.0, 600.0)  # horizontal distance to the target
     height_above_m: tuple[float, float] = (60.0, 150.0)
     compass_bias_deg: tuple[float, float] = (1.0, 5.0)  # |bias|, random sign, constant over the flight
+    pitch_bias_deg: float = 0.5  # gimbal pitch bias, uniform in +-this, constant over the flight
     attitude_jitter_deg: float = 0.3
-    gnss_offset_sigma_m: tuple[float, float] = (1.5, 2.0)  # shared by the flight's photos: horizontal, vertical
+    # the horizontal GNSS error: a Gauss-Markov process per axis, its sigma drawn per flight uniform in this range
+    gnss_offset_sigma_m: tuple[float, float] = (0.5, 2.0)
+    gnss_tau_s: float = 120.0
     gnss_noise_sigma_m: tuple[float, float] = (0.3, 0.5)  # photo to photo: horizontal, vertical
     datum_offset_m: tuple[float, float] = (-30.0, 30.0)  # added to every recorded altitude
-    laser_sigma_m: float = 0.5
+    laser_sigma_m: tuple[float, float] = (0.1, 0.00075)  # a + b * range (m): DJI's 0.2 m + 0.15 % as 2 sigma
+    # the RTK status written (drone-dji:RtkFlag, RtkStdLon/Lat/Hgt m): 16 single point, 50 fixed (the errors drawn
+    # above are the caller's to match: RTK_FIXED_ERRORS)
+    rtk_flag: int = 16
+    rtk_std_m: tuple[float, float, float] = (1.5, 1.5, 2.0)
     mark_sigma_px: float = 1.0
     mark_offset_px: float = 0.0  # without laser: the target up to this far from the centre (uniform per axis)
+    # further targets (name, east m, north m from the main one, on the terrain), marked where the photos see them;
+    # the main target (the laser's, at the image centre) is then named main_target_name
+    extra_targets: tuple[tuple[str, float, float], ...] = ()
+    main_target_name: str = "laser_spot"
     dt_s: float = 20.0
+
+
+#: the errors of an RTK-fixed flight (PhotoFlightSpec changes): centimetre GNSS, the altitude's datum known to a
+#: decimetre; the compass and the laser as without RTK
+RTK_FIXED_ERRORS = {"rtk_flag": 50, "rtk_std_m": (0.02, 0.02, 0.03), "gnss_offset_sigma_m": (0.01, 0.05),
+                    "gnss_noise_sigma_m": (0.01, 0.02), "datum_offset_m": (-0.3, 0.3)}
 
 
 @dataclass
@@ -65,6 +86,7 @@ class PhotoFlight:
     tags: list[dict]
     marks_px: np.ndarray  # (n, 2) the target's pixel as marked (with marking noise)
     truth: dict = field(default_factory=dict)
+    extra_marks_px: dict = field(default_factory=dict)  # {name: (n, 2)} further targets' marks, NaN: not in view
 
 
 def _ypr_towards(camera_lla, target_lla) -> tuple[float, float]:
@@ -93,13 +115,19 @@ def simulate_photo_flight(spec: PhotoFlightSpec) -> PhotoFlight:
     enu = np.c_[dist_h * np.sin(np.radians(az)), dist_h * np.cos(np.radians(az)), up]
     cams = lla_from_enu(enu, target)
     bias = rng.uniform(*spec.compass_bias_deg) * rng.choice([-1.0, 1.0])
+    pitch_bias = rng.uniform(-spec.pitch_bias_deg, spec.pitch_bias_deg)
     offset = rng.uniform(*spec.datum_offset_m)
-    # a consumer GNSS error drifts over minutes: over one photo flight it is mostly a shared offset
-    gnss_offset = rng.normal(0, 1, 3) * np.array([*[spec.gnss_offset_sigma_m[0]] * 2, spec.gnss_offset_sigma_m[1]])
+    # a consumer GNSS error wanders over minutes: over one photo flight it is mostly a shared offset
+    gnss_sigma = rng.uniform(*spec.gnss_offset_sigma_m)
+    a = np.exp(-spec.dt_s / spec.gnss_tau_s)
+    gnss = np.zeros((n, 3))
+    gnss[0, :2] = rng.normal(0, gnss_sigma, 2)
+    for i in range(1, n):
+        gnss[i, :2] = a * gnss[i - 1, :2] + np.sqrt(1 - a * a) * rng.normal(0, gnss_sigma, 2)
     geoid = patch_around(round(lat0, 1), round(lon0, 1))  # EGM2008 around the target, read once per area
     N = geoid(cams[:, 0], cams[:, 1])
     K = np.array([[spec.fx_px, 0, (spec.width_px - 1) / 2], [0, spec.fx_px, (spec.height_px - 1) / 2], [0, 0, 1]])
-    tags, marks = [], []
+    tags, marks, rotations = [], [], []
     t0 = 1_700_000_000
     for i in range(n):
         yaw, pitch = _ypr_towards(cams[i], target)
@@ -109,6 +137,7 @@ def simulate_photo_flight(spec: PhotoFlightSpec) -> PhotoFlight:
         d_yaw = np.degrees(np.arctan2(offset_px[0], spec.fx_px))
         d_pitch = -np.degrees(np.arctan2(offset_px[1], spec.fx_px))
         R = Rotation.from_euler("ZYX", [yaw - d_yaw, pitch - d_pitch, 0.0], degrees=True)
+        rotations.append(R)
         # target direction in the camera: optical (x right, y down, z forward) from gimbal FRD (x fwd, y right, z down)
         d_ned = _ned_towards(cams[i], target)
         d_g = R.inv().apply(d_ned)
@@ -118,26 +147,56 @@ def simulate_photo_flight(spec: PhotoFlightSpec) -> PhotoFlight:
         marks.append(pix + rng.normal(0, spec.mark_sigma_px, 2))
         yaw_true, pitch_true = R.as_euler("ZYX", degrees=True)[:2]
         rec_yaw = yaw_true + bias + rng.normal(0, spec.attitude_jitter_deg)
-        rec_pitch = pitch_true + rng.normal(0, spec.attitude_jitter_deg)
+        rec_pitch = pitch_true + pitch_bias + rng.normal(0, spec.attitude_jitter_deg)
         rec_roll = rng.normal(0, spec.attitude_jitter_deg / 3)
         noise = rng.normal(0, 1, 3) * np.array([*[spec.gnss_noise_sigma_m[0]] * 2, spec.gnss_noise_sigma_m[1]])
-        rec = lla_from_enu(gnss_offset + noise + np.array([0.0, 0.0, offset]), tuple(cams[i]))
+        rec = lla_from_enu(gnss[i] + noise + np.array([0.0, 0.0, offset]), tuple(cams[i]))
         tag = {"lat_deg": float(rec[0]), "lon_deg": float(rec[1]), "abs_alt_m": float(rec[2] - N[i]),
                "relative_alt_m": float(up[i]), "gimbal_ypr_deg": (float(rec_yaw), float(rec_pitch), float(rec_roll)),
                "flight_ypr_deg": (float(rec_yaw + rng.normal(0, 2)), float(rng.normal(0, 2)), float(rng.normal(0, 2))),
                "t_unix_s": t0 + spec.dt_s * i, "fx_px": spec.fx_px, "cx_px": float(K[0, 2]), "cy_px": float(K[1, 2]),
                "dist": tuple(spec.dist), "width_px": spec.width_px, "height_px": spec.height_px}
         if spec.laser:
-            measured = true_range + rng.normal(0, spec.laser_sigma_m)
+            measured = true_range + rng.normal(0, spec.laser_sigma_m[0] + spec.laser_sigma_m[1] * true_range)
             dji = _point_along(rec, rec_yaw, rec_pitch, measured)
             n_dji = float(geoid(dji[0], dji[1]))
             tag.update(lrf_range_m=float(measured), lrf_status="Normal", dji_target=(float(dji[0]), float(dji[1]),
                                                                                       float(dji[2] - n_dji)))
+        tag.update(rtk_flag=spec.rtk_flag, rtk_std_m=tuple(spec.rtk_std_m))
         tags.append(tag)
     truth = {"target_lla": [lat0, lon0, h_t], "target_alt_datum": "ellipsoid", "compass_bias_deg": float(bias),
-             "datum_offset_m": float(offset), "gnss_offset_enu_m": gnss_offset.tolist(),
+             "pitch_bias_deg": float(pitch_bias), "datum_offset_m": float(offset),
+             "gnss_sigma_m": float(gnss_sigma), "gnss_error_enu_m": gnss.tolist(),
              "camera_lla_true": cams.tolist(), "spec": _spec_dict(spec)}
-    return PhotoFlight(spec, tags, np.array(marks), truth)
+    extra = _extra_targets(spec, target, cams, rotations, K)
+    if extra:
+        truth["targets"] = [{"name": spec.main_target_name, "lat_deg": lat0, "lon_deg": lon0, "alt_m": h_t}] + [
+            {"name": name, "lat_deg": lla[0], "lon_deg": lla[1], "alt_m": lla[2]} for name, (lla, _) in extra.items()]
+    return PhotoFlight(spec, tags, np.array(marks), truth, {name: px for name, (_, px) in extra.items()})
+
+
+def _extra_targets(spec: PhotoFlightSpec, target, cams, rotations, K) -> dict:
+    """{name: ((lat, lon, h), (n, 2) marked pixels)} of spec.extra_targets as the true cameras see them (marking
+    noise from a generator of their own, so that the main flight's draws do not change); NaN where a target is
+    behind the camera or outside the image."""
+    rng = np.random.default_rng([spec.seed, 1])
+    out = {}
+    for name, e_m, n_m in spec.extra_targets:
+        lat, lon, _ = lla_from_enu(np.array([e_m, n_m, 0.0]), target)
+        h = float(spec.hills.h_wgs84_m(lat, lon)) if spec.hills is not None else spec.ground_h_m
+        lla = (float(lat), float(lon), h)
+        px = np.full((len(cams), 2), np.nan)
+        for i, R in enumerate(rotations):
+            d_g = R.inv().apply(_ned_towards(cams[i], lla))
+            d_opt = np.array([d_g[1], d_g[2], d_g[0]])
+            if d_opt[2] <= 0:
+                continue
+            pin = K @ (d_opt / d_opt[2])
+            pix = distort_pixels(pin[None, :2], K, spec.dist)[0] + rng.normal(0, spec.mark_sigma_px, 2)
+            if 0 <= pix[0] <= spec.width_px - 1 and 0 <= pix[1] <= spec.height_px - 1:
+                px[i] = pix
+        out[name] = (lla, px)
+    return out
 
 
 def _ned_towards(camera_lla, target_lla) -> np.ndarray:
@@ -173,7 +232,9 @@ def dji_xmp(tag: dict) -> bytes:
         "CalibratedOpticalCenterY": f"{tag['cy_px']:.4f}",
         "DewarpData": f"2024-01-01;{tag['fx_px']:.4f},{tag['fx_px']:.4f},{dcx:.4f},{dcy:.4f},"
                       f"{k1:.6f},{k2:.6f},{p1:.6f},{p2:.6f},{k3:.6f}",
-        "RtkFlag": "16", "RtkStdLon": "1.500", "RtkStdLat": "1.500", "RtkStdHgt": "2.000",
+        "RtkFlag": str(tag.get("rtk_flag", 16)),
+        **dict(zip(("RtkStdLon", "RtkStdLat", "RtkStdHgt"), (f"{v:.3f}" for v in tag.get("rtk_std_m", (1.5, 1.5, 2.0))),
+                   strict=True)),
     }
     if "lrf_range_m" in tag:
         lat, lon, alt = tag["dji_target"]
@@ -213,9 +274,11 @@ def write_photo(path, tag: dict, rng: np.random.Generator) -> Path:
 
 
 def write_photo_flight(flight: PhotoFlight, out_dir) -> list[Path]:
-    """DJI_0001.JPG ... in out_dir, with marks.csv (photo,x_px,y_px: the target's pixel as marked), truth.json
-    (`target` {lat_deg, lon_deg, alt_m ellipsoidal}, the errors drawn, the tags written) and flight.yaml (its flight
-    config for `ridgeloc run`)."""
+    """DJI_0001.JPG ... in out_dir, with marks.csv (photo,x_px,y_px: the main target's pixel as marked), truth.json
+    (`target` {lat_deg, lon_deg, alt_m ellipsoidal}, with further targets `targets` [{name, lat_deg, lon_deg,
+    alt_m}], the errors drawn, the tags written), with further targets targets.csv (every target's marks,
+    `name,frame_or_image,x_px,y_px` with the photo's file name) and flight.yaml (its flight config for `ridgeloc
+    run`: files.marks, or marks_file targets.csv)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(flight.spec.seed + 1)
@@ -229,7 +292,40 @@ def write_photo_flight(flight: PhotoFlight, out_dir) -> list[Path]:
                  marks_px=flight.marks_px.tolist())
     (out / "truth.json").write_text(json.dumps(truth, indent=1, default=list))
     name = "".join(c if c.isalnum() or c in "-_" else "_" for c in out.name) or "photos"
+    if flight.extra_marks_px:  # every target in a marks file (docs/run.md, "Many targets per flight")
+        with open(out / "targets.csv", "w") as f:
+            f.write("name,frame_or_image,x_px,y_px\n")
+            marks = {flight.spec.main_target_name: flight.marks_px, **flight.extra_marks_px}
+            for target, px in marks.items():
+                for p, (u, v) in zip(paths, px, strict=True):
+                    if np.isfinite(u):
+                        f.write(f"{target},{p.name},{u:.2f},{v:.2f}\n")
+        marks_line = "marks_file: targets.csv\n"
+    else:
+        marks_line = ""
+    files = "files:\n  photos: .\n" + ("" if marks_line else "  marks: marks.csv\n")
     (out / "flight.yaml").write_text(f"# a synthetic DJI photo flight (pipeline/synth/photos.py): ridgeloc run this\n"
-                                     f"name: {name}\nfiles:\n  photos: .\n  marks: marks.csv\n"
-                                     f"truth_file: truth.json\n")
+                                     f"name: {name}\n{files}{marks_line}truth_file: truth.json\n")
     return paths
+
+
+def write_photo_sample(out_dir, spec: PhotoFlightSpec, dem: bool) -> PhotoFlight:
+    """A photo flight as `ridgeloc synth --photos` and scripts/make_sample_data.py write it: with dem, the target on
+    synthetic hills (pipeline.synth.dem.Hills at the spec's place) and their GeoTIFF dem.tif (4 km, 30 m posts, UTM
+    32N), named in flight.yaml's `terrain:` with a 2 m vertical sigma. out_dir must not exist or be empty."""
+    import dataclasses
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if dem:
+        from pipeline.synth.dem import Hills, write_dem
+
+        hills = Hills(spec.lat_deg, spec.lon_deg, base_m=spec.ground_h_m)
+        spec = dataclasses.replace(spec, hills=hills)
+        write_dem(out / "dem.tif", hills, extent_m=4000.0, post_m=30.0, crs="EPSG:32632")
+    flight = simulate_photo_flight(spec)
+    write_photo_flight(flight, out)
+    if dem:
+        with open(out / "flight.yaml", "a") as f:
+            f.write("terrain:\n  dem: dem.tif\n  vertical_sigma_m: 2.0\n")
+    return flight

@@ -8,7 +8,8 @@ The terms (`pipeline.solve.mle`, the bias-size-unknown path of `solve_batch`):
                 misfit factor); "offset x s" carries s position_m^2 instead
     bias        the bias mixture over the bias's prior scale phi (`bias_mixture.PHI_GRID`); "-bias" keeps only
                 phi = 0 (no bias: the estimate changes too)
-    inflation   the fit checks' inflation (lag-1 autocorrelation factor, chi-square variance factor)
+    inflation   the fit checks' inflation (lag-1 autocorrelation and batch-means factors, chi-square variance
+                factor)
 
 Per family and variant: coverage of the 95 % ellipsoid (e^T C^-1 e <= 7.81), median e^T C^-1 e (2.37 for a
 right covariance) and median error (m), on the problems of scripts/calibration.py (same generator, seed and
@@ -48,7 +49,8 @@ VARIANTS = {
 
 @contextlib.contextmanager
 def variant(offset: float = 1.0, bias: bool = True, inflation: bool = True):
-    saved = (_mle._Iteration.finish, bias_mixture.PHI_GRID, fit_checks.acf_significant, fit_checks.chi_square_p)
+    saved = (_mle._Iteration.finish, bias_mixture.PHI_GRID, fit_checks.acf_significant, fit_checks.chi_square_p,
+             fit_checks.batch_means_significant)
     if offset != 1.0:
         finish = saved[0]
 
@@ -62,11 +64,12 @@ def variant(offset: float = 1.0, bias: bool = True, inflation: bool = True):
     if not inflation:
         fit_checks.acf_significant = lambda rho, pairs: np.zeros(np.shape(rho), dtype=bool)
         fit_checks.chi_square_p = lambda chi2, dof: np.ones(np.shape(chi2))
+        fit_checks.batch_means_significant = lambda ratio, blocks: np.zeros(np.shape(ratio), dtype=bool)
     try:
         yield
     finally:
-        (_mle._Iteration.finish, bias_mixture.PHI_GRID, fit_checks.acf_significant,
-         fit_checks.chi_square_p) = saved
+        (_mle._Iteration.finish, bias_mixture.PHI_GRID, fit_checks.acf_significant, fit_checks.chi_square_p,
+         fit_checks.batch_means_significant) = saved
 
 
 def main(argv: list[str] | None = None) -> int:

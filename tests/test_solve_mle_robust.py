@@ -95,6 +95,38 @@ def test_lag1_autocorrelation_finds_drift_and_not_white_noise():
     assert fit_checks.acf_inflation(np.array([0.8]), np.array([True]))[0] == pytest.approx(9.0)
 
 
+def test_batch_means_see_a_slow_drift_under_white_noise_that_lag1_misses():
+    """Video-rate residuals: white noise (variance 1) plus a slow AR(1) drift (lag-1 0.998, variance 0.03). The
+    lag-1 autocorrelation is about 0.03, mostly below its two standard errors; the means over blocks of 30 frames
+    vary about 1.8 times as much as white noise's, as the autocovariance sum says, and the test sees it on most
+    problems (the drift's own slowness makes the ratio vary from problem to problem)."""
+    rng = np.random.default_rng(1)
+    n, b, a, v = 900, 200, 0.998, 0.03
+    white = rng.normal(size=(3, n, b))
+    drift = np.empty_like(white)
+    drift[:, 0] = rng.normal(size=(3, b)) * np.sqrt(v)
+    for i in range(1, n):
+        drift[:, i] = a * drift[:, i - 1] + np.sqrt(v * (1 - a * a)) * rng.normal(size=(3, b))
+    use = np.ones((3, n, b), dtype=bool)
+    use[:, 7::9, : b // 2] = False  # drop-outs: blocks are of consecutive used frames
+    e = white + drift
+    rho, pairs = fit_checks.lag1_autocorrelation(e, use, slice(0, 2))
+    lag1_rate = np.mean(fit_checks.acf_significant(rho, pairs))
+    ratio, blocks = fit_checks.batch_means_ratio(e, use, slice(0, 2))
+    k = 30  # floor(sqrt(900))
+    gamma = lambda h: (1.0 if h == 0 else 0.0) + v * a ** abs(h)  # noqa: E731
+    expected = sum(gamma(i - j) for i in range(k) for j in range(k)) / k / (1.0 + v)
+    full = ratio[b // 2:]  # no drop-outs: exactly k-frame blocks
+    assert np.mean(full) == pytest.approx(expected, rel=0.1)
+    blocks_rate = np.mean(fit_checks.batch_means_significant(ratio, blocks))
+    assert lag1_rate < 0.3 and blocks_rate > 0.6, (lag1_rate, blocks_rate)
+    w_ratio, w_blocks = fit_checks.batch_means_ratio(white, use, slice(0, 2))
+    assert np.mean(w_ratio) == pytest.approx(1.0, abs=0.05)
+    assert np.mean(fit_checks.batch_means_significant(w_ratio, w_blocks)) < 0.05
+    assert (fit_checks.batch_means_inflation(np.array([3.0, 0.5, 500.0]), np.array([True, True, True]))
+            == [3.0, 1.0, fit_checks.MAX_ACF_INFLATION]).all()
+
+
 def test_misfit_is_said_in_words_and_inflates_the_covariance():
     """Pixel noise 3x what the sigma says, variance components off: the chi-square test fails, the message
     says so and the covariance grows."""

@@ -7,6 +7,10 @@
   assumes independent errors then counts one error many times. For a first-order autoregressive error with
   lag-1 correlation rho, the variance of an average grows by (1 + rho) / (1 - rho) over the independent case:
   that factor inflates the group's variances (`acf_inflation`).
+- batch means: the same factor measured without the AR(1) form, from the means over blocks of sqrt(count)
+  consecutive frames (`batch_means_ratio`). A slow drift under a larger white noise (many video frames a
+  fraction of a second apart) has a small lag-1 autocorrelation, yet its block means vary far more than white
+  errors' would, and the variance of the target's average with them.
 
 Residual planes are (3, n, b): rows u, v, range of the n frames of b problems, zero where unused.
 """
@@ -20,6 +24,8 @@ from scipy.stats import chi2 as _chi2
 CHI2_ALPHA = 0.01
 #: the largest inflation of a group's variances by the autocorrelation (rho = 0.98)
 MAX_ACF_INFLATION = 99.0
+#: false-alarm rate of the batch-means drift test (as the lag-1 test's two standard errors)
+DRIFT_ALPHA = 0.023
 
 
 def lag1_autocorrelation(E: np.ndarray, use: np.ndarray, rows: slice) -> tuple[np.ndarray, np.ndarray]:
@@ -34,6 +40,44 @@ def lag1_autocorrelation(E: np.ndarray, use: np.ndarray, rows: slice) -> tuple[n
     with np.errstate(divide="ignore", invalid="ignore"):
         rho = np.where((pairs > 0) & (den > 0), num / den, np.nan)
     return rho, pairs
+
+
+def batch_means_ratio(E: np.ndarray, use: np.ndarray, rows: slice) -> tuple[np.ndarray, np.ndarray]:
+    """(ratio (b,), blocks (b,)): the batch-means variance ratio of the residuals E (3,n,b) over the frames, per
+    row of `rows` (u and v apart) pooled: the used frames (`use` (3,n,b) bool) in order, cut into blocks of
+    k = floor(sqrt(count)) consecutive ones (the classical batch size), ratio = mean over the blocks of
+    k * (block mean)^2 over the mean square of the residuals. It estimates the factor by which correlated errors
+    inflate the variance of an average over the independent case (1 for white residuals, (1 + rho)/(1 - rho) for
+    a long AR(1) error, larger for a slow drift under white noise, whose lag-1 autocorrelation is small); for
+    white residuals blocks * ratio is about chi-square with `blocks` degrees of freedom. NaN where no block."""
+    u = use[rows]
+    e = np.where(u, E[rows], 0.0)
+    R, n, b = e.shape
+    cnt = u.sum(axis=1)  # (R,b)
+    k = np.maximum(np.floor(np.sqrt(cnt)), 2).astype(np.int64)
+    nblk = cnt // k
+    pos = np.cumsum(u, axis=1) - 1  # the used frame's rank in its row
+    blk = pos // k[:, None, :]
+    ok = u & (blk < nblk[:, None, :])
+    flat = (np.arange(R)[:, None, None] * n + np.where(ok, blk, 0)) * b + np.arange(b)[None, None, :]
+    sums = np.bincount(flat[ok], weights=e[ok], minlength=R * n * b).reshape(R, n, b)
+    q = (sums * sums).sum(axis=1) / k  # (R,b): sum over blocks of k mean^2
+    blocks = nblk.sum(axis=0)
+    ms = (e * e).sum(axis=(0, 1)) / np.maximum(cnt.sum(axis=0), 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where((blocks > 0) & (ms > 0), q.sum(axis=0) / blocks / ms, np.nan)
+    return ratio, blocks
+
+
+def batch_means_significant(ratio: np.ndarray, blocks: np.ndarray) -> np.ndarray:
+    """(b,) True where blocks * ratio exceeds the chi-square quantile of white residuals at DRIFT_ALPHA."""
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(ratio) & (blocks >= 2) & (ratio * blocks > _chi2.isf(DRIFT_ALPHA, np.maximum(blocks, 1)))
+
+
+def batch_means_inflation(ratio: np.ndarray, significant: np.ndarray) -> np.ndarray:
+    """(b,) variance inflation: the batch-means ratio where significant (at most MAX_ACF_INFLATION), else 1."""
+    return np.where(significant, np.clip(np.nan_to_num(ratio, nan=1.0), 1.0, MAX_ACF_INFLATION), 1.0)
 
 
 def acf_significant(rho: np.ndarray, pairs: np.ndarray) -> np.ndarray:
@@ -56,10 +100,12 @@ def chi_square_p(chi2: np.ndarray, dof: np.ndarray) -> np.ndarray:
 
 
 def describe(chi2: float, dof: float, p: float, rho_pix: float, rho_rng: float, acf_pix: bool, acf_rng: bool,
-             inflation: float, spread: float = 1.0) -> str | None:
+             inflation: float, spread: float = 1.0, blocks_pix: float | None = None,
+             blocks_rng: float | None = None) -> str | None:
     """One sentence for the console and the report when the model does not fit; None when it does. spread: the
     largest robust spread (1.4826 median |e|) of a group's standardized residuals, when the loss's rejection
-    thresholds were widened by it (else 1)."""
+    thresholds were widened by it (else 1); blocks_pix, blocks_rng: the batch-means ratio of a group whose block
+    test failed (else None)."""
     parts = []
     if spread > 1.0:
         parts.append(f"the residuals are spread {spread:.1f} times wider than the stated sigmas (robust scale)")
@@ -70,6 +116,10 @@ def describe(chi2: float, dof: float, p: float, rho_pix: float, rho_rng: float, 
         parts.append(f"the pixel residuals drift slowly from frame to frame (lag-1 autocorrelation {rho_pix:.2f})")
     if acf_rng:
         parts.append(f"the range residuals drift slowly from frame to frame (lag-1 autocorrelation {rho_rng:.2f})")
+    for name, r in (("pixel", blocks_pix), ("range", blocks_rng)):
+        if r is not None:
+            parts.append(f"the {name} residuals' means over blocks of consecutive frames vary {r:.1f} times more than "
+                         "independent errors' would (a slow drift)")
     if not parts:
         return None
     return ("the error model does not fit this flight: " + "; ".join(parts)

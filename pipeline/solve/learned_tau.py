@@ -119,6 +119,7 @@ def replace_with_learned(ex: dict, tau: float, att: float, lls: dict, chi2: floa
     fail = bool(np.isfinite(p[0]) and p[0] < fit_checks.CHI2_ALPHA)
     out.update({"chi2": np.array([chi2]), "chi2_dof": np.array([dof]), "chi2_p": p,
                 "drift_pixel": np.zeros(1, dtype=bool), "drift_range": np.zeros(1, dtype=bool),
+                "block_drift_pixel": np.zeros(1, dtype=bool), "block_drift_range": np.zeros(1, dtype=bool),
                 "consistent": np.array([not fail]), "robust_spread": np.ones((1, 2)),
                 "covariance_inflation": np.array([max(chi2 / dof, 1.0) if fail and dof > 0 else 1.0]),
                 "error_model_tau_s": np.array([tau]), "error_model_attitude_deg": np.array([att]),

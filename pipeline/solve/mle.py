@@ -502,6 +502,14 @@ class _Iteration:
         acf_rng = fit_checks.acf_significant(rho_rng, pairs_rng)
         infl_pix = fit_checks.acf_inflation(rho_pix, acf_pix)
         infl_rng = fit_checks.acf_inflation(rho_rng, acf_rng)
+        # a slow drift under white noise hardly shows at lag 1 but does in the means over blocks of frames
+        # (batch means): the larger factor inflates; it does not call for the learned drift model (`_drifts`)
+        vr_pix, nb_pix = fit_checks.batch_means_ratio(Ew, use, slice(0, 2))
+        vr_rng, nb_rng = fit_checks.batch_means_ratio(Ew, use, slice(2, 3))
+        blk_pix = fit_checks.batch_means_significant(vr_pix, nb_pix)
+        blk_rng = fit_checks.batch_means_significant(vr_rng, nb_rng)
+        infl_pix = np.maximum(infl_pix, fit_checks.batch_means_inflation(vr_pix, blk_pix))
+        infl_rng = np.maximum(infl_rng, fit_checks.batch_means_inflation(vr_rng, blk_rng))
         N6, _ = _normal(J, E, wr)
         if a is not None:
             hs = _bias_schur(N6, J, a, wr)
@@ -537,7 +545,7 @@ class _Iteration:
             # a misfit (the robust scale guard, the chi-square's variance factor) scales every stated sigma:
             # the bias prior's and the shared GNSS offset's too (told wrong by that factor, they are likely all
             # wrong alike); the shared offset takes the larger of the two groups' factors
-            mix, mix0, E_report = self._mixture(s / np.sqrt(vf_chi), s * g, g, failed, acf_pix)
+            mix, mix0, E_report = self._mixture(s / np.sqrt(vf_chi), s * g, g, failed, acf_pix | blk_pix)
             misfit = vf_chi * self.guard.max(axis=1)
             eye = self.position_m ** 2 * np.eye(3)
             cov = np.where(failed[:, None, None], cov, mix["covariance"] + misfit[:, None, None] * eye)
@@ -560,7 +568,9 @@ class _Iteration:
                   "chi2": chi2, "chi2_dof": dof.astype(np.float64), "chi2_p": p,
                   "autocorrelation_pixel": rho_pix, "autocorrelation_range": rho_rng,
                   "drift_pixel": acf_pix, "drift_range": acf_rng,
-                  "consistent": ~(p_fail | acf_pix | acf_rng | (self.guard > 1).any(axis=1)),
+                  "batch_means_pixel": vr_pix, "batch_means_range": vr_rng,
+                  "block_drift_pixel": blk_pix, "block_drift_range": blk_rng,
+                  "consistent": ~(p_fail | acf_pix | acf_rng | blk_pix | blk_rng | (self.guard > 1).any(axis=1)),
                   "robust_spread": np.sqrt(self.guard),
                   "covariance_inflation": np.where(np.isfinite(inflation), inflation, 1.0)}
         if mix is not None:

@@ -28,6 +28,12 @@ def rejected_observations(ex: dict, b: int, t_ns: np.ndarray) -> list[dict]:
     return out
 
 
+def _block_drift(ex: dict, b: int, group: str) -> float | None:
+    """The batch-means ratio of problem b's group ("pixel", "range") where its block test failed, else None."""
+    flag = ex.get(f"block_drift_{group}")
+    return float(ex[f"batch_means_{group}"][b]) if flag is not None and flag[b] else None
+
+
 def fit_summary(ex: dict, b: int) -> dict:
     """The fit checks of problem b: chi-square, its degrees of freedom and p-value, the lag-1 autocorrelations,
     whether the model fits, the covariance inflation and, when it does not fit, a message."""
@@ -35,10 +41,13 @@ def fit_summary(ex: dict, b: int) -> dict:
                               float(ex["autocorrelation_pixel"][b]), float(ex["autocorrelation_range"][b]),
                               bool(ex["drift_pixel"][b]), bool(ex["drift_range"][b]),
                               float(ex["covariance_inflation"][b]),
-                              float(np.max(ex["robust_spread"][b])) if "robust_spread" in ex else 1.0)
+                              float(np.max(ex["robust_spread"][b])) if "robust_spread" in ex else 1.0,
+                              *(_block_drift(ex, b, g) for g in ("pixel", "range")))
     return {"consistent": bool(ex["consistent"][b]), "chi2": _f(ex["chi2"][b]), "dof": _f(ex["chi2_dof"][b]),
             "p_value": _f(ex["chi2_p"][b]), "autocorrelation_pixel": _f(ex["autocorrelation_pixel"][b]),
             "autocorrelation_range": _f(ex["autocorrelation_range"][b]),
+            "batch_means_pixel": _f(ex["batch_means_pixel"][b]) if "batch_means_pixel" in ex else None,
+            "batch_means_range": _f(ex["batch_means_range"][b]) if "batch_means_range" in ex else None,
             "covariance_inflation": _f(ex["covariance_inflation"][b]), "message": msg}
 
 

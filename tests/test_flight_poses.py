@@ -1,0 +1,47 @@
+"""Flight.poses: every target of a flight asks for the same observation times; the poses are computed once per
+time and given again row for row, equal to a fresh computation (sample flight three_targets)."""
+
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.flight import Flight
+from pipeline.flight_config import load_flight_config
+
+CONFIG = Path(__file__).resolve().parents[1] / "configs" / "flights" / "three_targets.yaml"
+FIELDS = ("R_enu0_from_optical", "camera_m", "laser_m", "antenna_m")
+
+
+def _fresh(config, t_ns):
+    with Flight.open(config) as f:
+        return f.poses(t_ns)
+
+
+def test_poses_asked_again_are_the_first_answer_and_new_times_are_computed():
+    config = load_flight_config(CONFIG)
+    with Flight.open(config) as flight:
+        t = flight.require_plan().t_ns
+        span = flight.telemetry_span_ns()
+        outside = np.array([span[0] - 10**9, span[1] + 10**9], dtype=np.int64)
+        first, inside = flight.poses(np.r_[outside[:1], t])  # a time outside first: no pose, a row of inside
+        assert not inside[0] and inside[1:].all()
+        again, _ = flight.poses(t)
+        picked = t[[5, 1, 1, 9]]  # any order, repeated times
+        sub, sub_inside = flight.poses(picked)
+        calls = []
+        real_states = flight.states
+        flight.states = lambda *a, **k: calls.append(a) or real_states(*a, **k)
+        mixed = np.r_[t[:3] + 123_456_789, outside, t[4:6]]  # new times, outside ones and remembered ones
+        got, got_inside = flight.poses(mixed)
+        flight.poses(mixed)  # all remembered now
+        none, none_inside = flight.poses(outside)
+    assert len(calls) == 1  # only the call with new times interpolated the telemetry
+    for name in FIELDS:
+        np.testing.assert_array_equal(getattr(again, name), getattr(first, name))
+        np.testing.assert_array_equal(getattr(sub, name), getattr(first, name)[[5, 1, 1, 9]])
+    ref, ref_inside = _fresh(config, mixed)
+    np.testing.assert_array_equal(got_inside, ref_inside)
+    np.testing.assert_array_equal(got_inside, [True] * 3 + [False] * 2 + [True] * 2)
+    for name in FIELDS:
+        np.testing.assert_array_equal(getattr(got, name), getattr(ref, name))
+    assert sub_inside.all() and none is None and not none_inside.any()

@@ -81,7 +81,8 @@ def main(argv=None) -> int:
     a, b = med[1], med[10]
     no_solve = [sum(m[s] for s in STAGES if s != "solve") for m in (a, b)]
     print(f"ratio 10/1: wall {b['wall_s'] / a['wall_s']:.2f}x, cpu {b['cpu_s'] / a['cpu_s']:.2f}x, "
-          f"peak memory {b['maxrss_mb'] / a['maxrss_mb']:.2f}x, stages without solve {no_solve[1] / no_solve[0]:.2f}x, solve {b['solve'] / max(a['solve'], 1e-9):.2f}x")
+          f"peak memory {b['maxrss_mb'] / a['maxrss_mb']:.2f}x, stages without solve {no_solve[1] / no_solve[0]:.2f}x, "
+          f"solve {b['solve'] / max(a['solve'], 1e-9):.2f}x")
     if runs[10][0]["failed"]:
         print(f"not located among the 10: {', '.join(runs[10][0]['failed'])}")
     return 0

@@ -45,3 +45,14 @@ def test_poses_asked_again_are_the_first_answer_and_new_times_are_computed():
     for name in FIELDS:
         np.testing.assert_array_equal(getattr(got, name), getattr(ref, name))
     assert sub_inside.all() and none is None and not none_inside.any()
+
+
+def test_a_flight_with_three_targets_interpolates_its_telemetry_once(monkeypatch):
+    from pipeline.run import process_group
+
+    calls = []
+    real = Flight.states
+    monkeypatch.setattr(Flight, "states", lambda self, t, log=None: calls.append(len(t)) or real(self, t, log))
+    result = process_group(load_flight_config(CONFIG))
+    assert len(result.targets) == 3 and not result.failed
+    assert calls == [len(result.targets[0].tracking["t_ns"])]  # the observation times, once for every target

@@ -1,5 +1,6 @@
 """Flight.poses: every target of a flight asks for the same observation times; the poses are computed once per
-time and given again row for row, equal to a fresh computation (sample flight three_targets)."""
+time and given again row for row, equal to a fresh computation (sample flight three_targets). The flight's
+truth file is read once for all its targets too."""
 
 from pathlib import Path
 
@@ -47,12 +48,15 @@ def test_poses_asked_again_are_the_first_answer_and_new_times_are_computed():
     assert sub_inside.all() and none is None and not none_inside.any()
 
 
-def test_a_flight_with_three_targets_interpolates_its_telemetry_once(monkeypatch):
+def test_a_flight_with_three_targets_interpolates_its_telemetry_and_reads_its_truth_once(monkeypatch):
+    from pipeline import target_stage
     from pipeline.run import process_group
 
-    calls = []
-    real = Flight.states
+    calls, truth_reads = [], []
+    real, real_truth = Flight.states, target_stage.truth_file_targets
     monkeypatch.setattr(Flight, "states", lambda self, t, log=None: calls.append(len(t)) or real(self, t, log))
+    monkeypatch.setattr(target_stage, "truth_file_targets", lambda c: truth_reads.append(c) or real_truth(c))
     result = process_group(load_flight_config(CONFIG))
     assert len(result.targets) == 3 and not result.failed
     assert calls == [len(result.targets[0].tracking["t_ns"])]  # the observation times, once for every target
+    assert len(truth_reads) == 1 and all(r.truth_m is not None for r in result.targets)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import json
 import time
 from collections.abc import Sequence
@@ -88,6 +89,11 @@ class FlightPass:
     notes: list[str] = field(default_factory=list)
     times: StageTimes = field(default_factory=StageTimes)
     clock_estimate: ClockEstimate | None = None
+
+    @functools.cached_property
+    def truth_targets(self) -> list:
+        """The truth_file's targets (`truth_file_targets`), read once for every target of the flight."""
+        return truth_file_targets(self.flight.config)
 
     def acquire(self, mark: Mark | None, notes: list[str]) -> TargetMark:
         """A mark as a frame and pixel (`pipeline.flight.acquire_mark`), its note added to `notes`."""
@@ -191,27 +197,35 @@ def _synchronize(flight: Flight, plan: ObservationPlan, track: TrackResult, rang
     return obs, useful, inside
 
 
-def named_truth_lla(config: FlightConfig, name: str) -> tuple[float, float, float] | None:
-    """A named target's truth from the config's truth_file: its `targets` list ({name, lat_deg, lon_deg, alt_m})
-    when it has one (synthetic flights with several targets), else None."""
+def truth_file_targets(config: FlightConfig) -> list:
+    """The `targets` list ({name, lat_deg, lon_deg, alt_m} each) of the config's truth_file (synthetic flights with
+    several targets); [] without a truth_file or when the config states its truth."""
     if config.truth is not None or config.truth_file is None:
-        return None
+        return []
     try:
-        doc = json.loads(Path(config.truth_file).read_text())
-        for t in doc.get("targets") or []:
+        return list(json.loads(Path(config.truth_file).read_text()).get("targets") or [])
+    except (OSError, ValueError, TypeError, AttributeError) as exc:
+        raise ConfigError(f"cannot read the targets' truth: {exc}", config.truth_file) from None
+
+
+def named_truth_lla(config: FlightConfig, name: str, entries: list) -> tuple[float, float, float] | None:
+    """A named target's truth among the truth_file's `entries` (`truth_file_targets`), else None."""
+    try:
+        for t in entries:
             if t.get("name") == name:
                 return float(t["lat_deg"]), float(t["lon_deg"]), float(t["alt_m"])
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise ConfigError(f"cannot read the targets' truth: {exc}", config.truth_file) from None
     return None
 
 
-def _truth_lla(config: FlightConfig, target: NamedTarget | None):
+def _truth_lla(fp: FlightPass, target: NamedTarget | None):
+    config = fp.flight.config
     if target is not None and target.truth_lla is not None:
         return target.truth_lla
     if target is None or target.name is None:
         return config.truth_lla()
-    return named_truth_lla(config, target.name)
+    return named_truth_lla(config, target.name, fp.truth_targets)
 
 
 def locate_target(fp: FlightPass, target: NamedTarget | None, marks: list[TargetMark] | None = None
@@ -234,7 +248,7 @@ def locate_target(fp: FlightPass, target: NamedTarget | None, marks: list[Target
     if track.lost.any():
         notes.append(f"target lost in {int(track.lost.sum())} of {plan.n} observation frames (pixel not used)")
     range_m = _on_axis_ranges(flight, plan, track, notes)
-    truth_lla = _truth_lla(config, target)
+    truth_lla = _truth_lla(fp, target)
     truth_m = None if truth_lla is None else enu_from_lla(*truth_lla, fp.origin)
     with times("sync"):
         obs, useful, inside = _synchronize(flight, plan, track, range_m, truth_m, notes)

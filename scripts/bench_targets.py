@@ -6,9 +6,10 @@ side by side in one run.
 
 Each case is `pipeline.run.process_group` (what `ridgeloc run` does before writing outputs) in a fresh child
 process, the cases alternating, N times each; per case the median wall time, the median stage times (ingest,
-decode, track, sync, solve; a stage summed over the targets) and the median peak resident memory of the
-child (ru_maxrss, which includes the interpreter and libraries). The 10 targets are the flight's three and seven
-more points marked on a grid of frame 4; 1 target is the first of them. Prints the ratios 10 / 1.
+decode, track, sync, solve; a stage summed over the targets), the median process CPU time of the run (all
+threads; less disturbed than wall time when other work shares the cores) and the median peak resident memory of
+the child (ru_maxrss, which includes the interpreter and libraries). The 10 targets are the flight's three and
+seven more points marked on a grid of frame 4; 1 target is the first of them. Prints the ratios 10 / 1.
 """
 
 from __future__ import annotations
@@ -41,11 +42,11 @@ def child(config: str, n: int) -> None:
     entries = list(cfg.targets) + [TargetEntry(f"grid{i}", frame_index=cfg.targets[0].frame_index, pixel=px)
                                    for i, px in enumerate(GRID_PX)]
     cfg = dataclasses.replace(cfg, targets=tuple(entries[:n]))
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     r = process_group(cfg)
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     located = [t.target for t in r.targets]
-    print(json.dumps({"n": n, "wall_s": wall, "timings_s": r.timings_s, "located": located,
+    print(json.dumps({"n": n, "wall_s": wall, "cpu_s": cpu, "timings_s": r.timings_s, "located": located,
                       "failed": [f.target for f in r.failed],
                       "frames_decoded": r.targets[0].settings["frames_decoded"],
                       "maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
@@ -66,21 +67,22 @@ def main(argv=None) -> int:
             out = subprocess.run([sys.executable, __file__, "--config", args.config, "--child", str(n)], cwd=ROOT,
                                  capture_output=True, text=True, check=True)
             runs[n].append(json.loads(out.stdout.strip().splitlines()[-1]))
-    med = {n: {"wall_s": statistics.median(r["wall_s"] for r in rs),
+    med = {n: {"wall_s": statistics.median(r["wall_s"] for r in rs), "cpu_s": statistics.median(r["cpu_s"] for r in rs),
                "maxrss_mb": statistics.median(r["maxrss_mb"] for r in rs),
                **{s: statistics.median(r["timings_s"].get(s, 0.0) for r in rs) for s in STAGES}}
            for n, rs in runs.items()}
     print(f"{Path(args.config).name}, median of {args.repeat} run(s) each, alternating, one child process per run")
-    print(f"{'targets':>8} {'located':>8} {'decoded':>8} {'wall s':>8} {'peak MB':>8} "
+    print(f"{'targets':>8} {'located':>8} {'decoded':>8} {'wall s':>8} {'cpu s':>8} {'peak MB':>8} "
           + " ".join(f"{s + ' s':>9}" for s in STAGES))
     for n, rs in runs.items():
         m = med[n]
         print(f"{n:>8} {len(rs[0]['located']):>8} {rs[0]['frames_decoded']:>8} {m['wall_s']:>8.2f} "
-              f"{m['maxrss_mb']:>8.1f} " + " ".join(f"{m[s]:>9.3f}" for s in STAGES))
+              f"{m['cpu_s']:>8.2f} {m['maxrss_mb']:>8.1f} " + " ".join(f"{m[s]:>9.3f}" for s in STAGES))
     a, b = med[1], med[10]
     no_solve = [sum(m[s] for s in STAGES if s != "solve") for m in (a, b)]
-    print(f"ratio 10/1: wall {b['wall_s'] / a['wall_s']:.2f}x, peak memory {b['maxrss_mb'] / a['maxrss_mb']:.2f}x, "
-          f"stages without solve {no_solve[1] / no_solve[0]:.2f}x, solve {b['solve'] / max(a['solve'], 1e-9):.2f}x")
+    print(f"ratio 10/1: wall {b['wall_s'] / a['wall_s']:.2f}x, cpu {b['cpu_s'] / a['cpu_s']:.2f}x, "
+          f"peak memory {b['maxrss_mb'] / a['maxrss_mb']:.2f}x, stages without solve {no_solve[1] / no_solve[0]:.2f}x, "
+          f"solve {b['solve'] / max(a['solve'], 1e-9):.2f}x")
     if runs[10][0]["failed"]:
         print(f"not located among the 10: {', '.join(runs[10][0]['failed'])}")
     return 0

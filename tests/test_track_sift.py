@@ -134,3 +134,29 @@ def test_a_target_washed_out_by_cloud_is_lost_although_it_still_correlates(groun
     f = res.frames[1]
     assert f.via == "low contrast" and f.contrast < 0.3
     assert f.correlation > TrackerSettings().min_correlation  # correlation alone would have accepted it
+
+
+def test_a_target_gone_out_of_view_is_bridged_only_without_a_shared_cache(ground):
+    """A frame whose held homography puts the target outside the image: with a ViewCache sharing matches (a
+    flight's named targets) no stepping stone is decoded for it; without one (a single `target:`, one random
+    stream) stones are tried as before. Either way the frame is lost, "out of image", and the others agree."""
+    from pipeline.track.sift import ViewCache
+
+    Hs = {k: homography(k) for k in range(9)}
+    Hs[8] = homography(8, shift=(400.0, 0.0))  # the target pushed out of the image, the scene still overlapping
+    frames = {k: render(ground, H) for k, H in Hs.items()}
+    wanted = [0, 4, 8]
+    results = {}
+    for shared in (True, False):
+        dec = Decoder(frames)
+        cache = ViewCache(share_matches=True) if shared else None
+        results[shared] = SiftTracker().track(dec, 0, true_px(Hs[0]), wanted, available=list(frames), cache=cache)
+        results[shared, "asked"] = set(dec.asked)
+    for shared in (True, False):
+        r = results[shared]
+        np.testing.assert_array_equal(r.lost, [False, False, True])
+        assert r.frames[2].via == "out of image"
+    np.testing.assert_array_equal(results[True].pixel_px[:2], results[False].pixel_px[:2])
+    assert results[True, "asked"] == set(wanted)  # no stone for a target that has left the view
+    stones = results[False, "asked"] - set(wanted)
+    assert stones and stones <= set(range(1, 8))  # stones between the key frame and the lost frame

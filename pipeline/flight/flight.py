@@ -98,6 +98,9 @@ class Flight:
     origin: tuple[float, float, float] | None
     origin_error: RidgelocError | None
     notes: list[str] = field(default_factory=list)
+    # the configured poses of the times asked so far (times (m,), poses of the inside ones, inside (m,)): every
+    # target of a flight asks for the same observation times
+    _poses_memo: tuple | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def open(cls, config: FlightConfig) -> Flight:
@@ -187,7 +190,14 @@ class Flight:
               R_optical_from_gimbal: np.ndarray | None = None) -> tuple[FramePoses | None, np.ndarray]:
         """(poses of the times the telemetry covers, that mask `inside` (m,)): camera and rangefinder poses at
         telemetry times t_ns (m,) in ENU at the origin, with the config's clock offsets, mount
-        (`R_optical_from_gimbal` replaces it) and lever arms. Poses None when no time is inside."""
+        (`R_optical_from_gimbal` replaces it) and lever arms. Poses None when no time is inside. The configured
+        poses are computed once per time: times asked before are taken from the earlier answer (row for row the
+        same numbers)."""
+        configured = log is None and R_optical_from_gimbal is None
+        if configured and self._poses_memo is not None:
+            got = self._poses_from_memo(np.asarray(t_ns, dtype=np.int64))
+            if got is not None:
+                return got
         st = self.states(t_ns, log)
         if not st.inside.any():
             return None, st.inside
@@ -198,7 +208,40 @@ class Flight:
                             st.yaw_in_vehicle_frame[k], self.require_origin(),
                             R_optical_from_gimbal=np.asarray(M, dtype=float), lever_camera_m=arms.camera,
                             lever_rangefinder_m=arms.rangefinder)
+        if configured:
+            self._remember_poses(np.asarray(t_ns, dtype=np.int64), poses, st.inside)
         return poses, st.inside
+
+    def _remember_poses(self, t_ns: np.ndarray, poses: FramePoses, inside: np.ndarray) -> None:
+        """Keep the times' poses, merged with those kept before (the times in first-asked order)."""
+        if self._poses_memo is None:
+            self._poses_memo = (t_ns.copy(), poses, inside.copy())
+            return
+        t0, p0, in0 = self._poses_memo
+        new = ~np.isin(t_ns, t0)
+        if not new.any():
+            return
+        t1, in1 = t_ns[new], inside[new]
+        p1 = poses.subset(new[inside])
+        cat = np.concatenate
+        merged = FramePoses(p0.origin_lla, *(cat([getattr(p0, f), getattr(p1, f)]) for f in (
+            "R_enu0_from_optical", "camera_m", "laser_m", "antenna_m")))
+        self._poses_memo = (cat([t0, t1]), merged, cat([in0, in1]))
+
+    def _poses_from_memo(self, t_ns: np.ndarray) -> tuple[FramePoses | None, np.ndarray] | None:
+        """(poses, inside) of times all kept before, else None."""
+        t0, p0, in0 = self._poses_memo
+        if len(t0) == 0:
+            return None
+        order = np.argsort(t0, kind="stable")
+        rows = order[np.clip(np.searchsorted(t0, t_ns, sorter=order), 0, len(t0) - 1)]
+        if not np.array_equal(t0[rows], t_ns):
+            return None
+        inside = in0[rows]
+        if not inside.any():
+            return None, inside
+        row_of_pose = np.cumsum(in0) - 1  # a kept time's row among the kept poses (inside times only)
+        return p0.subset(row_of_pose[rows[inside]]), inside
 
     def rays(self, t_ns: np.ndarray, pixel_px: np.ndarray | None = None, *, log: FlightLog | None = None,
              R_optical_from_gimbal: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -11,7 +11,11 @@ For each frame (processed outward from the mark frame, forward and backward in t
    only the prediction, not the answer: drift does not accumulate.
 4. Quality: inlier count and ratio, RANSAC reprojection RMS, peak correlation. Below thresholds the frame is
    flagged lost (pixel NaN), never guessed. A failed frame is retried against the mark frame itself
-   (re-acquisition) and through intermediate frames (stepping stones) when the caller offers them.
+   (re-acquisition) and through intermediate frames (stepping stones) when the caller offers them; with a
+   `ViewCache` that shares matches (a flight's named targets), not where the key frame's homography holds and
+   puts the target outside the image: it has left the view, and stones would only cost decoding and SIFT.
+   (Without one, as for a flight's single `target:`, they are tried there too: every match draws from one random
+   stream, so skipping one would shift every later frame's matches.)
 5. The current frame becomes the key frame when its inliers fall below a fraction of the key's first match, or
    after a re-acquisition, so later frames match a recent view.
 """
@@ -313,7 +317,8 @@ class SiftTracker:
                 if H is None and key.view is not mark:  # re-acquisition against the mark itself
                     ft2, H = self._attempt(_Key(mark, np.eye(3)), mark, p0, cur, "reacquired")
                     ft = ft2 if H is not None else ft
-                if H is None:
+                left_view = ft.via == "out of image" and self._pairs is not None  # see the module docstring, 4.
+                if H is None and not left_view:
                     ft, H = self._bridge(decode_views, key, mark, p0, cur, avail, direction, views, ft)
                 out[idx] = ft
                 if H is None:

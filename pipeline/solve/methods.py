@@ -14,7 +14,7 @@ import numpy as np
 from pipeline.errors import GeometryError, ObservationError, SolverError
 from pipeline.solve import correlated as _correlated
 from pipeline.solve import learned_tau as _learned
-from pipeline.solve import least_squares, linear, mle_outputs
+from pipeline.solve import least_squares, linear, mle_outputs, uncertainty
 from pipeline.solve import mle as _mle
 from pipeline.solve import starts as _starts
 from pipeline.solve.estimate import BatchEstimate, Estimate, Status
@@ -167,7 +167,7 @@ def _solve_stacked(method: str, st: Stacked, o: dict) -> BatchEstimate:
             X, it, status, cond, cov, ex = _mle_multistart(st, o)
         else:
             X, it, status, cond, cov, ex = _mle_dispatch(st, o)
-        extras = {**_mle_summaries(cov), **ex}
+        extras = {**uncertainty.summaries(cov), **ex}
     else:  # pragma: no cover - _check_options rejects it
         raise ValueError(method)
     if method in _USES_PIXELS:
@@ -409,12 +409,6 @@ def _learned_tau(st: Stacked, res: tuple, sigma, robust, vce, tol, itmax) -> tup
     return Xg, it + res[1], status, cond, cov, out
 
 
-def _mle_summaries(cov: np.ndarray) -> dict:
-    axes, vecs = _mle.ellipsoid(cov)
-    return {"cep50_m": _mle.cep_m(cov[:, :2, :2], 0.5), "cep90_m": _mle.cep_m(cov[:, :2, :2], 0.9),
-            "ellipsoid_semi_axes_1sigma_m": axes, "ellipsoid_axes": vecs}
-
-
 def _behind_camera(st: Stacked, X: np.ndarray) -> np.ndarray:
     ok = np.isfinite(X).all(axis=1)
     depth = st.depths(np.where(ok[:, None], X, 0.0))
@@ -571,12 +565,9 @@ def solve(method: str, obs: Observations, **options) -> Estimate:
         if key in info:
             extras[key] = float(info[key])
     if method == "mle":
-        ax = info["ellipsoid_semi_axes_1sigma_m"].tolist()
-        s95 = np.sqrt(_mle.CHI2_3_95)
         extras.update({
             "cep50_m": float(info["cep50_m"]), "cep90_m": float(info["cep90_m"]),
-            "ellipsoid": {"semi_axes_1sigma_m": ax, "semi_axes_95pct_m": [v * s95 for v in ax],
-                          "axes": info["ellipsoid_axes"].T.tolist()},
+            "ellipsoid": uncertainty.ellipsoid_json(info["ellipsoid_semi_axes_1sigma_m"], info["ellipsoid_axes"]),
             "variance_factors": {"pixel": float(info["variance_factor_pixel"]),
                                  "range": float(info["variance_factor_range"])},
             "sigma0_sq": float(info["sigma0_sq"]),

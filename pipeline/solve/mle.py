@@ -8,7 +8,6 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-from scipy.special import erf, erfinv
 
 from pipeline.solve import bias_mixture, fit_checks
 from pipeline.solve import iterate as _iterate
@@ -30,8 +29,6 @@ CAUCHY_C = 2.3849
 REDESCEND_A = 3.0
 REDESCEND_A_PIXEL = 3.44
 REDESCEND_B = 6.0
-#: 95 % quantile of chi-square with 3 degrees of freedom, for the 95 % ellipsoid
-CHI2_3_95 = 7.814727903251178
 #: the boresight bias prior when the sigma gives no attitude accuracy (deg)
 DEFAULT_BIAS_PRIOR_DEG = 0.5
 VCE_MAX_ROUNDS = 10
@@ -760,71 +757,3 @@ def _vce_factors(J, E, ok, robust, a=None, terrain_rows=None):
         usable[:, g] &= np.isfinite(out[:, g]) & (out[:, g] > 0)
         out[:, g] = np.where(usable[:, g], out[:, g], 1.0)
     return out, usable
-
-
-# ---- accuracy summaries from the covariance ----------------------------------------------------------------
-
-_Q_GRID = np.linspace(0.0, 1.0, 257)
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(64)
-_GL_T = 0.5 * np.pi * _GL_X
-_CEP_TABLES: dict[float, np.ndarray] = {}
-
-
-def _prob_within(rho: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """P(|e| <= rho) for e ~ N(0, diag(1, q^2)), elementwise over rho, q (q <= 1).
-
-    Conditioning on the major component z1 = rho sin t: P = int_{-pi/2}^{pi/2} phi(rho sin t)
-    erf(rho cos t / (sqrt(2) q)) rho cos t dt, by 64-point Gauss-Legendre (smooth integrand; the steep erf at
-    the ends is damped by cos t).
-    """
-    t, w = _GL_T, _GL_W
-    rho = rho[:, None]
-    qq = np.maximum(q, 1e-12)[:, None]
-    z1 = rho * np.sin(t)
-    f = np.exp(-0.5 * z1 * z1) / np.sqrt(2 * np.pi) * erf(rho * np.cos(t) / (np.sqrt(2) * qq)) * rho * np.cos(t)
-    return 0.5 * np.pi * (f * w).sum(axis=1)
-
-
-def _cep_table(p: float) -> np.ndarray:
-    """rho_p(q) on _Q_GRID: the radius, in units of the major standard deviation, holding probability p."""
-    table = _CEP_TABLES.get(p)
-    if table is None:
-        lo = np.full(_Q_GRID.shape, np.sqrt(2.0) * erfinv(p))  # the 1-D quantile: q = 0
-        hi = np.full(_Q_GRID.shape, np.sqrt(-2.0 * np.log1p(-p)))  # the circular one: q = 1
-        lo, hi = lo * (1 - 1e-9), hi * (1 + 1e-9)
-        for _ in range(44):  # the bracket is within a factor 2.3: 2^-44 relative
-            mid = 0.5 * (lo + hi)
-            below = _prob_within(mid, _Q_GRID) < p
-            lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
-        table = _CEP_TABLES[p] = 0.5 * (lo + hi)
-    return table
-
-
-def cep_m(cov_xy: np.ndarray, p: float) -> np.ndarray:
-    """(B,) radius of the circle around the estimate that holds probability p of the horizontal error, for
-    (B,2,2) covariances of a zero-mean 2D Gaussian.
-
-    With principal standard deviations s1 >= s2 (closed-form 2x2 eigenvalues) the radius is s1 rho_p(s2/s1);
-    rho_p is tabulated once per p on 257 ratios (exact integral `_prob_within`, bisection) and interpolated
-    linearly (relative error < 1e-5 against a 1025-point table).
-    """
-    a, b, c = cov_xy[:, 0, 0], cov_xy[:, 0, 1], cov_xy[:, 1, 1]
-    mean = 0.5 * (a + c)
-    half = np.sqrt(0.25 * (a - c) ** 2 + b * b)
-    s1 = np.sqrt(np.maximum(mean + half, 0.0))
-    s2 = np.sqrt(np.maximum(mean - half, 0.0))
-    ok = np.isfinite(s1) & (s1 > 0)
-    q = np.where(ok, s2 / np.where(ok, s1, 1.0), 1.0)
-    return np.where(ok, s1 * np.interp(q, _Q_GRID, _cep_table(float(p))), np.nan)
-
-
-def ellipsoid(cov: np.ndarray):
-    """(B,3) 1-sigma semi-axes (m, ascending), (B,3,3) axes as columns, from (B,3,3) covariances;
-    the 95 % semi-axes are sqrt(CHI2_3_95) times the 1-sigma ones."""
-    good = np.isfinite(cov).all(axis=(1, 2))
-    safe = np.where(good[:, None, None], cov, np.eye(3))
-    ev, vec = np.linalg.eigh(safe)
-    axes = np.sqrt(np.maximum(ev, 0.0))
-    axes[~good] = np.nan
-    vec[~good] = np.nan
-    return axes, vec

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.solve.mle import CHI2_3_95, HUBER_C
+from pipeline.solve.mle import HUBER_C
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import Stacked, pixel_model, range_model
 
@@ -91,4 +91,4 @@ def disagreement(X: np.ndarray, cov: np.ndarray, candidates: dict) -> dict:
     return out
 
 
-__all__ = ["CHI2_3_95", "DISAGREE_CHI2", "START_METHODS", "disagreement", "explains_away", "yardstick"]
+__all__ = ["DISAGREE_CHI2", "START_METHODS", "disagreement", "explains_away", "yardstick"]

@@ -262,7 +262,7 @@ def _mle_dispatch(st: Stacked, o: dict):
             raise ValueError("mle: the terrain option is not available with time-correlated errors (sigma "
                              "attitude_tau_s / position_tau_s)")
         if model.correlated:
-            return _correlated.mle_gls(st, x0[0], model, robust, vce, tol, itmax)[0]
+            return _correlated.gls(st, x0[0], model, robust, vce, tol, itmax)
         sigma = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
     res = _mle.mle(st, x0, sigma, robust, vce, tol, itmax, init_status, bias_deg, size_unknown, o.get("terrain"))
     if bias_deg and size_unknown:
@@ -389,7 +389,7 @@ def _learned_tau(st: Stacked, res: tuple, sigma, robust, vce, tol, itmax) -> tup
     got = _learned.learn_tau(clean, X[0], sigma, robust, vce, tol, itmax)
     if got is None:
         return res
-    tau, att, lls, (Xg, it, status, cond, cov, exg), chi2, m = got
+    _, att, _, (Xg, it, status, cond, cov, exg) = got
     if np.isfinite(Xg[0]).all():
         # a drift model may trade the target against the drift where the flight cannot tell them apart (a short
         # burst, a run of mistracked frames): kept only when its estimate lies within the first answer's
@@ -401,11 +401,14 @@ def _learned_tau(st: Stacked, res: tuple, sigma, robust, vce, tol, itmax) -> tup
         att_eff = att * float(np.sqrt(exg["variance_factor_pixel"][0]))
         if sigma.attitude_deg and att_eff > _starts.MAX_ATTITUDE_OVER_STATED * sigma.attitude_deg:
             return res
-    out = _learned.replace_with_learned(ex, tau, att, lls, chi2, m)
-    out.update({k: exg[k] for k in ("variance_factor_pixel", "variance_factor_range", "sigma0_sq", "vce_rounds")})
+    out = dict(exg)
+    # the rows the first solve rejected (left out of the drift model's data) stay rejected, with their residuals
+    rej = ex["rejected"]
+    out["rejected"] = rej | exg["rejected"]
+    for k in ("residuals", "residual_sigmas"):
+        out[k] = np.where(rej, ex[k], exg[k])
     # the attitude sigma the chosen model carries (variance components scale the whole pixel covariance)
     out["error_model_attitude_deg"] = out["error_model_attitude_deg"] * np.sqrt(exg["variance_factor_pixel"])
-    cov = cov * out["covariance_inflation"][0]
     return Xg, it + res[1], status, cond, cov, out
 
 

@@ -33,7 +33,7 @@ from scipy.linalg import cho_solve_banded, cholesky_banded
 
 from pipeline.solve import mle as _mle
 from pipeline.solve.iterate import start_status
-from pipeline.solve.mle import VCE_MAX_ROUNDS, VCE_TOL, _rho_and_weight, pixel_pair_redescending
+from pipeline.solve.mle import VCE_MAX_ROUNDS, VCE_TOL
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import Stacked, inverse3, pixel_model, range_model, solve_spd
 
@@ -165,14 +165,6 @@ def rows_in_use(st: Stacked, X: np.ndarray) -> np.ndarray:
                            np.concatenate([Jr[0, rng], rr[0, rng, None]], axis=1)])
 
 
-def robust_weights(z: np.ndarray, npix: int, robust: str | None) -> np.ndarray:
-    """(m,) robust weights of the rows' standardized marginal residuals z (pixel rows u, v interleaved first)."""
-    w = np.ones(z.size) if robust is None else _rho_and_weight(z, robust)[1]
-    if robust == "redescending":  # the pixel rows weighted in pairs, by their 2-D length
-        w[:npix] = np.repeat(pixel_pair_redescending(z[:npix:2], z[1:npix:2])[1], 2)
-    return w
-
-
 def quadratic_forms(model: Model, A: np.ndarray, w: np.ndarray, vf: np.ndarray):
     """Per group (u, v, range): ([J|r]^T C_w^-1 [J|r] (4,4), log det C_w, rows with weight) with the robust
     weights w (m,) (row variance C_ii / w, the rest of C unchanged) and the variance factors vf (2,) (pixel,
@@ -230,12 +222,14 @@ class Correlated:
         return out
 
     def _refresh(self):
-        """The weights and residual planes at the current rows A, loss and variance factors."""
+        """The weights (`mle._cost_weights`) and residual planes at the current rows A, loss and variance
+        factors."""
         s = self.sd * np.sqrt(self.vf[0, self.grp])
-        z = self.A[:, 3] / s
-        self.w = robust_weights(z, self.model.npix, self.robust)
-        self.E, self.wr = self._planes(z, 0.0), self._planes(self.w, 0.0)
-        self.ok, self._isd = self._planes(np.ones(z.size), 0.0) > 0, self._planes(1.0 / s, 1.0)
+        self.E, self._isd = self._planes(self.A[:, 3] / s, 0.0), self._planes(1.0 / s, 1.0)
+        self.ok = self._planes(np.ones(s.size), 0.0) > 0
+        self.wr = _mle._cost_weights(self.E, self.robust)[1]
+        self.w = np.ones(s.size) if self.wr is None else np.concatenate([self.wr[:2, self.pf, 0].T.ravel(),
+                                                                        self.wr[2, self.rf, 0]])
 
     def _forms(self, var_scale=1.0):
         q = quadratic_forms(self.model, self.A, self.w, self.vf[0] * var_scale)

@@ -14,7 +14,7 @@ from pipeline.solve import iterate as _iterate
 from pipeline.solve.estimate import Status
 from pipeline.solve.iterate import problem_scale_m, start_status
 from pipeline.solve.observations import Sigma
-from pipeline.solve.stacked import SINGULAR_DET, Stacked, condition_numbers, inverse3
+from pipeline.solve.stacked import SINGULAR_DET, Planes, Stacked, condition_numbers, evaluate, inverse3
 
 ROBUST_LOSSES = (None, "huber", "cauchy", "redescending")
 #: the default loss of `solve` and `solve_batch`
@@ -125,61 +125,6 @@ def base_variances(st: Stacked, X0: np.ndarray, sigma: Sigma):
     return var
 
 
-class _Planes:
-    """B problems as contiguous (n,b) planes for the batched kernel: M entries Mc (3,3,n,b), p4c (3,n,b), the
-    pixel planes (2,n,b), platform planes sc (3,n,b), ranges (n,b), the masks, and the inverse standard
-    deviations isd (3,n,b) of the u, v and range rows (1/sqrt of `base_variances` times the variance factors).
-    Numpy is slow on tiny trailing axes; with the problems on the last axis every operation, per-problem
-    values (b,) broadcast included, is one contiguous pass over n x b numbers."""
-
-    __slots__ = ("Mc", "has_pix", "has_range", "isd", "p4c", "pixc", "rng", "sc")
-
-    def __init__(self, Mc, p4c, pixc, sc, rng, has_pix, has_range, isd):
-        self.Mc, self.p4c, self.pixc, self.sc, self.rng = Mc, p4c, pixc, sc, rng
-        self.has_pix, self.has_range, self.isd = has_pix, has_range, isd
-
-    @classmethod
-    def from_stacked(cls, st: Stacked, var: np.ndarray) -> _Planes:
-        B, n = st.has_pix.shape
-        isd = np.empty((3, n, B))
-        np.divide(1.0, np.sqrt(var[:, :2 * n].reshape(B, n, 2).transpose(2, 1, 0)), out=isd[:2])
-        np.divide(1.0, np.sqrt(var[:, 2 * n:].T), out=isd[2])
-        c = np.ascontiguousarray
-        return cls(c(st.M.transpose(2, 3, 1, 0)), c(st.p4.transpose(2, 1, 0)), c(st.pix.transpose(2, 1, 0)),
-                   c(st.platform_m.transpose(2, 1, 0)), c(st.range_m.T), c(st.has_pix.T), c(st.has_range.T), isd)
-
-    def take(self, idx: np.ndarray) -> _Planes:
-        return _Planes(self.Mc[..., idx], self.p4c[..., idx], self.pixc[..., idx], self.sc[..., idx],
-                       self.rng[:, idx], self.has_pix[:, idx], self.has_range[:, idx], self.isd[..., idx])
-
-
-def _evaluate(pl: _Planes, X: np.ndarray):
-    """Standardized Jacobian J (3,3,n,b) (J[c, k] = d row / d X_c over the row's sigma, rows k = u, v, range of
-    each frame) and residuals E (3,n,b) at X (b,3); unusable rows (missing, q3 = 0, X on a platform) are zero;
-    and their mask ok (3,n,b). The arithmetic of `stacked.pixel_model` and `range_model`, on contiguous planes."""
-    n, b = pl.has_pix.shape
-    J = np.empty((3, 3, n, b))
-    E = np.empty((3, n, b))
-    ok = np.empty((3, n, b), dtype=bool)
-    Mc, isd = pl.Mc, pl.isd
-    Xp = X.T[:, None, :]  # (3,1,b): broadcasts over the frames
-    q = Mc[:, 0] * Xp[0] + Mc[:, 1] * Xp[1] + Mc[:, 2] * Xp[2] + pl.p4c  # (3,n,b)
-    okp = np.logical_and(pl.has_pix, q[2] != 0, out=ok[0])
-    ok[1] = okp
-    iw = 1.0 / np.where(okp, q[2], np.inf)  # 1/q3, 0 on unusable rows
-    uv = q[:2] * iw
-    s = iw * isd[:2]
-    for c in range(3):  # per coordinate, so that the temporaries stay (2,n,b) planes (in cache)
-        np.multiply(Mc[:2, c] - uv * Mc[2, c], s, out=J[c, :2])
-    np.multiply(pl.pixc - uv, np.where(okp, isd[:2], 0.0), out=E[:2])
-    d = Xp - pl.sc
-    dist = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    okr = np.logical_and(pl.has_range, dist > 0, out=ok[2])
-    np.multiply(d, isd[2] / np.where(okr, dist, np.inf), out=J[:, 2])
-    np.multiply(pl.rng - dist, np.where(okr, isd[2], 0.0), out=E[2])
-    return J, E, ok
-
-
 def _sum_rows(A: np.ndarray) -> np.ndarray:
     """(b,) sums over the rows (k, frame) of (3,n,b) planes."""
     return A.reshape(-1, A.shape[-1]).sum(axis=0)
@@ -194,10 +139,6 @@ def _cost_weights(E: np.ndarray, robust: str | None):
     """sum rho(e) (b,) and the IRLS weights rho'(e)/e (3,n,b) (None for the squared loss) of standardized E."""
     if robust is None:
         return 0.5 * _dot_rows(E, E), None
-    if robust == "huber":  # rho = 0.5 w e^2 + 0.5 c (|e| - c)^+ with w = c / max(|e|, c)
-        mx = np.maximum(np.abs(E), HUBER_C)
-        w = HUBER_C / mx
-        return 0.5 * (_dot_rows(w * E, E) + HUBER_C * _sum_rows(mx - HUBER_C)), w
     if robust == "redescending":
         rho_p, w_p = pixel_pair_redescending(E[0], E[1])
         rho_r, w_r = _redescending(E[2])
@@ -258,12 +199,12 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     covariance, the chi-square (one more observation) and the variance components' leverages; none where fn
     is not finite (off the terrain model).
 
-    Works on planes (`_Planes`): the normal equations as six (B,) entries, the 3x3 steps in closed form.
+    Works on planes (`stacked.Planes`): the normal equations as six (B,) entries, the 3x3 steps in closed form.
     """
     X = np.array(X0, dtype=np.float64, copy=True)
     status, bad = start_status(X, init_status)
     X[bad] = 0.0
-    pl = _Planes.from_stacked(st, base_variances(st, X, sigma))
+    pl = Planes.from_stacked(st, base_variances(st, X, sigma))
     a = None
     if bias_deg:
         fx, fy = st.focal_px()
@@ -410,7 +351,7 @@ class White:
 
     def _eval(self, pl, a, X, z, robust):
         """J, bias-corrected E, ok, z, cost, IRLS weights at X (the sub-batch of pl, a, z)."""
-        J, E, ok = _evaluate(pl, X)
+        J, E, ok = evaluate(pl, X)
         if a is not None:
             E, z = _profile_bias(E, a, robust, z.copy())
         cost, w = _cost_weights(E, robust)
@@ -581,7 +522,7 @@ class White:
         J, E, ok = self.J, self.E + self.a * self.z[:, None, :], self.ok
         for rnd in range(2):
             if rnd:
-                J, E, ok = _evaluate(self.pl, self.X)
+                J, E, ok = evaluate(self.pl, self.X)
             a0[:2] = np.where(ok[:2], self.a[:2], 0.0)
             w = np.where(ok, 1.0 if self.wr is None else self.wr, 0.0)
             a_mix = a0 * s_bias
@@ -599,7 +540,7 @@ class White:
         mix["bias_var"] = mix["bias_var"] * (unit * unit)[:, None]
         mix["bias_cross"] = mix["bias_cross"] * unit[:, None, None]
         mix["prior_scale"] = unit
-        E_report = _evaluate(self.pl, self.X)[1]
+        E_report = evaluate(self.pl, self.X)[1]
         E_report[:2] -= a0[:2] * mix["bias"].T[:, None, :]
         return mix, mix0, E_report
 

@@ -74,22 +74,13 @@ class Stacked:
             g = self.__dict__["_gram_cache"] = self.M @ np.swapaxes(self.M, -1, -2)
         return g
 
-    def planes(self):
-        """Mc (3,3,B,n), p4c (3,B,n), pixc (2,B,n): every entry of M, p4 and the pixels as a contiguous
-        (B,n) plane, computed once."""
-        cache = self.__dict__.get("_planes_cache")
-        if cache is None:
-            cache = self.__dict__["_planes_cache"] = (np.ascontiguousarray(self.M.transpose(2, 3, 0, 1)),
-                                                      np.ascontiguousarray(self.p4.transpose(2, 0, 1)),
-                                                      np.ascontiguousarray(self.pix.transpose(2, 0, 1)))
-        return cache
-
-    def planes_platform(self) -> np.ndarray:
-        """(3,B,n) platform coordinates as contiguous planes, computed once."""
-        cache = self.__dict__.get("_platform_planes")
-        if cache is None:
-            cache = self.__dict__["_platform_planes"] = np.ascontiguousarray(self.platform_m.transpose(2, 0, 1))
-        return cache
+    def unit_planes(self) -> Planes:
+        """The problems as `Planes` with unit weights (the unweighted measurement model), computed once."""
+        pl = self.__dict__.get("_planes_cache")
+        if pl is None:
+            B, n = self.has_pix.shape
+            pl = self.__dict__["_planes_cache"] = Planes.from_stacked(self, np.ones((B, 3 * n)))
+        return pl
 
     def det_M(self) -> np.ndarray:
         """(B,n) det of the left 3x3 block of each P, computed once."""
@@ -129,47 +120,78 @@ class Stacked:
         return q2 * self.depth_sign() / np.where(n3 > 0, n3, np.inf)
 
 
-def pixel_model(st: Stacked, X: np.ndarray):
-    """Reprojection residuals and Jacobian at X (B,3).
+class Planes:
+    """B problems as contiguous (n,b) planes for the batched kernels: M entries Mc (3,3,n,b), p4c (3,n,b), the
+    pixel planes (2,n,b), platform planes sc (3,n,b), ranges (n,b), the masks, and the inverse standard
+    deviations isd (3,n,b) of the u, v and range rows (1/sqrt of `mle.base_variances` times the variance
+    factors; 1 for the unweighted models). Numpy is slow on tiny trailing axes; with the problems on the last
+    axis every operation, per-problem values (b,) broadcast included, is one contiguous pass over n x b
+    numbers."""
 
-    Returns J (B,2n,3) d(u,v)/dX, r (B,2n) observed - predicted (px), mask (B,2n) bool. Rows are u_1, v_1,
-    u_2, ... With q = M X + p4: u = q1/q3, du/dX = (m1 - u m3)/q3 and dv/dX = (m2 - v m3)/q3 (m_k rows of M).
-    Rows with a missing pixel or a camera with q3 = 0 are masked (zero Jacobian and residual).
-    Computed on (B,n) planes of each matrix entry (`Stacked.planes`): numpy is slow on tiny trailing axes.
-    """
-    B, n = st.has_pix.shape
-    Mc, p4c, pixc = st.planes()
-    x0, x1, x2 = X[:, 0, None], X[:, 1, None], X[:, 2, None]
-    q0 = Mc[0, 0] * x0 + Mc[0, 1] * x1 + Mc[0, 2] * x2 + p4c[0]
-    q1 = Mc[1, 0] * x0 + Mc[1, 1] * x1 + Mc[1, 2] * x2 + p4c[1]
-    q2 = Mc[2, 0] * x0 + Mc[2, 1] * x1 + Mc[2, 2] * x2 + p4c[2]
-    ok = st.has_pix & (q2 != 0)
-    iw = ok / np.where(ok, q2, 1.0)  # 1/q3, 0 on masked rows
-    u, v = q0 * iw, q1 * iw
-    J = np.empty((B, n, 2, 3))
-    for c in range(3):
-        J[:, :, 0, c] = (Mc[0, c] - u * Mc[2, c]) * iw
-        J[:, :, 1, c] = (Mc[1, c] - v * Mc[2, c]) * iw
-    r = np.empty((B, n, 2))
-    r[:, :, 0] = (pixc[0] - u) * ok
-    r[:, :, 1] = (pixc[1] - v) * ok
-    return J.reshape(B, 2 * n, 3), r.reshape(B, 2 * n), np.repeat(ok, 2, axis=1)
+    __slots__ = ("Mc", "has_pix", "has_range", "isd", "p4c", "pixc", "rng", "sc")
+
+    def __init__(self, Mc, p4c, pixc, sc, rng, has_pix, has_range, isd):
+        self.Mc, self.p4c, self.pixc, self.sc, self.rng = Mc, p4c, pixc, sc, rng
+        self.has_pix, self.has_range, self.isd = has_pix, has_range, isd
+
+    @classmethod
+    def from_stacked(cls, st: Stacked, var: np.ndarray) -> Planes:
+        B, n = st.has_pix.shape
+        isd = np.empty((3, n, B))
+        np.divide(1.0, np.sqrt(var[:, :2 * n].reshape(B, n, 2).transpose(2, 1, 0)), out=isd[:2])
+        np.divide(1.0, np.sqrt(var[:, 2 * n:].T), out=isd[2])
+        c = np.ascontiguousarray
+        return cls(c(st.M.transpose(2, 3, 1, 0)), c(st.p4.transpose(2, 1, 0)), c(st.pix.transpose(2, 1, 0)),
+                   c(st.platform_m.transpose(2, 1, 0)), c(st.range_m.T), c(st.has_pix.T), c(st.has_range.T), isd)
+
+    def take(self, idx: np.ndarray) -> Planes:
+        return Planes(self.Mc[..., idx], self.p4c[..., idx], self.pixc[..., idx], self.sc[..., idx],
+                       self.rng[:, idx], self.has_pix[:, idx], self.has_range[:, idx], self.isd[..., idx])
+
+
+def evaluate(pl: Planes, X: np.ndarray):
+    """Standardized Jacobian J (3,3,n,b) (J[c, k] = d row / d X_c over the row's sigma, rows k = u, v, range of
+    each frame) and residuals E (3,n,b) at X (b,3); unusable rows (missing, q3 = 0, X on a platform) are zero;
+    and their mask ok (3,n,b). The one measurement model (reprojection and range) of every estimator."""
+    n, b = pl.has_pix.shape
+    J = np.empty((3, 3, n, b))
+    E = np.empty((3, n, b))
+    ok = np.empty((3, n, b), dtype=bool)
+    Mc, isd = pl.Mc, pl.isd
+    Xp = X.T[:, None, :]  # (3,1,b): broadcasts over the frames
+    q = Mc[:, 0] * Xp[0] + Mc[:, 1] * Xp[1] + Mc[:, 2] * Xp[2] + pl.p4c  # (3,n,b)
+    okp = np.logical_and(pl.has_pix, q[2] != 0, out=ok[0])
+    ok[1] = okp
+    iw = 1.0 / np.where(okp, q[2], np.inf)  # 1/q3, 0 on unusable rows
+    uv = q[:2] * iw
+    s = iw * isd[:2]
+    for c in range(3):  # per coordinate, so that the temporaries stay (2,n,b) planes (in cache)
+        np.multiply(Mc[:2, c] - uv * Mc[2, c], s, out=J[c, :2])
+    np.multiply(pl.pixc - uv, np.where(okp, isd[:2], 0.0), out=E[:2])
+    d = Xp - pl.sc
+    dist = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    okr = np.logical_and(pl.has_range, dist > 0, out=ok[2])
+    np.multiply(d, isd[2] / np.where(okr, dist, np.inf), out=J[:, 2])
+    np.multiply(pl.rng - dist, np.where(okr, isd[2], 0.0), out=E[2])
+    return J, E, ok
+
+
+def pixel_model(st: Stacked, X: np.ndarray):
+    """Reprojection residuals and Jacobian at X (B,3) (`evaluate`, unweighted): J (B,2n,3) d(u,v)/dX, r (B,2n)
+    observed - predicted (px), mask (B,2n) bool; rows u_1, v_1, u_2, ... With q = M X + p4: u = q1/q3,
+    du/dX = (m1 - u m3)/q3 and dv/dX = (m2 - v m3)/q3 (m_k rows of M). Rows with a missing pixel or a camera
+    with q3 = 0 are masked (zero Jacobian and residual)."""
+    J, E, ok = evaluate(st.unit_planes(), X)
+    B = X.shape[0]
+    return (J[:, :2].transpose(3, 2, 1, 0).reshape(B, -1, 3), E[:2].transpose(2, 1, 0).reshape(B, -1),
+            ok[:2].transpose(2, 1, 0).reshape(B, -1))
 
 
 def range_model(st: Stacked, X: np.ndarray):
-    """Range residuals and Jacobian at X (B,3): J (B,n,3) = (X - s_i)/|X - s_i|, r (B,n) = d_i - |X - s_i| (m),
-    mask (B,n) bool (a missing range, or X on a platform position, is masked)."""
-    B, n = st.has_range.shape
-    sc = st.planes_platform()
-    d = [X[:, c, None] - sc[c] for c in range(3)]
-    dist = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    ok = st.has_range & (dist > 0)
-    inv = ok / np.where(ok, dist, 1.0)
-    J = np.empty((B, n, 3))
-    for c in range(3):
-        J[:, :, c] = d[c] * inv
-    r = (st.range_m - dist) * ok
-    return J, r, ok
+    """Range residuals and Jacobian at X (B,3) (`evaluate`, unweighted): J (B,n,3) = (X - s_i)/|X - s_i|,
+    r (B,n) = d_i - |X - s_i| (m), mask (B,n) bool (a missing range, or X on a platform position, is masked)."""
+    J, E, ok = evaluate(st.unit_planes(), X)
+    return J[:, 2].transpose(2, 1, 0), E[2].T, ok[2].T
 
 
 def normal_equations(J: np.ndarray, r: np.ndarray, w: np.ndarray):
@@ -196,20 +218,7 @@ def solve_spd(N: np.ndarray, g: np.ndarray, singular_below: float = SINGULAR_DET
         x = (inv @ g[..., None])[..., 0]
         x[singular] = np.nan
         return x, singular
-    if N.shape[-1] <= 6:
-        return _cholesky_solve(N, g, singular_below)
-    d = np.sqrt(np.abs(np.einsum("bii->bi", N)))
-    bad_d = ~(d > 0) | ~np.isfinite(d)
-    d = np.where(bad_d, 1.0, d)
-    Ns = N / (d[:, :, None] * d[:, None, :])
-    det = np.linalg.det(Ns)
-    singular = bad_d.any(axis=1) | ~(det > singular_below)
-    if singular.any():
-        k = N.shape[-1]
-        Ns = np.where(singular[:, None, None], np.eye(k), Ns)
-    x = np.linalg.solve(Ns, (g / d)[..., None])[..., 0] / d
-    x[singular] = np.nan
-    return x, singular
+    return _cholesky_solve(N, g, singular_below)
 
 
 def _cholesky_solve(N: np.ndarray, g: np.ndarray, singular_below: float):
@@ -269,14 +278,8 @@ def inverse3(N: np.ndarray, singular_below: float = SINGULAR_DET):
 
 
 def is_singular(N: np.ndarray) -> np.ndarray:
-    """(B,) the `solve_spd` criterion alone, for normal matrices N (B,k,k)."""
-    if N.shape[-1] == 3:
-        return inverse3(N)[1]
-    d = np.sqrt(np.abs(np.einsum("bii->bi", N)))
-    ok = (d > 0).all(axis=1) & np.isfinite(N).all(axis=(1, 2))
-    d = np.where(d > 0, d, 1.0)
-    det = np.linalg.det(np.where(ok[:, None, None], N / (d[:, :, None] * d[:, None, :]), 0.0))
-    return ~ok | ~(det > SINGULAR_DET)
+    """(B,) the `solve_spd` criterion alone, for 3x3 normal matrices N (B,3,3)."""
+    return inverse3(N)[1]
 
 
 def condition_numbers(N: np.ndarray) -> np.ndarray:

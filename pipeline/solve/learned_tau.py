@@ -4,7 +4,7 @@ flight by evidence, for `mle` on one problem whose sigma gives no correlation ti
 Attitude and GNSS errors drift: first-order Gauss-Markov with a correlation time tau. `mle` first solves the
 independent-error model with a boresight bias (`mle.mle`: redescending loss, fit checks); where it has timestamps
 and its residuals drift from frame to frame (`fit_checks`), it then fits the generalized least squares model
-(`correlated.mle_gls`, O(n)) with one correlation time for the attitude and the position errors, for each tau of
+(`correlated.gls`, O(n)) with one correlation time for the attitude and the position errors, for each tau of
 TAU_GRID_S, and where the attitude sigma is not stated for each attitude sigma of ATTITUDE_GRID_DEG too (without
 a size the drift has no covariance, and every tau would give the same likelihood), without the rows the first
 solve rejected, and keeps the model of the largest restricted (REML) Gaussian likelihood

@@ -242,7 +242,7 @@ def _terrain_start(st: Stacked, fn) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _mle_dispatch(st: Stacked, o: dict):
-    """`mle.mle` on the batch, or `correlated.mle_gls` for one problem whose sigma has correlation times (and
+    """`mle.mle` on the batch, or `correlated.gls` for one problem whose sigma has correlation times (and
     whose residual covariance is not diagonal: with vanishing correlation it is the independent problem)."""
     x0, init_status, sigma, vce = _mle_start(st, o)
     robust, tol, itmax = o.get("robust", _mle.DEFAULT_ROBUST), o["tol_m"], o["max_iterations"]

@@ -97,10 +97,6 @@ class Stacked:
         """(B,n) sign of det(M): P and -P project alike, the sign says which side of the camera is 'front'."""
         return np.where(self.det_M() < 0, -1.0, 1.0)
 
-    def camera_centres_m(self) -> np.ndarray:
-        """(B,n,3) camera centres, the right null vector of P: C = -M^-1 p4."""
-        return -np.linalg.solve(self.M, self.p4[..., None])[..., 0]
-
     def focal_px(self) -> tuple[np.ndarray, np.ndarray]:
         """(B,n) focal lengths fx, fy in px from the rows m1, m2, m3 of M = lambda K R (zero skew assumed):
         m1 x m3 = lambda^2 fx r1 x r3, so fx = |m1 x m3| / |m3|^2 = sqrt(|m1|^2 |m3|^2 - (m1.m3)^2) / |m3|^2,

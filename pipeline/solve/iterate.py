@@ -93,16 +93,14 @@ def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iteratio
 class _StepModel:
     """`drive`'s model for a plain Gauss-Newton step function: every step accepted, no damping."""
 
-    def __init__(self, st: Stacked, step: StepFn, extras: dict):
-        self.st, self.fn, self.extras = st, step, extras
+    def __init__(self, st: Stacked, step: StepFn, extras: dict, X: np.ndarray):
+        self.st, self.fn, self.extras, self.X = st, step, extras, X
 
     def step(self, idx, X, lam):
-        B = self.st.size
-        if 2 * idx.size >= B:  # copying most of the batch costs more than computing the finished ones again
-            full = np.full((B, 3), np.nan)
-            full[idx] = X
-            dX, singular, ex = self.fn(self.st, np.where(np.isfinite(full), full, 0.0))
-            dX, singular, ex = dX[idx], singular[idx], {k: v[idx] for k, v in ex.items()}
+        if 2 * idx.size >= self.st.size:  # copying most of the batch costs more than computing all again
+            dX, singular, ex = self.fn(self.st, self.X)
+            if idx.size < self.st.size:
+                dX, singular, ex = dX[idx], singular[idx], {k: v[idx] for k, v in ex.items()}
         else:
             dX, singular, ex = self.fn(self.st.take(idx), X)
         for name, v in ex.items():
@@ -133,7 +131,7 @@ def iterate(st: Stacked, X0: np.ndarray, step: StepFn, tol_m: float, max_iterati
     centre = st.platform_m.mean(axis=1)
     bound = DIVERGENCE_FACTOR * problem_scale_m(st, np.where(np.isfinite(X).all(axis=1)[:, None], X, centre))
     extras = {name: np.full(B, np.nan) for name in extra_names}
-    drive(_StepModel(st, step, extras), X, status, ~bad_init, iterations, bound, centre, tol_m, max_iterations)
+    drive(_StepModel(st, step, extras, X), X, status, ~bad_init, iterations, bound, centre, tol_m, max_iterations)
     return X, iterations, status, extras
 
 

@@ -74,13 +74,22 @@ class Stacked:
             g = self.__dict__["_gram_cache"] = self.M @ np.swapaxes(self.M, -1, -2)
         return g
 
-    def unit_planes(self) -> Planes:
-        """The problems as `Planes` with unit weights (the unweighted measurement model), computed once."""
-        pl = self.__dict__.get("_planes_cache")
-        if pl is None:
-            B, n = self.has_pix.shape
-            pl = self.__dict__["_planes_cache"] = Planes.from_stacked(self, np.ones((B, 3 * n)))
-        return pl
+    def planes(self):
+        """Mc (3,3,B,n), p4c (3,B,n), pixc (2,B,n): every entry of M, p4 and the pixels as a contiguous
+        (B,n) plane, computed once."""
+        cache = self.__dict__.get("_planes_cache")
+        if cache is None:
+            cache = self.__dict__["_planes_cache"] = (np.ascontiguousarray(self.M.transpose(2, 3, 0, 1)),
+                                                      np.ascontiguousarray(self.p4.transpose(2, 0, 1)),
+                                                      np.ascontiguousarray(self.pix.transpose(2, 0, 1)))
+        return cache
+
+    def planes_platform(self) -> np.ndarray:
+        """(3,B,n) platform coordinates as contiguous planes, computed once."""
+        cache = self.__dict__.get("_platform_planes")
+        if cache is None:
+            cache = self.__dict__["_platform_planes"] = np.ascontiguousarray(self.platform_m.transpose(2, 0, 1))
+        return cache
 
     def det_M(self) -> np.ndarray:
         """(B,n) det of the left 3x3 block of each P, computed once."""
@@ -173,21 +182,46 @@ def evaluate(pl: Planes, X: np.ndarray):
 
 
 def pixel_model(st: Stacked, X: np.ndarray):
-    """Reprojection residuals and Jacobian at X (B,3) (`evaluate`, unweighted): J (B,2n,3) d(u,v)/dX, r (B,2n)
-    observed - predicted (px), mask (B,2n) bool; rows u_1, v_1, u_2, ... With q = M X + p4: u = q1/q3,
-    du/dX = (m1 - u m3)/q3 and dv/dX = (m2 - v m3)/q3 (m_k rows of M). Rows with a missing pixel or a camera
-    with q3 = 0 are masked (zero Jacobian and residual)."""
-    J, E, ok = evaluate(st.unit_planes(), X)
-    B = X.shape[0]
-    return (J[:, :2].transpose(3, 2, 1, 0).reshape(B, -1, 3), E[:2].transpose(2, 1, 0).reshape(B, -1),
-            ok[:2].transpose(2, 1, 0).reshape(B, -1))
+    """Reprojection residuals and Jacobian at X (B,3).
+
+    Returns J (B,2n,3) d(u,v)/dX, r (B,2n) observed - predicted (px), mask (B,2n) bool. Rows are u_1, v_1,
+    u_2, ... With q = M X + p4: u = q1/q3, du/dX = (m1 - u m3)/q3 and dv/dX = (m2 - v m3)/q3 (m_k rows of M).
+    Rows with a missing pixel or a camera with q3 = 0 are masked (zero Jacobian and residual).
+    Computed on (B,n) planes of each matrix entry (`Stacked.planes`): numpy is slow on tiny trailing axes.
+    """
+    B, n = st.has_pix.shape
+    Mc, p4c, pixc = st.planes()
+    x0, x1, x2 = X[:, 0, None], X[:, 1, None], X[:, 2, None]
+    q0 = Mc[0, 0] * x0 + Mc[0, 1] * x1 + Mc[0, 2] * x2 + p4c[0]
+    q1 = Mc[1, 0] * x0 + Mc[1, 1] * x1 + Mc[1, 2] * x2 + p4c[1]
+    q2 = Mc[2, 0] * x0 + Mc[2, 1] * x1 + Mc[2, 2] * x2 + p4c[2]
+    ok = st.has_pix & (q2 != 0)
+    iw = ok / np.where(ok, q2, 1.0)  # 1/q3, 0 on masked rows
+    u, v = q0 * iw, q1 * iw
+    J = np.empty((B, n, 2, 3))
+    for c in range(3):
+        J[:, :, 0, c] = (Mc[0, c] - u * Mc[2, c]) * iw
+        J[:, :, 1, c] = (Mc[1, c] - v * Mc[2, c]) * iw
+    r = np.empty((B, n, 2))
+    r[:, :, 0] = (pixc[0] - u) * ok
+    r[:, :, 1] = (pixc[1] - v) * ok
+    return J.reshape(B, 2 * n, 3), r.reshape(B, 2 * n), np.repeat(ok, 2, axis=1)
 
 
 def range_model(st: Stacked, X: np.ndarray):
-    """Range residuals and Jacobian at X (B,3) (`evaluate`, unweighted): J (B,n,3) = (X - s_i)/|X - s_i|,
-    r (B,n) = d_i - |X - s_i| (m), mask (B,n) bool (a missing range, or X on a platform position, is masked)."""
-    J, E, ok = evaluate(st.unit_planes(), X)
-    return J[:, 2].transpose(2, 1, 0), E[2].T, ok[2].T
+    """Range residuals and Jacobian at X (B,3): J (B,n,3) = (X - s_i)/|X - s_i|, r (B,n) = d_i - |X - s_i| (m),
+    mask (B,n) bool (a missing range, or X on a platform position, is masked)."""
+    B, n = st.has_range.shape
+    sc = st.planes_platform()
+    d = [X[:, c, None] - sc[c] for c in range(3)]
+    dist = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    ok = st.has_range & (dist > 0)
+    inv = ok / np.where(ok, dist, 1.0)
+    J = np.empty((B, n, 3))
+    for c in range(3):
+        J[:, :, c] = d[c] * inv
+    r = (st.range_m - dist) * ok
+    return J, r, ok
 
 
 def normal_equations(J: np.ndarray, r: np.ndarray, w: np.ndarray):

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
 
+from pipeline.solve import iterate as _iterate
 from pipeline.solve import mle as _mle
 from pipeline.solve.iterate import start_status
 from pipeline.solve.mle import VCE_MAX_ROUNDS, VCE_TOL
@@ -194,7 +195,7 @@ def gls(st: Stacked, X0: np.ndarray, model: Model, robust: str | None, vce: bool
     return _mle.run(Correlated(st, model, X, vce), st, X, status, bad, X.copy(), robust, tol_m, max_iterations)
 
 
-class Correlated:
+class Correlated(_iterate.Model):
     """The `mle` model of one problem (B = 1) with time-correlated errors, as `iterate.drive` and `mle.finish`
     use it: iteratively reweighted generalized least squares. Every step takes the robust weights
     w_i = rho'(z)/z of the rows' marginal standardized residuals z_i = r_i / sqrt(C_ii vf) at the current
@@ -202,7 +203,6 @@ class Correlated:
     step of the correlated problem (`quadratic_forms`, O(n)); no damping. Its residual planes (3,n,1) hold the
     marginal standardized residuals; the drift is modelled (no autocorrelation inflation in `mle.finish`)."""
 
-    damped = False
     drift_modelled = True
 
     def __init__(self, st: Stacked, model: Model, X: np.ndarray, vce: bool):
@@ -245,7 +245,7 @@ class Correlated:
 
     def trial(self, idx, Xn):
         self._A = rows_in_use(self.st, Xn[0])
-        return np.ones(1, dtype=bool)
+        return super().trial(idx, Xn)
 
     def accept(self, idx, accepted):
         if accepted[0]:
@@ -267,9 +267,6 @@ class Correlated:
         self.vf[idx, g] *= factor
         self._refresh()
 
-    def extra_dof(self):
-        return 0
-
     def isd(self):
         return self._isd
 
@@ -277,24 +274,14 @@ class Correlated:
         G = self._forms(var_scale[0])[1]
         return G[None, :3, :3], np.array([G[3, 3]])
 
-    def adjust(self, cov, cov0, infl, vf_chi, failed, drift_pix):
-        return cov, cov0, self.E, np.zeros(1, dtype=bool)
-
-    def bias_extras(self, cov, vf_chi):
-        return {}
-
 
 def _vce_factors(q, G):
-    """Helmert/Foerstner variance factors (2,) of the pixel (u and v) and range groups from the per-group
-    quadratic forms q (`quadratic_forms`) and their sum G, and which are usable (redundancy >= 0.5): the group's
-    r^T C^-1 r over its redundancy, its rows with weight minus trace(N^-1 J_g^T C_g^-1 J_g)."""
+    """`mle.helmert` of the pixel (u and v) and range groups from the per-group quadratic forms q
+    (`quadratic_forms`) and their sum G: a group's r^T C^-1 r over its rows with weight minus
+    trace(N^-1 J_g^T C_g^-1 J_g). Returns factors (2,), usable (2,)."""
     Ninv = inverse3(G[None, :3, :3])[0][0]
-    out, usable = np.ones(2), np.zeros(2, dtype=bool)
-    for k, parts in ((0, q[:2]), (1, q[2:])):
-        Q = sum(f for f, _, _ in parts)
-        red = sum(n for _, _, n in parts) - float(np.sum(Ninv * Q[:3, :3]))
-        if red >= 0.5:
-            f = float(Q[3, 3]) / red
-            if np.isfinite(f) and f > 0:
-                out[k], usable[k] = f, True
-    return out, usable
+    Q = [sum(f for f, _, _ in parts) for parts in (q[:2], q[2:])]
+    red = [sum(n for _, _, n in parts) - float(np.sum(Ninv * Qg[:3, :3])) for parts, Qg in zip((q[:2], q[2:]), Q,
+                                                                                              strict=True)]
+    f, usable = _mle.helmert(np.array([[Qg[3, 3] for Qg in Q]]), np.array([red]))
+    return f[0], usable[0]

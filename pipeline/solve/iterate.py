@@ -40,18 +40,42 @@ def start_status(X0: np.ndarray, init_status: np.ndarray | None) -> tuple[np.nda
     return status, bad
 
 
+class Model:
+    """What `drive` iterates (and, for `mle`, what `mle.finish` finishes); the defaults are a plain
+    Gauss-Newton model. step(idx, X_idx, lam_idx) -> (dX (k,3), singular (k,)): the step of the active problems
+    idx (lam: the damping, None unless damped); trial(idx, Xn) -> (k,) bool: evaluate the problems at Xn, where
+    the cost did not rise; accept(idx, accepted) -> (k,) bool: keep the trial's state where accepted, and which
+    rejected steps to retry undamped; converged(idx) -> (k,) bool: the problems to iterate again (variance
+    components changed). For `mle.finish`: extra_dof, adjust (the bias averaging), bias_extras."""
+
+    damped = False
+    drift_modelled = False
+
+    def trial(self, idx, Xn):
+        return np.ones(idx.size, dtype=bool)
+
+    def accept(self, idx, accepted):
+        return np.zeros(idx.size, dtype=bool)
+
+    def converged(self, idx):
+        return np.zeros(idx.size, dtype=bool)
+
+    def extra_dof(self):
+        return 0
+
+    def adjust(self, cov, cov0, infl, vf_chi, failed, drift_pix):
+        return cov, cov0, self.E, np.zeros(cov.shape[0], dtype=bool)
+
+    def bias_extras(self, cov, vf_chi):
+        return {}
+
+
 def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iterations: np.ndarray, bound: np.ndarray,
           centre: np.ndarray, tol_m: float, max_iterations: int, damped: bool = False) -> None:
-    """THE iteration of every estimator that iterates (in place on X (B,3), status, active, iterations (B,)).
-
-    model.step(idx, X_idx, lam_idx) -> (dX (k,3), singular (k,)): the step of the active problems idx (lam: the
-    Levenberg-Marquardt damping, None unless damped); model.trial(idx, Xn) -> (k,) bool: evaluates the problems
-    at Xn and says where the cost did not rise; model.accept(idx, accepted) -> (k,) bool: keeps the trial's
-    state where accepted and says which rejected steps to retry undamped; model.converged(idx) -> (k,) bool:
-    the problems to iterate again (variance components changed). A step stops a problem as CONVERGED
-    (||dX|| <= tol_m, or damping that cannot help any more), DEGENERATE (singular), DIVERGED (non-finite, or
-    further than `bound` from `centre`), else MAX_ITERATIONS after max_iterations.
-    """
+    """THE iteration of every estimator that iterates (in place on X (B,3), status, active, iterations (B,)), on
+    a `Model`. A step stops a problem as CONVERGED (||dX|| <= tol_m, or damping that cannot help any more),
+    DEGENERATE (singular), DIVERGED (non-finite, or further than `bound` from `centre`), else MAX_ITERATIONS
+    after max_iterations; with `damped`, Levenberg-Marquardt (a rejected step raises the damping)."""
     lam = np.zeros(X.shape[0])
     for _ in range(max_iterations):
         idx = np.flatnonzero(active)
@@ -90,7 +114,7 @@ def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iteratio
         active[idx] = still
 
 
-class _StepModel:
+class _StepModel(Model):
     """`drive`'s model for a plain Gauss-Newton step function: every step accepted, no damping."""
 
     def __init__(self, st: Stacked, step: StepFn, extras: dict, X: np.ndarray):
@@ -106,15 +130,6 @@ class _StepModel:
         for name, v in ex.items():
             self.extras[name][idx] = v
         return dX, singular
-
-    def trial(self, idx, Xn):
-        return np.ones(idx.size, dtype=bool)
-
-    def accept(self, idx, accepted):
-        return np.zeros(idx.size, dtype=bool)
-
-    def converged(self, idx):
-        return np.zeros(idx.size, dtype=bool)
 
 
 def iterate(st: Stacked, X0: np.ndarray, step: StepFn, tol_m: float, max_iterations: int,

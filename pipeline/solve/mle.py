@@ -328,13 +328,12 @@ def finish(m, X: np.ndarray, status: np.ndarray, iterations: np.ndarray):
     return X, iterations, status, cond, cov, extras
 
 
-class White:
+class White(_iterate.Model):
     """The `mle` model with errors independent from frame to frame (a boresight bias and the terrain prior
     optional), over B problems, as `iterate.drive` and `finish` use it: the state of the batched
     Levenberg-Marquardt / IRLS iteration (all arrays over the B problems)."""
 
     damped = True
-    drift_modelled = False
 
     def __init__(self, st, pl, a, X, vce, terrain):
         B = st.size
@@ -665,16 +664,17 @@ def _vce_factors(J, E, ok, robust, a=None, terrain_rows=None):
     lev = quad if w is None else w * quad
     q = E * E if w is None else w * E * E
     use = ok if w is None else ok & (w > 0)
-    b = E.shape[-1]
-    out = np.ones((b, 2))
-    usable = np.zeros((b, 2), dtype=bool)
-    for g, rows in ((0, slice(0, 2)), (1, slice(2, 3))):
-        sel = use[rows]
-        red = _sum_rows(np.where(sel, 1.0 - lev[rows], 0.0))
-        qs = _sum_rows(np.where(sel, q[rows], 0.0))
-        usable[:, g] = red >= 0.5
-        with np.errstate(divide="ignore", invalid="ignore"):
-            out[:, g] = np.where(usable[:, g], qs / red, 1.0)
-        usable[:, g] &= np.isfinite(out[:, g]) & (out[:, g] > 0)
-        out[:, g] = np.where(usable[:, g], out[:, g], 1.0)
-    return out, usable
+    groups = (slice(0, 2), slice(2, 3))
+    return helmert(np.stack([_sum_rows(np.where(use[r], q[r], 0.0)) for r in groups], axis=1),
+                   np.stack([_sum_rows(np.where(use[r], 1.0 - lev[r], 0.0)) for r in groups], axis=1))
+
+
+def helmert(q: np.ndarray, red: np.ndarray):
+    """The one Helmert/Foerstner variance-component step of every `mle` model: factors (b,2) of the pixel and
+    range groups, each group's weighted r^T C^-1 r q (b,2) over its redundancy red (b,2) (rows with weight minus
+    the trace of their share of the hat matrix), and whether usable (redundancy >= 0.5, a finite factor > 0;
+    else 1)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        f = np.where(red >= 0.5, q / red, 1.0)
+    usable = (red >= 0.5) & np.isfinite(f) & (f > 0)
+    return np.where(usable, f, 1.0), usable

@@ -44,8 +44,8 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.geometry.camera import look_at_rotation, project, projection_matrix
 from pipeline.solve import solve, solve_batch
-from pipeline.solve.mle import CHI2_3_95
 from pipeline.solve.observations import ObservationBatch, Observations, Sigma
+from pipeline.solve.uncertainty import CHI2_3_95
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test support: support.scenes
 

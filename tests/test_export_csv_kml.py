@@ -23,8 +23,8 @@ from pipeline.report.exports import (
     write_targets_geojson,
     write_targets_kml,
 )
-from pipeline.report.geometry import cep_m, ellipse_axes_m
 from pipeline.report.store import load_group_result, save_group_result
+from pipeline.solve.uncertainty import cep_m, ellipse_axes_m
 
 DOCS = Path(__file__).resolve().parent.parent / "docs" / "outputs.md"
 KML = "{http://www.opengis.net/kml/2.2}"

@@ -11,8 +11,8 @@ from scipy.optimize import least_squares
 from pipeline.errors import GeometryError, ObservationError
 from pipeline.geometry.camera import project
 from pipeline.solve import solve, solve_batch
-from pipeline.solve.mle import CHI2_3_95
 from pipeline.solve.observations import Observations, Sigma
+from pipeline.solve.uncertainty import CHI2_3_95
 from support.scenes import PAPER_SIGMA, correlated_problems, paper_batch, paper_problem
 
 CORR = dataclasses.replace(PAPER_SIGMA, attitude_tau_s=20.0, position_tau_s=60.0)

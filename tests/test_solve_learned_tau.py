@@ -25,7 +25,7 @@ def test_likelihood_changes_with_tau_and_the_true_tau_wins(told):
         st = Stacked.from_observations(dataclasses.replace(obs, sigma=told))
         got = learned_tau.learn_tau(st, obs.truth_m + 1.0, told, None, told.pixel_px is None, 1e-4, 50)
         assert got is not None
-        _, att, lls, _, _, _ = got
+        _, att, lls, _ = got
         ll = np.array([lls[(t, att)] for t in learned_tau.TAU_GRID_S])
         assert np.ptp(ll) > 1.0
         total += ll
@@ -40,6 +40,6 @@ def test_the_attitude_size_is_learned_where_unstated():
     chosen = []
     for obs in correlated_problems(12, n=60, attitude_tau_s=TRUE_TAU_S, position_tau_s=TRUE_TAU_S, seed=6):
         st = Stacked.from_observations(dataclasses.replace(obs, sigma=told))
-        _, att, _, res, _, _ = learned_tau.learn_tau(st, obs.truth_m, told, None, True, 1e-4, 50)
+        _, att, _, res = learned_tau.learn_tau(st, obs.truth_m, told, None, True, 1e-4, 50)
         chosen.append(att * np.sqrt(res[5]["variance_factor_pixel"][0]))
     assert np.mean((np.array(chosen) > 0.1) & (np.array(chosen) < 0.4)) >= 0.75

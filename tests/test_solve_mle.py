@@ -8,9 +8,10 @@ from scipy.optimize import least_squares
 
 from pipeline.geometry.camera import project
 from pipeline.solve import solve, solve_batch
-from pipeline.solve.mle import CAUCHY_C, HUBER_C, base_variances, cep_m
+from pipeline.solve.mle import CAUCHY_C, HUBER_C, base_variances
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import Stacked
+from pipeline.solve.uncertainty import cep_m
 from support.scenes import PAPER_SIGMA, paper_batch, paper_problem
 
 UNIT = Sigma(pixel_px=1.0, range_m=1.0, position_m=0.0, attitude_deg=0.0)

@@ -21,15 +21,14 @@ from pipeline.atomic import atomic_write_bytes, atomic_write_text
 from pipeline.geometry.geoid import GEOID_MODEL_LONG, patch_around
 from pipeline.report.geometry import (
     ALT_DATUM,
-    ELLIPSE_CONFIDENCE,
     best_reference_m,
-    ellipse_points_en_m,
     geodetic_from_enu,
     lines_of_sight_m,
     uncertainty,
 )
 from pipeline.report.labels import METHOD_COLORS, method_label, ordered_methods
 from pipeline.results import FlightResult, GroupResult, per_target
+from pipeline.solve.uncertainty import ELLIPSE_CONFIDENCE, ellipse_points_en_m
 
 # The documented columns of targets.csv, in order (docs/outputs.md describes each).
 TARGETS_CSV_COLUMNS = (

@@ -21,12 +21,12 @@ from matplotlib.patches import Rectangle
 
 from pipeline.report.geometry import (
     best_reference_m,
-    ellipse_points_en_m,
     frame_residuals,
     lines_of_sight_m,
 )
 from pipeline.report.labels import METHOD_COLORS, METHOD_MARKERS, method_label, ordered_methods
 from pipeline.results import GroupResult
+from pipeline.solve.uncertainty import ellipse_points_en_m
 
 FIGURE_NAMES = ("map", "view3d", "residuals")
 DPI = 110

@@ -7,14 +7,13 @@ from __future__ import annotations
 
 import numpy as np
 import pymap3d
-from scipy import integrate, optimize, special, stats
 
 from pipeline.geometry.camera import project
 from pipeline.results import GroupResult
 from pipeline.solve.estimate import Estimate
 from pipeline.solve.observations import Observations
+from pipeline.solve.uncertainty import horizontal
 
-ELLIPSE_CONFIDENCE = 0.95
 ALT_DATUM = "WGS84 ellipsoidal height (EPSG:4979)"
 
 
@@ -69,72 +68,15 @@ def lines_of_sight_m(obs: Observations, reference_m: np.ndarray | None = None,
     return seg, idx
 
 
-def ellipse_axes_m(cov_en_m2: np.ndarray, confidence: float = ELLIPSE_CONFIDENCE) -> tuple[float, float, float]:
-    """Semi-major and semi-minor axis (m) of the horizontal error ellipse holding `confidence` of a 2D Gaussian
-    with (2, 2) East-North covariance, and the major axis' azimuth in degrees clockwise from North [0, 180)."""
-    k2 = stats.chi2.ppf(confidence, 2)
-    w, v = np.linalg.eigh(np.asarray(cov_en_m2, dtype=np.float64))
-    w = np.clip(w, 0.0, None)
-    major = v[:, 1]
-    azimuth = float(np.degrees(np.arctan2(major[0], major[1])) % 180.0)
-    return float(np.sqrt(k2 * w[1])), float(np.sqrt(k2 * w[0])), azimuth
-
-
-def ellipse_points_en_m(cov_en_m2: np.ndarray, confidence: float = ELLIPSE_CONFIDENCE, n: int = 72) -> np.ndarray:
-    """(n + 1, 2) East-North offsets (m) of the error ellipse boundary, counter-clockwise, first point repeated
-    at the end (a closed ring)."""
-    k2 = stats.chi2.ppf(confidence, 2)
-    w, v = np.linalg.eigh(np.asarray(cov_en_m2, dtype=np.float64))
-    t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
-    circle = np.stack([np.cos(t), np.sin(t)], axis=1)
-    pts = circle * np.sqrt(k2 * np.clip(w, 0.0, None)) @ v.T
-    if np.linalg.det(v) < 0:  # a reflection would turn the ring clockwise
-        pts = pts[::-1]
-    return np.vstack([pts, pts[:1]])
-
-
-def circular_probability(cov_en_m2: np.ndarray, radius_m: float) -> float:
-    """P(|x| <= radius) for x ~ N(0, cov) in 2D: along the major axis x1 ~ N(0, s1^2), and given x1 the minor
-    component must stay within +-sqrt(r^2 - x1^2), so P = 2 int_0^r pdf1(x1) erf(sqrt(r^2 - x1^2) / (s2 sqrt 2)).
-    The integrand stays bounded when s2 -> 0 (the 1D limit), unlike the polar-angle form."""
-    w = np.clip(np.linalg.eigvalsh(np.asarray(cov_en_m2, dtype=np.float64)), 0.0, None)
-    s1, s2 = np.sqrt(w[1]), np.sqrt(w[0])
-    if s1 == 0.0:
-        return 1.0 if radius_m > 0 else 0.0
-
-    def integrand(x):
-        half_width = np.sqrt(max(radius_m ** 2 - x * x, 0.0))
-        inner = special.erf(half_width / (s2 * np.sqrt(2.0))) if s2 > 0 else 1.0
-        return np.exp(-0.5 * (x / s1) ** 2) / (s1 * np.sqrt(2.0 * np.pi)) * inner
-
-    value, _ = integrate.quad(integrand, 0.0, radius_m, limit=200, epsabs=1e-12)
-    return float(min(2.0 * value, 1.0))
-
-
-def cep_m(cov_en_m2: np.ndarray, probability: float) -> float:
-    """Radius (m) of the circle centred on the estimate that holds `probability` of the horizontal error
-    (CEP50 for 0.5), for a zero-mean Gaussian with (2, 2) East-North covariance."""
-    w = np.clip(np.linalg.eigvalsh(np.asarray(cov_en_m2, dtype=np.float64)), 0.0, None)
-    if w[1] <= 0:
-        return 0.0
-    hi = np.sqrt(stats.chi2.ppf(probability, 2) * w[1])  # the circle of the larger variance bounds it
-    return float(optimize.brentq(lambda r: circular_probability(cov_en_m2, r) - probability, 0.0, hi * 1.0001,
-                                 xtol=1e-9 * hi))
-
-
 def uncertainty(e: Estimate) -> dict:
     """CEP50, CEP90, vertical sigma and the 95 % horizontal ellipse of an estimate, where defined (with a
-    covariance); an estimator's own CEP values in `extras` (`cep50_m`, `cep90_m`) take precedence."""
+    covariance; `pipeline.solve.uncertainty.horizontal`); an estimator's own CEP values in `extras` (`cep50_m`,
+    `cep90_m`) take precedence."""
     out = {"cep50_m": None, "cep90_m": None, "sigma_up_m": None, "ellipse95_semi_major_m": None,
            "ellipse95_semi_minor_m": None, "ellipse95_azimuth_deg": None}
     cov = e.covariance_m2
     if cov is not None and np.isfinite(cov).all():
-        en = np.asarray(cov)[:2, :2]
-        out["cep50_m"] = cep_m(en, 0.5)
-        out["cep90_m"] = cep_m(en, 0.9)
-        out["sigma_up_m"] = float(np.sqrt(max(cov[2][2], 0.0)))
-        a, b, az = ellipse_axes_m(en)
-        out.update(ellipse95_semi_major_m=a, ellipse95_semi_minor_m=b, ellipse95_azimuth_deg=az)
+        out.update(horizontal(np.asarray(cov)))
     for key in ("cep50_m", "cep90_m", "sigma_up_m"):
         v = e.extras.get(key)
         if isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v):

@@ -23,14 +23,13 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.report.geometry import (
-    ELLIPSE_CONFIDENCE,
     best_reference_m,
-    ellipse_points_en_m,
     geodetic_from_enu,
     lines_of_sight_m,
 )
 from pipeline.report.labels import METHOD_COLORS, method_label, ordered_methods
 from pipeline.results import GroupResult
+from pipeline.solve.uncertainty import ELLIPSE_CONFIDENCE, ellipse_points_en_m
 
 ASSETS = Path(__file__).resolve().parent / "assets" / "leaflet"
 OSM_TILES = "https://tile.openstreetmap.org/{z}/{x}/{y}.png"

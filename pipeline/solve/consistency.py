@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.solve import solve
-from pipeline.solve.mle import CHI2_3_95
 from pipeline.solve.observations import Observations
+from pipeline.solve.uncertainty import CHI2_3_95
 
 
 def normalized_errors(obs: Observations, **options) -> tuple[float, float, np.ndarray, dict]:

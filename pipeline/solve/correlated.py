@@ -31,11 +31,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
 
-from pipeline.solve.estimate import Status
-from pipeline.solve.iterate import DIVERGENCE_FACTOR, problem_scale_m
-from pipeline.solve.mle import VCE_MAX_ROUNDS, VCE_TOL, _rho_and_weight, pixel_pair_redescending
+from pipeline.solve import iterate as _iterate
+from pipeline.solve import mle as _mle
+from pipeline.solve.iterate import start_status
+from pipeline.solve.mle import VCE_MAX_ROUNDS, VCE_TOL
 from pipeline.solve.observations import Sigma
-from pipeline.solve.stacked import Stacked, condition_numbers, inverse3, pixel_model, range_model, solve_spd
+from pipeline.solve.stacked import Stacked, inverse3, pixel_model, range_model, solve_spd
 
 #: 1 - a^2 floor of a transition (frames at equal times): keeps the chain's precision finite
 _MIN_INNOVATION = 1e-10
@@ -165,14 +166,6 @@ def rows_in_use(st: Stacked, X: np.ndarray) -> np.ndarray:
                            np.concatenate([Jr[0, rng], rr[0, rng, None]], axis=1)])
 
 
-def robust_weights(z: np.ndarray, npix: int, robust: str | None) -> np.ndarray:
-    """(m,) robust weights of the rows' standardized marginal residuals z (pixel rows u, v interleaved first)."""
-    w = np.ones(z.size) if robust is None else _rho_and_weight(z, robust)[1]
-    if robust == "redescending":  # the pixel rows weighted in pairs, by their 2-D length
-        w[:npix] = np.repeat(pixel_pair_redescending(z[:npix:2], z[1:npix:2])[1], 2)
-    return w
-
-
 def quadratic_forms(model: Model, A: np.ndarray, w: np.ndarray, vf: np.ndarray):
     """Per group (u, v, range): ([J|r]^T C_w^-1 [J|r] (4,4), log det C_w, rows with weight) with the robust
     weights w (m,) (row variance C_ii / w, the rest of C unchanged) and the variance factors vf (2,) (pixel,
@@ -192,110 +185,103 @@ def quadratic_forms(model: Model, A: np.ndarray, w: np.ndarray, vf: np.ndarray):
     return out
 
 
-def mle_gls(st: Stacked, X0: np.ndarray, model: Model, robust: str | None, vce: bool, tol_m: float,
-            max_iterations: int):
+def gls(st: Stacked, X0: np.ndarray, model: Model, robust: str | None, vce: bool, tol_m: float,
+        max_iterations: int):
     """Generalized least squares `mle` of one problem (B = 1) from a usable start X0 (3,) under `model`
-    (`problem_model`), by iteratively reweighted least squares.
+    (`problem_model`): `Correlated` through the one iteration and finish of `mle.run`. Returns `mle.finish`'s
+    tuple for B = 1."""
+    X = np.array(X0, dtype=np.float64).reshape(1, 3)
+    status, bad = start_status(X, None)
+    return _mle.run(Correlated(st, model, X, vce), st, X, status, bad, X.copy(), robust, tol_m, max_iterations)
 
-    Every iteration takes the robust weights w_i = rho'(z)/z of the rows' marginal standardized residuals
-    z_i = r_i / sqrt(C_ii vf) at the current estimate, applies them as inflated variances of an independent
-    gross error, and takes the Gauss-Newton step of the correlated problem (`quadratic_forms`, O(n)). Stops when
-    the step is below tol_m (then, with variance components, re-estimates them and continues while they change).
-    With the redescending loss the variance factors first take the residuals' robust spread where that exceeds
-    them (the scale guard: a misfit or an unknown sigma must not reject good data).
 
-    Returns, shaped as `mle.mle` for B = 1: X (1,3), iterations (1,), status (1,) int8, cond (1,),
-    covariance (1,3,3) and the extras {variance_factor_pixel, variance_factor_range, sigma0_sq, vce_rounds,
-    log_likelihood (restricted, at the final weights' rows), chi2, rows}.
-    """
-    npix, m = model.npix, model.m
-    sd = np.sqrt(model.Cii())
-    bound = DIVERGENCE_FACTOR * problem_scale_m(st, X0[None])[0]
-    centre = st.platform_m[0].mean(axis=0)
-    vf = np.ones(2)
-    grp = np.r_[np.zeros(npix, dtype=int), np.ones(m - npix, dtype=int)]
+class Correlated(_iterate.Model):
+    """The `mle` model of one problem (B = 1) with time-correlated errors, as `iterate.drive` and `mle.finish`
+    use it: iteratively reweighted generalized least squares. Every step takes the robust weights
+    w_i = rho'(z)/z of the rows' marginal standardized residuals z_i = r_i / sqrt(C_ii vf) at the current
+    estimate, applies them as inflated variances of an independent gross error, and takes the Gauss-Newton
+    step of the correlated problem (`quadratic_forms`, O(n)); no damping. Its residual planes (3,n,1) hold the
+    marginal standardized residuals; the drift is modelled (no autocorrelation inflation in `mle.finish`)."""
 
-    def forms(A, loss):
-        w = robust_weights(A[:, 3] / (sd * np.sqrt(vf[grp])), npix, loss)
-        q = quadratic_forms(model, A, w, vf)
-        return w, q, sum(f for f, _, _ in q)
+    drift_modelled = True
 
-    def run(X, loss):
-        """IRLS from X to convergence with this loss (variance components between rounds)."""
-        nonlocal vf, it, vce_rounds
-        A = rows_in_use(st, X)
-        for _ in range(max_iterations):
-            _, _, G = forms(A, loss)
-            dX, singular = solve_spd(G[None, :3, :3], G[None, :3, 3])
-            dX = dX[0]
-            it += 1
-            if singular[0]:
-                return X, A, Status.DEGENERATE
-            Xn = X + dX
-            if not np.isfinite(Xn).all() or np.linalg.norm(Xn - centre) > bound:
-                return X, A, Status.DIVERGED
-            X = Xn
-            A = rows_in_use(st, X)
-            if np.linalg.norm(dX) <= tol_m:
-                if vce and vce_rounds < VCE_MAX_ROUNDS:
-                    _, q, G = forms(A, loss)
-                    factors, usable = _vce_factors(q, G)
-                    if (usable & (np.abs(factors - 1) > VCE_TOL)).any():
-                        vf = np.where(usable, vf * factors, vf)
-                        vce_rounds += 1
-                        continue
-                return X, A, Status.CONVERGED
-        return X, A, Status.MAX_ITERATIONS
+    def __init__(self, st: Stacked, model: Model, X: np.ndarray, vce: bool):
+        self.st, self.model, self.X, self.vce = st, model, X, vce
+        self.sd = np.sqrt(model.Cii())
+        self.grp = np.r_[np.zeros(model.npix, dtype=int), np.ones(model.m - model.npix, dtype=int)]
+        self.vf, self.guard = np.ones((1, 2)), np.ones((1, 2))
+        self.vce_rounds = np.zeros(1, dtype=np.int64)
+        self.pf, self.rf = np.flatnonzero(st.has_pix[0]), np.flatnonzero(st.has_range[0])
+        self.A = rows_in_use(st, X[0])
 
-    it = vce_rounds = 0
-    X, A, status = run(np.array(X0, dtype=np.float64), "huber" if robust == "redescending" else robust)
-    if robust == "redescending" and status not in (Status.DIVERGED, Status.DEGENERATE):
-        # the scale guard at the convex (Huber) fit, before anything can get zero weight: a group whose
-        # residuals are more spread than its sigma says (beyond the MAD's own noise) is scaled up, so that a
-        # misfit model does not reject good data
-        z = A[:, 3] / (sd * np.sqrt(vf[grp]))
-        for gi, sl in ((0, slice(0, npix)), (1, slice(npix, m))):
-            cnt = z[sl].size
-            if cnt >= 4:
-                mad = 1.4826 * float(np.median(np.abs(z[sl])))
-                if mad > 1.0 + 2.34 / math.sqrt(cnt):
-                    vf[gi] *= mad * mad
-        X, A, status = run(X, robust)
-    # covariance with the weights at the final estimate
-    w, q, G = forms(A, robust)
-    N = G[None, :3, :3]
-    cov, singular = inverse3(N)
-    cond = condition_numbers(N)
-    if singular[0] and status not in (Status.DIVERGED, Status.DEGENERATE):
-        status = Status.DEGENERATE
-    chi2 = float(G[3, 3])  # r^T C_w^-1 r at the solution
-    used = int(np.count_nonzero(w > 0))
-    logdet = sum(ld for _, ld, _ in q)
-    sign, logdet_n = np.linalg.slogdet(G[:3, :3])
-    ll = -0.5 * (chi2 + logdet + (logdet_n if sign > 0 else np.inf) + (used - 3) * math.log(2 * math.pi))
-    if status in (Status.DIVERGED, Status.DEGENERATE):
-        X = np.full(3, np.nan)
-        cov[:] = np.nan
-        if not singular[0]:
-            cond[:] = np.nan
-    extras = {"variance_factor_pixel": vf[:1], "variance_factor_range": vf[1:],
-              "sigma0_sq": np.array([chi2 / (used - 3) if used > 3 else np.nan]),
-              "vce_rounds": np.array([vce_rounds])}
-    info = {"log_likelihood": ll, "chi2": chi2, "rows": used}
-    return (X[None], np.array([it]), np.array([status], dtype=np.int8), cond, cov, extras), info
+    def _planes(self, rows: np.ndarray, fill: float) -> np.ndarray:
+        """(3,n,1) planes of per-row values (m,) (u, v of the pixel frames, then the ranged frames)."""
+        out = np.full((3, self.st.n, 1), fill)
+        npix = self.model.npix
+        out[0, self.pf, 0], out[1, self.pf, 0], out[2, self.rf, 0] = rows[:npix:2], rows[1:npix:2], rows[npix:]
+        return out
+
+    def _refresh(self):
+        """The weights (`mle._cost_weights`) and residual planes at the current rows A, loss and variance
+        factors."""
+        s = self.sd * np.sqrt(self.vf[0, self.grp])
+        self.E, self._isd = self._planes(self.A[:, 3] / s, 0.0), self._planes(1.0 / s, 1.0)
+        self.ok = self._planes(np.ones(s.size), 0.0) > 0
+        self.wr = _mle._cost_weights(self.E, self.robust)[1]
+        self.w = np.ones(s.size) if self.wr is None else np.concatenate([self.wr[:2, self.pf, 0].T.ravel(),
+                                                                        self.wr[2, self.rf, 0]])
+
+    def _forms(self, var_scale=1.0):
+        q = quadratic_forms(self.model, self.A, self.w, self.vf[0] * var_scale)
+        return q, sum(f for f, _, _ in q)
+
+    def start(self, robust):
+        self.robust = robust
+        self._refresh()
+
+    def step(self, idx, X, lam):
+        G = self._forms()[1]
+        return solve_spd(G[None, :3, :3], G[None, :3, 3])
+
+    def trial(self, idx, Xn):
+        self._A = rows_in_use(self.st, Xn[0])
+        return super().trial(idx, Xn)
+
+    def accept(self, idx, accepted):
+        if accepted[0]:
+            self.A = self._A
+            self._refresh()
+        return np.zeros(1, dtype=bool)
+
+    def converged(self, idx):
+        if self.vce and self.vce_rounds[0] < VCE_MAX_ROUNDS:
+            factors, usable = _vce_factors(*self._forms())
+            if (usable & (np.abs(factors - 1) > VCE_TOL)).any():
+                self.vf[0] = np.where(usable, self.vf[0] * factors, self.vf[0])
+                self.vce_rounds += 1
+                self._refresh()
+                return np.ones(1, dtype=bool)
+        return np.zeros(1, dtype=bool)
+
+    def rescale(self, idx, g, factor):
+        self.vf[idx, g] *= factor
+        self._refresh()
+
+    def isd(self):
+        return self._isd
+
+    def information(self, var_scale):
+        G = self._forms(var_scale[0])[1]
+        return G[None, :3, :3], np.array([G[3, 3]])
 
 
 def _vce_factors(q, G):
-    """Helmert/Foerstner variance factors (2,) of the pixel (u and v) and range groups from the per-group
-    quadratic forms q (`quadratic_forms`) and their sum G, and which are usable (redundancy >= 0.5): the group's
-    r^T C^-1 r over its redundancy, its rows with weight minus trace(N^-1 J_g^T C_g^-1 J_g)."""
+    """`mle.helmert` of the pixel (u and v) and range groups from the per-group quadratic forms q
+    (`quadratic_forms`) and their sum G: a group's r^T C^-1 r over its rows with weight minus
+    trace(N^-1 J_g^T C_g^-1 J_g). Returns factors (2,), usable (2,)."""
     Ninv = inverse3(G[None, :3, :3])[0][0]
-    out, usable = np.ones(2), np.zeros(2, dtype=bool)
-    for k, parts in ((0, q[:2]), (1, q[2:])):
-        Q = sum(f for f, _, _ in parts)
-        red = sum(n for _, _, n in parts) - float(np.sum(Ninv * Q[:3, :3]))
-        if red >= 0.5:
-            f = float(Q[3, 3]) / red
-            if np.isfinite(f) and f > 0:
-                out[k], usable[k] = f, True
-    return out, usable
+    Q = [sum(f for f, _, _ in parts) for parts in (q[:2], q[2:])]
+    red = [sum(n for _, _, n in parts) - float(np.sum(Ninv * Qg[:3, :3])) for parts, Qg in zip((q[:2], q[2:]), Q,
+                                                                                              strict=True)]
+    f, usable = _mle.helmert(np.array([[Qg[3, 3] for Qg in Q]]), np.array([red]))
+    return f[0], usable[0]

@@ -40,9 +40,101 @@ def start_status(X0: np.ndarray, init_status: np.ndarray | None) -> tuple[np.nda
     return status, bad
 
 
+class Model:
+    """What `drive` iterates (and, for `mle`, what `mle.finish` finishes); the defaults are a plain
+    Gauss-Newton model. step(idx, X_idx, lam_idx) -> (dX (k,3), singular (k,)): the step of the active problems
+    idx (lam: the damping, None unless damped); trial(idx, Xn) -> (k,) bool: evaluate the problems at Xn, where
+    the cost did not rise; accept(idx, accepted) -> (k,) bool: keep the trial's state where accepted, and which
+    rejected steps to retry undamped; converged(idx) -> (k,) bool: the problems to iterate again (variance
+    components changed). For `mle.finish`: extra_dof, adjust (the bias averaging), bias_extras."""
+
+    damped = False
+    drift_modelled = False
+
+    def trial(self, idx, Xn):
+        return np.ones(idx.size, dtype=bool)
+
+    def accept(self, idx, accepted):
+        return np.zeros(idx.size, dtype=bool)
+
+    def converged(self, idx):
+        return np.zeros(idx.size, dtype=bool)
+
+    def extra_dof(self):
+        return 0
+
+    def adjust(self, cov, cov0, infl, vf_chi, failed, drift_pix):
+        return cov, cov0, self.E, np.zeros(cov.shape[0], dtype=bool)
+
+    def bias_extras(self, cov, vf_chi):
+        return {}
+
+
+def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iterations: np.ndarray, bound: np.ndarray,
+          centre: np.ndarray, tol_m: float, max_iterations: int, damped: bool = False) -> None:
+    """THE iteration of every estimator that iterates (in place on X (B,3), status, active, iterations (B,)), on
+    a `Model`. A step stops a problem as CONVERGED (||dX|| <= tol_m, or damping that cannot help any more),
+    DEGENERATE (singular), DIVERGED (non-finite, or further than `bound` from `centre`), else MAX_ITERATIONS
+    after max_iterations; with `damped`, Levenberg-Marquardt (a rejected step raises the damping)."""
+    lam = np.zeros(X.shape[0])
+    for _ in range(max_iterations):
+        idx = np.flatnonzero(active)
+        if idx.size == 0:
+            break
+        dX, singular = model.step(idx, X[idx], lam[idx] if damped else None)
+        iterations[idx] += 1
+        Xi = X[idx]
+        Xn = Xi + np.where(singular[:, None], 0.0, dX)
+        finite = np.isfinite(Xn).all(axis=1)
+        exploded = ~finite | (np.sqrt(((Xn - centre[idx]) ** 2).sum(axis=1)) > bound[idx])
+        accept = ~singular & ~exploded & model.trial(idx, np.where(exploded[:, None], Xi, Xn))
+        X[idx] = np.where((accept | (exploded & finite))[:, None], Xn, Xi)
+        retry = model.accept(idx, accept)
+        if damped:
+            lam[idx[accept]] = np.where(lam[idx[accept]] / 10 < 1e-9, 0.0, lam[idx[accept]] / 10)
+            rej = idx[~accept & ~retry]
+            lam[rej] = np.where(lam[rej] == 0, 1e-4, lam[rej] * 10)
+        step_norm = np.where(singular, np.inf, np.sqrt((dX * dX).sum(axis=1)))
+        done = (step_norm <= tol_m) & ~singular & ~exploded
+        still = ~singular & ~exploded & ~done
+        stuck = still & ~accept & (lam[idx] > 1e12)  # damping that cannot help: the minimum is reached
+        done |= stuck
+        still &= ~stuck
+        if done.any():
+            again = np.zeros(idx.size, dtype=bool)
+            again[done] = model.converged(idx[done])
+            lam[idx[again]] = 0.0
+            done &= ~again
+            still |= again
+        s = status[idx]
+        s[singular] = Status.DEGENERATE
+        s[exploded & ~singular] = Status.DIVERGED
+        s[done] = Status.CONVERGED
+        status[idx] = s
+        active[idx] = still
+
+
+class _StepModel(Model):
+    """`drive`'s model for a plain Gauss-Newton step function: every step accepted, no damping."""
+
+    def __init__(self, st: Stacked, step: StepFn, extras: dict, X: np.ndarray):
+        self.st, self.fn, self.extras, self.X = st, step, extras, X
+
+    def step(self, idx, X, lam):
+        if 2 * idx.size >= self.st.size:  # copying most of the batch costs more than computing all again
+            dX, singular, ex = self.fn(self.st, self.X)
+            if idx.size < self.st.size:
+                dX, singular, ex = dX[idx], singular[idx], {k: v[idx] for k, v in ex.items()}
+        else:
+            dX, singular, ex = self.fn(self.st.take(idx), X)
+        for name, v in ex.items():
+            self.extras[name][idx] = v
+        return dX, singular
+
+
 def iterate(st: Stacked, X0: np.ndarray, step: StepFn, tol_m: float, max_iterations: int,
             init_status: np.ndarray | None = None, extra_names: tuple[str, ...] = ()):
-    """Run `step(sub, X_sub) -> (dX (b,3), singular (b,) bool, extras {name: (b,)})` to convergence.
+    """`drive` with `step(sub, X_sub) -> (dX (b,3), singular (b,) bool, extras {name: (b,)})`.
 
     Returns X (B,3) (the last finite iterate; callers blank DIVERGED and DEGENERATE ones with `finish`),
     iterations (B,), status (B,) int8 and the extras of each problem's last iteration (B,) arrays.
@@ -51,36 +143,10 @@ def iterate(st: Stacked, X0: np.ndarray, step: StepFn, tol_m: float, max_iterati
     X = np.array(X0, dtype=np.float64, copy=True)
     iterations = np.zeros(B, dtype=np.int64)
     status, bad_init = start_status(X, init_status)
-    active = ~bad_init
     centre = st.platform_m.mean(axis=1)
-    finite0 = np.isfinite(X).all(axis=1)
-    bound = DIVERGENCE_FACTOR * problem_scale_m(st, np.where(finite0[:, None], X, centre))
+    bound = DIVERGENCE_FACTOR * problem_scale_m(st, np.where(np.isfinite(X).all(axis=1)[:, None], X, centre))
     extras = {name: np.full(B, np.nan) for name in extra_names}
-    for _ in range(max_iterations):
-        idx = np.flatnonzero(active)
-        if idx.size == 0:
-            break
-        if 2 * idx.size >= B:  # copying most of the batch costs more than computing the finished ones again
-            dX, singular, ex = step(st, X)
-            if idx.size < B:
-                dX, singular, ex = dX[idx], singular[idx], {k: v[idx] for k, v in ex.items()}
-        else:
-            dX, singular, ex = step(st.take(idx), X[idx])
-        for name, v in ex.items():
-            extras[name][idx] = v
-        iterations[idx] += 1
-        Xn = X[idx] + dX
-        step_norm = np.linalg.norm(dX, axis=1)
-        finite = np.isfinite(Xn).all(axis=1)
-        exploded = ~finite | (np.linalg.norm(Xn - centre[idx], axis=1) > bound[idx])
-        X[idx] = np.where(finite[:, None], Xn, X[idx])
-        done_conv = ~singular & ~exploded & (step_norm <= tol_m)
-        st_idx = status[idx]
-        st_idx[singular] = Status.DEGENERATE
-        st_idx[~singular & exploded] = Status.DIVERGED
-        st_idx[done_conv] = Status.CONVERGED
-        status[idx] = st_idx
-        active[idx] = ~(singular | exploded | done_conv)
+    drive(_StepModel(st, step, extras, X), X, status, ~bad_init, iterations, bound, centre, tol_m, max_iterations)
     return X, iterations, status, extras
 
 

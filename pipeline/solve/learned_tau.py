@@ -4,7 +4,7 @@ flight by evidence, for `mle` on one problem whose sigma gives no correlation ti
 Attitude and GNSS errors drift: first-order Gauss-Markov with a correlation time tau. `mle` first solves the
 independent-error model with a boresight bias (`mle.mle`: redescending loss, fit checks); where it has timestamps
 and its residuals drift from frame to frame (`fit_checks`), it then fits the generalized least squares model
-(`correlated.mle_gls`, O(n)) with one correlation time for the attitude and the position errors, for each tau of
+(`correlated.gls`, O(n)) with one correlation time for the attitude and the position errors, for each tau of
 TAU_GRID_S, and where the attitude sigma is not stated for each attitude sigma of ATTITUDE_GRID_DEG too (without
 a size the drift has no covariance, and every tau would give the same likelihood), without the rows the first
 solve rejected, and keeps the model of the largest restricted (REML) Gaussian likelihood
@@ -13,7 +13,7 @@ solve rejected, and keeps the model of the largest restricted (REML) Gaussian li
 
 (r the m residuals at that model's estimate, the target integrated out with a flat prior; the covariance's size
 charged by log det, its overall scale k at its maximum likelihood but never below the stated sigmas). The chosen
-model's estimate and covariance are the answer; its chi-square is checked again.
+models' mixture is the answer, with the fit checks of the most likely one (`mle.finish`).
 """
 
 from __future__ import annotations
@@ -24,7 +24,6 @@ import math
 import numpy as np
 
 from pipeline.solve import correlated as _correlated
-from pipeline.solve import fit_checks
 from pipeline.solve.estimate import Status
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import Stacked
@@ -73,24 +72,25 @@ def learn_tau(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce
     """The GLS `mle` of one problem (B = 1, st without rejected rows) averaged over the models of `candidates`
     (correlation time, and attitude sigma where unstated), each weighted by its likelihood (equal priors): the
     posterior mean estimate and the mixture's covariance (the spread between the models included), from X0
-    (3,). Returns (tau_s, attitude_deg of the most likely model, {(tau, att): log L}, the `correlated.mle_gls`
-    result tuple with the mixture's estimate and covariance, that model's chi-square, rows) or None when no
-    model gave an answer."""
+    (3,). Returns (tau_s, attitude_deg of the most likely model, {(tau, att): log L}, the `correlated.gls`
+    result tuple of that model (its fit checks and extras, and error_model_tau_s, error_model_attitude_deg,
+    error_model_log_likelihoods over TAU_GRID_S at its attitude sigma) with the mixture's estimate and
+    covariance), or None when no model gave an answer."""
     lls: dict[tuple, float] = {}
     fits = []
     for tau, att in candidates(sigma):
         s = dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau, attitude_deg=att)
         model = _correlated.problem_model(st, X0, s)
-        res, _ = _correlated.mle_gls(st, X0, model, robust, vce, tol_m, max_iterations)
+        res = _correlated.gls(st, X0, model, robust, vce, tol_m, max_iterations)
         X, status = res[0][0], res[2][0]
         if status in (Status.DIVERGED, Status.DEGENERATE) or not np.isfinite(X).all():
             continue
         vf = (float(res[5]["variance_factor_pixel"][0]), float(res[5]["variance_factor_range"][0]))
-        ll, chi2, m = log_likelihood(st, X, s, vf)
+        ll = log_likelihood(st, X, s, vf)[0]
         if not np.isfinite(ll):
             continue
         lls[(tau, att)] = ll
-        fits.append((ll, tau, att, res, chi2, m))
+        fits.append((ll, tau, att, res))
     if not fits:
         return None
     ll = np.array([f[0] for f in fits])
@@ -104,24 +104,6 @@ def learn_tau(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce
     d = Xs - Xm
     cov = np.einsum("k,kij->ij", post, covs + d[:, :, None] * d[:, None, :])
     _, it, status, cond, _, ex = best[3]
-    res = (Xm[None], it, status, cond, cov[None], ex)
-    _, tau, att, _, chi2, m = best
-    return tau, att, lls, res, chi2, m
-
-
-def replace_with_learned(ex: dict, tau: float, att: float, lls: dict, chi2: float, m: int) -> dict:
-    """The first solve's extras (B = 1 arrays) updated for the learned model's answer: the fit checks of the GLS
-    model (its chi-square; drift is now modelled), no bias, the chosen tau and attitude sigma, and the
-    likelihoods over TAU_GRID_S at the chosen attitude sigma."""
-    out = {k: v for k, v in ex.items() if not k.startswith("bias_")}
-    dof = float(m - 3)
-    p = fit_checks.chi_square_p(np.array([chi2]), np.array([dof]))
-    fail = bool(np.isfinite(p[0]) and p[0] < fit_checks.CHI2_ALPHA)
-    out.update({"chi2": np.array([chi2]), "chi2_dof": np.array([dof]), "chi2_p": p,
-                "drift_pixel": np.zeros(1, dtype=bool), "drift_range": np.zeros(1, dtype=bool),
-                "block_drift_pixel": np.zeros(1, dtype=bool), "block_drift_range": np.zeros(1, dtype=bool),
-                "consistent": np.array([not fail]), "robust_spread": np.ones((1, 2)),
-                "covariance_inflation": np.array([max(chi2 / dof, 1.0) if fail and dof > 0 else 1.0]),
-                "error_model_tau_s": np.array([tau]), "error_model_attitude_deg": np.array([att]),
-                "error_model_log_likelihoods": np.array([[lls.get((t, att), np.nan) for t in TAU_GRID_S]])})
-    return out
+    ex = {**ex, "error_model_tau_s": np.array([best[1]]), "error_model_attitude_deg": np.array([best[2]]),
+          "error_model_log_likelihoods": np.array([[lls.get((t, best[2]), np.nan) for t in TAU_GRID_S]])}
+    return best[1], best[2], lls, (Xm[None], it, status, cond, cov[None], ex)

@@ -14,7 +14,7 @@ import numpy as np
 from pipeline.errors import GeometryError, ObservationError, SolverError
 from pipeline.solve import correlated as _correlated
 from pipeline.solve import learned_tau as _learned
-from pipeline.solve import least_squares, linear, mle_outputs
+from pipeline.solve import least_squares, linear, mle_outputs, uncertainty
 from pipeline.solve import mle as _mle
 from pipeline.solve import starts as _starts
 from pipeline.solve.estimate import BatchEstimate, Estimate, Status
@@ -167,7 +167,7 @@ def _solve_stacked(method: str, st: Stacked, o: dict) -> BatchEstimate:
             X, it, status, cond, cov, ex = _mle_multistart(st, o)
         else:
             X, it, status, cond, cov, ex = _mle_dispatch(st, o)
-        extras = {**_mle_summaries(cov), **ex}
+        extras = {**uncertainty.summaries(cov), **ex}
     else:  # pragma: no cover - _check_options rejects it
         raise ValueError(method)
     if method in _USES_PIXELS:
@@ -242,7 +242,7 @@ def _terrain_start(st: Stacked, fn) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _mle_dispatch(st: Stacked, o: dict):
-    """`mle.mle` on the batch, or `correlated.mle_gls` for one problem whose sigma has correlation times (and
+    """`mle.mle` on the batch, or `correlated.gls` for one problem whose sigma has correlation times (and
     whose residual covariance is not diagonal: with vanishing correlation it is the independent problem)."""
     x0, init_status, sigma, vce = _mle_start(st, o)
     robust, tol, itmax = o.get("robust", _mle.DEFAULT_ROBUST), o["tol_m"], o["max_iterations"]
@@ -262,7 +262,7 @@ def _mle_dispatch(st: Stacked, o: dict):
             raise ValueError("mle: the terrain option is not available with time-correlated errors (sigma "
                              "attitude_tau_s / position_tau_s)")
         if model.correlated:
-            return _correlated.mle_gls(st, x0[0], model, robust, vce, tol, itmax)[0]
+            return _correlated.gls(st, x0[0], model, robust, vce, tol, itmax)
         sigma = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
     res = _mle.mle(st, x0, sigma, robust, vce, tol, itmax, init_status, bias_deg, size_unknown, o.get("terrain"))
     if bias_deg and size_unknown:
@@ -389,7 +389,7 @@ def _learned_tau(st: Stacked, res: tuple, sigma, robust, vce, tol, itmax) -> tup
     got = _learned.learn_tau(clean, X[0], sigma, robust, vce, tol, itmax)
     if got is None:
         return res
-    tau, att, lls, (Xg, it, status, cond, cov, exg), chi2, m = got
+    _, att, _, (Xg, it, status, cond, cov, exg) = got
     if np.isfinite(Xg[0]).all():
         # a drift model may trade the target against the drift where the flight cannot tell them apart (a short
         # burst, a run of mistracked frames): kept only when its estimate lies within the first answer's
@@ -401,18 +401,15 @@ def _learned_tau(st: Stacked, res: tuple, sigma, robust, vce, tol, itmax) -> tup
         att_eff = att * float(np.sqrt(exg["variance_factor_pixel"][0]))
         if sigma.attitude_deg and att_eff > _starts.MAX_ATTITUDE_OVER_STATED * sigma.attitude_deg:
             return res
-    out = _learned.replace_with_learned(ex, tau, att, lls, chi2, m)
-    out.update({k: exg[k] for k in ("variance_factor_pixel", "variance_factor_range", "sigma0_sq", "vce_rounds")})
+    out = dict(exg)
+    # the rows the first solve rejected (left out of the drift model's data) stay rejected, with their residuals
+    rej = ex["rejected"]
+    out["rejected"] = rej | exg["rejected"]
+    for k in ("residuals", "residual_sigmas"):
+        out[k] = np.where(rej, ex[k], exg[k])
     # the attitude sigma the chosen model carries (variance components scale the whole pixel covariance)
     out["error_model_attitude_deg"] = out["error_model_attitude_deg"] * np.sqrt(exg["variance_factor_pixel"])
-    cov = cov * out["covariance_inflation"][0]
     return Xg, it + res[1], status, cond, cov, out
-
-
-def _mle_summaries(cov: np.ndarray) -> dict:
-    axes, vecs = _mle.ellipsoid(cov)
-    return {"cep50_m": _mle.cep_m(cov[:, :2, :2], 0.5), "cep90_m": _mle.cep_m(cov[:, :2, :2], 0.9),
-            "ellipsoid_semi_axes_1sigma_m": axes, "ellipsoid_axes": vecs}
 
 
 def _behind_camera(st: Stacked, X: np.ndarray) -> np.ndarray:
@@ -571,12 +568,9 @@ def solve(method: str, obs: Observations, **options) -> Estimate:
         if key in info:
             extras[key] = float(info[key])
     if method == "mle":
-        ax = info["ellipsoid_semi_axes_1sigma_m"].tolist()
-        s95 = np.sqrt(_mle.CHI2_3_95)
         extras.update({
             "cep50_m": float(info["cep50_m"]), "cep90_m": float(info["cep90_m"]),
-            "ellipsoid": {"semi_axes_1sigma_m": ax, "semi_axes_95pct_m": [v * s95 for v in ax],
-                          "axes": info["ellipsoid_axes"].T.tolist()},
+            "ellipsoid": uncertainty.ellipsoid_json(info["ellipsoid_semi_axes_1sigma_m"], info["ellipsoid_axes"]),
             "variance_factors": {"pixel": float(info["variance_factor_pixel"]),
                                  "range": float(info["variance_factor_range"])},
             "sigma0_sq": float(info["sigma0_sq"]),

@@ -8,14 +8,13 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-from scipy.special import erf, erfinv
 
 from pipeline.solve import bias_mixture, fit_checks
 from pipeline.solve import iterate as _iterate
 from pipeline.solve.estimate import Status
 from pipeline.solve.iterate import problem_scale_m, start_status
 from pipeline.solve.observations import Sigma
-from pipeline.solve.stacked import SINGULAR_DET, Stacked, condition_numbers, inverse3
+from pipeline.solve.stacked import SINGULAR_DET, Planes, Stacked, condition_numbers, evaluate, inverse3
 
 ROBUST_LOSSES = (None, "huber", "cauchy", "redescending")
 #: the default loss of `solve` and `solve_batch`
@@ -30,8 +29,6 @@ CAUCHY_C = 2.3849
 REDESCEND_A = 3.0
 REDESCEND_A_PIXEL = 3.44
 REDESCEND_B = 6.0
-#: 95 % quantile of chi-square with 3 degrees of freedom, for the 95 % ellipsoid
-CHI2_3_95 = 7.814727903251178
 #: the boresight bias prior when the sigma gives no attitude accuracy (deg)
 DEFAULT_BIAS_PRIOR_DEG = 0.5
 VCE_MAX_ROUNDS = 10
@@ -128,61 +125,6 @@ def base_variances(st: Stacked, X0: np.ndarray, sigma: Sigma):
     return var
 
 
-class _Planes:
-    """B problems as contiguous (n,b) planes for the batched kernel: M entries Mc (3,3,n,b), p4c (3,n,b), the
-    pixel planes (2,n,b), platform planes sc (3,n,b), ranges (n,b), the masks, and the inverse standard
-    deviations isd (3,n,b) of the u, v and range rows (1/sqrt of `base_variances` times the variance factors).
-    Numpy is slow on tiny trailing axes; with the problems on the last axis every operation, per-problem
-    values (b,) broadcast included, is one contiguous pass over n x b numbers."""
-
-    __slots__ = ("Mc", "has_pix", "has_range", "isd", "p4c", "pixc", "rng", "sc")
-
-    def __init__(self, Mc, p4c, pixc, sc, rng, has_pix, has_range, isd):
-        self.Mc, self.p4c, self.pixc, self.sc, self.rng = Mc, p4c, pixc, sc, rng
-        self.has_pix, self.has_range, self.isd = has_pix, has_range, isd
-
-    @classmethod
-    def from_stacked(cls, st: Stacked, var: np.ndarray) -> _Planes:
-        B, n = st.has_pix.shape
-        isd = np.empty((3, n, B))
-        np.divide(1.0, np.sqrt(var[:, :2 * n].reshape(B, n, 2).transpose(2, 1, 0)), out=isd[:2])
-        np.divide(1.0, np.sqrt(var[:, 2 * n:].T), out=isd[2])
-        c = np.ascontiguousarray
-        return cls(c(st.M.transpose(2, 3, 1, 0)), c(st.p4.transpose(2, 1, 0)), c(st.pix.transpose(2, 1, 0)),
-                   c(st.platform_m.transpose(2, 1, 0)), c(st.range_m.T), c(st.has_pix.T), c(st.has_range.T), isd)
-
-    def take(self, idx: np.ndarray) -> _Planes:
-        return _Planes(self.Mc[..., idx], self.p4c[..., idx], self.pixc[..., idx], self.sc[..., idx],
-                       self.rng[:, idx], self.has_pix[:, idx], self.has_range[:, idx], self.isd[..., idx])
-
-
-def _evaluate(pl: _Planes, X: np.ndarray):
-    """Standardized Jacobian J (3,3,n,b) (J[c, k] = d row / d X_c over the row's sigma, rows k = u, v, range of
-    each frame) and residuals E (3,n,b) at X (b,3); unusable rows (missing, q3 = 0, X on a platform) are zero;
-    and their mask ok (3,n,b). The arithmetic of `stacked.pixel_model` and `range_model`, on contiguous planes."""
-    n, b = pl.has_pix.shape
-    J = np.empty((3, 3, n, b))
-    E = np.empty((3, n, b))
-    ok = np.empty((3, n, b), dtype=bool)
-    Mc, isd = pl.Mc, pl.isd
-    Xp = X.T[:, None, :]  # (3,1,b): broadcasts over the frames
-    q = Mc[:, 0] * Xp[0] + Mc[:, 1] * Xp[1] + Mc[:, 2] * Xp[2] + pl.p4c  # (3,n,b)
-    okp = np.logical_and(pl.has_pix, q[2] != 0, out=ok[0])
-    ok[1] = okp
-    iw = 1.0 / np.where(okp, q[2], np.inf)  # 1/q3, 0 on unusable rows
-    uv = q[:2] * iw
-    s = iw * isd[:2]
-    for c in range(3):  # per coordinate, so that the temporaries stay (2,n,b) planes (in cache)
-        np.multiply(Mc[:2, c] - uv * Mc[2, c], s, out=J[c, :2])
-    np.multiply(pl.pixc - uv, np.where(okp, isd[:2], 0.0), out=E[:2])
-    d = Xp - pl.sc
-    dist = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    okr = np.logical_and(pl.has_range, dist > 0, out=ok[2])
-    np.multiply(d, isd[2] / np.where(okr, dist, np.inf), out=J[:, 2])
-    np.multiply(pl.rng - dist, np.where(okr, isd[2], 0.0), out=E[2])
-    return J, E, ok
-
-
 def _sum_rows(A: np.ndarray) -> np.ndarray:
     """(b,) sums over the rows (k, frame) of (3,n,b) planes."""
     return A.reshape(-1, A.shape[-1]).sum(axis=0)
@@ -197,10 +139,6 @@ def _cost_weights(E: np.ndarray, robust: str | None):
     """sum rho(e) (b,) and the IRLS weights rho'(e)/e (3,n,b) (None for the squared loss) of standardized E."""
     if robust is None:
         return 0.5 * _dot_rows(E, E), None
-    if robust == "huber":  # rho = 0.5 w e^2 + 0.5 c (|e| - c)^+ with w = c / max(|e|, c)
-        mx = np.maximum(np.abs(E), HUBER_C)
-        w = HUBER_C / mx
-        return 0.5 * (_dot_rows(w * E, E) + HUBER_C * _sum_rows(mx - HUBER_C)), w
     if robust == "redescending":
         rho_p, w_p = pixel_pair_redescending(E[0], E[1])
         rho_r, w_r = _redescending(E[2])
@@ -242,20 +180,17 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
         max_iterations: int, init_status: np.ndarray | None = None, bias_deg: float | None = None,
         bias_size_unknown: bool = True, terrain=None):
     """Returns X (B,3), iterations (B,), status (B,) int8, cond (B,) of the weighted design W^1/2 J,
-    covariance (B,3,3) m^2, and extras (B, ...) arrays: variance_factor_pixel, variance_factor_range, sigma0_sq,
-    vce_rounds, rejected (B,n,3) bool (u, v, range rows with zero weight), residual_sigmas (B,n,3) (the
-    standardized residuals, at the final X), the fit checks (`fit_checks`: chi2, chi2_dof, chi2_p, the
-    autocorrelations and drift flags, consistent, robust_spread (B,2), covariance_inflation) and, with bias_deg,
-    the boresight bias (bias_deg, bias_sigma_deg, bias_prior_deg, bias_target_correlation; bias_size_deg when
-    its size is averaged). The fit checks are taken at the iteration's solution, before the averaging.
+    covariance (B,3,3) m^2, and extras (B, ...) arrays (`finish`) and, with bias_deg, the boresight bias
+    (bias_deg, bias_sigma_deg, bias_prior_deg, bias_target_correlation; bias_size_deg when its size is
+    averaged). The fit checks are taken at the iteration's solution, before the averaging.
 
     robust "redescending" (the default of `solve`) runs Huber to convergence first (a convex start), then the
-    redescending loss from there. bias_deg > 0 estimates a constant boresight bias (two camera-frame angles,
-    seen as constant pixel offsets f * angle in u and v) jointly with the target, with a zero-mean Gaussian
-    prior of that standard deviation; it is eliminated from the normal equations (Schur complement), so the
-    target covariance is the marginal one. With bias_size_unknown, bias_deg is the largest bias: the answer is
-    then averaged over the bias's size (`bias_mixture`, the stated attitude variance split between the bias and
-    the frame-to-frame part unless the residuals drift), and position_m^2 I, a GNSS offset shared by the
+    redescending loss from there (`run`). bias_deg > 0 estimates a constant boresight bias (two camera-frame
+    angles, seen as constant pixel offsets f * angle in u and v) jointly with the target, with a zero-mean
+    Gaussian prior of that standard deviation; it is eliminated from the normal equations (Schur complement), so
+    the target covariance is the marginal one. With bias_size_unknown, bias_deg is the largest bias: the answer
+    is then averaged over the bias's size (`bias_mixture`, the stated attitude variance split between the bias
+    and the frame-to-frame part unless the residuals drift), and position_m^2 I, a GNSS offset shared by the
     segment, is added to the covariance.
 
     terrain=(fn, sigma_m): a soft prior on the target's height, fn(e_m, n_m) -> (up_m, dup_de, dup_dn) the
@@ -264,71 +199,166 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     covariance, the chi-square (one more observation) and the variance components' leverages; none where fn
     is not finite (off the terrain model).
 
-    Works on planes (`_Planes`): the normal equations as six (B,) entries, the 3x3 steps in closed form.
-    Converged problems are frozen once fewer than all are active.
+    Works on planes (`stacked.Planes`): the normal equations as six (B,) entries, the 3x3 steps in closed form.
     """
-    B = st.size
     X = np.array(X0, dtype=np.float64, copy=True)
     status, bad = start_status(X, init_status)
     X[bad] = 0.0
-    pl = _Planes.from_stacked(st, base_variances(st, X, sigma))
-    n = pl.has_pix.shape[0]
+    pl = Planes.from_stacked(st, base_variances(st, X, sigma))
+    a = None
     if bias_deg:
         fx, fy = st.focal_px()
         sb = np.deg2rad(bias_deg)
-        a = np.zeros((3, n, B))
+        a = np.zeros((3, *pl.has_pix.shape))
         a[0] = np.where(pl.has_pix, fx.T * sb, 0.0) * pl.isd[0]
         a[1] = np.where(pl.has_pix, fy.T * sb, 0.0) * pl.isd[1]
-    else:
-        a = None
-    it = _Iteration(st, pl, a, X, status, bad, X0, tol_m, max_iterations, vce)
-    it.terrain = terrain
-    it.bias_sigma_deg = bias_deg
-    it.bias_size_unknown = bias_size_unknown
+    m = White(st, pl, a, X, vce, terrain)
+    m.bias_sigma_deg, m.bias_size_unknown = bias_deg, bias_size_unknown
     # the stated attitude sigma is split between the bias and the frame-to-frame error (it is the largest bias)
-    it.split_attitude = bool(a is not None and bias_size_unknown and sigma.attitude_deg)
+    m.split_attitude = bool(a is not None and bias_size_unknown and sigma.attitude_deg)
     if bias_deg and bias_size_unknown and sigma.position_m:
         # GNSS errors wander over minutes: over a segment much of them is an offset shared by every frame, which
         # moves the target exactly as the platforms and shows in no residual; the covariance carries all of the
         # stated position variance as that offset (the rows keep it too, as frame-to-frame: the safe side)
-        it.position_m = sigma.position_m
-    if robust == "redescending":
-        it.run("huber")
-        it.robust_scale()
-        it.restart()
-        it.run("redescending")
-    else:
-        it.run(robust)
-    return it.finish(robust)
+        m.position_m = sigma.position_m
+    return run(m, st, X, status, bad, X0, robust, tol_m, max_iterations)
 
 
-class _Iteration:
-    """The state of the batched Levenberg-Marquardt / IRLS iteration of `mle` (all arrays over the B problems),
-    so that it can run in phases (a convex loss, then a redescending one from where it stopped)."""
+def run(m, st: Stacked, X: np.ndarray, status: np.ndarray, bad: np.ndarray, X0: np.ndarray, robust: str | None,
+        tol_m: float, max_iterations: int):
+    """The one `mle` iteration and finish of a model m (`White`, or `correlated.Correlated`): Levenberg-Marquardt
+    / IRLS by `iterate.drive` with m's loss; with the redescending loss Huber first, then the scale guard
+    (`robust_scale`), then the redescending loss from there. Returns `finish`'s tuple."""
+    iterations = np.zeros(st.size, dtype=np.int64)
+    centre = st.platform_m.mean(axis=1)
+    finite0 = np.isfinite(X0).all(axis=1)
+    bound = _iterate.DIVERGENCE_FACTOR * problem_scale_m(st, np.where(finite0[:, None], X0, centre))
+    active = ~bad
+    for phase in (("huber", "redescending") if robust == "redescending" else (robust,)):
+        if phase == "redescending":
+            robust_scale(m)
+            active = ~((status == Status.DIVERGED) | (status == Status.DEGENERATE)) & ~bad
+            status[active] = Status.MAX_ITERATIONS
+        m.start(phase)
+        _iterate.drive(m, X, status, active, iterations, bound, centre, tol_m, max_iterations, damped=m.damped)
+    return finish(m, X, status, iterations)
 
-    def __init__(self, st, pl, a, X, status, bad, X0, tol_m, max_iterations, vce):
+
+def robust_scale(m) -> None:
+    """The scale guard before the redescending phase: where the Huber fit's standardized residuals of a group
+    are more spread than its sigma says (1.4826 x median |e| beyond the MAD's own noise, ~1.17 / sqrt(count)),
+    that group's variances (the rejection thresholds and the covariance) scale with them (`m.rescale`), so that
+    a misfit model does not reject good data; the factors are kept in m.guard (a misfit, unlike variance
+    components)."""
+    E, ok = m.E, m.ok
+    for g, rows in ((0, slice(0, 2)), (1, slice(2, 3))):
+        e = np.where(ok[rows], np.abs(E[rows]), np.nan).reshape(-1, E.shape[-1])
+        cnt = ok[rows].reshape(-1, E.shape[-1]).sum(axis=0)
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mad = 1.4826 * np.nanmedian(e, axis=0)
+        big = np.isfinite(mad) & (cnt >= 4) & (mad > 1.0 + 2.34 / np.sqrt(np.maximum(cnt, 1)))
+        f = np.where(big, mad ** 2, 1.0)
+        m.rescale(np.arange(E.shape[-1]), g, f)
+        m.guard[:, g] = f
+
+
+def finish(m, X: np.ndarray, status: np.ndarray, iterations: np.ndarray):
+    """The one finish of every `mle` model m at its final iterate X (B,3) with its final weights: covariance,
+    condition number, fit checks, rejected rows and extras. Returns X, iterations, status, cond (B,),
+    covariance (B,3,3) and the extras (B, ...) arrays: variance_factor_pixel, variance_factor_range, sigma0_sq,
+    vce_rounds, rejected (B,n,3) bool (u, v, range rows with zero weight), residual_sigmas (B,n,3) (the
+    standardized residuals), residuals (px, m), the fit checks (`fit_checks`: chi2, chi2_dof, chi2_p, the
+    autocorrelations and drift flags, consistent, robust_spread (B,2)) and covariance_inflation: the trace of the
+    covariance reported over that of the model as stated.
+
+    m gives its standardized residual planes m.E (3,n,B), their mask m.ok, the weights m.wr (or None), the
+    scale guard m.guard and variance factors m.vf (B,2), and m.information(var_scale (B,2)) -> (the target's
+    information matrix (B,3,3), chi-square (B,)) with each group's (pixel, range) variances scaled by var_scale.
+    The chi-square is taken against the sigmas as stated (or as variance components estimated them); where
+    the residuals drift (lag-1 autocorrelation, unless m models the drift) the drifting group's variances are
+    inflated by (1 + rho) / (1 - rho), and where the chi-square test fails everything by its variance factor."""
+    E, ok, wr, guard = m.E, m.ok, m.wr, m.guard
+    B = X.shape[0]
+    failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
+    use = ok if wr is None else ok & (wr > 0)
+    dof = _sum_rows(use) - 3 + m.extra_dof()  # a bias angle costs a degree of freedom, its prior gives one back
+    cond = condition_numbers(m.information(np.ones((B, 2)))[0])
+    N0, chi2 = m.information(1.0 / guard)  # before the scale guard
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sigma0_sq = np.where(dof > 0, chi2 / dof, np.nan)
+    p = fit_checks.chi_square_p(chi2, dof)
+    # the residuals as the fit weighs them: a run of frames the robust loss (partly) rejects is no drift
+    Ew = E if wr is None else np.sqrt(wr) * E
+    # a slow drift under white noise hardly shows at lag 1 but does in the means over blocks of frames (batch
+    # means): the larger factor inflates; it does not call for the learned drift model (`methods._drifts`)
+    rho, drift, ratio, block, infl = [], [], [], [], []
+    for rows in (slice(0, 2), slice(2, 3)):
+        r, pairs = fit_checks.lag1_autocorrelation(Ew, use, rows)
+        d = fit_checks.acf_significant(r, pairs) & (not m.drift_modelled)
+        vr, blocks = fit_checks.batch_means_ratio(Ew, use, rows)
+        blk = fit_checks.batch_means_significant(vr, blocks) & (not m.drift_modelled)
+        rho.append(r), drift.append(d), ratio.append(vr), block.append(blk)
+        infl.append(np.maximum(fit_checks.acf_inflation(r, d), fit_checks.batch_means_inflation(vr, blk)))
+    N, chi2_s = m.information(np.stack(infl, axis=1))
+    p_fail = np.isfinite(p) & (p < fit_checks.CHI2_ALPHA)
+    # what `robust_scale` already folded in counts towards the chi-square's variance factor
+    with np.errstate(divide="ignore", invalid="ignore"):
+        vf_chi = np.where(p_fail & (dof > 0), np.maximum(chi2_s / dof, 1.0), 1.0)
+    cov, singular = _inverse_spd(N)
+    cov = cov * vf_chi[:, None, None]
+    cov0 = _inverse_spd(N0)[0]  # the covariance the model as stated gives
+    cov, cov0, E_report, mix_singular = m.adjust(cov, cov0, np.stack(infl, axis=1), vf_chi, failed,
+                                                 drift[0] | block[0])
+    singular |= mix_singular
+    status[singular & ~failed] = Status.DEGENERATE
+    failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
+    X[failed] = np.nan
+    cov[failed] = np.nan
+    cond[failed & ~singular] = np.nan
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inflation = np.trace(cov, axis1=1, axis2=2) / np.trace(cov0, axis1=1, axis2=2)
+    extras = {"variance_factor_pixel": m.vf[:, 0], "variance_factor_range": m.vf[:, 1],
+              "sigma0_sq": sigma0_sq, "vce_rounds": m.vce_rounds,
+              "rejected": (ok & (wr == 0)).transpose(2, 1, 0) if wr is not None else np.zeros((B, ok.shape[1], 3),
+                                                                                                dtype=bool),
+              "residual_sigmas": E_report.transpose(2, 1, 0).copy(),
+              "residuals": (E_report / m.isd()).transpose(2, 1, 0),
+              "chi2": chi2, "chi2_dof": dof.astype(np.float64), "chi2_p": p,
+              "autocorrelation_pixel": rho[0], "autocorrelation_range": rho[1],
+              "drift_pixel": drift[0], "drift_range": drift[1],
+              "batch_means_pixel": ratio[0], "batch_means_range": ratio[1],
+              "block_drift_pixel": block[0], "block_drift_range": block[1],
+              "consistent": ~(p_fail | drift[0] | drift[1] | block[0] | block[1] | (guard > 1).any(axis=1)),
+              "robust_spread": np.sqrt(guard),
+              "covariance_inflation": np.where(np.isfinite(inflation), inflation, 1.0)}
+    extras.update(m.bias_extras(cov, vf_chi))
+    return X, iterations, status, cond, cov, extras
+
+
+class White(_iterate.Model):
+    """The `mle` model with errors independent from frame to frame (a boresight bias and the terrain prior
+    optional), over B problems, as `iterate.drive` and `finish` use it: the state of the batched
+    Levenberg-Marquardt / IRLS iteration (all arrays over the B problems)."""
+
+    damped = True
+
+    def __init__(self, st, pl, a, X, vce, terrain):
         B = st.size
-        self.st, self.pl, self.a, self.X, self.status = st, pl, a, X, status
-        self.tol_m, self.max_iterations, self.vce = tol_m, max_iterations, vce
+        self.st, self.pl, self.a, self.X, self.vce, self.terrain = st, pl, a, X, vce, terrain
         self.vf = np.ones((B, 2))  # variance factors of the pixel and range groups
-        self.iterations = np.zeros(B, dtype=np.int64)
         self.vce_rounds = np.zeros(B, dtype=np.int64)
         self.z = np.zeros((3, B))  # the bias in prior standard deviations (u, v; the range row stays 0)
-        self.centre = st.platform_m.mean(axis=1)
-        finite0 = np.isfinite(X0).all(axis=1)
-        self.bound = _iterate.DIVERGENCE_FACTOR * problem_scale_m(st, np.where(finite0[:, None], X0, self.centre))
-        self.bad = bad
-        self.active = ~bad
+        self.guard = np.ones((B, 2))  # `robust_scale`'s factors: a misfit, unlike variance components
         self.bias_sigma_deg = None
         self.position_m = 0.0  # the stated position sigma, when the GNSS error is taken as a shared offset
         self.bias_size_unknown = False
         self.split_attitude = False
-        self.guard = np.ones((B, 2))  # `robust_scale`'s factors: a misfit, unlike variance components
-        self.terrain = None
+        self.mix = None
 
     def _eval(self, pl, a, X, z, robust):
         """J, bias-corrected E, ok, z, cost, IRLS weights at X (the sub-batch of pl, a, z)."""
-        J, E, ok = _evaluate(pl, X)
+        J, E, ok = evaluate(pl, X)
         if a is not None:
             E, z = _profile_bias(E, a, robust, z.copy())
         cost, w = _cost_weights(E, robust)
@@ -338,29 +368,83 @@ class _Iteration:
             cost = cost + 0.5 * _terrain_rows(self.terrain, X)[1] ** 2
         return J, E, ok, z, cost, w
 
-    def restart(self):
-        """Make every problem that has not failed active again (it must converge again with the next loss)."""
-        self.active = ~((self.status == Status.DIVERGED) | (self.status == Status.DEGENERATE)) & ~self.bad
-        self.status[self.active] = Status.MAX_ITERATIONS
+    def start(self, robust):
+        """Evaluate every problem at X for this loss; Newton (the loss's curvature in the normal matrix) only
+        where it is convex or nearly so."""
+        self.robust = robust
+        self.J, self.E, self.ok, self.z, self.cost, self.wr = self._eval(self.pl, self.a, self.X, self.z, robust)
+        self.newton_ok = np.full(self.st.size, robust in ("huber", "cauchy") and self.a is None)
 
-    def robust_scale(self):
-        """Fold a robust scale of the Huber fit's residuals into the sigmas before the redescending phase: where
-        the residuals of a group are more spread than its sigma says (1.4826 x median |e| > 1), the rejection
-        thresholds (and the covariance) scale with them, so that a misfit model does not reject good data."""
-        E, ok = self.E, self.ok
-        for g, rows in ((0, slice(0, 2)), (1, slice(2, 3))):
-            e = np.where(ok[rows], np.abs(E[rows]), np.nan).reshape(-1, E.shape[-1])
-            cnt = ok[rows].reshape(-1, E.shape[-1]).sum(axis=0)
-            with np.errstate(all="ignore"), warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                mad = 1.4826 * np.nanmedian(e, axis=0)
-            # only a spread the MAD shows beyond its own noise (standard error ~1.17 / sqrt(count))
-            big = np.isfinite(mad) & (cnt >= 4) & (mad > 1.0 + 2.34 / np.sqrt(np.maximum(cnt, 1)))
-            f = np.where(big, mad ** 2, 1.0)
-            self._rescale_group(np.arange(E.shape[-1]), g, f)
-            self.guard[:, g] = f
+    def _sub(self, idx):
+        """(full, the arrays of problems idx) without copies when idx is the whole batch."""
+        full = idx.size == self.st.size
+        pick = (lambda x: x) if full else (lambda x: None if x is None else x[..., idx])
+        return full, pick
 
-    def _rescale_group(self, idx, g, factor):
+    def step(self, idx, X, lam):
+        _, pick = self._sub(idx)
+        Ji, Ei, ai, wi = pick(self.J), pick(self.E), pick(self.a), pick(self.wr)
+        if self.robust is None:
+            N, g = _normal(Ji, Ei, None)
+        else:
+            nok = pick(self.newton_ok)
+            curv = _curvature(Ei, self.robust) if nok.any() else wi
+            N, g = _normal(Ji, Ei, wi, np.where(nok, curv, wi))
+        if ai is not None:
+            _bias_schur(N, Ji, ai, wi)
+        if self.terrain is not None:
+            _add_terrain(N, g, *_terrain_rows(self.terrain, X))
+        dX, singular, _, _ = _solve3(N, g, lam)
+        return dX, singular
+
+    def trial(self, idx, Xn):
+        full, pick = self._sub(idx)
+        self._trial = self._eval(self.pl if full else self.pl.take(idx), pick(self.a), Xn,
+                                 self.z if full else self.z[:, idx], self.robust)
+        return self._trial[4] <= self.cost[idx] * (1 + 1e-12) + 1e-300
+
+    def accept(self, idx, accept):
+        Jn, En, okn, zn, cost_n, wr_n = self._trial
+        a_idx = idx[accept]
+        if a_idx.size == self.st.size:  # every problem moved: take the new arrays as they are
+            self.J, self.E, self.ok, self.wr, self.z = Jn, En, okn, wr_n, zn
+        else:
+            sel = accept if a_idx.size != idx.size else slice(None)
+            self.J[..., a_idx], self.E[..., a_idx], self.ok[..., a_idx] = Jn[..., sel], En[..., sel], okn[..., sel]
+            self.z[:, a_idx] = zn[:, sel]
+            if self.wr is not None:
+                self.wr[..., a_idx] = wr_n[..., sel]
+        self.cost[a_idx] = cost_n[accept]
+        # a rejected Newton step is retried as the IRLS step (a descent step) before damping
+        retry = ~accept & self.newton_ok[idx] if self.robust is not None else np.zeros(idx.size, dtype=bool)
+        if self.robust in ("huber", "cauchy") and self.a is None:
+            self.newton_ok[a_idx] = True
+        self.newton_ok[idx[retry]] = False
+        return retry
+
+    def converged(self, d_idx):
+        """Variance components at convergence: the problems whose factors changed go on."""
+        if not self.vce:
+            return np.zeros(d_idx.size, dtype=bool)
+        factors, usable = _vce_factors(self.J[..., d_idx], self.E[..., d_idx], self.ok[..., d_idx], self.robust,
+                                       None if self.a is None else self.a[..., d_idx],
+                                       None if self.terrain is None else _terrain_rows(self.terrain, self.X[d_idx]))
+        more = (np.abs(factors - 1) > VCE_TOL) & usable
+        again = more.any(axis=1) & (self.vce_rounds[d_idx] < VCE_MAX_ROUNDS)
+        change = np.where(usable & again[:, None], factors, 1.0)
+        self.vce_rounds[d_idx] += again
+        rd = d_idx[again]
+        if rd.size:  # rescale the standardized rows: sigma_g -> sigma_g sqrt(factor_g)
+            self.rescale(rd, 0, change[again, 0])
+            self.rescale(rd, 1, change[again, 1])
+            J, E, _, z, cost, w_rd = self._eval(self.pl.take(rd), None if self.a is None else self.a[..., rd],
+                                                self.X[rd], self.z[:, rd], self.robust)
+            self.J[..., rd], self.E[..., rd], self.z[:, rd], self.cost[rd] = J, E, z, cost
+            if self.wr is not None:
+                self.wr[..., rd] = w_rd
+        return again
+
+    def rescale(self, idx, g, factor):
         """Multiply the variances of group g (0 pixels, 1 ranges) of problems idx by factor (len(idx),)."""
         self.vf[idx, g] *= factor
         s = 1.0 / np.sqrt(factor)
@@ -369,215 +453,50 @@ class _Iteration:
                                                                           else ()):
             arr[..., idx] *= s
 
-    def run(self, robust):
-        """Iterate the active problems to convergence with this loss (variance components between rounds)."""
-        pl, a, X, status = self.pl, self.a, self.X, self.status
-        B = self.st.size
-        self.J, self.E, self.ok, self.z, self.cost, self.wr = self._eval(pl, a, X, self.z, robust)
-        lam = np.zeros(B)
-        # Newton (the loss's curvature in the normal matrix) only where it is convex or nearly so
-        newton_ok = np.full(B, robust in ("huber", "cauchy") and a is None)
-        centre, bound, tol_m, vce = self.centre, self.bound, self.tol_m, self.vce
-        active = self.active
-        for _ in range(self.max_iterations):
-            idx = np.flatnonzero(active)
-            if idx.size == 0:
-                break
-            J, E, ok, wr, z = self.J, self.E, self.ok, self.wr, self.z
-            full = idx.size == B
-            Ji, Ei = (J, E) if full else (J[..., idx], E[..., idx])
-            ai = a if (full or a is None) else a[..., idx]
-            wi = wr if (full or wr is None) else wr[..., idx]
-            if robust is None:
-                N, g = _normal(Ji, Ei, None)
-            else:
-                nok = newton_ok if full else newton_ok[idx]
-                curv = _curvature(Ei, robust) if nok.any() else wi
-                N, g = _normal(Ji, Ei, wi, np.where(nok, curv, wi))
-            if ai is not None:
-                _bias_schur(N, Ji, ai, wi)
-            if self.terrain is not None:
-                _add_terrain(N, g, *_terrain_rows(self.terrain, X if full else X[idx]))
-            lam_i = lam if full else lam[idx]
-            dX, singular, _, _ = _solve3(N, g, lam_i)
-            self.iterations[idx] += 1
-            Xi = X if full else X[idx]
-            Xn = Xi + np.where(singular[:, None], 0.0, dX)
-            finite = np.isfinite(Xn).all(axis=1)
-            cen = centre if full else centre[idx]
-            exploded = ~finite | (np.sqrt(((Xn - cen) ** 2).sum(axis=1)) > (bound if full else bound[idx]))
-            Xn = np.where(exploded[:, None], Xi, Xn)
-            Jn, En, okn, zn, cost_n, wr_n = self._eval(pl if full else pl.take(idx), ai, Xn,
-                                                         z if full else z[:, idx], robust)
-            old = self.cost[idx]
-            accept = ~singular & ~exploded & (cost_n <= old * (1 + 1e-12) + 1e-300)
-            step_norm = np.where(singular, np.inf, np.sqrt((dX * dX).sum(axis=1)))
-            a_idx = idx[accept]
-            X[a_idx] = Xn[accept]
-            if full and a_idx.size == B:  # every problem moved: take the new arrays as they are
-                self.J, self.E, self.ok, self.wr, self.z = Jn, En, okn, wr_n, zn
-            else:
-                sel = accept if a_idx.size != idx.size else slice(None)
-                J[..., a_idx], E[..., a_idx], ok[..., a_idx] = Jn[..., sel], En[..., sel], okn[..., sel]
-                z[:, a_idx] = zn[:, sel]
-                if wr is not None:
-                    wr[..., a_idx] = wr_n[..., sel]
-            self.cost[a_idx] = cost_n[accept]
-            lam[a_idx] = np.where(lam[a_idx] / 10 < 1e-9, 0.0, lam[a_idx] / 10)
-            rej = idx[~accept]
-            # a rejected Newton step is retried as the IRLS step (a descent step) before damping
-            retry = newton_ok[rej] if robust is not None else np.zeros(rej.size, dtype=bool)
-            if robust in ("huber", "cauchy") and a is None:
-                newton_ok[a_idx] = True
-            newton_ok[rej[retry]] = False
-            rej = rej[~retry]
-            lam[rej] = np.where(lam[rej] == 0, 1e-4, lam[rej] * 10)
-            small = step_norm <= tol_m
-            inner_done = small & ~singular & ~exploded
-            st_idx = status[idx]
-            st_idx[singular & ~small] = Status.DEGENERATE
-            st_idx[exploded & ~singular] = Status.DIVERGED
-            still = ~(singular & ~small) & ~(exploded & ~singular) & ~inner_done
-            # damping that cannot help any more: the minimum along every direction is reached
-            stuck = ~accept & (lam[idx] > 1e12)
-            inner_done |= stuck & still
-            still &= ~stuck
-            if vce and inner_done.any():
-                d_idx = idx[inner_done]
-                J, E, ok = self.J, self.E, self.ok
-                factors, usable = _vce_factors(J[..., d_idx], E[..., d_idx], ok[..., d_idx], robust,
-                                               None if a is None else a[..., d_idx],
-                                               None if self.terrain is None else
-                                               _terrain_rows(self.terrain, X[d_idx]))
-                more = (np.abs(factors - 1) > VCE_TOL) & usable
-                again = more.any(axis=1) & (self.vce_rounds[d_idx] < VCE_MAX_ROUNDS)
-                change = np.where(usable & again[:, None], factors, 1.0)
-                self.vce_rounds[d_idx] += again
-                rd = d_idx[again]
-                if rd.size:  # rescale the standardized rows: sigma_g -> sigma_g sqrt(factor_g)
-                    ch = change[again]
-                    self._rescale_group(rd, 0, ch[:, 0])
-                    self._rescale_group(rd, 1, ch[:, 1])
-                    J, E, ok, z, cost, w_rd = self._eval(pl.take(rd), None if a is None else a[..., rd], X[rd],
-                                                         self.z[:, rd], robust)
-                    self.J[..., rd], self.E[..., rd], self.z[:, rd], self.cost[rd] = J, E, z, cost
-                    if self.wr is not None:
-                        self.wr[..., rd] = w_rd
-                    lam[rd] = 0.0
-                keep = np.zeros(idx.size, dtype=bool)
-                keep[np.flatnonzero(inner_done)[again]] = True
-                inner_done &= ~keep
-                still |= keep
-            st_idx[inner_done] = Status.CONVERGED
-            status[idx] = st_idx
-            active[idx] = still
-        self.active = active
+    def extra_dof(self):
+        return 0 if self.terrain is None else _terrain_rows(self.terrain, self.X)[2]
 
-    def finish(self, robust):
-        """Covariance, condition number, fit checks and extras at the final iterate with the final weights."""
-        X, status, a = self.X, self.status, self.a
-        J, E, ok, wr = self.J, self.E, self.ok, self.wr
-        B = self.st.size
-        failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
-        use = ok if wr is None else ok & (wr > 0)
-        m = _sum_rows(use)
-        WE = E if wr is None else wr * E
-        # against the sigmas as stated (or as variance components estimated them), before `robust_scale`
-        chi2 = _dot_rows(WE[:2], E[:2]) * self.guard[:, 0] + _dot_rows(WE[2:], E[2:]) * self.guard[:, 1]
-        dof = m - 3  # a bias angle costs a degree of freedom, its prior gives one back
-        if a is not None:
+    def isd(self):
+        return self.pl.isd
+
+    def _rows(self, var_scale):
+        """(3,1,B) row scale of each group's variances scaled by var_scale (B,2)."""
+        return (1.0 / np.sqrt(var_scale[:, [0, 0, 1]].T))[:, None, :]
+
+    def information(self, var_scale):
+        s = self._rows(var_scale)
+        Js, Es, wr = self.J * s, self.E * s, self.wr
+        N6, _ = _normal(Js, Es, wr)
+        chi2 = _dot_rows(Es if wr is None else wr * Es, Es)
+        if self.a is not None:
+            self.hs = _bias_schur(N6, Js, self.a * s, wr)
             chi2 = chi2 + (self.z * self.z).sum(axis=0)
-        tr = None if self.terrain is None else _terrain_rows(self.terrain, X)
-        if tr is not None:  # the terrain prior is one more observation
-            chi2 = chi2 + tr[1] ** 2
-            dof = dof + tr[2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            sigma0_sq = np.where(dof > 0, chi2 / dof, np.nan)
-        p = fit_checks.chi_square_p(chi2, dof)
-        # the residuals as the fit weighs them: a run of frames the robust loss (partly) rejects is no drift
-        Ew = E if wr is None else np.sqrt(wr) * E
-        rho_pix, pairs_pix = fit_checks.lag1_autocorrelation(Ew, use, slice(0, 2))
-        rho_rng, pairs_rng = fit_checks.lag1_autocorrelation(Ew, use, slice(2, 3))
-        acf_pix = fit_checks.acf_significant(rho_pix, pairs_pix)
-        acf_rng = fit_checks.acf_significant(rho_rng, pairs_rng)
-        infl_pix = fit_checks.acf_inflation(rho_pix, acf_pix)
-        infl_rng = fit_checks.acf_inflation(rho_rng, acf_rng)
-        # a slow drift under white noise hardly shows at lag 1 but does in the means over blocks of frames
-        # (batch means): the larger factor inflates; it does not call for the learned drift model (`_drifts`)
-        vr_pix, nb_pix = fit_checks.batch_means_ratio(Ew, use, slice(0, 2))
-        vr_rng, nb_rng = fit_checks.batch_means_ratio(Ew, use, slice(2, 3))
-        blk_pix = fit_checks.batch_means_significant(vr_pix, nb_pix)
-        blk_rng = fit_checks.batch_means_significant(vr_rng, nb_rng)
-        infl_pix = np.maximum(infl_pix, fit_checks.batch_means_inflation(vr_pix, blk_pix))
-        infl_rng = np.maximum(infl_rng, fit_checks.batch_means_inflation(vr_rng, blk_rng))
-        N6, _ = _normal(J, E, wr)
-        if a is not None:
-            hs = _bias_schur(N6, J, a, wr)
-        if tr is not None:
-            _add_terrain(N6, None, *tr)
-        g = np.sqrt(np.stack([self.guard[:, 0], self.guard[:, 0], self.guard[:, 1]]))[:, None, :]
-        N60, _ = _normal(J * g, E, wr)
-        if a is not None:
-            _bias_schur(N60, J * g, a * g, wr)
-        if tr is not None:
-            _add_terrain(N60, None, *tr)
-        cov0 = _cov_from_six(N60)[0]  # the covariance the model as stated gives
-        # inflate: the drifting groups' variances by their autocorrelation factor, then everything by the
-        # chi-square's variance factor when the test fails
-        s = np.stack([1.0 / np.sqrt(infl_pix)] * 2 + [1.0 / np.sqrt(infl_rng)])[:, None, :]
-        Js = J * s
-        Es = E * s
-        N6s, _ = _normal(Js, Es, wr)
-        if a is not None:
-            hs = _bias_schur(N6s, Js, a * s, wr)
-        if tr is not None:
-            _add_terrain(N6s, None, *tr)
-        chi2_s = _dot_rows(Es if wr is None else wr * Es, Es) + (0.0 if a is None else (self.z ** 2).sum(axis=0))
-        p_fail = np.isfinite(p) & (p < fit_checks.CHI2_ALPHA)
-        # what `robust_scale` already folded in counts towards the chi-square's variance factor
-        with np.errstate(divide="ignore", invalid="ignore"):
-            vf_chi = np.where(p_fail & (dof > 0), np.maximum(chi2_s / dof, 1.0), 1.0)
-        cov, singular = _cov_from_six(N6s)
-        mix = None
-        cov = cov * vf_chi[:, None, None]
-        E_report = E
-        if a is not None and self.bias_size_unknown:
-            # a misfit (the robust scale guard, the chi-square's variance factor) scales every stated sigma:
-            # the bias prior's and the shared GNSS offset's too (told wrong by that factor, they are likely all
-            # wrong alike); the shared offset takes the larger of the two groups' factors
-            mix, mix0, E_report = self._mixture(s / np.sqrt(vf_chi), s * g, g, failed, acf_pix | blk_pix)
-            misfit = vf_chi * self.guard.max(axis=1)
-            eye = self.position_m ** 2 * np.eye(3)
-            cov = np.where(failed[:, None, None], cov, mix["covariance"] + misfit[:, None, None] * eye)
-            cov0 = np.where(failed[:, None, None], cov0, mix0["covariance"] + eye)
-            singular |= mix["singular"]
-        cond = condition_numbers(_full3(N6))
-        status[singular & ~failed] = Status.DEGENERATE
-        failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
-        X[failed] = np.nan
-        cov[failed] = np.nan
-        cond[failed & ~singular] = np.nan
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inflation = np.trace(cov, axis1=1, axis2=2) / np.trace(cov0, axis1=1, axis2=2)
-        extras = {"variance_factor_pixel": self.vf[:, 0], "variance_factor_range": self.vf[:, 1],
-                  "sigma0_sq": sigma0_sq, "vce_rounds": self.vce_rounds,
-                  "rejected": (ok & (wr == 0)).transpose(2, 1, 0) if wr is not None else np.zeros((B, ok.shape[1], 3),
-                                                                                                    dtype=bool),
-                  "residual_sigmas": E_report.transpose(2, 1, 0).copy(),
-                  "residuals": (E_report / self.pl.isd).transpose(2, 1, 0),
-                  "chi2": chi2, "chi2_dof": dof.astype(np.float64), "chi2_p": p,
-                  "autocorrelation_pixel": rho_pix, "autocorrelation_range": rho_rng,
-                  "drift_pixel": acf_pix, "drift_range": acf_rng,
-                  "batch_means_pixel": vr_pix, "batch_means_range": vr_rng,
-                  "block_drift_pixel": blk_pix, "block_drift_range": blk_rng,
-                  "consistent": ~(p_fail | acf_pix | acf_rng | blk_pix | blk_rng | (self.guard > 1).any(axis=1)),
-                  "robust_spread": np.sqrt(self.guard),
-                  "covariance_inflation": np.where(np.isfinite(inflation), inflation, 1.0)}
-        if mix is not None:
-            extras.update(_mixture_summary(self, mix, cov))
-        elif a is not None:
-            extras.update(_bias_summary(self, cov, hs, vf_chi))
-        return X, self.iterations, status, cond, cov, extras
+        if self.terrain is not None:  # the terrain prior is one more observation
+            jt, et, _ = _terrain_rows(self.terrain, self.X)
+            _add_terrain(N6, None, jt, et)
+            chi2 = chi2 + et ** 2
+        return _full3(N6), chi2
+
+    def adjust(self, cov, cov0, infl, vf_chi, failed, drift_pix):
+        """The bias averaged over its size (`_mixture`) where it is unknown: (cov, cov0, E_report, singular)."""
+        if self.a is None or not self.bias_size_unknown:
+            return cov, cov0, self.E, np.zeros(cov.shape[0], dtype=bool)
+        # a misfit (the robust scale guard, the chi-square's variance factor) scales every stated sigma: the bias
+        # prior's and the shared GNSS offset's too (told wrong by that factor, they are likely all wrong alike);
+        # the shared offset takes the larger of the two groups' factors
+        s, g = self._rows(infl), self._rows(1.0 / self.guard)
+        mix, mix0, E_report = self._mixture(s / np.sqrt(vf_chi), s * g, g, failed, drift_pix)
+        self.mix = mix
+        misfit = vf_chi * self.guard.max(axis=1)
+        eye = self.position_m ** 2 * np.eye(3)
+        cov = np.where(failed[:, None, None], cov, mix["covariance"] + misfit[:, None, None] * eye)
+        cov0 = np.where(failed[:, None, None], cov0, mix0["covariance"] + eye)
+        return cov, cov0, E_report, mix["singular"]
+
+    def bias_extras(self, cov, vf_chi) -> dict:
+        if self.mix is not None:
+            return _mixture_summary(self, self.mix, cov)
+        return {} if self.a is None else _bias_summary(self, cov, self.hs, vf_chi)
 
     def _with_terrain(self, J, E, a, w, share):
         """The mixture's arguments with the terrain prior (if any) at self.X as one more frame: its range row
@@ -610,7 +529,7 @@ class _Iteration:
         J, E, ok = self.J, self.E + self.a * self.z[:, None, :], self.ok
         for rnd in range(2):
             if rnd:
-                J, E, ok = _evaluate(self.pl, self.X)
+                J, E, ok = evaluate(self.pl, self.X)
             a0[:2] = np.where(ok[:2], self.a[:2], 0.0)
             w = np.where(ok, 1.0 if self.wr is None else self.wr, 0.0)
             a_mix = a0 * s_bias
@@ -628,7 +547,7 @@ class _Iteration:
         mix["bias_var"] = mix["bias_var"] * (unit * unit)[:, None]
         mix["bias_cross"] = mix["bias_cross"] * unit[:, None, None]
         mix["prior_scale"] = unit
-        E_report = _evaluate(self.pl, self.X)[1]
+        E_report = evaluate(self.pl, self.X)[1]
         E_report[:2] -= a0[:2] * mix["bias"].T[:, None, :]
         return mix, mix0, E_report
 
@@ -660,10 +579,6 @@ def _full3(N6):
     return np.stack([a, b, c, b, d, f, c, f, i], axis=1).reshape(-1, 3, 3)
 
 
-def _cov_from_six(N6):
-    return _inverse_spd(_full3(N6))
-
-
 def _profile_bias(E, a, robust, z):
     """The bias-corrected residuals E - a z (3,n,b) and z (3,b): the bias (in prior standard deviations) that
     minimizes sum rho(E - a z) + |z|^2 / 2 for the u and v rows (a few IRLS rounds from the previous z)."""
@@ -689,7 +604,7 @@ def _bias_schur(N, J, a, w):
     return out
 
 
-def _bias_summary(it: _Iteration, cov, hs, vf_chi) -> dict:
+def _bias_summary(it: White, cov, hs, vf_chi) -> dict:
     """The bias estimate (B,2) deg (u: about the camera's vertical axis, v: about its horizontal axis, as
     pixel offsets / f), its posterior standard deviation and its correlation with the target (B,2,3)."""
     B = cov.shape[0]
@@ -707,7 +622,7 @@ def _bias_summary(it: _Iteration, cov, hs, vf_chi) -> dict:
     return {"bias_deg": bias, "bias_sigma_deg": sd, "bias_target_correlation": corr, "bias_prior_deg": sb}
 
 
-def _mixture_summary(it: _Iteration, mix: dict, cov) -> dict:
+def _mixture_summary(it: White, mix: dict, cov) -> dict:
     """`_bias_summary` from the bias mixture: the posterior mean bias (B,2) deg, its standard deviation, its
     correlation with the target (B,2,3), the prior's standard deviation (B,2) (the mixture's: the largest bias,
     scaled by a misfit, times the rms of PHI_GRID) and the bias size the flight supports (B,) (the posterior
@@ -757,84 +672,17 @@ def _vce_factors(J, E, ok, robust, a=None, terrain_rows=None):
     lev = quad if w is None else w * quad
     q = E * E if w is None else w * E * E
     use = ok if w is None else ok & (w > 0)
-    b = E.shape[-1]
-    out = np.ones((b, 2))
-    usable = np.zeros((b, 2), dtype=bool)
-    for g, rows in ((0, slice(0, 2)), (1, slice(2, 3))):
-        sel = use[rows]
-        red = _sum_rows(np.where(sel, 1.0 - lev[rows], 0.0))
-        qs = _sum_rows(np.where(sel, q[rows], 0.0))
-        usable[:, g] = red >= 0.5
-        with np.errstate(divide="ignore", invalid="ignore"):
-            out[:, g] = np.where(usable[:, g], qs / red, 1.0)
-        usable[:, g] &= np.isfinite(out[:, g]) & (out[:, g] > 0)
-        out[:, g] = np.where(usable[:, g], out[:, g], 1.0)
-    return out, usable
+    groups = (slice(0, 2), slice(2, 3))
+    return helmert(np.stack([_sum_rows(np.where(use[r], q[r], 0.0)) for r in groups], axis=1),
+                   np.stack([_sum_rows(np.where(use[r], 1.0 - lev[r], 0.0)) for r in groups], axis=1))
 
 
-# ---- accuracy summaries from the covariance ----------------------------------------------------------------
-
-_Q_GRID = np.linspace(0.0, 1.0, 257)
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(64)
-_GL_T = 0.5 * np.pi * _GL_X
-_CEP_TABLES: dict[float, np.ndarray] = {}
-
-
-def _prob_within(rho: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """P(|e| <= rho) for e ~ N(0, diag(1, q^2)), elementwise over rho, q (q <= 1).
-
-    Conditioning on the major component z1 = rho sin t: P = int_{-pi/2}^{pi/2} phi(rho sin t)
-    erf(rho cos t / (sqrt(2) q)) rho cos t dt, by 64-point Gauss-Legendre (smooth integrand; the steep erf at
-    the ends is damped by cos t).
-    """
-    t, w = _GL_T, _GL_W
-    rho = rho[:, None]
-    qq = np.maximum(q, 1e-12)[:, None]
-    z1 = rho * np.sin(t)
-    f = np.exp(-0.5 * z1 * z1) / np.sqrt(2 * np.pi) * erf(rho * np.cos(t) / (np.sqrt(2) * qq)) * rho * np.cos(t)
-    return 0.5 * np.pi * (f * w).sum(axis=1)
-
-
-def _cep_table(p: float) -> np.ndarray:
-    """rho_p(q) on _Q_GRID: the radius, in units of the major standard deviation, holding probability p."""
-    table = _CEP_TABLES.get(p)
-    if table is None:
-        lo = np.full(_Q_GRID.shape, np.sqrt(2.0) * erfinv(p))  # the 1-D quantile: q = 0
-        hi = np.full(_Q_GRID.shape, np.sqrt(-2.0 * np.log1p(-p)))  # the circular one: q = 1
-        lo, hi = lo * (1 - 1e-9), hi * (1 + 1e-9)
-        for _ in range(44):  # the bracket is within a factor 2.3: 2^-44 relative
-            mid = 0.5 * (lo + hi)
-            below = _prob_within(mid, _Q_GRID) < p
-            lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
-        table = _CEP_TABLES[p] = 0.5 * (lo + hi)
-    return table
-
-
-def cep_m(cov_xy: np.ndarray, p: float) -> np.ndarray:
-    """(B,) radius of the circle around the estimate that holds probability p of the horizontal error, for
-    (B,2,2) covariances of a zero-mean 2D Gaussian.
-
-    With principal standard deviations s1 >= s2 (closed-form 2x2 eigenvalues) the radius is s1 rho_p(s2/s1);
-    rho_p is tabulated once per p on 257 ratios (exact integral `_prob_within`, bisection) and interpolated
-    linearly (relative error < 1e-5 against a 1025-point table).
-    """
-    a, b, c = cov_xy[:, 0, 0], cov_xy[:, 0, 1], cov_xy[:, 1, 1]
-    mean = 0.5 * (a + c)
-    half = np.sqrt(0.25 * (a - c) ** 2 + b * b)
-    s1 = np.sqrt(np.maximum(mean + half, 0.0))
-    s2 = np.sqrt(np.maximum(mean - half, 0.0))
-    ok = np.isfinite(s1) & (s1 > 0)
-    q = np.where(ok, s2 / np.where(ok, s1, 1.0), 1.0)
-    return np.where(ok, s1 * np.interp(q, _Q_GRID, _cep_table(float(p))), np.nan)
-
-
-def ellipsoid(cov: np.ndarray):
-    """(B,3) 1-sigma semi-axes (m, ascending), (B,3,3) axes as columns, from (B,3,3) covariances;
-    the 95 % semi-axes are sqrt(CHI2_3_95) times the 1-sigma ones."""
-    good = np.isfinite(cov).all(axis=(1, 2))
-    safe = np.where(good[:, None, None], cov, np.eye(3))
-    ev, vec = np.linalg.eigh(safe)
-    axes = np.sqrt(np.maximum(ev, 0.0))
-    axes[~good] = np.nan
-    vec[~good] = np.nan
-    return axes, vec
+def helmert(q: np.ndarray, red: np.ndarray):
+    """The one Helmert/Foerstner variance-component step of every `mle` model: factors (b,2) of the pixel and
+    range groups, each group's weighted r^T C^-1 r q (b,2) over its redundancy red (b,2) (rows with weight minus
+    the trace of their share of the hat matrix), and whether usable (redundancy >= 0.5, a finite factor > 0;
+    else 1)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        f = np.where(red >= 0.5, q / red, 1.0)
+    usable = (red >= 0.5) & np.isfinite(f) & (f > 0)
+    return np.where(usable, f, 1.0), usable

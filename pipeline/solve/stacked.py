@@ -106,10 +106,6 @@ class Stacked:
         """(B,n) sign of det(M): P and -P project alike, the sign says which side of the camera is 'front'."""
         return np.where(self.det_M() < 0, -1.0, 1.0)
 
-    def camera_centres_m(self) -> np.ndarray:
-        """(B,n,3) camera centres, the right null vector of P: C = -M^-1 p4."""
-        return -np.linalg.solve(self.M, self.p4[..., None])[..., 0]
-
     def focal_px(self) -> tuple[np.ndarray, np.ndarray]:
         """(B,n) focal lengths fx, fy in px from the rows m1, m2, m3 of M = lambda K R (zero skew assumed):
         m1 x m3 = lambda^2 fx r1 x r3, so fx = |m1 x m3| / |m3|^2 = sqrt(|m1|^2 |m3|^2 - (m1.m3)^2) / |m3|^2,
@@ -127,6 +123,62 @@ class Stacked:
         q2 = (m3 @ X[:, :, None])[..., 0] + self.p4[..., 2]
         n3 = np.sqrt(self._gram()[..., 2, 2])
         return q2 * self.depth_sign() / np.where(n3 > 0, n3, np.inf)
+
+
+class Planes:
+    """B problems as contiguous (n,b) planes for the batched kernels: M entries Mc (3,3,n,b), p4c (3,n,b), the
+    pixel planes (2,n,b), platform planes sc (3,n,b), ranges (n,b), the masks, and the inverse standard
+    deviations isd (3,n,b) of the u, v and range rows (1/sqrt of `mle.base_variances` times the variance
+    factors; 1 for the unweighted models). Numpy is slow on tiny trailing axes; with the problems on the last
+    axis every operation, per-problem values (b,) broadcast included, is one contiguous pass over n x b
+    numbers."""
+
+    __slots__ = ("Mc", "has_pix", "has_range", "isd", "p4c", "pixc", "rng", "sc")
+
+    def __init__(self, Mc, p4c, pixc, sc, rng, has_pix, has_range, isd):
+        self.Mc, self.p4c, self.pixc, self.sc, self.rng = Mc, p4c, pixc, sc, rng
+        self.has_pix, self.has_range, self.isd = has_pix, has_range, isd
+
+    @classmethod
+    def from_stacked(cls, st: Stacked, var: np.ndarray) -> Planes:
+        B, n = st.has_pix.shape
+        isd = np.empty((3, n, B))
+        np.divide(1.0, np.sqrt(var[:, :2 * n].reshape(B, n, 2).transpose(2, 1, 0)), out=isd[:2])
+        np.divide(1.0, np.sqrt(var[:, 2 * n:].T), out=isd[2])
+        c = np.ascontiguousarray
+        return cls(c(st.M.transpose(2, 3, 1, 0)), c(st.p4.transpose(2, 1, 0)), c(st.pix.transpose(2, 1, 0)),
+                   c(st.platform_m.transpose(2, 1, 0)), c(st.range_m.T), c(st.has_pix.T), c(st.has_range.T), isd)
+
+    def take(self, idx: np.ndarray) -> Planes:
+        return Planes(self.Mc[..., idx], self.p4c[..., idx], self.pixc[..., idx], self.sc[..., idx],
+                       self.rng[:, idx], self.has_pix[:, idx], self.has_range[:, idx], self.isd[..., idx])
+
+
+def evaluate(pl: Planes, X: np.ndarray):
+    """Standardized Jacobian J (3,3,n,b) (J[c, k] = d row / d X_c over the row's sigma, rows k = u, v, range of
+    each frame) and residuals E (3,n,b) at X (b,3); unusable rows (missing, q3 = 0, X on a platform) are zero;
+    and their mask ok (3,n,b). The one measurement model (reprojection and range) of every estimator."""
+    n, b = pl.has_pix.shape
+    J = np.empty((3, 3, n, b))
+    E = np.empty((3, n, b))
+    ok = np.empty((3, n, b), dtype=bool)
+    Mc, isd = pl.Mc, pl.isd
+    Xp = X.T[:, None, :]  # (3,1,b): broadcasts over the frames
+    q = Mc[:, 0] * Xp[0] + Mc[:, 1] * Xp[1] + Mc[:, 2] * Xp[2] + pl.p4c  # (3,n,b)
+    okp = np.logical_and(pl.has_pix, q[2] != 0, out=ok[0])
+    ok[1] = okp
+    iw = 1.0 / np.where(okp, q[2], np.inf)  # 1/q3, 0 on unusable rows
+    uv = q[:2] * iw
+    s = iw * isd[:2]
+    for c in range(3):  # per coordinate, so that the temporaries stay (2,n,b) planes (in cache)
+        np.multiply(Mc[:2, c] - uv * Mc[2, c], s, out=J[c, :2])
+    np.multiply(pl.pixc - uv, np.where(okp, isd[:2], 0.0), out=E[:2])
+    d = Xp - pl.sc
+    dist = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    okr = np.logical_and(pl.has_range, dist > 0, out=ok[2])
+    np.multiply(d, isd[2] / np.where(okr, dist, np.inf), out=J[:, 2])
+    np.multiply(pl.rng - dist, np.where(okr, isd[2], 0.0), out=E[2])
+    return J, E, ok
 
 
 def pixel_model(st: Stacked, X: np.ndarray):
@@ -196,20 +248,7 @@ def solve_spd(N: np.ndarray, g: np.ndarray, singular_below: float = SINGULAR_DET
         x = (inv @ g[..., None])[..., 0]
         x[singular] = np.nan
         return x, singular
-    if N.shape[-1] <= 6:
-        return _cholesky_solve(N, g, singular_below)
-    d = np.sqrt(np.abs(np.einsum("bii->bi", N)))
-    bad_d = ~(d > 0) | ~np.isfinite(d)
-    d = np.where(bad_d, 1.0, d)
-    Ns = N / (d[:, :, None] * d[:, None, :])
-    det = np.linalg.det(Ns)
-    singular = bad_d.any(axis=1) | ~(det > singular_below)
-    if singular.any():
-        k = N.shape[-1]
-        Ns = np.where(singular[:, None, None], np.eye(k), Ns)
-    x = np.linalg.solve(Ns, (g / d)[..., None])[..., 0] / d
-    x[singular] = np.nan
-    return x, singular
+    return _cholesky_solve(N, g, singular_below)
 
 
 def _cholesky_solve(N: np.ndarray, g: np.ndarray, singular_below: float):
@@ -269,14 +308,8 @@ def inverse3(N: np.ndarray, singular_below: float = SINGULAR_DET):
 
 
 def is_singular(N: np.ndarray) -> np.ndarray:
-    """(B,) the `solve_spd` criterion alone, for normal matrices N (B,k,k)."""
-    if N.shape[-1] == 3:
-        return inverse3(N)[1]
-    d = np.sqrt(np.abs(np.einsum("bii->bi", N)))
-    ok = (d > 0).all(axis=1) & np.isfinite(N).all(axis=(1, 2))
-    d = np.where(d > 0, d, 1.0)
-    det = np.linalg.det(np.where(ok[:, None, None], N / (d[:, :, None] * d[:, None, :]), 0.0))
-    return ~ok | ~(det > SINGULAR_DET)
+    """(B,) the `solve_spd` criterion alone, for 3x3 normal matrices N (B,3,3)."""
+    return inverse3(N)[1]
 
 
 def condition_numbers(N: np.ndarray) -> np.ndarray:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.solve.mle import CHI2_3_95, HUBER_C
+from pipeline.solve.mle import _rho_and_weight
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import Stacked, pixel_model, range_model
 
@@ -72,8 +72,7 @@ def yardstick(st: Stacked, sigma: Sigma, points: np.ndarray, consensus: np.ndarr
     for X in points:
         cost = 0.0
         for r, s in zip(_residuals(st, X), scales, strict=True):
-            a = np.abs(np.ravel(r)) / s
-            cost += float(np.where(a <= HUBER_C, 0.5 * a * a, HUBER_C * (a - 0.5 * HUBER_C)).sum())
+            cost += float(_rho_and_weight(np.ravel(r) / s, "huber")[0].sum())
         out.append(cost)
     return np.array(out)
 
@@ -91,4 +90,4 @@ def disagreement(X: np.ndarray, cov: np.ndarray, candidates: dict) -> dict:
     return out
 
 
-__all__ = ["CHI2_3_95", "DISAGREE_CHI2", "START_METHODS", "disagreement", "explains_away", "yardstick"]
+__all__ = ["DISAGREE_CHI2", "START_METHODS", "disagreement", "explains_away", "yardstick"]

@@ -89,17 +89,15 @@ def with_shared_offset(e: Estimate, errors: PhotoErrorModel) -> Estimate:
     camera off by the same vector puts the target off by it too, which no residual shows."""
     import dataclasses
 
-    from pipeline.solve.mle import CHI2_3_95, cep_m, ellipsoid
+    from pipeline.solve.uncertainty import ellipsoid_json, summaries
 
     if e.covariance_m2 is None or not np.isfinite(e.covariance_m2).all():
         return e
     cov = np.asarray(e.covariance_m2) + errors.shared_covariance_m2()
-    axes, vecs = ellipsoid(cov[None])
-    ax = axes[0].tolist()
-    extras = dict(e.extras, cep50_m=float(cep_m(cov[None, :2, :2], 0.5)[0]),
-                  cep90_m=float(cep_m(cov[None, :2, :2], 0.9)[0]), error_model=errors.to_dict(),
-                  ellipsoid={"semi_axes_1sigma_m": ax, "semi_axes_95pct_m": [v * np.sqrt(CHI2_3_95) for v in ax],
-                             "axes": vecs[0].T.tolist()})
+    acc = summaries(cov[None])
+    extras = dict(e.extras, cep50_m=float(acc["cep50_m"][0]), cep90_m=float(acc["cep90_m"][0]),
+                  error_model=errors.to_dict(),
+                  ellipsoid=ellipsoid_json(acc["ellipsoid_semi_axes_1sigma_m"][0], acc["ellipsoid_axes"][0]))
     return dataclasses.replace(e, covariance_m2=cov, extras=extras)
 
 
@@ -231,14 +229,15 @@ def process_photo_group(config):
         if pixels is not None:
             check_pixels(photos, pixels)
         return _photo_result(config, photos, pixels, dem, dem_sigma, notes, config.truth_lla(), None)
-    from pipeline.target_stage import named_truth_lla
+    from pipeline.target_stage import named_truth_lla, truth_file_targets
 
     results, failed = [], []
+    truth_entries = truth_file_targets(config)  # read once for every target
     for t in flight_targets(config):
         try:
             pixels = target_pixels(t, photos)
             check_pixels(photos, pixels)
-            truth = t.truth_lla if t.truth_lla is not None else named_truth_lla(config, t.name)
+            truth = t.truth_lla if t.truth_lla is not None else named_truth_lla(config, t.name, truth_entries)
             results.append(_photo_result(config, photos, pixels, dem, dem_sigma, notes, truth, t.name))
         except RidgelocError as exc:
             failed.append(TargetFailure(t.name, str(exc), tuple([*METHODS, "dem", "dji"])))

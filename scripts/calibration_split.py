@@ -49,16 +49,16 @@ VARIANTS = {
 
 @contextlib.contextmanager
 def variant(offset: float = 1.0, bias: bool = True, inflation: bool = True):
-    saved = (_mle._Iteration.finish, bias_mixture.PHI_GRID, fit_checks.acf_significant, fit_checks.chi_square_p,
+    saved = (_mle.White.adjust, bias_mixture.PHI_GRID, fit_checks.acf_significant, fit_checks.chi_square_p,
              fit_checks.batch_means_significant)
     if offset != 1.0:
         finish = saved[0]
 
-        def scaled(self, robust):
+        def scaled(self, *args):
             self.position_m = self.position_m * np.sqrt(offset)
-            return finish(self, robust)
+            return finish(self, *args)
 
-        _mle._Iteration.finish = scaled
+        _mle.White.adjust = scaled
     if not bias:
         bias_mixture.PHI_GRID = np.array([0.0])
     if not inflation:
@@ -68,7 +68,7 @@ def variant(offset: float = 1.0, bias: bool = True, inflation: bool = True):
     try:
         yield
     finally:
-        (_mle._Iteration.finish, bias_mixture.PHI_GRID, fit_checks.acf_significant, fit_checks.chi_square_p,
+        (_mle.White.adjust, bias_mixture.PHI_GRID, fit_checks.acf_significant, fit_checks.chi_square_p,
          fit_checks.batch_means_significant) = saved
 
 

@@ -5,12 +5,11 @@ Datum: WGS84 ellipsoidal heights (EPSG:4979) throughout; poses in ECEF metres.
 
 from __future__ import annotations
 
-import math
-
 import cv2
 import numpy as np
 import pymap3d
 
+from pipeline.geometry.rays import intersection_angle_deg
 from pipeline.synth.config import SynthConfig
 from pipeline.synth.telemetry import LaserTruth
 from pipeline.synth.timeline import Timeline
@@ -99,14 +98,6 @@ def targets_truth(cfg: SynthConfig, flight: Flight, frames: list[dict], obs: lis
     return out
 
 
-def intersection_angle_deg(cam_ecef_first, cam_ecef_last, target_ecef) -> float:
-    """Angle between the lines of sight camera -> target at the first and the last observation, degrees."""
-    a = np.asarray(target_ecef) - np.asarray(cam_ecef_first)
-    b = np.asarray(target_ecef) - np.asarray(cam_ecef_last)
-    c = np.dot(a, b) / (np.linalg.norm(a) * np.linalg.norm(b))
-    return math.degrees(math.acos(float(np.clip(c, -1.0, 1.0))))
-
-
 def build_truth(cfg: SynthConfig, tl: Timeline, flight: Flight, laser: LaserTruth, frames: list[dict],
                 files: dict[str, str], spacing_s: int) -> dict:
     s = cfg.site
@@ -125,7 +116,8 @@ def build_truth(cfg: SynthConfig, tl: Timeline, flight: Flight, laser: LaserTrut
                     "range_true_m": float(laser.range_true_m[i]),
                     "range_measured_m": float(laser.range_measured_m[i]) if logged else None,
                     "target_visible": f["target_visible"], "camera_position_ecef_m": f["camera_position_ecef_m"]})
-    gamma = intersection_angle_deg(obs[0]["camera_position_ecef_m"], obs[-1]["camera_position_ecef_m"], target_ecef)
+    gamma = intersection_angle_deg(np.array([obs[0]["camera_position_ecef_m"], obs[-1]["camera_position_ecef_m"]]),
+                                   target_ecef)
     mark = next((frames[o["frame_index"]] for o in obs if o["target_visible"]), None)
     K = cfg.camera
     speed = flight.path.span_m / ((tl.obs_t_ns[-1] - tl.obs_t_ns[0]) / 1e9)

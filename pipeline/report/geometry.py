@@ -6,9 +6,9 @@ All positions are ENU metres in the group's local frame unless a name says other
 from __future__ import annotations
 
 import numpy as np
-import pymap3d
 
 from pipeline.geometry.camera import project
+from pipeline.geometry.frames import lla_from_enu
 from pipeline.results import GroupResult
 from pipeline.solve.estimate import Estimate
 from pipeline.solve.observations import Observations
@@ -18,11 +18,11 @@ ALT_DATUM = "WGS84 ellipsoidal height (EPSG:4979)"
 
 
 def geodetic_from_enu(enu_m: np.ndarray, origin_lla: tuple[float, float, float]) -> np.ndarray:
-    """(..., 3) ENU metres -> (..., 3) (lat_deg, lon_deg, alt_m) on WGS84, alt above the ellipsoid."""
-    enu = np.asarray(enu_m, dtype=np.float64)
-    lat, lon, alt = pymap3d.enu2geodetic(enu[..., 0], enu[..., 1], enu[..., 2], *origin_lla)
-    lon = (np.asarray(lon) + 180.0) % 360.0 - 180.0  # [-180, 180), as RFC 7946 and KML want
-    return np.stack([np.asarray(lat), lon, np.asarray(alt)], axis=-1)
+    """(..., 3) ENU metres -> (..., 3) (lat_deg, lon_deg, alt_m) on WGS84, alt above the ellipsoid, the longitude
+    in [-180, 180) as RFC 7946 and KML want (`geometry.frames.lla_from_enu`, wrapped)."""
+    lla = lla_from_enu(enu_m, origin_lla)
+    lla[..., 1] = (lla[..., 1] + 180.0) % 360.0 - 180.0
+    return lla
 
 
 def camera_rays(obs: Observations) -> tuple[np.ndarray, np.ndarray]:

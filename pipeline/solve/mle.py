@@ -61,22 +61,26 @@ def _rho_and_weight(e: np.ndarray, robust: str | None):
     return 0.5 * CAUCHY_C ** 2 * np.log1p(z), 1.0 / (1.0 + z)
 
 
-def _redescending(e: np.ndarray, A: float = REDESCEND_A):
+def _redescending(e: np.ndarray, A: float = REDESCEND_A, rho: bool = True):
     """rho and weight of the redescending loss: w = 1 for |e| <= A, (1 - t^2)^2 with t = (|e| - A) / (B - A)
-    up to B = REDESCEND_B, 0 beyond; rho = integral of w e de (continuous, constant beyond B)."""
+    up to B = REDESCEND_B, 0 beyond; rho = integral of w e de (continuous, constant beyond B); rho None unless
+    asked for."""
     D = REDESCEND_B - A
     a = np.abs(e)
     t = np.clip((a - A) / D, 0.0, 1.0)
-    u = 1.0 - t * t
-    w = np.where(a <= A, 1.0, u * u)
-    tail = 0.5 * A * A + D * (A * (t - 2.0 * t ** 3 / 3.0 + t ** 5 / 5.0) + D * (1.0 - u ** 3) / 6.0)
+    t2 = t * t
+    u = 1.0 - t2
+    w = u * u  # 1 where |e| <= A (t = 0)
+    if not rho:
+        return None, w
+    tail = 0.5 * A * A + D * (A * t * (1.0 - t2 * (2.0 / 3.0 - t2 / 5.0)) + D * (1.0 - w * u) / 6.0)
     return np.where(a <= A, 0.5 * e * e, tail), w
 
 
-def pixel_pair_redescending(e_u: np.ndarray, e_v: np.ndarray):
+def pixel_pair_redescending(e_u: np.ndarray, e_v: np.ndarray, rho: bool = True):
     """rho and weight (shaped as e_u) of the redescending loss of the pixel residuals (e_u, e_v), standardized,
     by their length: a mistracked frame moves the pixel in 2-D, and both coordinates go (or stay) together."""
-    return _redescending(np.sqrt(e_u * e_u + e_v * e_v), REDESCEND_A_PIXEL)
+    return _redescending(np.sqrt(e_u * e_u + e_v * e_v), REDESCEND_A_PIXEL, rho)
 
 
 def bias_prior_deg(sigma: Sigma, options: dict) -> tuple[float | None, bool]:
@@ -581,11 +585,17 @@ def _full3(N6):
 
 def _profile_bias(E, a, robust, z):
     """The bias-corrected residuals E - a z (3,n,b) and z (3,b): the bias (in prior standard deviations) that
-    minimizes sum rho(E - a z) + |z|^2 / 2 for the u and v rows (a few IRLS rounds from the previous z)."""
+    minimizes sum rho(E - a z) + |z|^2 / 2 for the u and v rows (a few IRLS rounds from the previous z; the
+    range rows carry no bias)."""
     for _ in range(1 if robust is None else 4):
-        w = 1.0 if robust is None else _cost_weights(E - a * z[:, None, :], robust)[1]
+        if robust is None:
+            w = (1.0, 1.0)
+        else:
+            Eu, Ev = E[0] - a[0] * z[0], E[1] - a[1] * z[1]
+            w = ((pixel_pair_redescending(Eu, Ev, rho=False)[1],) * 2 if robust == "redescending"
+                 else _rho_and_weight(np.stack([Eu, Ev]), robust)[1])
         for k in (0, 1):
-            wa = a[k] if robust is None else w[k] * a[k]
+            wa = w[k] * a[k]
             z[k] = (wa * E[k]).sum(axis=0) / (1.0 + (wa * a[k]).sum(axis=0))
     return E - a * z[:, None, :], z
 

@@ -14,7 +14,16 @@ from pipeline.solve import iterate as _iterate
 from pipeline.solve.estimate import Status
 from pipeline.solve.iterate import problem_scale_m, start_status
 from pipeline.solve.observations import Sigma
-from pipeline.solve.stacked import SINGULAR_DET, Planes, Stacked, condition_numbers, evaluate, inverse3
+from pipeline.solve.stacked import (
+    SINGULAR_DET,
+    Planes,
+    Stacked,
+    condition_numbers,
+    evaluate,
+    inverse3,
+    put_last,
+    take_last,
+)
 
 ROBUST_LOSSES = (None, "huber", "cauchy", "redescending")
 #: the default loss of `solve` and `solve_batch`
@@ -382,7 +391,7 @@ class White(_iterate.Model):
     def _sub(self, idx):
         """(full, the arrays of problems idx) without copies when idx is the whole batch."""
         full = idx.size == self.st.size
-        pick = (lambda x: x) if full else (lambda x: None if x is None else x[..., idx])
+        pick = (lambda x: x) if full else (lambda x: None if x is None else take_last(x, idx))
         return full, pick
 
     def step(self, idx, X, lam):
@@ -404,7 +413,7 @@ class White(_iterate.Model):
     def trial(self, idx, Xn):
         full, pick = self._sub(idx)
         self._trial = self._eval(self.pl if full else self.pl.take(idx), pick(self.a), Xn,
-                                 self.z if full else self.z[:, idx], self.robust)
+                                 self.z if full else take_last(self.z, idx), self.robust)
         return self._trial[4] <= self.cost[idx] * (1 + 1e-12) + 1e-300
 
     def accept(self, idx, accept):
@@ -413,11 +422,10 @@ class White(_iterate.Model):
         if a_idx.size == self.st.size:  # every problem moved: take the new arrays as they are
             self.J, self.E, self.ok, self.wr, self.z = Jn, En, okn, wr_n, zn
         else:
-            sel = accept if a_idx.size != idx.size else slice(None)
-            self.J[..., a_idx], self.E[..., a_idx], self.ok[..., a_idx] = Jn[..., sel], En[..., sel], okn[..., sel]
-            self.z[:, a_idx] = zn[:, sel]
-            if self.wr is not None:
-                self.wr[..., a_idx] = wr_n[..., sel]
+            sel = (lambda x: x) if a_idx.size == idx.size else (lambda x: take_last(x, accept))
+            for old, new in ((self.J, Jn), (self.E, En), (self.ok, okn), (self.z, zn), (self.wr, wr_n)):
+                if old is not None:
+                    put_last(old, a_idx, sel(new))
         self.cost[a_idx] = cost_n[accept]
         # a rejected Newton step is retried as the IRLS step (a descent step) before damping
         retry = ~accept & self.newton_ok[idx] if self.robust is not None else np.zeros(idx.size, dtype=bool)
@@ -430,8 +438,8 @@ class White(_iterate.Model):
         """Variance components at convergence: the problems whose factors changed go on."""
         if not self.vce:
             return np.zeros(d_idx.size, dtype=bool)
-        factors, usable = _vce_factors(self.J[..., d_idx], self.E[..., d_idx], self.ok[..., d_idx], self.robust,
-                                       None if self.a is None else self.a[..., d_idx],
+        factors, usable = _vce_factors(take_last(self.J, d_idx), take_last(self.E, d_idx), take_last(self.ok, d_idx),
+                                       self.robust, None if self.a is None else take_last(self.a, d_idx),
                                        None if self.terrain is None else _terrain_rows(self.terrain, self.X[d_idx]))
         more = (np.abs(factors - 1) > VCE_TOL) & usable
         again = more.any(axis=1) & (self.vce_rounds[d_idx] < VCE_MAX_ROUNDS)
@@ -441,11 +449,12 @@ class White(_iterate.Model):
         if rd.size:  # rescale the standardized rows: sigma_g -> sigma_g sqrt(factor_g)
             self.rescale(rd, 0, change[again, 0])
             self.rescale(rd, 1, change[again, 1])
-            J, E, _, z, cost, w_rd = self._eval(self.pl.take(rd), None if self.a is None else self.a[..., rd],
-                                                self.X[rd], self.z[:, rd], self.robust)
-            self.J[..., rd], self.E[..., rd], self.z[:, rd], self.cost[rd] = J, E, z, cost
-            if self.wr is not None:
-                self.wr[..., rd] = w_rd
+            J, E, _, z, cost, w_rd = self._eval(self.pl.take(rd), None if self.a is None else take_last(self.a, rd),
+                                                self.X[rd], take_last(self.z, rd), self.robust)
+            self.cost[rd] = cost
+            for old, new in ((self.J, J), (self.E, E), (self.z, z), (self.wr, w_rd)):
+                if old is not None:
+                    put_last(old, rd, new)
         return again
 
     def rescale(self, idx, g, factor):

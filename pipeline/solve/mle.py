@@ -498,12 +498,12 @@ class White(_iterate.Model):
         # prior's and the shared GNSS offset's too (told wrong by that factor, they are likely all wrong alike);
         # the shared offset takes the larger of the two groups' factors
         s, g = self._rows(infl), self._rows(1.0 / self.guard)
-        mix, mix0, E_report = self._mixture(s / np.sqrt(vf_chi), s * g, g, failed, drift_pix)
+        mix, cov_stated, E_report = self._mixture(s / np.sqrt(vf_chi), s * g, g, failed, drift_pix)
         self.mix = mix
         misfit = vf_chi * self.guard.max(axis=1)
         eye = self.position_m ** 2 * np.eye(3)
         cov = np.where(failed[:, None, None], cov, mix["covariance"] + misfit[:, None, None] * eye)
-        cov0 = np.where(failed[:, None, None], cov0, mix0["covariance"] + eye)
+        cov0 = np.where(failed[:, None, None], cov0, cov_stated + eye)
         return cov, cov0, E_report, mix["singular"]
 
     def bias_extras(self, cov, vf_chi) -> dict:
@@ -511,12 +511,12 @@ class White(_iterate.Model):
             return _mixture_summary(self, self.mix, cov)
         return {} if self.a is None else _bias_summary(self, cov, self.hs, vf_chi)
 
-    def _with_terrain(self, J, E, a, w, share):
-        """The mixture's arguments with the terrain prior (if any) at self.X as one more frame: its range row
-        the terrain residual, no pixel, no bias column, unit weight."""
+    def _with_terrain(self, J, E, a, w, share, idx=slice(None)):
+        """The mixture's arguments (of problems idx) with the terrain prior (if any) at self.X as one more frame:
+        its range row the terrain residual, no pixel, no bias column, unit weight."""
         if self.terrain is None:
             return J, E, a, w, share
-        jt, et, _ = _terrain_rows(self.terrain, self.X)
+        jt, et, _ = _terrain_rows(self.terrain, self.X[idx])
         b = E.shape[-1]
         Jt = np.zeros((3, 3, 1, b))
         Jt[:, 2, 0] = jt
@@ -552,8 +552,17 @@ class White(_iterate.Model):
             mix = bias_mixture.mixture(*self._with_terrain(J * s, E * s, a_mix, w, share))
             step = np.where(keep[:, None] & np.isfinite(mix["step"]), mix["step"], 0.0)
             self.X += step
-        share0 = np.where(drift_pix, 0.0, np.minimum((a0 * g)[:2] ** 2, 1.0)) if self.split_attitude else None
-        mix0 = bias_mixture.mixture(*self._with_terrain(J * g, E * g, a0 * g, w, share0))  # the same point, as stated
+        # the same point as stated (rows and bias columns scaled by g): where nothing scaled them (s = g = 1) the
+        # mixture just computed, else computed again for those problems
+        cov_stated = mix["covariance"].copy()
+        restate = np.flatnonzero(~((s == 1).all(axis=(0, 1)) & (g == 1).all(axis=(0, 1))))
+        if restate.size:
+            J0, E0, w0, a0g = (take_last(x, restate) for x in (J, E, w, a0 * g))
+            g0 = take_last(g, restate)
+            share0 = (np.where(take_last(drift_pix, restate), 0.0, np.minimum(a0g[:2] ** 2, 1.0))
+                      if self.split_attitude else None)
+            cov_stated[restate] = bias_mixture.mixture(*self._with_terrain(J0 * g0, E0 * g0, a0g, w0, share0,
+                                                                           restate))["covariance"]
         # the bias in units of the stated prior: the columns passed carry the misfit's scaling s_bias / s
         unit = (s_bias / s)[0, 0]
         mix["bias"] = mix["bias"] * unit[:, None]
@@ -562,7 +571,7 @@ class White(_iterate.Model):
         mix["prior_scale"] = unit
         E_report = evaluate(self.pl, self.X)[1]
         E_report[:2] -= a0[:2] * mix["bias"].T[:, None, :]
-        return mix, mix0, E_report
+        return mix, cov_stated, E_report
 
 
 def _terrain_rows(terrain, X: np.ndarray):

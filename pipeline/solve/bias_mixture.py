@@ -95,11 +95,11 @@ def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None,
     else:  # the frame-to-frame attitude variance is what the bias leaves of the stated one
         S = np.empty((G, 15, 2, b))
         logdet_rows = np.empty((G, b))
-        used = W1[:2] > 0
+        share = np.where(W1[:2] > 0, share, 0.0)  # rows not in use: ratio 1, no log det
         for j in range(G):
             ratio = np.maximum(1.0 - p[j, 0] * share, RATIO_FLOOR)
             np.einsum("fknb,knb->fkb", F, 1.0 / ratio, out=S[j])
-            logdet_rows[j] = np.where(used, np.log(ratio), 0.0).reshape(-1, b).sum(axis=0)
+            logdet_rows[j] = np.log(ratio).reshape(-1, b).sum(axis=0)
     both = S[:, :10].sum(axis=2) + range_sums  # (G,10,b): N0's six entries, g0, c0
     s, t = S[:, _AA], S[:, _AR]  # (G,2,b)
     h = S[:, _AJ]  # (G,3,2,b)

@@ -56,18 +56,21 @@ def _curvature(e: np.ndarray, robust: str) -> np.ndarray:
     return np.maximum((1.0 - z) * w * w, 0.001 * w)
 
 
-def _rho_and_weight(e: np.ndarray, robust: str | None):
-    """Loss rho(e) and IRLS weight rho'(e)/e of standardized residuals e."""
+def _rho_and_weight(e: np.ndarray, robust: str | None, rho: bool = True):
+    """Loss rho(e) and IRLS weight rho'(e)/e of standardized residuals e (rho None unless asked for)."""
     if robust is None:
-        return 0.5 * e * e, np.ones_like(e)
+        return (0.5 * e * e if rho else None), np.ones_like(e)
     if robust == "huber":
         a = np.abs(e)
+        w = np.minimum(1.0, HUBER_C / np.maximum(a, 1e-300))
+        if not rho:
+            return None, w
         t = np.maximum(a - HUBER_C, 0.0)  # rho = e^2/2 inside, c|e| - c^2/2 = e^2/2 - (|e| - c)^2/2 outside
-        return 0.5 * (e * e - t * t), np.minimum(1.0, HUBER_C / np.maximum(a, 1e-300))
+        return 0.5 * (e * e - t * t), w
     if robust == "redescending":
-        return _redescending(e)
+        return _redescending(e, rho=rho)
     z = (e / CAUCHY_C) ** 2
-    return 0.5 * CAUCHY_C ** 2 * np.log1p(z), 1.0 / (1.0 + z)
+    return (0.5 * CAUCHY_C ** 2 * np.log1p(z) if rho else None), 1.0 / (1.0 + z)
 
 
 def _redescending(e: np.ndarray, A: float = REDESCEND_A, rho: bool = True):
@@ -611,7 +614,7 @@ def _profile_bias(E, a, robust, z):
         else:
             Eu, Ev = E[0] - a[0] * z[0], E[1] - a[1] * z[1]
             w = ((pixel_pair_redescending(Eu, Ev, rho=False)[1],) * 2 if robust == "redescending"
-                 else _rho_and_weight(np.stack([Eu, Ev]), robust)[1])
+                 else (_rho_and_weight(Eu, robust, rho=False)[1], _rho_and_weight(Ev, robust, rho=False)[1]))
         for k in (0, 1):
             wa = w[k] * a[k]
             z[k] = (wa * E[k]).sum(axis=0) / (1.0 + (wa * a[k]).sum(axis=0))

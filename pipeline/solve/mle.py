@@ -608,17 +608,19 @@ def _profile_bias(E, a, robust, z):
     """The bias-corrected residuals E - a z (3,n,b) and z (3,b): the bias (in prior standard deviations) that
     minimizes sum rho(E - a z) + |z|^2 / 2 for the u and v rows (a few IRLS rounds from the previous z; the
     range rows carry no bias)."""
-    aE, aa = (a[0] * E[0], a[1] * E[1]), (a[0] * a[0], a[1] * a[1])
-    for _ in range(1 if robust is None else 4):
-        if robust is not None:
-            Eu, Ev = E[0] - a[0] * z[0], E[1] - a[1] * z[1]
-            w = ((pixel_pair_redescending(Eu, Ev, rho=False)[1],) * 2 if robust == "redescending"
-                 else (_rho_and_weight(Eu, robust, rho=False)[1], _rho_and_weight(Ev, robust, rho=False)[1]))
-        for k in (0, 1):
-            if robust is None:
-                z[k] = aE[k].sum(axis=0) / (1.0 + aa[k].sum(axis=0))
-            else:  # the weighted sums without temporaries
-                z[k] = np.einsum("nb,nb->b", w[k], aE[k]) / (1.0 + np.einsum("nb,nb->b", w[k], aa[k]))
+    a2 = a[:2]
+    aE, aa = a2 * E[:2], a2 * a2  # (2,n,b)
+    if robust is None:
+        z[:2] = aE.sum(axis=1) / (1.0 + aa.sum(axis=1))
+    for _ in range(0 if robust is None else 4):
+        Euv = E[:2] - a2 * z[:2, None, :]
+        if robust == "redescending":  # one weight per frame for both rows
+            w = pixel_pair_redescending(Euv[0], Euv[1], rho=False)[1]
+            num, den = np.einsum("nb,knb->kb", w, aE), np.einsum("nb,knb->kb", w, aa)
+        else:
+            w = _rho_and_weight(Euv, robust, rho=False)[1]
+            num, den = np.einsum("knb,knb->kb", w, aE), np.einsum("knb,knb->kb", w, aa)
+        z[:2] = num / (1.0 + den)
     return E - a * z[:, None, :], z
 
 

@@ -60,6 +60,9 @@ class Model:
     def converged(self, idx):
         return np.zeros(idx.size, dtype=bool)
 
+    def settle(self):
+        """After the iteration: the state of the problems complete (a model keeping the active ones apart)."""
+
     def extra_dof(self):
         return 0
 
@@ -112,6 +115,7 @@ def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iteratio
         s[done] = Status.CONVERGED
         status[idx] = s
         active[idx] = still
+    model.settle()
 
 
 class _StepModel(Model):

@@ -390,20 +390,57 @@ class White(_iterate.Model):
         self.robust = robust
         self.J, self.E, self.ok, self.z, self.cost, self.wr = self._eval(self.pl, self.a, self.X, self.z, robust)
         self.newton_ok = np.full(self.st.size, robust in ("huber", "cauchy") and self.a is None)
+        self._cidx = self._c = None
 
-    def _sub(self, idx):
-        """(full, the arrays of problems idx) without copies when idx is the whole batch."""
-        full = idx.size == self.st.size
-        pick = (lambda x: x) if full else (lambda x: None if x is None else take_last(x, idx))
-        return full, pick
+    #: the iteration state of each problem (planes over the B problems; a read-only), kept for the active
+    #: problems by `_active` while `drive` iterates
+    STATE = ("J", "E", "ok", "wr", "z", "a")
+
+    def _active(self, idx):
+        """[J, E, ok, wr, z, a] of the problems idx (sorted; None for what the model lacks). The state of the
+        active problems is kept between iterations (`accept` merges into it) and written back to the full
+        arrays as problems leave the active set (`settle` at the end): an iteration moves no data of the
+        problems it does not touch."""
+        cidx = self._cidx
+        if cidx is not None and not (cidx is idx or np.array_equal(cidx, idx)):
+            pos = np.searchsorted(cidx, idx)
+            if (pos < cidx.size).all() and (cidx[np.minimum(pos, cidx.size - 1)] == idx).all():  # a subset
+                leave = np.ones(cidx.size, dtype=bool)
+                leave[pos] = False
+                self._write_back(cidx[leave], [None if c is None else take_last(c, leave) for c in self._c])
+                self._c = [None if c is None else take_last(c, pos) for c in self._c]
+                self._cidx = idx
+            else:
+                self.settle()
+        if self._cidx is None:
+            full = idx.size == self.st.size
+            self._c = [None if x is None else (x if full else take_last(x, idx))
+                       for x in (getattr(self, name) for name in self.STATE)]
+            self._cidx = idx
+        return self._c
+
+    def _write_back(self, idx, state):
+        for name, c in zip(self.STATE, state, strict=True):
+            if c is not None and name != "a":
+                put_last(getattr(self, name), idx, c)
+
+    def settle(self):
+        """Write the active problems' state back to the full arrays."""
+        if self._cidx is None:
+            return
+        if self._cidx.size == self.st.size:
+            for name, c in zip(self.STATE, self._c, strict=True):
+                setattr(self, name, c)
+        else:
+            self._write_back(self._cidx, self._c)
+        self._cidx = self._c = None
 
     def step(self, idx, X, lam):
-        _, pick = self._sub(idx)
-        Ji, Ei, ai, wi = pick(self.J), pick(self.E), pick(self.a), pick(self.wr)
+        Ji, Ei, _, wi, _, ai = self._active(idx)
         if self.robust is None:
             N, g = _normal(Ji, Ei, None)
         else:
-            nok = pick(self.newton_ok)
+            nok = self.newton_ok[idx]
             curv = _curvature(Ei, self.robust) if nok.any() else wi
             N, g = _normal(Ji, Ei, wi, np.where(nok, curv, wi))
         if ai is not None:
@@ -414,21 +451,16 @@ class White(_iterate.Model):
         return dX, singular
 
     def trial(self, idx, Xn):
-        full, pick = self._sub(idx)
-        self._trial = self._eval(self.pl if full else self.pl.take(idx), pick(self.a), Xn,
-                                 self.z if full else take_last(self.z, idx), self.robust)
+        z, a = self._active(idx)[4:]
+        self._trial = self._eval(self.pl if idx.size == self.st.size else self.pl.take(idx), a, Xn, z, self.robust)
         return self._trial[4] <= self.cost[idx] * (1 + 1e-12) + 1e-300
 
     def accept(self, idx, accept):
         Jn, En, okn, zn, cost_n, wr_n = self._trial
         a_idx = idx[accept]
-        if a_idx.size == self.st.size:  # every problem moved: take the new arrays as they are
-            self.J, self.E, self.ok, self.wr, self.z = Jn, En, okn, wr_n, zn
-        else:
-            sel = (lambda x: x) if a_idx.size == idx.size else (lambda x: take_last(x, accept))
-            for old, new in ((self.J, Jn), (self.E, En), (self.ok, okn), (self.z, zn), (self.wr, wr_n)):
-                if old is not None:
-                    put_last(old, a_idx, sel(new))
+        every = a_idx.size == idx.size
+        self._c = [new if every or new is None or new is old else np.where(accept, new, old)
+                   for old, new in zip(self._active(idx), (Jn, En, okn, wr_n, zn, self._c[-1]), strict=True)]
         self.cost[a_idx] = cost_n[accept]
         # a rejected Newton step is retried as the IRLS step (a descent step) before damping
         retry = ~accept & self.newton_ok[idx] if self.robust is not None else np.zeros(idx.size, dtype=bool)
@@ -441,6 +473,7 @@ class White(_iterate.Model):
         """Variance components at convergence: the problems whose factors changed go on."""
         if not self.vce:
             return np.zeros(d_idx.size, dtype=bool)
+        self.settle()  # the variance components rescale the full arrays
         factors, usable = _vce_factors(take_last(self.J, d_idx), take_last(self.E, d_idx), take_last(self.ok, d_idx),
                                        self.robust, None if self.a is None else take_last(self.a, d_idx),
                                        None if self.terrain is None else _terrain_rows(self.terrain, self.X[d_idx]))

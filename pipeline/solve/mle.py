@@ -275,7 +275,7 @@ def robust_scale(m) -> None:
             mad = 1.4826 * np.nanmedian(e, axis=0)
         big = np.isfinite(mad) & (cnt >= 4) & (mad > 1.0 + 2.34 / np.sqrt(np.maximum(cnt, 1)))
         f = np.where(big, mad ** 2, 1.0)
-        m.rescale(np.arange(E.shape[-1]), g, f)
+        m.rescale(slice(None), g, f)
         m.guard[:, g] = f
 
 
@@ -494,7 +494,7 @@ class White(_iterate.Model):
         return again
 
     def rescale(self, idx, g, factor):
-        """Multiply the variances of group g (0 pixels, 1 ranges) of problems idx by factor (len(idx),)."""
+        """Multiply the variances of group g (0 pixels, 1 ranges) of problems idx (indices, or a slice) by factor."""
         self.vf[idx, g] *= factor
         s = 1.0 / np.sqrt(factor)
         rows = slice(0, 2) if g == 0 else slice(2, 3)

@@ -441,8 +441,7 @@ class White(_iterate.Model):
             N, g = _normal(Ji, Ei, None)
         else:
             nok = self.newton_ok[idx]
-            curv = _curvature(Ei, self.robust) if nok.any() else wi
-            N, g = _normal(Ji, Ei, wi, np.where(nok, curv, wi))
+            N, g = _normal(Ji, Ei, wi, np.where(nok, _curvature(Ei, self.robust), wi) if nok.any() else wi)
         if ai is not None:
             _bias_schur(N, Ji, ai, wi)
         if self.terrain is not None:
@@ -659,15 +658,15 @@ def _profile_bias(E, a, robust, z):
 
 def _bias_schur(N, J, a, w):
     """Eliminate the u and v bias from the six normal-matrix entries N (in place): N -= h h^T / (1 + s) with
-    h = J^T W a, s = a^T W a per group. Returns [(h (3 of (b,)), s (b,)) for u, v]."""
+    h = J^T W a, s = a^T W a per group. Returns [(h (b,3), s (b,)) for u, v]."""
     out = []
     for k in (0, 1):
         wa = a[k] if w is None else w[k] * a[k]
-        s = (wa * a[k]).sum(axis=0)
-        h = [(wa * J[c, k]).sum(axis=0) for c in range(3)]
+        s = np.einsum("nb,nb->b", wa, a[k])
+        h = np.einsum("cnb,nb->cb", J[:, k], wa)
         for e, (c, d) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
             N[e] = N[e] - h[c] * h[d] / (1.0 + s)
-        out.append((np.stack(h, axis=1), s))
+        out.append((h.T, s))
     return out
 
 

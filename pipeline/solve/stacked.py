@@ -163,7 +163,7 @@ def take_last(x: np.ndarray, idx) -> np.ndarray:
 
 def put_last(x: np.ndarray, idx: np.ndarray, v: np.ndarray) -> None:
     """x[..., idx] = v in place for integer idx (x C-contiguous, v shaped x[..., idx]): by flat indices (np.put,
-    about twice as fast as fancy assignment on the last axis)."""
+    ~1.6x faster than fancy assignment on the last axis)."""
     b = x.shape[-1]
     flat = (np.arange(0, x.size, b)[:, None] + idx).ravel()
     np.put(x, flat, np.broadcast_to(v, (*x.shape[:-1], len(idx))))

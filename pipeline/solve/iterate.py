@@ -46,7 +46,8 @@ class Model:
     idx (lam: the damping, None unless damped); trial(idx, Xn) -> (k,) bool: evaluate the problems at Xn, where
     the cost did not rise; accept(idx, accepted) -> (k,) bool: keep the trial's state where accepted, and which
     rejected steps to retry undamped; converged(idx) -> (k,) bool: the problems to iterate again (variance
-    components changed). For `mle.finish`: extra_dof, adjust (the bias averaging), bias_extras."""
+    components changed); settle() once the iteration ends. For `mle.finish`: extra_dof, adjust (the bias
+    averaging), bias_extras."""
 
     damped = False
     drift_modelled = False

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.solve.stacked import inverse3
+from pipeline.solve.stacked import SINGULAR_DET
 
 #: the bias's prior standard deviation over the stated attitude sigma: the candidates, equally likely a priori
 PHI_GRID = np.linspace(0.0, 1.0, 9)
@@ -41,16 +41,28 @@ PHI_GRID = np.linspace(0.0, 1.0, 9)
 RATIO_FLOOR = 1e-3
 
 
-def _rows(A: np.ndarray, Bm: np.ndarray) -> np.ndarray:
-    """(b,) sum over the rows of A * B, (n,b) or (3,n,b) planes."""
-    return (A * Bm).reshape(-1, A.shape[-1]).sum(axis=0)
+#: the six unique entries (c, d) of a symmetric 3x3 matrix, in the order N00 N01 N02 N11 N12 N22
+PAIRS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+#: the per-row products summed for each candidate (planes of `_row_products`): J_c J_d (6), J_c r (3), r r,
+#: a J_c (3), a a, a r
+_JJ, _JR, _RR, _AJ, _AA, _AR = slice(0, 6), slice(6, 9), 9, slice(10, 13), 13, 14
 
 
-def _det3(N: np.ndarray) -> np.ndarray:
-    """(b,) determinants of (b,3,3) matrices by cofactors."""
-    return (N[:, 0, 0] * (N[:, 1, 1] * N[:, 2, 2] - N[:, 1, 2] * N[:, 2, 1])
-            - N[:, 0, 1] * (N[:, 1, 0] * N[:, 2, 2] - N[:, 1, 2] * N[:, 2, 0])
-            + N[:, 0, 2] * (N[:, 1, 0] * N[:, 2, 1] - N[:, 1, 1] * N[:, 2, 0]))
+def _row_products(J: np.ndarray, r: np.ndarray, a: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """(15,k,n,b) the weighted products of each row whose sums make the normal equations and the bias terms
+    (`_JJ` ... `_AR`), from J (3,k,n,b), r, a, W (k,n,b)."""
+    WJ = J * W
+    F = np.empty((15, *r.shape))
+    for e, (c, d) in enumerate(PAIRS):
+        np.multiply(WJ[c], J[d], out=F[e])
+    for c in range(3):
+        np.multiply(WJ[c], r, out=F[6 + c])
+        np.multiply(WJ[c], a, out=F[10 + c])
+    Wr = W * r
+    np.multiply(Wr, r, out=F[_RR])
+    np.multiply(W * a, a, out=F[_AA])
+    np.multiply(Wr, a, out=F[_AR])
+    return F
 
 
 def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None,
@@ -63,49 +75,56 @@ def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None,
     to it). Returns step (b,3) m, covariance (b,3,3) m^2, posterior (b,G) over PHI_GRID, bias (b,2) and
     bias_var (b,2) in units of a's prior (u, v), bias_cross (b,2,3) m the covariance of each bias with the
     target, singular (b,) where no candidate solves.
+
+    Only the u and v rows' weights depend on the candidate (through share): the rows' weighted products are
+    formed once (`_row_products`) and each candidate sums them over the frames with its ratios; the range
+    rows' sums are the same for all. Then all candidates at once as (G,b) planes, 3x3 solves by cofactors.
     """
     W1 = np.ones(r.shape) if w is None else np.asarray(w, dtype=np.float64)
     b = r.shape[-1]
     G = len(PHI_GRID)
-    steps = np.empty((G, b, 3))
-    covs = np.empty((G, b, 3, 3))
-    logL = np.empty((G, b))
-    bias = np.zeros((G, b, 2))
-    bvar = np.zeros((G, b, 2))
-    cross = np.zeros((G, b, 2, 3))
-    singular_all = np.ones(b, dtype=bool)
-    for j, phi in enumerate(PHI_GRID):
-        p = phi * phi
-        W, logdet_rows = W1, 0.0
-        if share is not None:  # the frame-to-frame attitude variance is what the bias leaves of the stated one
-            ratio = np.maximum(1.0 - p * share, RATIO_FLOOR)
-            W = W1.copy()
-            W[:2] = W1[:2] / ratio
-            logdet_rows = np.where(W1[:2] > 0, np.log(ratio), 0.0).reshape(-1, b).sum(axis=0)
-        WJ = J * W
-        N0 = np.einsum("cknb,dknb->bcd", WJ, J)
-        g0 = np.einsum("cknb,knb->bc", WJ, r)
-        c0 = _rows(W * r, r)
-        s = np.stack([_rows(W[k] * a[k], a[k]) for k in (0, 1)], axis=1)  # (b,2)
-        h = np.stack([np.einsum("cnb,nb->bc", WJ[:, k], a[k]) for k in (0, 1)], axis=1)  # (b,2,3)
-        t = np.stack([_rows(W[k] * a[k], r[k]) for k in (0, 1)], axis=1)  # (b,2)
-        f = p / (1.0 + p * s)  # (b,2)
-        N = N0 - np.einsum("bk,bkc,bkd->bcd", f, h, h)
-        g = g0 - np.einsum("bk,bkc->bc", f * t, h)
-        q = c0 - (f * t * t).sum(axis=1)
-        C, singular = inverse3(N)
-        d = np.einsum("bcd,bd->bc", C, g)
-        det = _det3(N)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ll = -0.5 * (q - (g * d).sum(axis=1) + np.log1p(p * s).sum(axis=1) + np.log(det)
-                         + logdet_rows)
-        logL[j] = np.where(singular | ~np.isfinite(ll), -np.inf, ll)
-        singular_all &= singular
-        steps[j], covs[j] = d, C
-        Ch = np.einsum("bcd,bkd->bkc", C, h)  # (b,2,3)
-        bias[j] = f * (t - np.einsum("bkc,bc->bk", h, d))
-        bvar[j] = f + f * f * np.einsum("bkc,bkc->bk", h, Ch)
-        cross[j] = -f[..., None] * Ch
+    p = (PHI_GRID * PHI_GRID)[:, None]  # (G,1)
+    F = _row_products(J[:, :2], r[:2], a[:2], W1[:2])  # (15,2,n,b)
+    Jr, rr, Wr = J[:, 2], r[2], W1[2]
+    WJr = Jr * Wr
+    range_sums = np.stack([(WJr[c] * Jr[d]).sum(axis=0) for c, d in PAIRS]
+                          + [(WJr[c] * rr).sum(axis=0) for c in range(3)] + [(Wr * rr * rr).sum(axis=0)])
+    if share is None:  # the same sums for every candidate
+        S = np.broadcast_to(F.sum(axis=2), (G, 15, 2, b))
+        logdet_rows = np.zeros((G, b))
+    else:  # the frame-to-frame attitude variance is what the bias leaves of the stated one
+        S = np.empty((G, 15, 2, b))
+        logdet_rows = np.empty((G, b))
+        share = np.where(W1[:2] > 0, share, 0.0)  # rows not in use: ratio 1, no log det
+        for j in range(G):
+            ratio = np.maximum(1.0 - p[j, 0] * share, RATIO_FLOOR)
+            np.einsum("fknb,knb->fkb", F, 1.0 / ratio, out=S[j])
+            logdet_rows[j] = np.log(ratio).reshape(-1, b).sum(axis=0)
+    both = S[:, :10].sum(axis=2) + range_sums  # (G,10,b): N0's six entries, g0, c0
+    s, t = S[:, _AA], S[:, _AR]  # (G,2,b)
+    h = S[:, _AJ]  # (G,3,2,b)
+    f = p[..., None] / (1.0 + p[..., None] * s)  # (G,2,b)
+    fh = f[:, None] * h
+    n00, n01, n02, n11, n12, n22 = (both[:, e] - (fh[:, c] * h[:, d]).sum(axis=1) for e, (c, d) in enumerate(PAIRS))
+    g = both[:, _JR] - (fh * t[:, None]).sum(axis=2)  # (G,3,b)
+    q = both[:, _RR] - (f * t * t).sum(axis=1)
+    # the inverse by cofactors, singular as `stacked.inverse3` judges it
+    c00, c01, c02 = n11 * n22 - n12 * n12, n02 * n12 - n01 * n22, n01 * n12 - n02 * n11
+    det = n00 * c00 + n01 * c01 + n02 * c02
+    with np.errstate(divide="ignore", invalid="ignore"):
+        singular = ~((n00 > 0) & (n11 > 0) & (n22 > 0) & (det / (n00 * n11 * n22) > SINGULAR_DET))
+        C = np.stack([c00, c01, c02, n00 * n22 - n02 * n02, n01 * n02 - n00 * n12, n00 * n11 - n01 * n01]) / det
+    C = np.where(singular, np.nan, C)  # (6,G,b) in PAIRS order
+    full = ((0, 1, 2), (1, 3, 4), (2, 4, 5))  # the PAIRS entry of (c, d)
+    d = np.stack([sum(C[full[c][e]] * g[:, e] for e in range(3)) for c in range(3)], axis=1)  # (G,3,b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ll = -0.5 * (q - (g * d).sum(axis=1) + np.log1p(p[..., None] * s).sum(axis=1) + np.log(det) + logdet_rows)
+    logL = np.where(singular | ~np.isfinite(ll), -np.inf, ll)
+    singular_all = singular.all(axis=0)
+    Ch = np.stack([sum(C[full[c][e]][:, None] * h[:, e] for e in range(3)) for c in range(3)], axis=1)  # (G,3,2,b)
+    bias = f * (t - (h * d[:, :, None]).sum(axis=1))  # (G,2,b)
+    bvar = f + f * f * (h * Ch).sum(axis=1)
+    cross = -f[:, None] * Ch  # (G,3,2,b)
     top = logL.max(axis=0)
     with np.errstate(invalid="ignore"):
         pi = np.exp(logL - np.where(np.isfinite(top), top, 0.0))
@@ -113,14 +132,15 @@ def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None,
     total = pi.sum(axis=0)
     pi = np.where(total > 0, pi / np.where(total > 0, total, 1.0), 1.0 / G)
     # a singular candidate has no weight (pi = 0); keep its NaNs out of the sums
-    steps, covs, bias, bvar, cross = (np.where(np.isfinite(x), x, 0.0) for x in (steps, covs, bias, bvar, cross))
-    step = np.einsum("gb,gbc->bc", pi, steps)
-    dev = steps - step
-    cov = np.einsum("gb,gbcd->bcd", pi, covs + dev[..., :, None] * dev[..., None, :])
-    bias_mean = np.einsum("gb,gbk->bk", pi, bias)
+    d, C, bias, bvar, cross = (np.where(np.isfinite(x), x, 0.0) for x in (d, C, bias, bvar, cross))
+    step = (pi[:, None] * d).sum(axis=0)  # (3,b)
+    dev = d - step
+    cov6 = np.stack([(pi * (C[e] + dev[:, c] * dev[:, dd])).sum(axis=0) for e, (c, dd) in enumerate(PAIRS)])
+    cov = cov6[[0, 1, 2, 1, 3, 4, 2, 4, 5]].T.reshape(b, 3, 3)
+    bias_mean = (pi[:, None] * bias).sum(axis=0)  # (2,b)
     bdev = bias - bias_mean
-    bias_var = np.einsum("gb,gbk->bk", pi, bvar + bdev * bdev)
-    bias_cross = np.einsum("gb,gbkc->bkc", pi, cross + bdev[..., None] * dev[:, :, None, :])
+    bias_var = (pi[:, None] * (bvar + bdev * bdev)).sum(axis=0)
+    bias_cross = (pi[:, None, None] * (cross + bdev[:, None] * dev[:, :, None])).sum(axis=0)  # (3,2,b)
     cov[singular_all] = np.nan
-    return {"step": step, "covariance": cov, "posterior": pi.T, "bias": bias_mean, "bias_var": bias_var,
-            "bias_cross": bias_cross, "singular": singular_all}
+    return {"step": step.T, "covariance": cov, "posterior": pi.T, "bias": bias_mean.T, "bias_var": bias_var.T,
+            "bias_cross": bias_cross.transpose(2, 1, 0), "singular": singular_all}

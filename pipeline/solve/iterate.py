@@ -46,7 +46,8 @@ class Model:
     idx (lam: the damping, None unless damped); trial(idx, Xn) -> (k,) bool: evaluate the problems at Xn, where
     the cost did not rise; accept(idx, accepted) -> (k,) bool: keep the trial's state where accepted, and which
     rejected steps to retry undamped; converged(idx) -> (k,) bool: the problems to iterate again (variance
-    components changed). For `mle.finish`: extra_dof, adjust (the bias averaging), bias_extras."""
+    components changed); settle() once the iteration ends. For `mle.finish`: extra_dof, adjust (the bias
+    averaging), bias_extras."""
 
     damped = False
     drift_modelled = False
@@ -59,6 +60,9 @@ class Model:
 
     def converged(self, idx):
         return np.zeros(idx.size, dtype=bool)
+
+    def settle(self):
+        """After the iteration: the state of the problems complete (a model keeping the active ones apart)."""
 
     def extra_dof(self):
         return 0
@@ -112,6 +116,7 @@ def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iteratio
         s[done] = Status.CONVERGED
         status[idx] = s
         active[idx] = still
+    model.settle()
 
 
 class _StepModel(Model):

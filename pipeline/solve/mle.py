@@ -14,7 +14,16 @@ from pipeline.solve import iterate as _iterate
 from pipeline.solve.estimate import Status
 from pipeline.solve.iterate import problem_scale_m, start_status
 from pipeline.solve.observations import Sigma
-from pipeline.solve.stacked import SINGULAR_DET, Planes, Stacked, condition_numbers, evaluate, inverse3
+from pipeline.solve.stacked import (
+    SINGULAR_DET,
+    Planes,
+    Stacked,
+    condition_numbers,
+    evaluate,
+    inverse3,
+    put_last,
+    take_last,
+)
 
 ROBUST_LOSSES = (None, "huber", "cauchy", "redescending")
 #: the default loss of `solve` and `solve_batch`
@@ -47,36 +56,43 @@ def _curvature(e: np.ndarray, robust: str) -> np.ndarray:
     return np.maximum((1.0 - z) * w * w, 0.001 * w)
 
 
-def _rho_and_weight(e: np.ndarray, robust: str | None):
-    """Loss rho(e) and IRLS weight rho'(e)/e of standardized residuals e."""
+def _rho_and_weight(e: np.ndarray, robust: str | None, rho: bool = True):
+    """Loss rho(e) and IRLS weight rho'(e)/e of standardized residuals e (rho None unless asked for)."""
     if robust is None:
-        return 0.5 * e * e, np.ones_like(e)
+        return (0.5 * e * e if rho else None), np.ones_like(e)
     if robust == "huber":
         a = np.abs(e)
+        w = np.minimum(1.0, HUBER_C / np.maximum(a, 1e-300))
+        if not rho:
+            return None, w
         t = np.maximum(a - HUBER_C, 0.0)  # rho = e^2/2 inside, c|e| - c^2/2 = e^2/2 - (|e| - c)^2/2 outside
-        return 0.5 * (e * e - t * t), np.minimum(1.0, HUBER_C / np.maximum(a, 1e-300))
+        return 0.5 * (e * e - t * t), w
     if robust == "redescending":
-        return _redescending(e)
+        return _redescending(e, rho=rho)
     z = (e / CAUCHY_C) ** 2
-    return 0.5 * CAUCHY_C ** 2 * np.log1p(z), 1.0 / (1.0 + z)
+    return (0.5 * CAUCHY_C ** 2 * np.log1p(z) if rho else None), 1.0 / (1.0 + z)
 
 
-def _redescending(e: np.ndarray, A: float = REDESCEND_A):
+def _redescending(e: np.ndarray, A: float = REDESCEND_A, rho: bool = True):
     """rho and weight of the redescending loss: w = 1 for |e| <= A, (1 - t^2)^2 with t = (|e| - A) / (B - A)
-    up to B = REDESCEND_B, 0 beyond; rho = integral of w e de (continuous, constant beyond B)."""
+    up to B = REDESCEND_B, 0 beyond; rho = integral of w e de (continuous, constant beyond B); rho None unless
+    asked for."""
     D = REDESCEND_B - A
     a = np.abs(e)
     t = np.clip((a - A) / D, 0.0, 1.0)
-    u = 1.0 - t * t
-    w = np.where(a <= A, 1.0, u * u)
-    tail = 0.5 * A * A + D * (A * (t - 2.0 * t ** 3 / 3.0 + t ** 5 / 5.0) + D * (1.0 - u ** 3) / 6.0)
+    t2 = t * t
+    u = 1.0 - t2
+    w = u * u  # 1 where |e| <= A (t = 0)
+    if not rho:
+        return None, w
+    tail = 0.5 * A * A + D * (A * t * (1.0 - t2 * (2.0 / 3.0 - t2 / 5.0)) + D * (1.0 - w * u) / 6.0)
     return np.where(a <= A, 0.5 * e * e, tail), w
 
 
-def pixel_pair_redescending(e_u: np.ndarray, e_v: np.ndarray):
+def pixel_pair_redescending(e_u: np.ndarray, e_v: np.ndarray, rho: bool = True):
     """rho and weight (shaped as e_u) of the redescending loss of the pixel residuals (e_u, e_v), standardized,
     by their length: a mistracked frame moves the pixel in 2-D, and both coordinates go (or stay) together."""
-    return _redescending(np.sqrt(e_u * e_u + e_v * e_v), REDESCEND_A_PIXEL)
+    return _redescending(np.sqrt(e_u * e_u + e_v * e_v), REDESCEND_A_PIXEL, rho)
 
 
 def bias_prior_deg(sigma: Sigma, options: dict) -> tuple[float | None, bool]:
@@ -259,7 +275,7 @@ def robust_scale(m) -> None:
             mad = 1.4826 * np.nanmedian(e, axis=0)
         big = np.isfinite(mad) & (cnt >= 4) & (mad > 1.0 + 2.34 / np.sqrt(np.maximum(cnt, 1)))
         f = np.where(big, mad ** 2, 1.0)
-        m.rescale(np.arange(E.shape[-1]), g, f)
+        m.rescale(slice(None), g, f)
         m.guard[:, g] = f
 
 
@@ -374,22 +390,58 @@ class White(_iterate.Model):
         self.robust = robust
         self.J, self.E, self.ok, self.z, self.cost, self.wr = self._eval(self.pl, self.a, self.X, self.z, robust)
         self.newton_ok = np.full(self.st.size, robust in ("huber", "cauchy") and self.a is None)
+        self._cidx = self._c = None
 
-    def _sub(self, idx):
-        """(full, the arrays of problems idx) without copies when idx is the whole batch."""
-        full = idx.size == self.st.size
-        pick = (lambda x: x) if full else (lambda x: None if x is None else x[..., idx])
-        return full, pick
+    #: the iteration state of each problem (planes over the B problems; a read-only), kept for the active
+    #: problems by `_active` while `drive` iterates
+    STATE = ("J", "E", "ok", "wr", "z", "a")
+
+    def _active(self, idx):
+        """[J, E, ok, wr, z, a] of the problems idx (sorted; None for what the model lacks). The state of the
+        active problems is kept between iterations (`accept` merges into it) and written back to the full
+        arrays as problems leave the active set (`settle` at the end): an iteration moves no data of the
+        problems it does not touch."""
+        cidx = self._cidx
+        if cidx is not None and not (cidx is idx or np.array_equal(cidx, idx)):
+            pos = np.searchsorted(cidx, idx)
+            if (pos < cidx.size).all() and (cidx[np.minimum(pos, cidx.size - 1)] == idx).all():  # a subset
+                leave = np.ones(cidx.size, dtype=bool)
+                leave[pos] = False
+                self._write_back(cidx[leave], [None if c is None else take_last(c, leave) for c in self._c])
+                self._c = [None if c is None else take_last(c, pos) for c in self._c]
+                self._cidx = idx
+            else:
+                self.settle()
+        if self._cidx is None:
+            full = idx.size == self.st.size
+            self._c = [None if x is None else (x if full else take_last(x, idx))
+                       for x in (getattr(self, name) for name in self.STATE)]
+            self._cidx = idx
+        return self._c
+
+    def _write_back(self, idx, state):
+        for name, c in zip(self.STATE, state, strict=True):
+            if c is not None and name != "a":
+                put_last(getattr(self, name), idx, c)
+
+    def settle(self):
+        """Write the active problems' state back to the full arrays."""
+        if self._cidx is None:
+            return
+        if self._cidx.size == self.st.size:
+            for name, c in zip(self.STATE, self._c, strict=True):
+                setattr(self, name, c)
+        else:
+            self._write_back(self._cidx, self._c)
+        self._cidx = self._c = None
 
     def step(self, idx, X, lam):
-        _, pick = self._sub(idx)
-        Ji, Ei, ai, wi = pick(self.J), pick(self.E), pick(self.a), pick(self.wr)
+        Ji, Ei, _, wi, _, ai = self._active(idx)
         if self.robust is None:
             N, g = _normal(Ji, Ei, None)
         else:
-            nok = pick(self.newton_ok)
-            curv = _curvature(Ei, self.robust) if nok.any() else wi
-            N, g = _normal(Ji, Ei, wi, np.where(nok, curv, wi))
+            nok = self.newton_ok[idx]
+            N, g = _normal(Ji, Ei, wi, np.where(nok, _curvature(Ei, self.robust), wi) if nok.any() else wi)
         if ai is not None:
             _bias_schur(N, Ji, ai, wi)
         if self.terrain is not None:
@@ -398,22 +450,16 @@ class White(_iterate.Model):
         return dX, singular
 
     def trial(self, idx, Xn):
-        full, pick = self._sub(idx)
-        self._trial = self._eval(self.pl if full else self.pl.take(idx), pick(self.a), Xn,
-                                 self.z if full else self.z[:, idx], self.robust)
+        z, a = self._active(idx)[4:]
+        self._trial = self._eval(self.pl if idx.size == self.st.size else self.pl.take(idx), a, Xn, z, self.robust)
         return self._trial[4] <= self.cost[idx] * (1 + 1e-12) + 1e-300
 
     def accept(self, idx, accept):
         Jn, En, okn, zn, cost_n, wr_n = self._trial
         a_idx = idx[accept]
-        if a_idx.size == self.st.size:  # every problem moved: take the new arrays as they are
-            self.J, self.E, self.ok, self.wr, self.z = Jn, En, okn, wr_n, zn
-        else:
-            sel = accept if a_idx.size != idx.size else slice(None)
-            self.J[..., a_idx], self.E[..., a_idx], self.ok[..., a_idx] = Jn[..., sel], En[..., sel], okn[..., sel]
-            self.z[:, a_idx] = zn[:, sel]
-            if self.wr is not None:
-                self.wr[..., a_idx] = wr_n[..., sel]
+        every = a_idx.size == idx.size
+        self._c = [new if every or new is None or new is old else np.where(accept, new, old)
+                   for old, new in zip(self._active(idx), (Jn, En, okn, wr_n, zn, self._c[-1]), strict=True)]
         self.cost[a_idx] = cost_n[accept]
         # a rejected Newton step is retried as the IRLS step (a descent step) before damping
         retry = ~accept & self.newton_ok[idx] if self.robust is not None else np.zeros(idx.size, dtype=bool)
@@ -426,8 +472,9 @@ class White(_iterate.Model):
         """Variance components at convergence: the problems whose factors changed go on."""
         if not self.vce:
             return np.zeros(d_idx.size, dtype=bool)
-        factors, usable = _vce_factors(self.J[..., d_idx], self.E[..., d_idx], self.ok[..., d_idx], self.robust,
-                                       None if self.a is None else self.a[..., d_idx],
+        self.settle()  # the variance components rescale the full arrays
+        factors, usable = _vce_factors(take_last(self.J, d_idx), take_last(self.E, d_idx), take_last(self.ok, d_idx),
+                                       self.robust, None if self.a is None else take_last(self.a, d_idx),
                                        None if self.terrain is None else _terrain_rows(self.terrain, self.X[d_idx]))
         more = (np.abs(factors - 1) > VCE_TOL) & usable
         again = more.any(axis=1) & (self.vce_rounds[d_idx] < VCE_MAX_ROUNDS)
@@ -437,15 +484,16 @@ class White(_iterate.Model):
         if rd.size:  # rescale the standardized rows: sigma_g -> sigma_g sqrt(factor_g)
             self.rescale(rd, 0, change[again, 0])
             self.rescale(rd, 1, change[again, 1])
-            J, E, _, z, cost, w_rd = self._eval(self.pl.take(rd), None if self.a is None else self.a[..., rd],
-                                                self.X[rd], self.z[:, rd], self.robust)
-            self.J[..., rd], self.E[..., rd], self.z[:, rd], self.cost[rd] = J, E, z, cost
-            if self.wr is not None:
-                self.wr[..., rd] = w_rd
+            J, E, _, z, cost, w_rd = self._eval(self.pl.take(rd), None if self.a is None else take_last(self.a, rd),
+                                                self.X[rd], take_last(self.z, rd), self.robust)
+            self.cost[rd] = cost
+            for old, new in ((self.J, J), (self.E, E), (self.z, z), (self.wr, w_rd)):
+                if old is not None:
+                    put_last(old, rd, new)
         return again
 
     def rescale(self, idx, g, factor):
-        """Multiply the variances of group g (0 pixels, 1 ranges) of problems idx by factor (len(idx),)."""
+        """Multiply the variances of group g (0 pixels, 1 ranges) of problems idx (indices, or a slice) by factor."""
         self.vf[idx, g] *= factor
         s = 1.0 / np.sqrt(factor)
         rows = slice(0, 2) if g == 0 else slice(2, 3)
@@ -485,12 +533,12 @@ class White(_iterate.Model):
         # prior's and the shared GNSS offset's too (told wrong by that factor, they are likely all wrong alike);
         # the shared offset takes the larger of the two groups' factors
         s, g = self._rows(infl), self._rows(1.0 / self.guard)
-        mix, mix0, E_report = self._mixture(s / np.sqrt(vf_chi), s * g, g, failed, drift_pix)
+        mix, cov_stated, E_report = self._mixture(s / np.sqrt(vf_chi), s * g, g, failed, drift_pix)
         self.mix = mix
         misfit = vf_chi * self.guard.max(axis=1)
         eye = self.position_m ** 2 * np.eye(3)
         cov = np.where(failed[:, None, None], cov, mix["covariance"] + misfit[:, None, None] * eye)
-        cov0 = np.where(failed[:, None, None], cov0, mix0["covariance"] + eye)
+        cov0 = np.where(failed[:, None, None], cov0, cov_stated + eye)
         return cov, cov0, E_report, mix["singular"]
 
     def bias_extras(self, cov, vf_chi) -> dict:
@@ -498,12 +546,12 @@ class White(_iterate.Model):
             return _mixture_summary(self, self.mix, cov)
         return {} if self.a is None else _bias_summary(self, cov, self.hs, vf_chi)
 
-    def _with_terrain(self, J, E, a, w, share):
-        """The mixture's arguments with the terrain prior (if any) at self.X as one more frame: its range row
-        the terrain residual, no pixel, no bias column, unit weight."""
+    def _with_terrain(self, J, E, a, w, share, idx=slice(None)):
+        """The mixture's arguments (of problems idx) with the terrain prior (if any) at self.X as one more frame:
+        its range row the terrain residual, no pixel, no bias column, unit weight."""
         if self.terrain is None:
             return J, E, a, w, share
-        jt, et, _ = _terrain_rows(self.terrain, self.X)
+        jt, et, _ = _terrain_rows(self.terrain, self.X[idx])
         b = E.shape[-1]
         Jt = np.zeros((3, 3, 1, b))
         Jt[:, 2, 0] = jt
@@ -539,8 +587,17 @@ class White(_iterate.Model):
             mix = bias_mixture.mixture(*self._with_terrain(J * s, E * s, a_mix, w, share))
             step = np.where(keep[:, None] & np.isfinite(mix["step"]), mix["step"], 0.0)
             self.X += step
-        share0 = np.where(drift_pix, 0.0, np.minimum((a0 * g)[:2] ** 2, 1.0)) if self.split_attitude else None
-        mix0 = bias_mixture.mixture(*self._with_terrain(J * g, E * g, a0 * g, w, share0))  # the same point, as stated
+        # the same point as stated (rows and bias columns scaled by g): where nothing scaled them (s = g = 1) the
+        # mixture just computed, else computed again for those problems
+        cov_stated = mix["covariance"].copy()
+        restate = np.flatnonzero(~((s == 1).all(axis=(0, 1)) & (g == 1).all(axis=(0, 1))))
+        if restate.size:
+            J0, E0, w0, a0g = (take_last(x, restate) for x in (J, E, w, a0 * g))
+            g0 = take_last(g, restate)
+            share0 = (np.where(take_last(drift_pix, restate), 0.0, np.minimum(a0g[:2] ** 2, 1.0))
+                      if self.split_attitude else None)
+            cov_stated[restate] = bias_mixture.mixture(*self._with_terrain(J0 * g0, E0 * g0, a0g, w0, share0,
+                                                                           restate))["covariance"]
         # the bias in units of the stated prior: the columns passed carry the misfit's scaling s_bias / s
         unit = (s_bias / s)[0, 0]
         mix["bias"] = mix["bias"] * unit[:, None]
@@ -549,7 +606,7 @@ class White(_iterate.Model):
         mix["prior_scale"] = unit
         E_report = evaluate(self.pl, self.X)[1]
         E_report[:2] -= a0[:2] * mix["bias"].T[:, None, :]
-        return mix, mix0, E_report
+        return mix, cov_stated, E_report
 
 
 def _terrain_rows(terrain, X: np.ndarray):
@@ -581,26 +638,35 @@ def _full3(N6):
 
 def _profile_bias(E, a, robust, z):
     """The bias-corrected residuals E - a z (3,n,b) and z (3,b): the bias (in prior standard deviations) that
-    minimizes sum rho(E - a z) + |z|^2 / 2 for the u and v rows (a few IRLS rounds from the previous z)."""
-    for _ in range(1 if robust is None else 4):
-        w = 1.0 if robust is None else _cost_weights(E - a * z[:, None, :], robust)[1]
-        for k in (0, 1):
-            wa = a[k] if robust is None else w[k] * a[k]
-            z[k] = (wa * E[k]).sum(axis=0) / (1.0 + (wa * a[k]).sum(axis=0))
+    minimizes sum rho(E - a z) + |z|^2 / 2 for the u and v rows (a few IRLS rounds from the previous z; the
+    range rows carry no bias)."""
+    a2 = a[:2]
+    aE, aa = a2 * E[:2], a2 * a2  # (2,n,b)
+    if robust is None:
+        z[:2] = aE.sum(axis=1) / (1.0 + aa.sum(axis=1))
+    for _ in range(0 if robust is None else 4):
+        Euv = E[:2] - a2 * z[:2, None, :]
+        if robust == "redescending":  # one weight per frame for both rows
+            w = pixel_pair_redescending(Euv[0], Euv[1], rho=False)[1]
+            num, den = np.einsum("nb,knb->kb", w, aE), np.einsum("nb,knb->kb", w, aa)
+        else:
+            w = _rho_and_weight(Euv, robust, rho=False)[1]
+            num, den = np.einsum("knb,knb->kb", w, aE), np.einsum("knb,knb->kb", w, aa)
+        z[:2] = num / (1.0 + den)
     return E - a * z[:, None, :], z
 
 
 def _bias_schur(N, J, a, w):
     """Eliminate the u and v bias from the six normal-matrix entries N (in place): N -= h h^T / (1 + s) with
-    h = J^T W a, s = a^T W a per group. Returns [(h (3 of (b,)), s (b,)) for u, v]."""
+    h = J^T W a, s = a^T W a per group. Returns [(h (b,3), s (b,)) for u, v]."""
     out = []
     for k in (0, 1):
         wa = a[k] if w is None else w[k] * a[k]
-        s = (wa * a[k]).sum(axis=0)
-        h = [(wa * J[c, k]).sum(axis=0) for c in range(3)]
+        s = np.einsum("nb,nb->b", wa, a[k])
+        h = np.einsum("cnb,nb->cb", J[:, k], wa)
         for e, (c, d) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
             N[e] = N[e] - h[c] * h[d] / (1.0 + s)
-        out.append((np.stack(h, axis=1), s))
+        out.append((h.T, s))
     return out
 
 

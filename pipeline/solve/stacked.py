@@ -150,8 +150,23 @@ class Planes:
                    c(st.platform_m.transpose(2, 1, 0)), c(st.range_m.T), c(st.has_pix.T), c(st.has_range.T), isd)
 
     def take(self, idx: np.ndarray) -> Planes:
-        return Planes(self.Mc[..., idx], self.p4c[..., idx], self.pixc[..., idx], self.sc[..., idx],
-                       self.rng[:, idx], self.has_pix[:, idx], self.has_range[:, idx], self.isd[..., idx])
+        return Planes(*(take_last(x, idx) for x in (self.Mc, self.p4c, self.pixc, self.sc, self.rng, self.has_pix,
+                                                    self.has_range, self.isd)))
+
+
+def take_last(x: np.ndarray, idx) -> np.ndarray:
+    """x[..., idx] for integer (or boolean) idx: the problems on the last axis of planes. np.take and
+    np.compress are several times faster than fancy indexing there (which copies element by element)."""
+    idx = np.asarray(idx)
+    return np.compress(idx, x, axis=-1) if idx.dtype == bool else np.take(x, idx, axis=-1)
+
+
+def put_last(x: np.ndarray, idx: np.ndarray, v: np.ndarray) -> None:
+    """x[..., idx] = v in place for integer idx (x C-contiguous, v shaped x[..., idx]): by flat indices (np.put,
+    ~1.6x faster than fancy assignment on the last axis)."""
+    b = x.shape[-1]
+    flat = (np.arange(0, x.size, b)[:, None] + idx).ravel()
+    np.put(x, flat, np.broadcast_to(v, (*x.shape[:-1], len(idx))))
 
 
 def evaluate(pl: Planes, X: np.ndarray):

@@ -29,7 +29,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import cho_solve_banded, cholesky_banded
+from scipy.linalg.lapack import dpbtrf as _pbtrf
+from scipy.linalg.lapack import dpbtrs as _pbtrs
 
 from pipeline.solve import iterate as _iterate
 from pipeline.solve import mle as _mle
@@ -46,12 +47,48 @@ _MIN_INNOVATION = 1e-10
 class Group:
     """One uncorrelated block of rows (u, v or range) of one problem: rows (k,) into the rows in use (time
     order), R0 (k,) white variances, gains (k, p) of p unit-variance Gauss-Markov states, a (k-1, p) their
-    transitions (empty p: white), marginal variances C_ii (k,)."""
+    transitions (empty p: white), marginal variances C_ii (k,). The parts of the banded matrix A that do not
+    depend on the row weights are built once; the factorization of A is kept for the last weights (an
+    iteration's finish asks for the same weights several times, at different variance scales)."""
     rows: np.ndarray
     R0: np.ndarray
     gains: np.ndarray
     a: np.ndarray
     Cii: np.ndarray
+
+    def __post_init__(self):
+        k, p = self.gains.shape
+        self._last = None  # (Rinv, banded Cholesky factor, its log det term) of the last weights
+        if p == 0 or k == 0:
+            return
+        inn = np.maximum(1.0 - self.a ** 2, _MIN_INNOVATION)  # (k-1, p)
+        # A = K^-1 + G^T R^-1 G, states ordered frame by frame (index i p + j), lower banded storage ab[d, c]:
+        # K^-1's diagonal here, its transitions (offset p) in the template
+        diag = np.ones((k, p))
+        diag[1:] += 1.0 / inn - 1.0
+        diag[:-1] += self.a ** 2 / inn
+        ab = np.zeros((p + 1, k * p))
+        ab[p, :(k - 1) * p] = (-self.a / inn).ravel()
+        self._diag, self._ab, self._log_inn = diag, ab, float(np.log(inn).sum())
+
+    def _factor(self, Rinv: np.ndarray):
+        """(lower banded Cholesky factor of A, 2 log det of it + log det K) for the row weights Rinv (k,)."""
+        if self._last is not None and np.array_equal(self._last[0], Rinv):
+            return self._last[1], self._last[2]
+        k, p = self.gains.shape
+        g = self.gains
+        ab = self._ab.copy()
+        for d in range(p):  # the same frame's states: G^T R^-1 G, offsets 0..p-1
+            blk = Rinv[:, None] * g[:, :p - d] * g[:, d:]
+            if d == 0:
+                blk = blk + self._diag
+            ab[d].reshape(k, p)[:, :p - d] = blk
+        cb, info = _pbtrf(ab, lower=1, overwrite_ab=1)  # LAPACK directly: scipy's checks cost more than the solve
+        if info > 0:
+            raise np.linalg.LinAlgError(f"{info}-th leading minor not positive definite")
+        ld = 2.0 * float(np.log(cb[0]).sum()) + self._log_inn
+        self._last = (Rinv, cb, ld)
+        return cb, ld
 
     def solve(self, Rinv: np.ndarray, Y: np.ndarray, scale: float = 1.0):
         """(C_w^-1 Y (k,q), log det C_w) for C_w = scale (R + G K G^T) with R = 1/Rinv (Rinv (k,) >= 0, in units
@@ -63,24 +100,12 @@ class Group:
         if p == 0 or k == 0:
             return RiY / scale, logdet
         g = self.gains
-        inn = np.maximum(1.0 - self.a ** 2, _MIN_INNOVATION)  # (k-1, p)
-        # A = K^-1 + G^T R^-1 G, states ordered frame by frame (index i p + j), lower banded storage ab[d, c]
-        diag = np.ones((k, p))
-        diag[1:] += 1.0 / inn - 1.0
-        diag[:-1] += self.a ** 2 / inn
-        ab = np.zeros((p + 1, k * p))
-        rw = Rinv
-        for d in range(p):  # the same frame's states: G^T R^-1 G, offsets 0..p-1
-            blk = rw[:, None] * g[:, :p - d] * g[:, d:]
-            if d == 0:
-                blk = blk + diag
-            ab[d].reshape(k, p)[:, :p - d] = blk
-        ab[p, :(k - 1) * p] = (-self.a / inn).ravel()  # transitions: offset p
-        cb = cholesky_banded(ab, lower=True, check_finite=False)
+        cb, ld = self._factor(Rinv)
         GtRiY = (g[:, :, None] * RiY[:, None, :]).reshape(k * p, -1)
-        Z = cho_solve_banded((cb, True), GtRiY, check_finite=False).reshape(k, p, -1)
-        out = (RiY - rw[:, None] * np.einsum("kp,kpq->kq", g, Z)) / scale
-        logdet += 2.0 * float(np.log(cb[0]).sum()) + float(np.log(inn).sum())
+        Z = _pbtrs(cb, GtRiY, lower=1)[0]  # info is nonzero only for malformed arguments
+        Z = Z.reshape(k, p, -1)
+        out = (RiY - Rinv[:, None] * np.einsum("kp,kpq->kq", g, Z)) / scale
+        logdet += ld
         return out, logdet
 
 
@@ -213,6 +238,7 @@ class Correlated(_iterate.Model):
         self.vce_rounds = np.zeros(1, dtype=np.int64)
         self.pf, self.rf = np.flatnonzero(st.has_pix[0]), np.flatnonzero(st.has_range[0])
         self.A = rows_in_use(st, X[0])
+        self._last_forms = None
 
     def _planes(self, rows: np.ndarray, fill: float) -> np.ndarray:
         """(3,n,1) planes of per-row values (m,) (u, v of the pixel frames, then the ranged frames)."""
@@ -232,8 +258,16 @@ class Correlated(_iterate.Model):
                                                                         self.wr[2, self.rf, 0]])
 
     def _forms(self, var_scale=1.0):
-        q = quadratic_forms(self.model, self.A, self.w, self.vf[0] * var_scale)
-        return q, sum(f for f, _, _ in q)
+        """(`quadratic_forms`, their sum) at the current rows, weights and variance factors times var_scale (2,);
+        the last ones are kept (the convergence test and the finish ask again at the same state)."""
+        vf = self.vf[0] * var_scale
+        last = self._last_forms
+        if last is not None and last[0] is self.A and np.array_equal(last[1], self.w) and np.array_equal(last[2], vf):
+            return last[3]
+        q = quadratic_forms(self.model, self.A, self.w, vf)
+        out = (q, sum(f for f, _, _ in q))
+        self._last_forms = (self.A, self.w, vf, out)
+        return out
 
     def start(self, robust):
         self.robust = robust
@@ -272,7 +306,7 @@ class Correlated(_iterate.Model):
 
     def information(self, var_scale):
         G = self._forms(var_scale[0])[1]
-        return G[None, :3, :3], np.array([G[3, 3]])
+        return G[None, :3, :3].copy(), np.array([G[3, 3]])
 
 
 def _vce_factors(q, G):

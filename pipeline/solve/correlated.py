@@ -121,11 +121,19 @@ class Model:
     def correlated(self) -> bool:
         return any(g.a.size and (g.a > 0).any() and (g.gains != 0).any() for g in self.groups)
 
-    def Cii(self) -> np.ndarray:
-        out = np.empty(self.m)
+    def __post_init__(self):
+        self._Cii, self._R0 = np.empty(self.m), np.empty(self.m)
         for g in self.groups:
-            out[g.rows] = g.Cii
-        return out
+            self._Cii[g.rows], self._R0[g.rows] = g.Cii, g.R0
+
+    def Cii(self) -> np.ndarray:
+        return self._Cii.copy()
+
+    def inverse_white(self, w: np.ndarray) -> np.ndarray:
+        """(m,) 1 / R_w, the white variances with the robust weights w (m,): R_w = C_ii / w - (C_ii - R0) (the
+        weight inflates the row's own variance only); 0 where w = 0."""
+        with np.errstate(divide="ignore"):
+            return np.where(w > 0, w / (self._Cii - w * (self._Cii - self._R0)), 0.0)
 
 
 def _chain(t_s: np.ndarray, tau_s: float | None) -> np.ndarray:
@@ -196,14 +204,12 @@ def quadratic_forms(model: Model, A: np.ndarray, w: np.ndarray, vf: np.ndarray):
     weights w (m,) (row variance C_ii / w, the rest of C unchanged) and the variance factors vf (2,) (pixel,
     range)."""
     out = []
+    Rinv_all = model.inverse_white(w)
     for gi, g in enumerate(model.groups):
         if g.rows.size == 0:
             out.append((np.zeros((4, 4)), 0.0, 0))
             continue
-        wg = w[g.rows]
-        # R_w = C_ii / w - (C_ii - R0): the weight inflates the row's own variance only
-        with np.errstate(divide="ignore"):
-            Rinv = np.where(wg > 0, wg / (g.Cii - wg * (g.Cii - g.R0)), 0.0)
+        Rinv = Rinv_all[g.rows]
         Y = A[g.rows]
         CY, logdet = g.solve(Rinv, Y, vf[0] if gi < 2 else vf[1])
         out.append((Y.T @ CY, logdet, int(np.count_nonzero(Rinv))))
@@ -236,26 +242,30 @@ class Correlated(_iterate.Model):
         self.grp = np.r_[np.zeros(model.npix, dtype=int), np.ones(model.m - model.npix, dtype=int)]
         self.vf, self.guard = np.ones((1, 2)), np.ones((1, 2))
         self.vce_rounds = np.zeros(1, dtype=np.int64)
-        self.pf, self.rf = np.flatnonzero(st.has_pix[0]), np.flatnonzero(st.has_range[0])
+        pf, rf = np.flatnonzero(st.has_pix[0]), np.flatnonzero(st.has_range[0])
+        # the rows' places in the (3,n,1) residual planes: u, v of the pixel frames (interleaved), the ranged frames
+        self._at = np.concatenate([(np.arange(2)[None, :] * st.n + pf[:, None]).ravel(), 2 * st.n + rf])
+        self.ok = self._planes(np.ones(model.m), 0.0) > 0
         self.A = rows_in_use(st, X[0])
         self._last_forms = None
+        self._scaled_vf = None  # the variance factors of the row scales self._s and self._isd
 
     def _planes(self, rows: np.ndarray, fill: float) -> np.ndarray:
         """(3,n,1) planes of per-row values (m,) (u, v of the pixel frames, then the ranged frames)."""
         out = np.full((3, self.st.n, 1), fill)
-        npix = self.model.npix
-        out[0, self.pf, 0], out[1, self.pf, 0], out[2, self.rf, 0] = rows[:npix:2], rows[1:npix:2], rows[npix:]
+        out.reshape(-1)[self._at] = rows
         return out
 
     def _refresh(self):
         """The weights (`mle._cost_weights`) and residual planes at the current rows A, loss and variance
         factors."""
-        s = self.sd * np.sqrt(self.vf[0, self.grp])
-        self.E, self._isd = self._planes(self.A[:, 3] / s, 0.0), self._planes(1.0 / s, 1.0)
-        self.ok = self._planes(np.ones(s.size), 0.0) > 0
+        vf = (float(self.vf[0, 0]), float(self.vf[0, 1]))
+        if vf != self._scaled_vf:
+            self._s = self.sd * np.sqrt(self.vf[0, self.grp])
+            self._isd, self._scaled_vf = self._planes(1.0 / self._s, 1.0), vf
+        self.E = self._planes(self.A[:, 3] / self._s, 0.0)
         self.wr = _mle._cost_weights(self.E, self.robust)[1]
-        self.w = np.ones(s.size) if self.wr is None else np.concatenate([self.wr[:2, self.pf, 0].T.ravel(),
-                                                                        self.wr[2, self.rf, 0]])
+        self.w = np.ones(self._s.size) if self.wr is None else self.wr.reshape(-1)[self._at]
 
     def _forms(self, var_scale=1.0):
         """(`quadratic_forms`, their sum) at the current rows, weights and variance factors times var_scale (2,);

@@ -143,32 +143,53 @@ def _chain(t_s: np.ndarray, tau_s: float | None) -> np.ndarray:
     return np.exp(-np.diff(t_s) / tau_s)
 
 
-def problem_model(st: Stacked, X0: np.ndarray, sigma: Sigma) -> Model:
-    """The `Model` of one problem (B = 1) under sigma, with the focal lengths, the distances at X0 (3,) and the
-    frames' times. Unknown pixel / range sigmas count as 1 px / 1 m (variance components then scale them),
-    like `mle.base_variances`; a part without a correlation time is white (on R)."""
-    s_px = 1.0 if sigma.pixel_px is None else sigma.pixel_px
-    s_r = 1.0 if sigma.range_m is None else sigma.range_m
-    s_pos = 0.0 if sigma.position_m is None else sigma.position_m
-    s_att = 0.0 if sigma.attitude_deg is None else math.radians(sigma.attitude_deg)
+@dataclass(frozen=True)
+class Frames:
+    """What a `Model` takes from one problem at X0, whatever the sigmas: the frames with a pixel in time order
+    (order_p, their times tp (s), focal lengths fx, fy (px) and 1 / distance to X0 inv_d (1/m)), the ranged
+    frames in time order (order_r, times tr (s))."""
+    order_p: np.ndarray
+    tp: np.ndarray
+    fx: np.ndarray
+    fy: np.ndarray
+    inv_d: np.ndarray
+    order_r: np.ndarray
+    tr: np.ndarray
+
+
+def problem_frames(st: Stacked, X0: np.ndarray) -> Frames:
+    """The `Frames` of one problem (B = 1) at X0 (3,)."""
     t_ns = st.t_ns[0]
     t_s = (t_ns - t_ns.min()).astype(np.float64) * 1e-9  # differences of int64 first: no rounding of epochs
     hp, hr = st.has_pix[0], st.has_range[0]
     fx, fy = st.focal_px()
     D = np.sqrt(((X0 - st.platform_m[0, hp]) ** 2).sum(axis=1))
     inv_d = np.where(np.isfinite(D) & (D > 0), 1.0 / np.where(D > 0, D, 1.0), 0.0)
-    k, npix = int(hp.sum()), 2 * int(hp.sum())
-    groups = []
     order_p = np.argsort(t_s[hp], kind="stable")
-    tp = t_s[hp][order_p]
-    for axis, f in ((0, fx[0, hp][order_p]), (1, fy[0, hp][order_p])):
-        parts = [(f * s_att, sigma.attitude_tau_s), (f * s_pos * inv_d[order_p], sigma.position_tau_s)]
-        groups.append(_group(2 * order_p + axis, np.full(k, s_px ** 2), parts, tp))
     order_r = np.argsort(t_s[hr], kind="stable")
-    tr = t_s[hr][order_r]
-    groups.append(_group(npix + order_r, np.full(tr.size, s_r ** 2),
-                         [(np.full(tr.size, s_pos), sigma.position_tau_s)], tr))
-    return Model(tuple(groups), npix, npix + tr.size)
+    return Frames(order_p, t_s[hp][order_p], fx[0, hp][order_p], fy[0, hp][order_p], inv_d[order_p], order_r,
+                  t_s[hr][order_r])
+
+
+def problem_model(st: Stacked, X0: np.ndarray, sigma: Sigma, frames: Frames | None = None) -> Model:
+    """The `Model` of one problem (B = 1) under sigma, with the focal lengths, the distances at X0 (3,) and the
+    frames' times (frames: `problem_frames(st, X0)` where the caller has it). Unknown pixel / range sigmas count
+    as 1 px / 1 m (variance components then scale them), like `mle.base_variances`; a part without a
+    correlation time is white (on R)."""
+    s_px = 1.0 if sigma.pixel_px is None else sigma.pixel_px
+    s_r = 1.0 if sigma.range_m is None else sigma.range_m
+    s_pos = 0.0 if sigma.position_m is None else sigma.position_m
+    s_att = 0.0 if sigma.attitude_deg is None else math.radians(sigma.attitude_deg)
+    fr = problem_frames(st, X0) if frames is None else frames
+    k = fr.order_p.size
+    npix = 2 * k
+    groups = []
+    for axis, f in ((0, fr.fx), (1, fr.fy)):
+        parts = [(f * s_att, sigma.attitude_tau_s), (f * s_pos * fr.inv_d, sigma.position_tau_s)]
+        groups.append(_group(2 * fr.order_p + axis, np.full(k, s_px ** 2), parts, fr.tp))
+    groups.append(_group(npix + fr.order_r, np.full(fr.tr.size, s_r ** 2),
+                         [(np.full(fr.tr.size, s_pos), sigma.position_tau_s)], fr.tr))
+    return Model(tuple(groups), npix, npix + fr.tr.size)
 
 
 def _group(rows, R0, parts, t_s) -> Group:
@@ -217,13 +238,14 @@ def quadratic_forms(model: Model, A: np.ndarray, w: np.ndarray, vf: np.ndarray):
 
 
 def gls(st: Stacked, X0: np.ndarray, model: Model, robust: str | None, vce: bool, tol_m: float,
-        max_iterations: int):
+        max_iterations: int, rows0: np.ndarray | None = None):
     """Generalized least squares `mle` of one problem (B = 1) from a usable start X0 (3,) under `model`
-    (`problem_model`): `Correlated` through the one iteration and finish of `mle.run`. Returns `mle.finish`'s
-    tuple for B = 1."""
+    (`problem_model`): `Correlated` through the one iteration and finish of `mle.run` (rows0: `rows_in_use` at
+    X0 where the caller has it). Returns `mle.finish`'s tuple for B = 1."""
     X = np.array(X0, dtype=np.float64).reshape(1, 3)
     status, bad = start_status(X, None)
-    return _mle.run(Correlated(st, model, X, vce), st, X, status, bad, X.copy(), robust, tol_m, max_iterations)
+    return _mle.run(Correlated(st, model, X, vce, rows0), st, X, status, bad, X.copy(), robust, tol_m,
+                    max_iterations)
 
 
 class Correlated(_iterate.Model):
@@ -236,7 +258,7 @@ class Correlated(_iterate.Model):
 
     drift_modelled = True
 
-    def __init__(self, st: Stacked, model: Model, X: np.ndarray, vce: bool):
+    def __init__(self, st: Stacked, model: Model, X: np.ndarray, vce: bool, rows: np.ndarray | None = None):
         self.st, self.model, self.X, self.vce = st, model, X, vce
         self.sd = np.sqrt(model.Cii())
         self.grp = np.r_[np.zeros(model.npix, dtype=int), np.ones(model.m - model.npix, dtype=int)]
@@ -246,7 +268,7 @@ class Correlated(_iterate.Model):
         # the rows' places in the (3,n,1) residual planes: u, v of the pixel frames (interleaved), the ranged frames
         self._at = np.concatenate([(np.arange(2)[None, :] * st.n + pf[:, None]).ravel(), 2 * st.n + rf])
         self.ok = self._planes(np.ones(model.m), 0.0) > 0
-        self.A = rows_in_use(st, X[0])
+        self.A = rows_in_use(st, X[0]) if rows is None else rows  # replaced, never changed in place
         self._last_forms = None
         self._scaled_vf = None  # the variance factors of the row scales self._s and self._isd
 

@@ -78,10 +78,12 @@ def learn_tau(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce
     covariance), or None when no model gave an answer."""
     lls: dict[tuple, float] = {}
     fits = []
+    # what every candidate's fit starts from: the frames' layout and the rows at X0 (no tau in them)
+    frames0, rows0 = _correlated.problem_frames(st, X0), _correlated.rows_in_use(st, X0)
     for tau, att in candidates(sigma):
         s = dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau, attitude_deg=att)
-        model = _correlated.problem_model(st, X0, s)
-        res = _correlated.gls(st, X0, model, robust, vce, tol_m, max_iterations)
+        model = _correlated.problem_model(st, X0, s, frames0)
+        res = _correlated.gls(st, X0, model, robust, vce, tol_m, max_iterations, rows0)
         X, status = res[0][0], res[2][0]
         if status in (Status.DIVERGED, Status.DEGENERATE) or not np.isfinite(X).all():
             continue

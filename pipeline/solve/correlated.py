@@ -238,67 +238,82 @@ def quadratic_forms(model: Model, A: np.ndarray, w: np.ndarray, vf: np.ndarray):
 
 
 def gls(st: Stacked, X0: np.ndarray, model: Model, robust: str | None, vce: bool, tol_m: float,
-        max_iterations: int, rows0: np.ndarray | None = None):
+        max_iterations: int):
     """Generalized least squares `mle` of one problem (B = 1) from a usable start X0 (3,) under `model`
-    (`problem_model`): `Correlated` through the one iteration and finish of `mle.run` (rows0: `rows_in_use` at
-    X0 where the caller has it). Returns `mle.finish`'s tuple for B = 1."""
-    X = np.array(X0, dtype=np.float64).reshape(1, 3)
+    (`problem_model`): `Correlated` through the one iteration and finish of `mle.run`. Returns `mle.finish`'s
+    tuple for B = 1."""
+    return gls_models(st, X0, [model], robust, vce, tol_m, max_iterations)
+
+
+def gls_models(st: Stacked, X0: np.ndarray, models: list, robust: str | None, vce: bool, tol_m: float,
+               max_iterations: int, rows0: np.ndarray | None = None):
+    """`gls` of one problem (B = 1) under each of several `Model`s of its rows (the candidates of
+    `learned_tau`), iterated side by side as K problems (each exactly as alone: one drive, one finish); rows0:
+    `rows_in_use` at X0 where the caller has it. Returns `mle.finish`'s tuple over the K models."""
+    K = len(models)
+    X = np.repeat(np.array(X0, dtype=np.float64).reshape(1, 3), K, axis=0)
     status, bad = start_status(X, None)
-    return _mle.run(Correlated(st, model, X, vce, rows0), st, X, status, bad, X.copy(), robust, tol_m,
+    stk = st if K == 1 else st.take(np.zeros(K, dtype=np.intp))
+    return _mle.run(Correlated(st, models, X, vce, rows0), stk, X, status, bad, X.copy(), robust, tol_m,
                     max_iterations)
 
 
 class Correlated(_iterate.Model):
     """The `mle` model of one problem (B = 1) with time-correlated errors, as `iterate.drive` and `mle.finish`
-    use it: iteratively reweighted generalized least squares. Every step takes the robust weights
+    use it: iteratively reweighted generalized least squares, under K models of the residual covariance at once
+    (K independent problems on the same rows; `gls_models`). Every step takes the robust weights
     w_i = rho'(z)/z of the rows' marginal standardized residuals z_i = r_i / sqrt(C_ii vf) at the current
     estimate, applies them as inflated variances of an independent gross error, and takes the Gauss-Newton
-    step of the correlated problem (`quadratic_forms`, O(n)); no damping. Its residual planes (3,n,1) hold the
+    step of the correlated problem (`quadratic_forms`, O(n)); no damping. Its residual planes (3,n,K) hold the
     marginal standardized residuals; the drift is modelled (no autocorrelation inflation in `mle.finish`)."""
 
     drift_modelled = True
 
-    def __init__(self, st: Stacked, model: Model, X: np.ndarray, vce: bool, rows: np.ndarray | None = None):
-        self.st, self.model, self.X, self.vce = st, model, X, vce
-        self.sd = np.sqrt(model.Cii())
-        self.grp = np.r_[np.zeros(model.npix, dtype=int), np.ones(model.m - model.npix, dtype=int)]
-        self.vf, self.guard = np.ones((1, 2)), np.ones((1, 2))
-        self.vce_rounds = np.zeros(1, dtype=np.int64)
+    def __init__(self, st: Stacked, models: list, X: np.ndarray, vce: bool, rows: np.ndarray | None = None):
+        K = len(models)
+        m, npix = models[0].m, models[0].npix
+        self.st, self.models, self.X, self.vce = st, models, X, vce
+        self.sd = np.stack([np.sqrt(md.Cii()) for md in models], axis=1)  # (m, K)
+        self.grp = np.r_[np.zeros(npix, dtype=int), np.ones(m - npix, dtype=int)]
+        self.vf, self.guard = np.ones((K, 2)), np.ones((K, 2))
+        self.vce_rounds = np.zeros(K, dtype=np.int64)
         pf, rf = np.flatnonzero(st.has_pix[0]), np.flatnonzero(st.has_range[0])
-        # the rows' places in the (3,n,1) residual planes: u, v of the pixel frames (interleaved), the ranged frames
+        # the rows' places in the (3,n,K) residual planes: u, v of the pixel frames (interleaved), the ranged frames
         self._at = np.concatenate([(np.arange(2)[None, :] * st.n + pf[:, None]).ravel(), 2 * st.n + rf])
-        self.ok = self._planes(np.ones(model.m), 0.0) > 0
-        self.A = rows_in_use(st, X[0]) if rows is None else rows  # replaced, never changed in place
-        self._last_forms = None
+        self.ok = self._planes(np.ones((m, K)), 0.0) > 0
+        A = rows_in_use(st, X[0]) if rows is None else rows
+        self.A = [A] * K  # per model; replaced, never changed in place
+        self._last_forms = [None] * K
         self._scaled_vf = None  # the variance factors of the row scales self._s and self._isd
 
     def _planes(self, rows: np.ndarray, fill: float) -> np.ndarray:
-        """(3,n,1) planes of per-row values (m,) (u, v of the pixel frames, then the ranged frames)."""
-        out = np.full((3, self.st.n, 1), fill)
-        out.reshape(-1)[self._at] = rows
+        """(3,n,K) planes of per-row values (m,K) (u, v of the pixel frames, then the ranged frames)."""
+        out = np.full((3, self.st.n, rows.shape[1]), fill)
+        out.reshape(-1, rows.shape[1])[self._at] = rows
         return out
 
     def _refresh(self):
         """The weights (`mle._cost_weights`) and residual planes at the current rows A, loss and variance
         factors."""
-        vf = (float(self.vf[0, 0]), float(self.vf[0, 1]))
-        if vf != self._scaled_vf:
-            self._s = self.sd * np.sqrt(self.vf[0, self.grp])
-            self._isd, self._scaled_vf = self._planes(1.0 / self._s, 1.0), vf
-        self.E = self._planes(self.A[:, 3] / self._s, 0.0)
+        if self._scaled_vf is None or not np.array_equal(self.vf, self._scaled_vf):
+            self._s = self.sd * np.sqrt(self.vf[:, self.grp].T)
+            self._isd, self._scaled_vf = self._planes(1.0 / self._s, 1.0), self.vf.copy()
+        r = np.stack([A[:, 3] for A in self.A], axis=1)
+        self.E = self._planes(r / self._s, 0.0)
         self.wr = _mle._cost_weights(self.E, self.robust)[1]
-        self.w = np.ones(self._s.size) if self.wr is None else self.wr.reshape(-1)[self._at]
+        self.w = np.ones(self._s.shape) if self.wr is None else self.wr.reshape(-1, self.wr.shape[-1])[self._at]
 
-    def _forms(self, var_scale=1.0):
-        """(`quadratic_forms`, their sum) at the current rows, weights and variance factors times var_scale (2,);
-        the last ones are kept (the convergence test and the finish ask again at the same state)."""
-        vf = self.vf[0] * var_scale
-        last = self._last_forms
-        if last is not None and last[0] is self.A and np.array_equal(last[1], self.w) and np.array_equal(last[2], vf):
+    def _forms(self, k: int, var_scale=1.0):
+        """(`quadratic_forms`, their sum) of model k at its current rows, weights and variance factors times
+        var_scale (2,); the last ones are kept (the convergence test and the finish ask again at the same
+        state)."""
+        vf, w = self.vf[k] * var_scale, self.w[:, k]
+        last = self._last_forms[k]
+        if last is not None and last[0] is self.A[k] and np.array_equal(last[1], w) and np.array_equal(last[2], vf):
             return last[3]
-        q = quadratic_forms(self.model, self.A, self.w, vf)
+        q = quadratic_forms(self.models[k], self.A[k], np.ascontiguousarray(w), vf)
         out = (q, sum(f for f, _, _ in q))
-        self._last_forms = (self.A, self.w, vf, out)
+        self._last_forms[k] = (self.A[k], w, vf, out)
         return out
 
     def start(self, robust):
@@ -306,28 +321,35 @@ class Correlated(_iterate.Model):
         self._refresh()
 
     def step(self, idx, X, lam):
-        G = self._forms()[1]
-        return solve_spd(G[None, :3, :3], G[None, :3, 3])
+        G = np.stack([self._forms(k)[1] for k in idx])
+        return solve_spd(G[:, :3, :3], G[:, :3, 3])
 
     def trial(self, idx, Xn):
-        self._A = rows_in_use(self.st, Xn[0])
+        self._A = [rows_in_use(self.st, x) for x in Xn]
         return super().trial(idx, Xn)
 
     def accept(self, idx, accepted):
-        if accepted[0]:
-            self.A = self._A
+        if accepted.any():
+            for k, A, ok in zip(idx, self._A, accepted, strict=True):
+                if ok:
+                    self.A[k] = A
             self._refresh()
-        return np.zeros(1, dtype=bool)
+        return np.zeros(idx.size, dtype=bool)
 
     def converged(self, idx):
-        if self.vce and self.vce_rounds[0] < VCE_MAX_ROUNDS:
-            factors, usable = _vce_factors(*self._forms())
-            if (usable & (np.abs(factors - 1) > VCE_TOL)).any():
-                self.vf[0] = np.where(usable, self.vf[0] * factors, self.vf[0])
-                self.vce_rounds += 1
-                self._refresh()
-                return np.ones(1, dtype=bool)
-        return np.zeros(1, dtype=bool)
+        again = np.zeros(idx.size, dtype=bool)
+        if not self.vce:
+            return again
+        for j, k in enumerate(idx):
+            if self.vce_rounds[k] < VCE_MAX_ROUNDS:
+                factors, usable = _vce_factors(*self._forms(k))
+                if (usable & (np.abs(factors - 1) > VCE_TOL)).any():
+                    self.vf[k] = np.where(usable, self.vf[k] * factors, self.vf[k])
+                    self.vce_rounds[k] += 1
+                    again[j] = True
+        if again.any():
+            self._refresh()
+        return again
 
     def rescale(self, idx, g, factor):
         self.vf[idx, g] *= factor
@@ -337,8 +359,8 @@ class Correlated(_iterate.Model):
         return self._isd
 
     def information(self, var_scale):
-        G = self._forms(var_scale[0])[1]
-        return G[None, :3, :3].copy(), np.array([G[3, 3]])
+        G = np.stack([self._forms(k, var_scale[k])[1] for k in range(len(self.models))])
+        return G[:, :3, :3].copy(), G[:, 3, 3].copy()
 
 
 def _vce_factors(q, G):

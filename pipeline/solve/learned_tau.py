@@ -78,12 +78,16 @@ def learn_tau(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce
     covariance), or None when no model gave an answer."""
     lls: dict[tuple, float] = {}
     fits = []
-    # what every candidate's fit starts from: the frames' layout and the rows at X0 (no tau in them)
+    # every candidate's fit starts from X0: the frames' layout and the rows there (no tau in them) are built
+    # once, and the fits iterate side by side (each as alone)
     frames0, rows0 = _correlated.problem_frames(st, X0), _correlated.rows_in_use(st, X0)
-    for tau, att in candidates(sigma):
-        s = dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau, attitude_deg=att)
-        model = _correlated.problem_model(st, X0, s, frames0)
-        res = _correlated.gls(st, X0, model, robust, vce, tol_m, max_iterations, rows0)
+    sigmas = [dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau, attitude_deg=att)
+              for tau, att in candidates(sigma)]
+    models = [_correlated.problem_model(st, X0, s, frames0) for s in sigmas]
+    out = _correlated.gls_models(st, X0, models, robust, vce, tol_m, max_iterations, rows0)
+    for k, s in enumerate(sigmas):
+        res = (out[0][k:k + 1], out[1][k:k + 1], out[2][k:k + 1], out[3][k:k + 1], out[4][k:k + 1],
+               {key: v[k:k + 1] for key, v in out[5].items()})
         X, status = res[0][0], res[2][0]
         if status in (Status.DIVERGED, Status.DEGENERATE) or not np.isfinite(X).all():
             continue
@@ -91,6 +95,7 @@ def learn_tau(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce
         ll = log_likelihood(st, X, s, vf)[0]
         if not np.isfinite(ll):
             continue
+        tau, att = s.attitude_tau_s, s.attitude_deg
         lls[(tau, att)] = ll
         fits.append((ll, tau, att, res))
     if not fits:

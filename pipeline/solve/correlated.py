@@ -211,13 +211,17 @@ def _group(rows, R0, parts, t_s) -> Group:
 
 def rows_in_use(st: Stacked, X: np.ndarray) -> np.ndarray:
     """[J | r] (m,4) at X (3,) of one problem (B = 1): the u and v rows of the frames with a pixel (interleaved),
-    then the rows of the frames with a range; r observed - predicted (px, m)."""
-    Jp, rp, _ = pixel_model(st, X[None])
-    Jr, rr, _ = range_model(st, X[None])
+    then the rows of the frames with a range; r observed - predicted (px, m). With X (B,3) and st B copies of
+    one problem: (B,m,4), the rows at each X."""
+    one = X.ndim == 1
+    X = X.reshape(-1, 3)
+    Jp, rp, _ = pixel_model(st, X)
+    Jr, rr, _ = range_model(st, X)
     pix = np.repeat(st.has_pix[0], 2)
     rng = st.has_range[0]
-    return np.concatenate([np.concatenate([Jp[0, pix], rp[0, pix, None]], axis=1),
-                           np.concatenate([Jr[0, rng], rr[0, rng, None]], axis=1)])
+    out = np.concatenate([np.concatenate([Jp[:, pix], rp[:, pix, None]], axis=2),
+                          np.concatenate([Jr[:, rng], rr[:, rng, None]], axis=2)], axis=1)
+    return out[0] if one else out
 
 
 def quadratic_forms(model: Model, A: np.ndarray, w: np.ndarray, vf: np.ndarray):
@@ -254,7 +258,7 @@ def gls_models(st: Stacked, X0: np.ndarray, models: list, robust: str | None, vc
     X = np.repeat(np.array(X0, dtype=np.float64).reshape(1, 3), K, axis=0)
     status, bad = start_status(X, None)
     stk = st if K == 1 else st.take(np.zeros(K, dtype=np.intp))
-    return _mle.run(Correlated(st, models, X, vce, rows0), stk, X, status, bad, X.copy(), robust, tol_m,
+    return _mle.run(Correlated(stk, models, X, vce, rows0), stk, X, status, bad, X.copy(), robust, tol_m,
                     max_iterations)
 
 
@@ -270,6 +274,7 @@ class Correlated(_iterate.Model):
     drift_modelled = True
 
     def __init__(self, st: Stacked, models: list, X: np.ndarray, vce: bool, rows: np.ndarray | None = None):
+        """st: the problem, once per model (K copies); X (K,3) the start of every model, one point."""
         K = len(models)
         m, npix = models[0].m, models[0].npix
         self.st, self.models, self.X, self.vce = st, models, X, vce
@@ -281,7 +286,7 @@ class Correlated(_iterate.Model):
         # the rows' places in the (3,n,K) residual planes: u, v of the pixel frames (interleaved), the ranged frames
         self._at = np.concatenate([(np.arange(2)[None, :] * st.n + pf[:, None]).ravel(), 2 * st.n + rf])
         self.ok = self._planes(np.ones((m, K)), 0.0) > 0
-        A = rows_in_use(st, X[0]) if rows is None else rows
+        A = rows_in_use(st.take(np.zeros(1, dtype=np.intp)), X[0]) if rows is None else rows
         self.A = [A] * K  # per model; replaced, never changed in place
         self._last_forms = [None] * K
         self._scaled_vf = None  # the variance factors of the row scales self._s and self._isd
@@ -325,7 +330,10 @@ class Correlated(_iterate.Model):
         return solve_spd(G[:, :3, :3], G[:, :3, 3])
 
     def trial(self, idx, Xn):
-        self._A = [rows_in_use(self.st, x) for x in Xn]
+        Xall = np.repeat(Xn[:1], len(self.models), axis=0)  # every model's rows at once (the others discarded)
+        Xall[idx] = Xn
+        A = rows_in_use(self.st, Xall)
+        self._A = [A[k] for k in idx]
         return super().trial(idx, Xn)
 
     def accept(self, idx, accepted):

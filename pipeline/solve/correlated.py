@@ -47,9 +47,8 @@ _MIN_INNOVATION = 1e-10
 class Group:
     """One uncorrelated block of rows (u, v or range) of one problem: rows (k,) into the rows in use (time
     order), R0 (k,) white variances, gains (k, p) of p unit-variance Gauss-Markov states, a (k-1, p) their
-    transitions (empty p: white), marginal variances C_ii (k,). The parts of the banded matrix A that do not
-    depend on the row weights are built once; the factorization of A is kept for the last weights (an
-    iteration's finish asks for the same weights several times, at different variance scales)."""
+    transitions (empty p: white), marginal variances C_ii (k,). The parts of the banded matrix A (module
+    docstring) that do not depend on the row weights are built once (`quadratic_forms_stacked` uses them)."""
     rows: np.ndarray
     R0: np.ndarray
     gains: np.ndarray
@@ -58,7 +57,7 @@ class Group:
 
     def __post_init__(self):
         k, p = self.gains.shape
-        self._last = None  # (Rinv, banded Cholesky factor, its log det term) of the last weights
+        self._diag, self._ab, self._log_inn = np.zeros((k, p)), np.zeros((p + 1, k * p)), 0.0
         if p == 0 or k == 0:
             return
         inn = np.maximum(1.0 - self.a ** 2, _MIN_INNOVATION)  # (k-1, p)
@@ -70,43 +69,6 @@ class Group:
         ab = np.zeros((p + 1, k * p))
         ab[p, :(k - 1) * p] = (-self.a / inn).ravel()
         self._diag, self._ab, self._log_inn = diag, ab, float(np.log(inn).sum())
-
-    def _factor(self, Rinv: np.ndarray):
-        """(lower banded Cholesky factor of A, 2 log det of it + log det K) for the row weights Rinv (k,)."""
-        if self._last is not None and np.array_equal(self._last[0], Rinv):
-            return self._last[1], self._last[2]
-        k, p = self.gains.shape
-        g = self.gains
-        ab = self._ab.copy()
-        for d in range(p):  # the same frame's states: G^T R^-1 G, offsets 0..p-1
-            blk = Rinv[:, None] * g[:, :p - d] * g[:, d:]
-            if d == 0:
-                blk = blk + self._diag
-            ab[d].reshape(k, p)[:, :p - d] = blk
-        cb, info = _pbtrf(ab, lower=1, overwrite_ab=1)  # LAPACK directly: scipy's checks cost more than the solve
-        if info > 0:
-            raise np.linalg.LinAlgError(f"{info}-th leading minor not positive definite")
-        ld = 2.0 * float(np.log(cb[0]).sum()) + self._log_inn
-        self._last = (Rinv, cb, ld)
-        return cb, ld
-
-    def solve(self, Rinv: np.ndarray, Y: np.ndarray, scale: float = 1.0):
-        """(C_w^-1 Y (k,q), log det C_w) for C_w = scale (R + G K G^T) with R = 1/Rinv (Rinv (k,) >= 0, in units
-        of scale; 0: a row with no weight, log det then over the rows that have one)."""
-        RiY = Rinv[:, None] * Y
-        keep = Rinv > 0
-        logdet = float(np.sum(np.log(scale / Rinv[keep])))
-        k, p = self.gains.shape
-        if p == 0 or k == 0:
-            return RiY / scale, logdet
-        g = self.gains
-        cb, ld = self._factor(Rinv)
-        GtRiY = (g[:, :, None] * RiY[:, None, :]).reshape(k * p, -1)
-        Z = _pbtrs(cb, GtRiY, lower=1)[0]  # info is nonzero only for malformed arguments
-        Z = Z.reshape(k, p, -1)
-        out = (RiY - Rinv[:, None] * np.einsum("kp,kpq->kq", g, Z)) / scale
-        logdet += ld
-        return out, logdet
 
 
 @dataclass
@@ -224,20 +186,82 @@ def rows_in_use(st: Stacked, X: np.ndarray) -> np.ndarray:
     return out[0] if one else out
 
 
+@dataclass
+class Stack:
+    """K `Model`s of one problem's rows (the same rows and number of states per group; `stack_models`), their
+    arrays stacked over K: per group (rows, gains (K,k,p), band template (K,p+1,kp), K^-1's diagonal (K,k,p),
+    log det K (K,)); Cii, R0 (K,m)."""
+    groups: tuple
+    Cii: np.ndarray
+    R0: np.ndarray
+
+    def take(self, idx: np.ndarray) -> Stack:
+        return Stack(tuple((r, G[idx], ab[idx], dg[idx], li[idx]) for r, G, ab, dg, li in self.groups),
+                     self.Cii[idx], self.R0[idx])
+
+
+def stack_models(models: list) -> Stack:
+    """The `Stack` of K models of the same rows (`problem_model` of one problem under K sigmas with the same
+    parts: the candidates of `learned_tau`)."""
+    groups = []
+    for gs in zip(*(md.groups for md in models), strict=True):
+        if any(g.gains.shape != gs[0].gains.shape or not np.array_equal(g.rows, gs[0].rows) for g in gs):
+            raise ValueError("stack_models: the models differ in their rows or states")
+        groups.append((gs[0].rows, np.stack([g.gains for g in gs]), np.stack([g._ab for g in gs]),
+                       np.stack([g._diag for g in gs]), np.array([g._log_inn for g in gs])))
+    return Stack(tuple(groups), np.stack([md._Cii for md in models]), np.stack([md._R0 for md in models]))
+
+
 def quadratic_forms(model: Model, A: np.ndarray, w: np.ndarray, vf: np.ndarray):
     """Per group (u, v, range): ([J|r]^T C_w^-1 [J|r] (4,4), log det C_w, rows with weight) with the robust
     weights w (m,) (row variance C_ii / w, the rest of C unchanged) and the variance factors vf (2,) (pixel,
     range)."""
-    out = []
-    Rinv_all = model.inverse_white(w)
-    for gi, g in enumerate(model.groups):
-        if g.rows.size == 0:
-            out.append((np.zeros((4, 4)), 0.0, 0))
+    return quadratic_forms_stacked(stack_models([model]), A[None], w[None], np.asarray(vf)[None])[0]
+
+
+def quadratic_forms_stacked(sk: Stack, A: np.ndarray, w: np.ndarray, vf: np.ndarray) -> list:
+    """`quadratic_forms` of K models (a `Stack`) at once, each at its rows A (K,m,4), weights w (K,m) and
+    variance factors vf (K,2): one banded factorization per group for all K (their band matrices side by side
+    are one block-diagonal band matrix). Returns the K lists of `quadratic_forms`."""
+    K = A.shape[0]
+    # R_w = C_ii / w - (C_ii - R0): the weight inflates the row's own variance only
+    with np.errstate(divide="ignore"):
+        Rinv_all = np.where(w > 0, w / (sk.Cii - w * (sk.Cii - sk.R0)), 0.0)
+    out = [[] for _ in range(K)]
+    for gi, (rows, G, ab0, diag, log_inn) in enumerate(sk.groups):
+        k, p = G.shape[1:]
+        if k == 0:
+            for o in out:
+                o.append((np.zeros((4, 4)), 0.0, 0))
             continue
-        Rinv = Rinv_all[g.rows]
-        Y = A[g.rows]
-        CY, logdet = g.solve(Rinv, Y, vf[0] if gi < 2 else vf[1])
-        out.append((Y.T @ CY, logdet, int(np.count_nonzero(Rinv))))
+        Rinv, Y = Rinv_all[:, rows], A[:, rows]
+        scale = vf[:, 0] if gi < 2 else vf[:, 1]
+        RiY = Rinv[:, :, None] * Y
+        logdet = [float(np.sum(np.log(scale[j] / Rinv[j][Rinv[j] > 0]))) for j in range(K)]
+        if p == 0:
+            CY = RiY / scale[:, None, None]
+        else:
+            # A = K^-1 + G^T R^-1 G: the same frame's states (offsets 0..p-1) on the template's transitions
+            ab = ab0.copy()
+            ab4 = ab.reshape(K, p + 1, k, p)
+            for d in range(p):
+                blk = Rinv[:, :, None] * G[:, :, :p - d] * G[:, :, d:]
+                if d == 0:
+                    blk = blk + diag
+                ab4[:, d, :, :p - d] = blk
+            band = np.ascontiguousarray(ab.transpose(1, 0, 2).reshape(p + 1, K * k * p))
+            cb, info = _pbtrf(band, lower=1, overwrite_ab=1)  # LAPACK directly: scipy's checks cost more
+            if info > 0:
+                raise np.linalg.LinAlgError(f"{info}-th leading minor not positive definite")
+            GtRiY = (G[:, :, :, None] * RiY[:, :, None, :]).reshape(K * k * p, -1)
+            Z = _pbtrs(cb, GtRiY, lower=1)[0].reshape(K, k, p, -1)  # info is nonzero only for bad arguments
+            CY = (RiY - Rinv[:, :, None] * np.einsum("jkp,jkpq->jkq", G, Z)) / scale[:, None, None]
+            for j in range(K):
+                logdet[j] += 2.0 * float(np.log(cb[0, j * k * p:(j + 1) * k * p]).sum()) + float(log_inn[j])
+        forms = np.swapaxes(Y, 1, 2) @ CY
+        counts = np.count_nonzero(Rinv, axis=1)
+        for j in range(K):
+            out[j].append((forms[j], logdet[j], int(counts[j])))
     return out
 
 
@@ -289,6 +313,7 @@ class Correlated(_iterate.Model):
         A = rows_in_use(st.take(np.zeros(1, dtype=np.intp)), X[0]) if rows is None else rows
         self.A = [A] * K  # per model; replaced, never changed in place
         self._last_forms = [None] * K
+        self._stack = stack_models(models)
         self._scaled_vf = None  # the variance factors of the row scales self._s and self._isd
 
     def _planes(self, rows: np.ndarray, fill: float) -> np.ndarray:
@@ -308,17 +333,26 @@ class Correlated(_iterate.Model):
         self.wr = _mle._cost_weights(self.E, self.robust)[1]
         self.w = np.ones(self._s.shape) if self.wr is None else self.wr.reshape(-1, self.wr.shape[-1])[self._at]
 
-    def _forms(self, k: int, var_scale=1.0):
-        """(`quadratic_forms`, their sum) of model k at its current rows, weights and variance factors times
-        var_scale (2,); the last ones are kept (the convergence test and the finish ask again at the same
-        state)."""
-        vf, w = self.vf[k] * var_scale, self.w[:, k]
-        last = self._last_forms[k]
-        if last is not None and last[0] is self.A[k] and np.array_equal(last[1], w) and np.array_equal(last[2], vf):
-            return last[3]
-        q = quadratic_forms(self.models[k], self.A[k], np.ascontiguousarray(w), vf)
-        out = (q, sum(f for f, _, _ in q))
-        self._last_forms[k] = (self.A[k], w, vf, out)
+    def _forms(self, idx, var_scale=None) -> list:
+        """Per model k of idx: (`quadratic_forms`, their sum) at its current rows, weights and variance factors
+        times var_scale (len(idx),2) (None: 1); the last ones are kept per model (the convergence test and the
+        finish ask again at the same state)."""
+        vfs = self.vf[idx] if var_scale is None else self.vf[idx] * var_scale
+        out, todo = [None] * len(idx), []
+        for j, k in enumerate(idx):
+            last = self._last_forms[k]
+            if (last is not None and last[0] is self.A[k] and np.array_equal(last[1], self.w[:, k])
+                    and np.array_equal(last[2], vfs[j])):
+                out[j] = last[3]
+            else:
+                todo.append(j)
+        if todo:
+            ks = np.asarray(idx)[todo]
+            sk = self._stack if len(ks) == len(self.models) else self._stack.take(ks)
+            qs = quadratic_forms_stacked(sk, np.stack([self.A[k] for k in ks]), self.w[:, ks].T, vfs[todo])
+            for j, k, q in zip(todo, ks, qs, strict=True):
+                out[j] = (q, sum(f for f, _, _ in q))
+                self._last_forms[k] = (self.A[k], self.w[:, k], vfs[j], out[j])
         return out
 
     def start(self, robust):
@@ -326,7 +360,7 @@ class Correlated(_iterate.Model):
         self._refresh()
 
     def step(self, idx, X, lam):
-        G = np.stack([self._forms(k)[1] for k in idx])
+        G = np.stack([f[1] for f in self._forms(idx)])
         return solve_spd(G[:, :3, :3], G[:, :3, 3])
 
     def trial(self, idx, Xn):
@@ -350,7 +384,7 @@ class Correlated(_iterate.Model):
             return again
         for j, k in enumerate(idx):
             if self.vce_rounds[k] < VCE_MAX_ROUNDS:
-                factors, usable = _vce_factors(*self._forms(k))
+                factors, usable = _vce_factors(*self._forms([k])[0])
                 if (usable & (np.abs(factors - 1) > VCE_TOL)).any():
                     self.vf[k] = np.where(usable, self.vf[k] * factors, self.vf[k])
                     self.vce_rounds[k] += 1
@@ -367,7 +401,7 @@ class Correlated(_iterate.Model):
         return self._isd
 
     def information(self, var_scale):
-        G = np.stack([self._forms(k, var_scale[k])[1] for k in range(len(self.models))])
+        G = np.stack([f[1] for f in self._forms(np.arange(len(self.models)), var_scale)])
         return G[:, :3, :3].copy(), G[:, 3, 3].copy()
 
 

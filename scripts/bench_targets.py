@@ -2,20 +2,23 @@
 """Cost of many targets in one pass (issue 21): the sample flight three_targets with 1 target and with 10,
 side by side in one run.
 
-    python scripts/bench_targets.py [--repeat N] [--config configs/flights/three_targets.yaml]
+    python scripts/bench_targets.py [--repeat N] [--config configs/flights/three_targets.yaml] [--against DIR]
 
 Each case is `pipeline.run.process_group` (what `ridgeloc run` does before writing outputs) in a fresh child
 process, the cases alternating, N times each; per case the median wall time, the median stage times (ingest,
 decode, track, sync, solve; a stage summed over the targets), the median process CPU time of the run (all
 threads; less disturbed than wall time when other work shares the cores) and the median peak resident memory of
 the child (ru_maxrss, which includes the interpreter and libraries). The 10 targets are the flight's three and
-seven more points marked on a grid of frame 4; 1 target is the first of them. Prints the ratios 10 / 1.
+seven more points marked on a grid of frame 4; 1 target is the first of them. Prints the ratios 10 / 1. With
+--against DIR (another checkout, e.g. main's, used read-only) its children run the same cases in turn with this
+code's, and the ratios of this code's medians to its are printed too; the 1-minute load average is printed.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import statistics
 import subprocess
@@ -52,26 +55,13 @@ def child(config: str, n: int) -> None:
                       "maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--config", default=str(ROOT / "configs" / "flights" / "three_targets.yaml"))
-    ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
-    args = ap.parse_args(argv)
-    if args.child is not None:
-        child(args.config, args.child)
-        return 0
-    runs: dict[int, list[dict]] = {1: [], 10: []}
-    for _ in range(max(1, args.repeat)):
-        for n in (1, 10):
-            out = subprocess.run([sys.executable, __file__, "--config", args.config, "--child", str(n)], cwd=ROOT,
-                                 capture_output=True, text=True, check=True)
-            runs[n].append(json.loads(out.stdout.strip().splitlines()[-1]))
+def _table(label: str, runs: dict[int, list[dict]]) -> dict[int, dict]:
+    """Print one code's table and ratios 10 / 1; returns the medians per case."""
     med = {n: {"wall_s": statistics.median(r["wall_s"] for r in rs), "cpu_s": statistics.median(r["cpu_s"] for r in rs),
                "maxrss_mb": statistics.median(r["maxrss_mb"] for r in rs),
                **{s: statistics.median(r["timings_s"].get(s, 0.0) for r in rs) for s in STAGES}}
            for n, rs in runs.items()}
-    print(f"{Path(args.config).name}, median of {args.repeat} run(s) each, alternating, one child process per run")
+    print(label)
     print(f"{'targets':>8} {'located':>8} {'decoded':>8} {'wall s':>8} {'cpu s':>8} {'peak MB':>8} "
           + " ".join(f"{s + ' s':>9}" for s in STAGES))
     for n, rs in runs.items():
@@ -85,6 +75,40 @@ def main(argv=None) -> int:
           f"solve {b['solve'] / max(a['solve'], 1e-9):.2f}x")
     if runs[10][0]["failed"]:
         print(f"not located among the 10: {', '.join(runs[10][0]['failed'])}")
+    return med
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--config", default=str(ROOT / "configs" / "flights" / "three_targets.yaml"))
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--against", default=None, metavar="DIR",
+                    help="another checkout of the project (e.g. main's): its children alternate with this one's")
+    ap.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.child is not None:
+        child(args.config, args.child)
+        return 0
+    trees = [("this code", ROOT)] + ([(f"against {args.against}", Path(args.against).resolve())] if args.against
+                                     else [])
+    runs: dict[str, dict[int, list[dict]]] = {label: {1: [], 10: []} for label, _ in trees}
+    load = [os.getloadavg()[0]]
+    for _ in range(max(1, args.repeat)):
+        for label, root in trees:
+            for n in (1, 10):
+                out = subprocess.run([sys.executable, str(root / "scripts" / "bench_targets.py"), "--config",
+                                      args.config, "--child", str(n)], cwd=root, capture_output=True, text=True,
+                                     check=True)
+                runs[label][n].append(json.loads(out.stdout.strip().splitlines()[-1]))
+        load.append(os.getloadavg()[0])
+    print(f"{Path(args.config).name}, median of {args.repeat} run(s) each, alternating, one child process per run; "
+          f"1-minute load average {min(load):.2f} to {max(load):.2f}")
+    med = {label: _table(label, r) for label, r in runs.items()}
+    if args.against:
+        (_, a), (lb, b) = med.items()
+        print(f"this code / {lb.split(' ', 1)[1]}: " + ", ".join(
+            f"{n} target(s) wall {a[n]['wall_s'] / b[n]['wall_s']:.2f}x cpu {a[n]['cpu_s'] / b[n]['cpu_s']:.2f}x "
+            f"solve {a[n]['solve'] / max(b[n]['solve'], 1e-9):.2f}x" for n in (1, 10)))
     return 0
 
 

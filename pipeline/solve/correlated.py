@@ -29,7 +29,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import cho_solve_banded, cholesky_banded
+from scipy.linalg.lapack import dpbtrf as _pbtrf
+from scipy.linalg.lapack import dpbtrs as _pbtrs
 
 from pipeline.solve import iterate as _iterate
 from pipeline.solve import mle as _mle
@@ -46,42 +47,28 @@ _MIN_INNOVATION = 1e-10
 class Group:
     """One uncorrelated block of rows (u, v or range) of one problem: rows (k,) into the rows in use (time
     order), R0 (k,) white variances, gains (k, p) of p unit-variance Gauss-Markov states, a (k-1, p) their
-    transitions (empty p: white), marginal variances C_ii (k,)."""
+    transitions (empty p: white), marginal variances C_ii (k,). The parts of the banded matrix A (module
+    docstring) that do not depend on the row weights are built once (`quadratic_forms_stacked` uses them)."""
     rows: np.ndarray
     R0: np.ndarray
     gains: np.ndarray
     a: np.ndarray
     Cii: np.ndarray
 
-    def solve(self, Rinv: np.ndarray, Y: np.ndarray, scale: float = 1.0):
-        """(C_w^-1 Y (k,q), log det C_w) for C_w = scale (R + G K G^T) with R = 1/Rinv (Rinv (k,) >= 0, in units
-        of scale; 0: a row with no weight, log det then over the rows that have one)."""
-        RiY = Rinv[:, None] * Y
-        keep = Rinv > 0
-        logdet = float(np.sum(np.log(scale / Rinv[keep])))
+    def __post_init__(self):
         k, p = self.gains.shape
+        self._diag, self._ab, self._log_inn = np.zeros((k, p)), np.zeros((p + 1, k * p)), 0.0
         if p == 0 or k == 0:
-            return RiY / scale, logdet
-        g = self.gains
+            return
         inn = np.maximum(1.0 - self.a ** 2, _MIN_INNOVATION)  # (k-1, p)
-        # A = K^-1 + G^T R^-1 G, states ordered frame by frame (index i p + j), lower banded storage ab[d, c]
+        # A = K^-1 + G^T R^-1 G, states ordered frame by frame (index i p + j), lower banded storage ab[d, c]:
+        # K^-1's diagonal here, its transitions (offset p) in the template
         diag = np.ones((k, p))
         diag[1:] += 1.0 / inn - 1.0
         diag[:-1] += self.a ** 2 / inn
         ab = np.zeros((p + 1, k * p))
-        rw = Rinv
-        for d in range(p):  # the same frame's states: G^T R^-1 G, offsets 0..p-1
-            blk = rw[:, None] * g[:, :p - d] * g[:, d:]
-            if d == 0:
-                blk = blk + diag
-            ab[d].reshape(k, p)[:, :p - d] = blk
-        ab[p, :(k - 1) * p] = (-self.a / inn).ravel()  # transitions: offset p
-        cb = cholesky_banded(ab, lower=True, check_finite=False)
-        GtRiY = (g[:, :, None] * RiY[:, None, :]).reshape(k * p, -1)
-        Z = cho_solve_banded((cb, True), GtRiY, check_finite=False).reshape(k, p, -1)
-        out = (RiY - rw[:, None] * np.einsum("kp,kpq->kq", g, Z)) / scale
-        logdet += 2.0 * float(np.log(cb[0]).sum()) + float(np.log(inn).sum())
-        return out, logdet
+        ab[p, :(k - 1) * p] = (-self.a / inn).ravel()
+        self._diag, self._ab, self._log_inn = diag, ab, float(np.log(inn).sum())
 
 
 @dataclass
@@ -96,11 +83,19 @@ class Model:
     def correlated(self) -> bool:
         return any(g.a.size and (g.a > 0).any() and (g.gains != 0).any() for g in self.groups)
 
-    def Cii(self) -> np.ndarray:
-        out = np.empty(self.m)
+    def __post_init__(self):
+        self._Cii, self._R0 = np.empty(self.m), np.empty(self.m)
         for g in self.groups:
-            out[g.rows] = g.Cii
-        return out
+            self._Cii[g.rows], self._R0[g.rows] = g.Cii, g.R0
+
+    def Cii(self) -> np.ndarray:
+        return self._Cii.copy()
+
+    def inverse_white(self, w: np.ndarray) -> np.ndarray:
+        """(m,) 1 / R_w, the white variances with the robust weights w (m,): R_w = C_ii / w - (C_ii - R0) (the
+        weight inflates the row's own variance only); 0 where w = 0."""
+        with np.errstate(divide="ignore"):
+            return np.where(w > 0, w / (self._Cii - w * (self._Cii - self._R0)), 0.0)
 
 
 def _chain(t_s: np.ndarray, tau_s: float | None) -> np.ndarray:
@@ -110,32 +105,53 @@ def _chain(t_s: np.ndarray, tau_s: float | None) -> np.ndarray:
     return np.exp(-np.diff(t_s) / tau_s)
 
 
-def problem_model(st: Stacked, X0: np.ndarray, sigma: Sigma) -> Model:
-    """The `Model` of one problem (B = 1) under sigma, with the focal lengths, the distances at X0 (3,) and the
-    frames' times. Unknown pixel / range sigmas count as 1 px / 1 m (variance components then scale them),
-    like `mle.base_variances`; a part without a correlation time is white (on R)."""
-    s_px = 1.0 if sigma.pixel_px is None else sigma.pixel_px
-    s_r = 1.0 if sigma.range_m is None else sigma.range_m
-    s_pos = 0.0 if sigma.position_m is None else sigma.position_m
-    s_att = 0.0 if sigma.attitude_deg is None else math.radians(sigma.attitude_deg)
+@dataclass(frozen=True)
+class Frames:
+    """What a `Model` takes from one problem at X0, whatever the sigmas: the frames with a pixel in time order
+    (order_p, their times tp (s), focal lengths fx, fy (px) and 1 / distance to X0 inv_d (1/m)), the ranged
+    frames in time order (order_r, times tr (s))."""
+    order_p: np.ndarray
+    tp: np.ndarray
+    fx: np.ndarray
+    fy: np.ndarray
+    inv_d: np.ndarray
+    order_r: np.ndarray
+    tr: np.ndarray
+
+
+def problem_frames(st: Stacked, X0: np.ndarray) -> Frames:
+    """The `Frames` of one problem (B = 1) at X0 (3,)."""
     t_ns = st.t_ns[0]
     t_s = (t_ns - t_ns.min()).astype(np.float64) * 1e-9  # differences of int64 first: no rounding of epochs
     hp, hr = st.has_pix[0], st.has_range[0]
     fx, fy = st.focal_px()
     D = np.sqrt(((X0 - st.platform_m[0, hp]) ** 2).sum(axis=1))
     inv_d = np.where(np.isfinite(D) & (D > 0), 1.0 / np.where(D > 0, D, 1.0), 0.0)
-    k, npix = int(hp.sum()), 2 * int(hp.sum())
-    groups = []
     order_p = np.argsort(t_s[hp], kind="stable")
-    tp = t_s[hp][order_p]
-    for axis, f in ((0, fx[0, hp][order_p]), (1, fy[0, hp][order_p])):
-        parts = [(f * s_att, sigma.attitude_tau_s), (f * s_pos * inv_d[order_p], sigma.position_tau_s)]
-        groups.append(_group(2 * order_p + axis, np.full(k, s_px ** 2), parts, tp))
     order_r = np.argsort(t_s[hr], kind="stable")
-    tr = t_s[hr][order_r]
-    groups.append(_group(npix + order_r, np.full(tr.size, s_r ** 2),
-                         [(np.full(tr.size, s_pos), sigma.position_tau_s)], tr))
-    return Model(tuple(groups), npix, npix + tr.size)
+    return Frames(order_p, t_s[hp][order_p], fx[0, hp][order_p], fy[0, hp][order_p], inv_d[order_p], order_r,
+                  t_s[hr][order_r])
+
+
+def problem_model(st: Stacked, X0: np.ndarray, sigma: Sigma, frames: Frames | None = None) -> Model:
+    """The `Model` of one problem (B = 1) under sigma, with the focal lengths, the distances at X0 (3,) and the
+    frames' times (frames: `problem_frames(st, X0)` where the caller has it). Unknown pixel / range sigmas count
+    as 1 px / 1 m (variance components then scale them), like `mle.base_variances`; a part without a
+    correlation time is white (on R)."""
+    s_px = 1.0 if sigma.pixel_px is None else sigma.pixel_px
+    s_r = 1.0 if sigma.range_m is None else sigma.range_m
+    s_pos = 0.0 if sigma.position_m is None else sigma.position_m
+    s_att = 0.0 if sigma.attitude_deg is None else math.radians(sigma.attitude_deg)
+    fr = problem_frames(st, X0) if frames is None else frames
+    k = fr.order_p.size
+    npix = 2 * k
+    groups = []
+    for axis, f in ((0, fr.fx), (1, fr.fy)):
+        parts = [(f * s_att, sigma.attitude_tau_s), (f * s_pos * fr.inv_d, sigma.position_tau_s)]
+        groups.append(_group(2 * fr.order_p + axis, np.full(k, s_px ** 2), parts, fr.tp))
+    groups.append(_group(npix + fr.order_r, np.full(fr.tr.size, s_r ** 2),
+                         [(np.full(fr.tr.size, s_pos), sigma.position_tau_s)], fr.tr))
+    return Model(tuple(groups), npix, npix + fr.tr.size)
 
 
 def _group(rows, R0, parts, t_s) -> Group:
@@ -157,31 +173,95 @@ def _group(rows, R0, parts, t_s) -> Group:
 
 def rows_in_use(st: Stacked, X: np.ndarray) -> np.ndarray:
     """[J | r] (m,4) at X (3,) of one problem (B = 1): the u and v rows of the frames with a pixel (interleaved),
-    then the rows of the frames with a range; r observed - predicted (px, m)."""
-    Jp, rp, _ = pixel_model(st, X[None])
-    Jr, rr, _ = range_model(st, X[None])
+    then the rows of the frames with a range; r observed - predicted (px, m). With X (B,3) and st B copies of
+    one problem: (B,m,4), the rows at each X."""
+    one = X.ndim == 1
+    X = X.reshape(-1, 3)
+    Jp, rp, _ = pixel_model(st, X)
+    Jr, rr, _ = range_model(st, X)
     pix = np.repeat(st.has_pix[0], 2)
     rng = st.has_range[0]
-    return np.concatenate([np.concatenate([Jp[0, pix], rp[0, pix, None]], axis=1),
-                           np.concatenate([Jr[0, rng], rr[0, rng, None]], axis=1)])
+    out = np.concatenate([np.concatenate([Jp[:, pix], rp[:, pix, None]], axis=2),
+                          np.concatenate([Jr[:, rng], rr[:, rng, None]], axis=2)], axis=1)
+    return out[0] if one else out
+
+
+@dataclass
+class Stack:
+    """K `Model`s of one problem's rows (the same rows and number of states per group; `stack_models`), their
+    arrays stacked over K: per group (rows, gains (K,k,p), band template (K,p+1,kp), K^-1's diagonal (K,k,p),
+    log det K (K,)); Cii, R0 (K,m)."""
+    groups: tuple
+    Cii: np.ndarray
+    R0: np.ndarray
+
+    def take(self, idx: np.ndarray) -> Stack:
+        return Stack(tuple((r, G[idx], ab[idx], dg[idx], li[idx]) for r, G, ab, dg, li in self.groups),
+                     self.Cii[idx], self.R0[idx])
+
+
+def stack_models(models: list) -> Stack:
+    """The `Stack` of K models of the same rows (`problem_model` of one problem under K sigmas with the same
+    parts: the candidates of `learned_tau`)."""
+    groups = []
+    for gs in zip(*(md.groups for md in models), strict=True):
+        if any(g.gains.shape != gs[0].gains.shape or not np.array_equal(g.rows, gs[0].rows) for g in gs):
+            raise ValueError("stack_models: the models differ in their rows or states")
+        groups.append((gs[0].rows, np.stack([g.gains for g in gs]), np.stack([g._ab for g in gs]),
+                       np.stack([g._diag for g in gs]), np.array([g._log_inn for g in gs])))
+    return Stack(tuple(groups), np.stack([md._Cii for md in models]), np.stack([md._R0 for md in models]))
 
 
 def quadratic_forms(model: Model, A: np.ndarray, w: np.ndarray, vf: np.ndarray):
     """Per group (u, v, range): ([J|r]^T C_w^-1 [J|r] (4,4), log det C_w, rows with weight) with the robust
     weights w (m,) (row variance C_ii / w, the rest of C unchanged) and the variance factors vf (2,) (pixel,
     range)."""
-    out = []
-    for gi, g in enumerate(model.groups):
-        if g.rows.size == 0:
-            out.append((np.zeros((4, 4)), 0.0, 0))
+    return quadratic_forms_stacked(stack_models([model]), A[None], w[None], np.asarray(vf)[None])[0]
+
+
+def quadratic_forms_stacked(sk: Stack, A: np.ndarray, w: np.ndarray, vf: np.ndarray) -> list:
+    """`quadratic_forms` of K models (a `Stack`) at once, each at its rows A (K,m,4), weights w (K,m) and
+    variance factors vf (K,2): one banded factorization per group for all K (their band matrices side by side
+    are one block-diagonal band matrix). Returns the K lists of `quadratic_forms`."""
+    K = A.shape[0]
+    # R_w = C_ii / w - (C_ii - R0): the weight inflates the row's own variance only
+    with np.errstate(divide="ignore"):
+        Rinv_all = np.where(w > 0, w / (sk.Cii - w * (sk.Cii - sk.R0)), 0.0)
+    out = [[] for _ in range(K)]
+    for gi, (rows, G, ab0, diag, log_inn) in enumerate(sk.groups):
+        k, p = G.shape[1:]
+        if k == 0:
+            for o in out:
+                o.append((np.zeros((4, 4)), 0.0, 0))
             continue
-        wg = w[g.rows]
-        # R_w = C_ii / w - (C_ii - R0): the weight inflates the row's own variance only
-        with np.errstate(divide="ignore"):
-            Rinv = np.where(wg > 0, wg / (g.Cii - wg * (g.Cii - g.R0)), 0.0)
-        Y = A[g.rows]
-        CY, logdet = g.solve(Rinv, Y, vf[0] if gi < 2 else vf[1])
-        out.append((Y.T @ CY, logdet, int(np.count_nonzero(Rinv))))
+        Rinv, Y = Rinv_all[:, rows], A[:, rows]
+        scale = vf[:, 0] if gi < 2 else vf[:, 1]
+        RiY = Rinv[:, :, None] * Y
+        logdet = [float(np.sum(np.log(scale[j] / Rinv[j][Rinv[j] > 0]))) for j in range(K)]
+        if p == 0:
+            CY = RiY / scale[:, None, None]
+        else:
+            # A = K^-1 + G^T R^-1 G: the same frame's states (offsets 0..p-1) on the template's transitions
+            ab = ab0.copy()
+            ab4 = ab.reshape(K, p + 1, k, p)
+            for d in range(p):
+                blk = Rinv[:, :, None] * G[:, :, :p - d] * G[:, :, d:]
+                if d == 0:
+                    blk = blk + diag
+                ab4[:, d, :, :p - d] = blk
+            band = np.ascontiguousarray(ab.transpose(1, 0, 2).reshape(p + 1, K * k * p))
+            cb, info = _pbtrf(band, lower=1, overwrite_ab=1)  # LAPACK directly: scipy's checks cost more
+            if info > 0:
+                raise np.linalg.LinAlgError(f"{info}-th leading minor not positive definite")
+            GtRiY = (G[:, :, :, None] * RiY[:, :, None, :]).reshape(K * k * p, -1)
+            Z = _pbtrs(cb, GtRiY, lower=1)[0].reshape(K, k, p, -1)  # info is nonzero only for bad arguments
+            CY = (RiY - Rinv[:, :, None] * np.einsum("jkp,jkpq->jkq", G, Z)) / scale[:, None, None]
+            for j in range(K):
+                logdet[j] += 2.0 * float(np.log(cb[0, j * k * p:(j + 1) * k * p]).sum()) + float(log_inn[j])
+        forms = np.swapaxes(Y, 1, 2) @ CY
+        counts = np.count_nonzero(Rinv, axis=1)
+        for j in range(K):
+            out[j].append((forms[j], logdet[j], int(counts[j])))
     return out
 
 
@@ -190,78 +270,128 @@ def gls(st: Stacked, X0: np.ndarray, model: Model, robust: str | None, vce: bool
     """Generalized least squares `mle` of one problem (B = 1) from a usable start X0 (3,) under `model`
     (`problem_model`): `Correlated` through the one iteration and finish of `mle.run`. Returns `mle.finish`'s
     tuple for B = 1."""
-    X = np.array(X0, dtype=np.float64).reshape(1, 3)
+    return gls_models(st, X0, [model], robust, vce, tol_m, max_iterations)
+
+
+def gls_models(st: Stacked, X0: np.ndarray, models: list, robust: str | None, vce: bool, tol_m: float,
+               max_iterations: int, rows0: np.ndarray | None = None):
+    """`gls` of one problem (B = 1) under each of several `Model`s of its rows (the candidates of
+    `learned_tau`), iterated side by side as K problems (each exactly as alone: one drive, one finish); rows0:
+    `rows_in_use` at X0 where the caller has it. Returns `mle.finish`'s tuple over the K models."""
+    K = len(models)
+    X = np.repeat(np.array(X0, dtype=np.float64).reshape(1, 3), K, axis=0)
     status, bad = start_status(X, None)
-    return _mle.run(Correlated(st, model, X, vce), st, X, status, bad, X.copy(), robust, tol_m, max_iterations)
+    stk = st if K == 1 else st.take(np.zeros(K, dtype=np.intp))
+    return _mle.run(Correlated(stk, models, X, vce, rows0), stk, X, status, bad, X.copy(), robust, tol_m,
+                    max_iterations)
 
 
 class Correlated(_iterate.Model):
     """The `mle` model of one problem (B = 1) with time-correlated errors, as `iterate.drive` and `mle.finish`
-    use it: iteratively reweighted generalized least squares. Every step takes the robust weights
+    use it: iteratively reweighted generalized least squares, under K models of the residual covariance at once
+    (K independent problems on the same rows; `gls_models`). Every step takes the robust weights
     w_i = rho'(z)/z of the rows' marginal standardized residuals z_i = r_i / sqrt(C_ii vf) at the current
     estimate, applies them as inflated variances of an independent gross error, and takes the Gauss-Newton
-    step of the correlated problem (`quadratic_forms`, O(n)); no damping. Its residual planes (3,n,1) hold the
+    step of the correlated problem (`quadratic_forms`, O(n)); no damping. Its residual planes (3,n,K) hold the
     marginal standardized residuals; the drift is modelled (no autocorrelation inflation in `mle.finish`)."""
 
     drift_modelled = True
 
-    def __init__(self, st: Stacked, model: Model, X: np.ndarray, vce: bool):
-        self.st, self.model, self.X, self.vce = st, model, X, vce
-        self.sd = np.sqrt(model.Cii())
-        self.grp = np.r_[np.zeros(model.npix, dtype=int), np.ones(model.m - model.npix, dtype=int)]
-        self.vf, self.guard = np.ones((1, 2)), np.ones((1, 2))
-        self.vce_rounds = np.zeros(1, dtype=np.int64)
-        self.pf, self.rf = np.flatnonzero(st.has_pix[0]), np.flatnonzero(st.has_range[0])
-        self.A = rows_in_use(st, X[0])
+    def __init__(self, st: Stacked, models: list, X: np.ndarray, vce: bool, rows: np.ndarray | None = None):
+        """st: the problem, once per model (K copies); X (K,3) the start of every model, one point."""
+        K = len(models)
+        m, npix = models[0].m, models[0].npix
+        self.st, self.models, self.X, self.vce = st, models, X, vce
+        self.sd = np.stack([np.sqrt(md.Cii()) for md in models], axis=1)  # (m, K)
+        self.grp = np.r_[np.zeros(npix, dtype=int), np.ones(m - npix, dtype=int)]
+        self.vf, self.guard = np.ones((K, 2)), np.ones((K, 2))
+        self.vce_rounds = np.zeros(K, dtype=np.int64)
+        pf, rf = np.flatnonzero(st.has_pix[0]), np.flatnonzero(st.has_range[0])
+        # the rows' places in the (3,n,K) residual planes: u, v of the pixel frames (interleaved), the ranged frames
+        self._at = np.concatenate([(np.arange(2)[None, :] * st.n + pf[:, None]).ravel(), 2 * st.n + rf])
+        self.ok = self._planes(np.ones((m, K)), 0.0) > 0
+        A = rows_in_use(st.take(np.zeros(1, dtype=np.intp)), X[0]) if rows is None else rows
+        self.A = [A] * K  # per model; replaced, never changed in place
+        self._last_forms = [None] * K
+        self._stack = stack_models(models)
+        self._scaled_vf = None  # the variance factors of the row scales self._s and self._isd
 
     def _planes(self, rows: np.ndarray, fill: float) -> np.ndarray:
-        """(3,n,1) planes of per-row values (m,) (u, v of the pixel frames, then the ranged frames)."""
-        out = np.full((3, self.st.n, 1), fill)
-        npix = self.model.npix
-        out[0, self.pf, 0], out[1, self.pf, 0], out[2, self.rf, 0] = rows[:npix:2], rows[1:npix:2], rows[npix:]
+        """(3,n,K) planes of per-row values (m,K) (u, v of the pixel frames, then the ranged frames)."""
+        out = np.full((3, self.st.n, rows.shape[1]), fill)
+        out.reshape(-1, rows.shape[1])[self._at] = rows
         return out
 
     def _refresh(self):
         """The weights (`mle._cost_weights`) and residual planes at the current rows A, loss and variance
         factors."""
-        s = self.sd * np.sqrt(self.vf[0, self.grp])
-        self.E, self._isd = self._planes(self.A[:, 3] / s, 0.0), self._planes(1.0 / s, 1.0)
-        self.ok = self._planes(np.ones(s.size), 0.0) > 0
+        if self._scaled_vf is None or not np.array_equal(self.vf, self._scaled_vf):
+            self._s = self.sd * np.sqrt(self.vf[:, self.grp].T)
+            self._isd, self._scaled_vf = self._planes(1.0 / self._s, 1.0), self.vf.copy()
+        r = np.stack([A[:, 3] for A in self.A], axis=1)
+        self.E = self._planes(r / self._s, 0.0)
         self.wr = _mle._cost_weights(self.E, self.robust)[1]
-        self.w = np.ones(s.size) if self.wr is None else np.concatenate([self.wr[:2, self.pf, 0].T.ravel(),
-                                                                        self.wr[2, self.rf, 0]])
+        self.w = np.ones(self._s.shape) if self.wr is None else self.wr.reshape(-1, self.wr.shape[-1])[self._at]
 
-    def _forms(self, var_scale=1.0):
-        q = quadratic_forms(self.model, self.A, self.w, self.vf[0] * var_scale)
-        return q, sum(f for f, _, _ in q)
+    def _forms(self, idx, var_scale=None) -> list:
+        """Per model k of idx: (`quadratic_forms`, their sum) at its current rows, weights and variance factors
+        times var_scale (len(idx),2) (None: 1); the last ones are kept per model (the convergence test and the
+        finish ask again at the same state)."""
+        vfs = self.vf[idx] if var_scale is None else self.vf[idx] * var_scale
+        out, todo = [None] * len(idx), []
+        for j, k in enumerate(idx):
+            last = self._last_forms[k]
+            if (last is not None and last[0] is self.A[k] and np.array_equal(last[1], self.w[:, k])
+                    and np.array_equal(last[2], vfs[j])):
+                out[j] = last[3]
+            else:
+                todo.append(j)
+        if todo:
+            ks = np.asarray(idx)[todo]
+            sk = self._stack if len(ks) == len(self.models) else self._stack.take(ks)
+            qs = quadratic_forms_stacked(sk, np.stack([self.A[k] for k in ks]), self.w[:, ks].T, vfs[todo])
+            for j, k, q in zip(todo, ks, qs, strict=True):
+                out[j] = (q, sum(f for f, _, _ in q))
+                self._last_forms[k] = (self.A[k], self.w[:, k], vfs[j], out[j])
+        return out
 
     def start(self, robust):
         self.robust = robust
         self._refresh()
 
     def step(self, idx, X, lam):
-        G = self._forms()[1]
-        return solve_spd(G[None, :3, :3], G[None, :3, 3])
+        G = np.stack([f[1] for f in self._forms(idx)])
+        return solve_spd(G[:, :3, :3], G[:, :3, 3])
 
     def trial(self, idx, Xn):
-        self._A = rows_in_use(self.st, Xn[0])
+        Xall = np.repeat(Xn[:1], len(self.models), axis=0)  # every model's rows at once (the others discarded)
+        Xall[idx] = Xn
+        A = rows_in_use(self.st, Xall)
+        self._A = [A[k] for k in idx]
         return super().trial(idx, Xn)
 
     def accept(self, idx, accepted):
-        if accepted[0]:
-            self.A = self._A
+        if accepted.any():
+            for k, A, ok in zip(idx, self._A, accepted, strict=True):
+                if ok:
+                    self.A[k] = A
             self._refresh()
-        return np.zeros(1, dtype=bool)
+        return np.zeros(idx.size, dtype=bool)
 
     def converged(self, idx):
-        if self.vce and self.vce_rounds[0] < VCE_MAX_ROUNDS:
-            factors, usable = _vce_factors(*self._forms())
-            if (usable & (np.abs(factors - 1) > VCE_TOL)).any():
-                self.vf[0] = np.where(usable, self.vf[0] * factors, self.vf[0])
-                self.vce_rounds += 1
-                self._refresh()
-                return np.ones(1, dtype=bool)
-        return np.zeros(1, dtype=bool)
+        again = np.zeros(idx.size, dtype=bool)
+        if not self.vce:
+            return again
+        for j, k in enumerate(idx):
+            if self.vce_rounds[k] < VCE_MAX_ROUNDS:
+                factors, usable = _vce_factors(*self._forms([k])[0])
+                if (usable & (np.abs(factors - 1) > VCE_TOL)).any():
+                    self.vf[k] = np.where(usable, self.vf[k] * factors, self.vf[k])
+                    self.vce_rounds[k] += 1
+                    again[j] = True
+        if again.any():
+            self._refresh()
+        return again
 
     def rescale(self, idx, g, factor):
         self.vf[idx, g] *= factor
@@ -271,8 +401,8 @@ class Correlated(_iterate.Model):
         return self._isd
 
     def information(self, var_scale):
-        G = self._forms(var_scale[0])[1]
-        return G[None, :3, :3], np.array([G[3, 3]])
+        G = np.stack([f[1] for f in self._forms(np.arange(len(self.models)), var_scale)])
+        return G[:, :3, :3].copy(), G[:, 3, 3].copy()
 
 
 def _vce_factors(q, G):

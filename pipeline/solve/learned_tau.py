@@ -47,18 +47,31 @@ def log_likelihood(st: Stacked, X: np.ndarray, sigma: Sigma, vf) -> tuple[float,
     range blocks of C scaled by the variance factors vf (2,); every row at full weight (the same data under
     every model); C's overall scale k = max(chi2 / m, 1) (the stated sigmas a lower bound: with sigmas stated
     too small, a model is not chosen for hiding the misfit in the target)."""
-    model = _correlated.problem_model(st, X, sigma)
-    A = _correlated.rows_in_use(st, X)
-    q = _correlated.quadratic_forms(model, A, np.ones(model.m), np.asarray(vf, dtype=np.float64))
-    G = sum(f for f, _, _ in q)
-    logdet = sum(ld for _, ld, _ in q)
-    chi2, m = float(G[3, 3]), model.m
-    k = max(chi2 / m, 1.0)
-    sign, logdet_n = np.linalg.slogdet(G[:3, :3] / k)
-    if sign <= 0:
-        return -np.inf, chi2, m
-    ll = -0.5 * (chi2 / k + m * math.log(k) + logdet + logdet_n + (m - 3) * math.log(2 * math.pi))
-    return ll, chi2, m
+    return log_likelihoods(st, np.asarray(X)[None], [sigma], [vf])[0]
+
+
+def log_likelihoods(st: Stacked, Xs: np.ndarray, sigmas: list, vfs: list) -> list:
+    """`log_likelihood` of one problem at K points Xs (K,3), each under its sigma and variance factors (models
+    with the same parts: the candidates), in one `correlated.quadratic_forms_stacked`."""
+    K = len(sigmas)
+    models = [_correlated.problem_model(st, X, s) for X, s in zip(Xs, sigmas, strict=True)]
+    A = _correlated.rows_in_use(st.take(np.zeros(K, dtype=np.intp)), Xs)
+    m = models[0].m
+    qs = _correlated.quadratic_forms_stacked(_correlated.stack_models(models), A, np.ones((K, m)),
+                                             np.asarray(vfs, dtype=np.float64).reshape(K, 2))
+    out = []
+    for q in qs:
+        G = sum(f for f, _, _ in q)
+        logdet = sum(ld for _, ld, _ in q)
+        chi2 = float(G[3, 3])
+        k = max(chi2 / m, 1.0)
+        sign, logdet_n = np.linalg.slogdet(G[:3, :3] / k)
+        if sign <= 0:
+            out.append((-np.inf, chi2, m))
+            continue
+        ll = -0.5 * (chi2 / k + m * math.log(k) + logdet + logdet_n + (m - 3) * math.log(2 * math.pi))
+        out.append((ll, chi2, m))
+    return out
 
 
 def candidates(sigma: Sigma):
@@ -78,17 +91,24 @@ def learn_tau(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce
     covariance), or None when no model gave an answer."""
     lls: dict[tuple, float] = {}
     fits = []
-    for tau, att in candidates(sigma):
-        s = dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau, attitude_deg=att)
-        model = _correlated.problem_model(st, X0, s)
-        res = _correlated.gls(st, X0, model, robust, vce, tol_m, max_iterations)
-        X, status = res[0][0], res[2][0]
-        if status in (Status.DIVERGED, Status.DEGENERATE) or not np.isfinite(X).all():
-            continue
-        vf = (float(res[5]["variance_factor_pixel"][0]), float(res[5]["variance_factor_range"][0]))
-        ll = log_likelihood(st, X, s, vf)[0]
+    # every candidate's fit starts from X0: the frames' layout and the rows there (no tau in them) are built
+    # once, and the fits iterate side by side (each as alone)
+    frames0, rows0 = _correlated.problem_frames(st, X0), _correlated.rows_in_use(st, X0)
+    sigmas = [dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau, attitude_deg=att)
+              for tau, att in candidates(sigma)]
+    models = [_correlated.problem_model(st, X0, s, frames0) for s in sigmas]
+    out = _correlated.gls_models(st, X0, models, robust, vce, tol_m, max_iterations, rows0)
+    X, status = out[0], out[2]
+    answered = [k for k in range(len(sigmas)) if status[k] not in (Status.DIVERGED, Status.DEGENERATE)
+                and np.isfinite(X[k]).all()]
+    vfs = [(float(out[5]["variance_factor_pixel"][k]), float(out[5]["variance_factor_range"][k])) for k in answered]
+    lk = log_likelihoods(st, X[answered], [sigmas[k] for k in answered], vfs) if answered else []
+    for k, (ll, _, _) in zip(answered, lk, strict=True):
         if not np.isfinite(ll):
             continue
+        res = (out[0][k:k + 1], out[1][k:k + 1], out[2][k:k + 1], out[3][k:k + 1], out[4][k:k + 1],
+               {key: v[k:k + 1] for key, v in out[5].items()})
+        tau, att = sigmas[k].attitude_tau_s, sigmas[k].attitude_deg
         lls[(tau, att)] = ll
         fits.append((ll, tau, att, res))
     if not fits:

@@ -90,10 +90,18 @@ def _vision_init(st: Stacked, o: dict):
     x0 = _initial(o, st.size)
     if x0 is not None:
         return x0, None
-    X, status, _ = linear.dlt(st, with_condition=False)
-    X, _, status, _ = least_squares.vision(st, X, o["tol_m"], o["max_iterations"], status)
+    X, _, status, _ = _vision_from_dlt(st, o)
     # a vision result that hit the iteration limit is still a usable initial value
     return X, status
+
+
+def _vision_from_dlt(st: Stacked, o: dict):
+    """vision from the DLT point: (X (B,3), iterations, status, cond), copies of o["vision_from_dlt"] where the
+    caller has it already (`_mle_multistart`: every start method that begins from vision)."""
+    if "vision_from_dlt" in o:
+        return tuple(np.array(a, copy=True) for a in o["vision_from_dlt"])
+    x0, init_status, _ = linear.dlt(st, with_condition=False)
+    return least_squares.vision(st, x0, o["tol_m"], o["max_iterations"], init_status)
 
 
 def _boresight_start(st: Stacked) -> np.ndarray:
@@ -140,10 +148,10 @@ def _solve_stacked(method: str, st: Stacked, o: dict) -> BatchEstimate:
         extras = {"points_m": pts, "oracle_error_m": oracle}
     elif method == "vision":
         x0 = _initial(o, B)
-        init_status = None
         if x0 is None:
-            x0, init_status, _ = linear.dlt(st, with_condition=False)
-        X, it, status, cond = least_squares.vision(st, x0, tol, itmax, init_status)
+            X, it, status, cond = _vision_from_dlt(st, o)
+        else:
+            X, it, status, cond = least_squares.vision(st, x0, tol, itmax, None)
     elif method == "range":
         x0, init_status = _range_init(st, o)
         X, it, status, cond, flat = least_squares.range_only(st, x0, tol, itmax, init_status)
@@ -317,6 +325,7 @@ def _mle_multistart(st: Stacked, o: dict):
     npix = int(st.has_pix[0].sum())
     cands = {}
     plain = {"tol_m": o["tol_m"], "max_iterations": o["max_iterations"]}
+    plain["vision_from_dlt"] = _vision_from_dlt(st, plain)  # vision, fusion and range all begin from it
     for name in _starts.START_METHODS:
         try:
             be = _solve_stacked(name, st, plain)

@@ -9,7 +9,20 @@ from typing import ClassVar
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 
-class TlogWriter:
+class _BinaryFile:
+    """A binary output file `self.f`, closed by `close()` or at the end of a `with` block."""
+
+    def close(self) -> None:
+        self.f.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+class TlogWriter(_BinaryFile):
     """Write a MAVLink 2 .tlog: `write(t_us, msg)` appends the 8-byte big-endian UNIX us time + packet."""
 
     def __init__(self, path, src_system: int = 1, src_component: int = 1):
@@ -22,15 +35,6 @@ class TlogWriter:
         if src_component is not None:
             self.mav.srcComponent = src_component
         self.f.write(struct.pack(">Q", int(t_us)) + msg.pack(self.mav))
-
-    def close(self) -> None:
-        self.f.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
 
 
 def write_json_mcap(path, messages: dict[str, list[dict]], chunk_size: int = 1024 * 1024) -> None:
@@ -132,7 +136,7 @@ def write_ros_bag(path, messages: list[tuple[str, int, str, object]], storage: s
             writer.write(conns[topic], int(t_ns), ser(msg, msgtype))
 
 
-class DataFlashWriter:
+class DataFlashWriter(_BinaryFile):
     """Minimal ArduPilot DataFlash (.bin) writer: FMT records then data records (`fmt()` then `write()`), with
     the firmware's format characters (e.g. L = int32 degE7, C = uint16 * 0.01), so DFReader's scaling applies."""
 
@@ -160,15 +164,6 @@ class DataFlashWriter:
     def write(self, name: str, *values) -> None:
         type_id, fmt = self.formats[name]
         self.f.write(bytes([0xA3, 0x95, type_id]) + struct.pack(self._struct(fmt), *values))
-
-    def close(self) -> None:
-        self.f.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
 
 
 def dataflash_text_from_binary(src, dst, newline: str = "\n") -> int:

@@ -63,3 +63,14 @@ def test_run_of_the_sample_flight_locates_its_three_targets():
     assert not any(r.observations.has_range.any() for r in result.targets[1:])  # the others: pixels only
     assert "dji" not in result.targets[1].estimates  # DJI's laser target is not theirs
     assert laser.estimates["mle"].extras["error_model"]["source"] == "GNSS without RTK, laser"
+
+
+def test_a_rerun_sees_a_change_of_the_photos_the_dem_or_the_marks():
+    """`ridgeloc run` reuses a finished flight only while its inputs are unchanged: a photo flight's inputs are its
+    photos, the DEM and the marks file, not only its config."""
+    from pipeline.commands.run import _input_files
+    from pipeline.flight_config import load_flight_config
+
+    files = {p.name for p in _input_files(load_flight_config(ROOT / "configs" / "flights" / "h20_laser.yaml"))}
+    assert {"dem.tif", "targets.csv", "truth.json"} <= files
+    assert sum(name.endswith(".JPG") for name in files) == 5

@@ -45,9 +45,11 @@ def _resolve_config(arg: str) -> Path:
 
 def _input_files(cfg: FlightConfig) -> list[Path]:
     """The files a flight's outputs depend on (for re-run skipping); folders (ROS 2 bags) contribute their files."""
-    listed = [*cfg.files.telemetry, cfg.files.video, cfg.files.frames_csv, cfg.truth_file,
-              cfg.target.template if cfg.target is not None else None,
-              cfg.marks_file, *[t.template for t in cfg.targets]]  # the targets' marks
+    from pipeline.targets import flight_targets
+
+    listed = [*cfg.files.telemetry, cfg.files.video, cfg.files.frames_csv, *cfg.files.photos, cfg.files.marks,
+              cfg.truth_file, cfg.marks_file, cfg.terrain.dem if cfg.terrain is not None else None,
+              *[m.template for t in flight_targets(cfg) for m in t.marks]]  # every target's template images
     files: list[Path] = []
     for f in listed:
         if f is None:

@@ -314,7 +314,8 @@ def refusal_reason(r: Flight, t_ns, pixel_px, ranges_m) -> str | None:
         # consistent lines of sight through a wrong mark: the gimbal (and the laser) track something else
         oa, da, _ = rays(r, t_ns)
         axes = cluster(oa, da, ranges_m)
-        if axes is not None and axes.consistent:
+        # only for the single `target:`: the gimbal (and the laser) track it; a named target may lie anywhere
+        if axes is not None and axes.consistent and r.config.target is not None:
             swapped = [p for p in mark_checks(r, axes.centre_m)[0] if "swapped to" in p or "row, column" in p]
             if swapped:
                 return f"the marked target is not what the gimbal tracks: {swapped[0]}; give target.pixel as [x, y]"

@@ -236,14 +236,15 @@ def estimate_video_offset(r: Flight, t_video_ns: np.ndarray, pixel_px: np.ndarra
                           len(t0), math.sqrt(s2), search_s)
 
 
-def estimate_clock(r: Flight, tracker, mark: TargetMark) -> ClockEstimate:
+def estimate_clock(r: Flight, tracker, mark: TargetMark, cache=None) -> ClockEstimate:
     """Track the target from `mark` through the frames around each observation (decoded by the flight's
-    frames) and estimate the video offset (see the module docstring); `tracker` a SiftTracker."""
+    frames) and estimate the video offset (see the module docstring); `tracker` a SiftTracker, `cache` the
+    flight's ViewCache (frames the targets' tracks decode later are then decoded once)."""
     if r.plan is None:
         return ClockEstimate(None)
     search_s = r.config.clock.search_s
     pos, groups = estimation_frames(r)
     idx = np.asarray(r.frames.index)[pos]
     track = tracker.track(r.decoder, mark.frame_index, mark.pixel_px, idx.tolist(),
-                          available=np.asarray(r.frames.index).tolist())
+                          available=np.asarray(r.frames.index).tolist(), cache=cache)
     return ClockEstimate(estimate_video_offset(r, np.asarray(r.frames.t_ns)[pos], track.pixel_px, groups, search_s))

@@ -25,11 +25,11 @@ from pipeline.terrain.flight import open_flight_dem
 from pipeline.track.sift import SiftTracker, ViewCache
 
 
-def _estimate_clock(flight: Flight, tracker: SiftTracker, mark: TargetMark,
-                    notes: list[str]) -> tuple[ClockEstimate, ObservationPlan]:
+def _estimate_clock(flight: Flight, tracker: SiftTracker, mark: TargetMark, notes: list[str],
+                    cache: ViewCache | None = None) -> tuple[ClockEstimate, ObservationPlan]:
     """clock.estimate: the video offset from the flight (`pipeline.clock_estimate`); returns (the estimate, the
     observation plan at the estimated video offset, or the configured plan when not determined)."""
-    est = estimate_clock(flight, tracker, mark)
+    est = estimate_clock(flight, tracker, mark, cache)
     v = est.video
     if v is not None and v.determined:
         notes.append(f"clock estimated: {v.describe()}; the estimate is used")
@@ -69,7 +69,7 @@ def process_group(config: FlightConfig) -> GroupResult | FlightResult:
                 notes.append(f"geoid separation {flight.separation_m:.2f} m (altitude.geoid_separation_m: auto, "
                              "EGM2008 at the first position)")
             if config.clock.estimate:  # the flight's clock, from the first target's first mark
-                fp.clock_estimate, fp.plan = _estimate_clock(flight, fp.tracker, first[0], notes)
+                fp.clock_estimate, fp.plan = _estimate_clock(flight, fp.tracker, first[0], notes, fp.cache)
         fp.dem = open_flight_dem(config.terrain)
         if named:
             result = locate_targets(fp, targets, first)

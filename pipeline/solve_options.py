@@ -26,9 +26,6 @@ import pydantic
 METHODS = ("dlt", "vision", "range", "los", "fusion-raw", "fusion", "ridge", "mle")
 Method = Literal["dlt", "vision", "range", "los", "fusion-raw", "fusion", "ridge", "mle"]
 
-HKB_VARIANTS = ("paper", "textbook")  # least_squares.HKB_VARIANTS
-ROBUST_LOSSES = ("redescending", "huber", "cauchy")  # and None (squared loss); mle.ROBUST_LOSSES
-
 
 class _Unset:
     """The default of an option that was not given (None is a value: `robust: null` is the squared loss)."""

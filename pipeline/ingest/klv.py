@@ -42,7 +42,6 @@ from pipeline.ingest.model import (
 )
 
 ST0601_KEY = bytes.fromhex("060E2B34020B01010E01030101000000")
-EG0104_KEY = eg0104.SET_KEY
 KEY_PREFIX = ST0601_KEY[:4]
 MAX_T_US = (2**63 - 1) // 1000  # time stamps past 2262 do not fit int64 nanoseconds: not a packet
 MAX_PACKET_BYTES = 65536  # far above any ST 0601 packet; a longer BER length is garbage, not a packet

@@ -73,14 +73,6 @@ class PhotoViews:
         px = self.file_to_camera_pixels(pixel_px, idx)
         return np.vstack([undistort_pixels(px[j:j + 1], self.K[i], self.dist[i]) for j, i in enumerate(idx)])
 
-    def rays_enu(self, pixel_px, idx=None) -> np.ndarray:
-        """(m, 3) unit ENU directions through (m, 2) image pixels of photos idx (default: all)."""
-        idx = np.arange(len(self.photos)) if idx is None else np.asarray(idx)
-        und = self.pinhole_pixels(pixel_px, idx)
-        d_cam = np.linalg.solve(self.K[idx], np.c_[und, np.ones(len(und))][..., None])[..., 0]
-        d = np.einsum("nij,nj->ni", self.R_enu0_from_optical[idx], d_cam)
-        return d / np.linalg.norm(d, axis=1, keepdims=True)
-
     def lla(self, enu_m) -> np.ndarray:
         return lla_from_enu(enu_m, self.origin_lla)
 

@@ -91,12 +91,6 @@ class Model:
     def Cii(self) -> np.ndarray:
         return self._Cii.copy()
 
-    def inverse_white(self, w: np.ndarray) -> np.ndarray:
-        """(m,) 1 / R_w, the white variances with the robust weights w (m,): R_w = C_ii / w - (C_ii - R0) (the
-        weight inflates the row's own variance only); 0 where w = 0."""
-        with np.errstate(divide="ignore"):
-            return np.where(w > 0, w / (self._Cii - w * (self._Cii - self._R0)), 0.0)
-
 
 def _chain(t_s: np.ndarray, tau_s: float | None) -> np.ndarray:
     """(k-1,) transitions exp(-dt / tau) between time-ordered frames; zeros (white) without tau."""
@@ -212,17 +206,11 @@ def stack_models(models: list) -> Stack:
     return Stack(tuple(groups), np.stack([md._Cii for md in models]), np.stack([md._R0 for md in models]))
 
 
-def quadratic_forms(model: Model, A: np.ndarray, w: np.ndarray, vf: np.ndarray):
-    """Per group (u, v, range): ([J|r]^T C_w^-1 [J|r] (4,4), log det C_w, rows with weight) with the robust
-    weights w (m,) (row variance C_ii / w, the rest of C unchanged) and the variance factors vf (2,) (pixel,
-    range)."""
-    return quadratic_forms_stacked(stack_models([model]), A[None], w[None], np.asarray(vf)[None])[0]
-
-
 def quadratic_forms_stacked(sk: Stack, A: np.ndarray, w: np.ndarray, vf: np.ndarray) -> list:
-    """`quadratic_forms` of K models (a `Stack`) at once, each at its rows A (K,m,4), weights w (K,m) and
+    """Per group (u, v, range) of K models (a `Stack`) at once: ([J|r]^T C_w^-1 [J|r] (4,4), log det C_w, rows with
+    weight), each at its rows A (K,m,4), robust weights w (K,m) (row variance C_ii / w, the rest of C unchanged) and
     variance factors vf (K,2): one banded factorization per group for all K (their band matrices side by side
-    are one block-diagonal band matrix). Returns the K lists of `quadratic_forms`."""
+    are one block-diagonal band matrix). Returns the K lists of these forms."""
     K = A.shape[0]
     # R_w = C_ii / w - (C_ii - R0): the weight inflates the row's own variance only
     with np.errstate(divide="ignore"):
@@ -292,7 +280,7 @@ class Correlated(_iterate.Model):
     (K independent problems on the same rows; `gls_models`). Every step takes the robust weights
     w_i = rho'(z)/z of the rows' marginal standardized residuals z_i = r_i / sqrt(C_ii vf) at the current
     estimate, applies them as inflated variances of an independent gross error, and takes the Gauss-Newton
-    step of the correlated problem (`quadratic_forms`, O(n)); no damping. Its residual planes (3,n,K) hold the
+    step of the correlated problem (`quadratic_forms_stacked`, O(n)); no damping. Its residual planes (3,n,K) hold the
     marginal standardized residuals; the drift is modelled (no autocorrelation inflation in `mle.finish`)."""
 
     drift_modelled = True
@@ -334,7 +322,7 @@ class Correlated(_iterate.Model):
         self.w = np.ones(self._s.shape) if self.wr is None else self.wr.reshape(-1, self.wr.shape[-1])[self._at]
 
     def _forms(self, idx, var_scale=None) -> list:
-        """Per model k of idx: (`quadratic_forms`, their sum) at its current rows, weights and variance factors
+        """Per model k of idx: (`quadratic_forms_stacked`, their sum) at its current rows, weights and variance factors
         times var_scale (len(idx),2) (None: 1); the last ones are kept per model (the convergence test and the
         finish ask again at the same state)."""
         vfs = self.vf[idx] if var_scale is None else self.vf[idx] * var_scale
@@ -407,7 +395,7 @@ class Correlated(_iterate.Model):
 
 def _vce_factors(q, G):
     """`mle.helmert` of the pixel (u and v) and range groups from the per-group quadratic forms q
-    (`quadratic_forms`) and their sum G: a group's r^T C^-1 r over its rows with weight minus
+    (`quadratic_forms_stacked`) and their sum G: a group's r^T C^-1 r over its rows with weight minus
     trace(N^-1 J_g^T C_g^-1 J_g). Returns factors (2,), usable (2,)."""
     Ninv = inverse3(G[None, :3, :3])[0][0]
     Q = [sum(f for f, _, _ in parts) for parts in (q[:2], q[2:])]

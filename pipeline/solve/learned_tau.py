@@ -42,17 +42,12 @@ def without_rejected(st: Stacked, rejected: np.ndarray) -> Stacked:
     return dataclasses.replace(st, has_pix=has_pix, has_range=has_range)
 
 
-def log_likelihood(st: Stacked, X: np.ndarray, sigma: Sigma, vf) -> tuple[float, float, int]:
-    """(restricted log L, chi-square r^T C^-1 r, rows m) of one problem at X (3,) under sigma, the pixel and
-    range blocks of C scaled by the variance factors vf (2,); every row at full weight (the same data under
-    every model); C's overall scale k = max(chi2 / m, 1) (the stated sigmas a lower bound: with sigmas stated
-    too small, a model is not chosen for hiding the misfit in the target)."""
-    return log_likelihoods(st, np.asarray(X)[None], [sigma], [vf])[0]
-
-
 def log_likelihoods(st: Stacked, Xs: np.ndarray, sigmas: list, vfs: list) -> list:
-    """`log_likelihood` of one problem at K points Xs (K,3), each under its sigma and variance factors (models
-    with the same parts: the candidates), in one `correlated.quadratic_forms_stacked`."""
+    """(restricted log L, chi-square r^T C^-1 r, rows m) of one problem at K points Xs (K,3), each under its sigma
+    and variance factors vf (2,) scaling the pixel and range blocks of C (models with the same parts: the
+    candidates), in one `correlated.quadratic_forms_stacked`; every row at full weight (the same data under every
+    model); C's overall scale k = max(chi2 / m, 1) (the stated sigmas a lower bound: with sigmas stated too small,
+    a model is not chosen for hiding the misfit in the target)."""
     K = len(sigmas)
     models = [_correlated.problem_model(st, X, s) for X, s in zip(Xs, sigmas, strict=True)]
     A = _correlated.rows_in_use(st.take(np.zeros(K, dtype=np.intp)), Xs)

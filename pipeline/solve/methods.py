@@ -337,7 +337,6 @@ def _mle_multistart(st: Stacked, o: dict):
             cands[name] = X
     finite = bool(np.isfinite(res[0][0]).all())
     why = _starts.explains_away(res[5], npix) if finite else "no estimate"
-    dis = _starts.disagreement(res[0][0], res[4][0], cands) if finite else {}
     runs = [("default", res, why)]
     if why is not None:
         tried = [res[0][0]] if finite else []

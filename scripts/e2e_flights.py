@@ -96,7 +96,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{group}: n {row['n']} ({row['pixels']} pixels, {row['ranges']} ranges); errors m: {errs}"
               + (f"; unsolved: {unsolved}" if unsolved else "")
               + f"; mle e^T C^-1 e {nees} ({'inside' if inside else 'OUTSIDE'} the 95 % ellipsoid)"
-              + f"; bound {row['bound_m']:.1f} m: {'CATASTROPHE' if row['catastrophe'] else 'ok'}"
+              + ("; no other method solved: no bound" if row["bound_m"] is None else
+                 f"; bound {row['bound_m']:.1f} m: {'CATASTROPHE' if row['catastrophe'] else 'ok'}")
               + f"; synth {synth_s:.0f} s, run {run_s:.0f} s", flush=True)
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))

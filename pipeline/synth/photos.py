@@ -30,6 +30,7 @@ from scipy.spatial.transform import Rotation
 from pipeline.geometry.frames import enu_from_lla, lla_from_enu
 from pipeline.geometry.geoid import patch_around
 from pipeline.geometry.lens import distort_pixels
+from pipeline.synth.noise import gauss_markov_filter
 
 
 @dataclass(frozen=True)
@@ -119,11 +120,8 @@ def simulate_photo_flight(spec: PhotoFlightSpec) -> PhotoFlight:
     offset = rng.uniform(*spec.datum_offset_m)
     # a consumer GNSS error wanders over minutes: over one photo flight it is mostly a shared offset
     gnss_sigma = rng.uniform(*spec.gnss_offset_sigma_m)
-    a = np.exp(-spec.dt_s / spec.gnss_tau_s)
     gnss = np.zeros((n, 3))
-    gnss[0, :2] = rng.normal(0, gnss_sigma, 2)
-    for i in range(1, n):
-        gnss[i, :2] = a * gnss[i - 1, :2] + np.sqrt(1 - a * a) * rng.normal(0, gnss_sigma, 2)
+    gnss[:, :2] = gauss_markov_filter(rng.normal(0, gnss_sigma, (n, 2)), spec.dt_s, spec.gnss_tau_s)
     geoid = patch_around(round(lat0, 1), round(lon0, 1))  # EGM2008 around the target, read once per area
     N = geoid(cams[:, 0], cams[:, 1])
     K = np.array([[spec.fx_px, 0, (spec.width_px - 1) / 2], [0, spec.fx_px, (spec.height_px - 1) / 2], [0, 0, 1]])

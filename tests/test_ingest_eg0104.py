@@ -18,7 +18,7 @@ from pipeline.check.frame_centre import GRID_NORTH, check_file, check_frame_cent
 from pipeline.ingest import read_flight
 from pipeline.ingest.klv import KlvTable, decode_eg0104, read_klv_table, scan_packets
 
-FMV = Path("../shared/fmv")
+FMV = Path(__file__).resolve().parents[1].parent / "shared" / "fmv"  # ../shared from the repo root
 CLIPS = {"aphill_short.ts": (48, 96), "aphill_klv_10s.ts": (300, 10)}  # KLV sets, video frames (README there)
 SET_KEY = bytes.fromhex("060E2B34020101010E01010201010000")
 UL = "060E2B34010101"  # EG 0104.5 table 1: every item key starts so; the 8th byte is the registry version

@@ -15,7 +15,7 @@ from pipeline.ingest.inspect import format_result, inspect_paths
 from pipeline.ingest.srt import fov_from_focal
 
 DATA = Path(__file__).parent / "data" / "srt"
-REAL = Path("../shared/srt")
+REAL = Path(__file__).resolve().parents[1].parent / "shared" / "srt"  # ../shared from the repo root
 MS = 10**6
 
 

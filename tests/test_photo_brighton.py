@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-FOLDER = Path("../shared/photos/brighton")
+FOLDER = Path(__file__).resolve().parents[1].parent / "shared" / "photos/brighton"  # ../shared from the repo root
 pytestmark = pytest.mark.skipif(not FOLDER.is_dir(), reason="../shared/photos/brighton is absent")
 
 # (first photo index, pixels in photos i, i+1, i+2 in the files' frame), from scripts/photo_brighton_check.py

@@ -8,7 +8,7 @@ import pytest
 from pipeline.cli import main as cli_main
 from pipeline.synth.photos import PhotoFlightSpec, simulate_photo_flight, write_photo_flight
 
-BRIGHTON = Path("../shared/photos/brighton")
+BRIGHTON = Path(__file__).resolve().parents[1].parent / "shared" / "photos/brighton"  # ../shared from the repo root
 
 
 @pytest.mark.skipif(not BRIGHTON.is_dir(), reason="../shared/photos/brighton is absent")

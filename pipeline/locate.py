@@ -196,9 +196,12 @@ def estimate_row(e: Estimate, views: PhotoViews) -> dict:
 
 
 def check_pixels(photos: list[Photo], pixel_px) -> None:
-    """InputError naming the photo when a pixel lies outside its image."""
+    """InputError naming the photo when a pixel lies outside its image or is not a number (NaN in both
+    coordinates: not marked there)."""
     for p, (u, v) in zip(photos, np.asarray(pixel_px, dtype=np.float64).reshape(-1, 2), strict=True):
-        if np.isfinite(u) and not (-0.5 <= u <= p.width_px - 0.5 and -0.5 <= v <= p.height_px - 0.5):
+        if np.isnan(u) and np.isnan(v):  # not marked in this photo
+            continue
+        if not (-0.5 <= u <= p.width_px - 0.5 and -0.5 <= v <= p.height_px - 0.5):
             raise InputError(f"pixel ({u:g}, {v:g}) is outside the {p.width_px}x{p.height_px} image", path=p.path)
 
 
@@ -310,9 +313,14 @@ def read_marks(path: str, photos) -> list:
     by_name = {}
     for i, r in enumerate(rows, start=2):
         try:
-            by_name[Path(r["photo"]).name] = (float(r["x_px"]), float(r["y_px"]))
+            name, px = Path(r["photo"]).name, (float(r["x_px"]), float(r["y_px"]))
         except (KeyError, TypeError, ValueError):
             raise InputError(f"line {i}: want photo,x_px,y_px with numbers", path=path) from None
+        if not np.isfinite(px).all():
+            raise InputError(f"line {i}: the pixel ({px[0]:g}, {px[1]:g}) is not a finite number", path=path)
+        if name in by_name:
+            raise InputError(f"line {i}: a second mark for photo {name}", path=path)
+        by_name[name] = px
     unknown = sorted(set(by_name) - {p.name for p in photos})
     if unknown:
         raise InputError(f"marks for photos not given: {', '.join(unknown[:5])}", path=path)

@@ -99,6 +99,19 @@ def test_marks_for_an_unknown_photo(flight, capsys, tmp_path):
     assert "marks for photos not given: NOPE.JPG" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("rows, problem", [
+    ("DJI_0001.JPG,inf,10\n", "line 2: the pixel (inf, 10) is not a finite number"),
+    ("DJI_0001.JPG,1,2\nDJI_0001.JPG,3,4\n", "line 3: a second mark for photo DJI_0001.JPG"),
+])
+def test_a_bad_photo_mark_is_one_line_naming_file_and_line(flight, capsys, tmp_path, rows, problem):
+    _, folder = flight
+    marks = tmp_path / "m.csv"
+    marks.write_text("photo,x_px,y_px\n" + rows)
+    assert cli_main(["locate", str(folder), "--marks", str(marks)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert str(marks) in err and problem in err and "\n" not in err, err
+
+
 def test_synth_command_writes_a_photo_flight_without_laser(tmp_path, capsys):
     out = tmp_path / "p"
     assert cli_main(["synth", "--photos", "3", "--no-laser", "-o", str(out), "--seed", "2"]) == 0

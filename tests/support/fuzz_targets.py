@@ -76,6 +76,23 @@ def _read_marks(path: Path) -> None:
     read_marks_file(path)
 
 
+def _seed_photo_marks(folder: Path) -> Path:
+    """`ridgeloc locate --marks`: a photo and a marks CSV `photo,x_px,y_px` naming it."""
+    _seed_photo(folder)
+    path = folder / "marks.csv"
+    path.write_text("photo,x_px,y_px\nDJI_0001.JPG,31.5,23.0\n")
+    return path
+
+
+def _read_photo_marks(path: Path) -> None:
+    """The marks CSV of `ridgeloc locate --marks`, read against the photo beside it and checked in its image."""
+    from pipeline.ingest.photo import read_photos
+    from pipeline.locate import check_pixels, read_marks
+
+    photos, _ = read_photos([path.parent / "DJI_0001.JPG"])
+    check_pixels(photos, read_marks(str(path), photos))
+
+
 def _read_flight_config(path: Path) -> None:
     from pipeline.flight_config import load_flight_config
 
@@ -436,6 +453,7 @@ TARGETS: tuple[Target, ...] = (
     Target("frames-csv", _seed_frames_csv, _read_frames_csv),
     Target("marks-csv", _seed_marks_csv, _read_marks),
     Target("gcp-list", _seed_gcp_list, _read_marks),
+    Target("photo-marks", _seed_photo_marks, _read_photo_marks),
     Target("flight-config", _seed_flight_config, _read_flight_config, tree="yaml"),
     Target("run-config", _seed_run_config, _read_run_config, tree="yaml"),
     Target("observations", _seed_observations, _read_observations, tree="json"),

@@ -22,9 +22,14 @@ from typing import Literal, TypeVar
 
 import pydantic
 import yaml
+from annotated_types import Ge, Gt
 from pydantic_core import SchemaValidator, core_schema
 
 from pipeline.errors import ConfigError
+
+#: a config number that must be >= 0 / > 0 (sigmas, sizes, times), checked by pydantic at load
+NonNegative = typing.Annotated[float, Ge(0)]
+Positive = typing.Annotated[float, Gt(0)]
 
 T = TypeVar("T")
 

@@ -26,13 +26,10 @@ import numpy as np
 import pydantic
 from annotated_types import Ge, Gt, Le, Lt
 
-from pipeline.config_schema import load_dataclass, read_yaml
+from pipeline.config_schema import NonNegative, Positive, load_dataclass, read_yaml
 from pipeline.errors import ConfigError, InputError
 from pipeline.solve_options import Method, SolveOptions, given_options, not_in_config_problem
 from pipeline.targets import TargetEntry, check_mark
-
-NonNegative = Annotated[float, Ge(0)]
-Positive = Annotated[float, Gt(0)]
 
 # ---- the flight configuration ------------------------------------------------------------------------------
 

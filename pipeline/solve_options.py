@@ -23,6 +23,8 @@ from typing import Annotated, Any, Literal
 import annotated_types
 import pydantic
 
+from pipeline.config_schema import NonNegative, Positive
+
 METHODS = ("dlt", "vision", "range", "los", "fusion-raw", "fusion", "ridge", "mle")
 Method = Literal["dlt", "vision", "range", "los", "fusion-raw", "fusion", "ridge", "mle"]
 
@@ -42,8 +44,6 @@ class _Unset:
 
 UNSET: Any = _Unset()
 
-NonNegative = Annotated[float, annotated_types.Ge(0)]
-Positive = Annotated[float, annotated_types.Gt(0)]
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,8 @@ ROOT = Path(__file__).resolve().parents[1]
 # Lowest first. Units in one layer are independent of each other.
 LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("base", ("pipeline", "errors", "atomic", "progress")),
-    ("config schema and simple files", ("config_schema", "solve_options", "frames_csv")),
+    ("config schema and simple files", ("config_schema", "frames_csv")),
+    ("solve options", ("solve_options",)),
     ("targets", ("targets",)),
     ("config", ("flight_config",)),
     ("geometry", ("geometry",)),

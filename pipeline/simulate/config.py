@@ -16,12 +16,9 @@ from typing import Annotated, Literal
 
 from annotated_types import Ge, Gt, MinLen
 
-from pipeline.config_schema import load_dataclass, read_yaml, to_plain
+from pipeline.config_schema import NonNegative, Positive, load_dataclass, read_yaml, to_plain
 from pipeline.errors import ConfigError
 from pipeline.solve_options import METHODS, Method
-
-NonNegative = Annotated[float, Ge(0)]
-Positive = Annotated[float, Gt(0)]
 
 
 @dataclass(frozen=True)

@@ -17,13 +17,11 @@ from typing import Annotated, Literal
 
 from annotated_types import Ge, Gt, Le, Lt, MinLen
 
-from pipeline.config_schema import load_dataclass, read_yaml, to_plain
+from pipeline.config_schema import NonNegative, Positive, load_dataclass, read_yaml, to_plain
 from pipeline.errors import ConfigError
 
 FORMATS = ("tlog", "ros1", "ros2-sqlite3", "ros2-mcap", "mcap", "klv")
 
-NonNegative = Annotated[float, Ge(0)]
-Positive = Annotated[float, Gt(0)]
 Index = Annotated[int, Ge(0)]
 Vec3 = tuple[float, float, float]
 Rate = Annotated[float, Gt(0), Le(200)]

@@ -368,6 +368,8 @@ def read_photos(paths, alt_datum: str | None = None) -> tuple[list[Photo], list[
             photos.append(read_photo_checked(p, alt_datum))
         except InputError as exc:
             bad.append((str(p), str(exc)))
+        except OSError as exc:  # unreadable (permissions, I/O): listed like a damaged photo, the folder goes on
+            bad.append((str(p), str(InputError(f"cannot read: {exc.strerror or exc}", path=p))))
     photos.sort(key=lambda ph: (ph.t_ns if ph.t_ns is not None else np.iinfo(np.int64).max, ph.name))
     return photos, bad
 

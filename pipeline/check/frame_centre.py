@@ -155,7 +155,8 @@ def check_frame_centre(table: KlvTable) -> FrameCentreCheck | None:
     c_h = c["centre_alt_m"][m] + n_centre  # ST 0601 tag 25 and EG 0104: MSL
     rng = c["slant_range_m"][m]
 
-    horiz, vert = _distances(lat, lon, h_read, table_sensor_rotation(table, m), rng, c_lat, c_lon, c_h)
+    R = table_sensor_rotation(table, m)
+    horiz, vert = _distances(lat, lon, h_read, R, rng, c_lat, c_lon, c_h)
     d, horizontal_only = _summary(horiz, vert)
     med = float(np.median(d))
     alternatives: dict[str, float] = {}
@@ -166,7 +167,6 @@ def check_frame_centre(table: KlvTable) -> FrameCentreCheck | None:
                 continue  # the platform's angles are missing in some packets: only the earth reading applies
         h2, v2 = _distances(lat, lon, h_read, rot(c, m), rng, c_lat, c_lon, c_h)
         alternatives[name] = float(np.median(_summary(h2, v2)[0]))
-    R = table_sensor_rotation(table, m)
     grid = Rotation.from_euler("Z", np.radians(utm_convergence_deg(lat, lon))[:, None])
     h2, v2 = _distances(lat, lon, h_read, grid * R, rng, c_lat, c_lon, c_h)
     alternatives[GRID_NORTH] = float(np.median(_summary(h2, v2)[0]))

@@ -32,8 +32,8 @@ def test_plain_gnss_with_laser(photos):
     ph, _ = photos
     assert ph[0].rtk_flag == 16  # the synth writes single-point fixes
     m = photo_error_model(ph)
-    assert (m.shared_h_m, m.shared_v_m, m.sigma.position_m) == GNSS_PLAIN_M
-    assert m.bias_prior_deg == COMPASS_BIAS_DEG
+    assert (m.shared_h_m, m.shared_v_m, m.sigma.position_m) == (1.5, 15.0, 0.5)  # docs/locate.md, "Error model"
+    assert m.bias_prior_deg == 3.0
     longest = max(p.lrf_range_m for p in ph)
     assert m.sigma.range_m == pytest.approx(0.2 + 0.0015 * longest)
     assert m.source == "GNSS without RTK, laser"

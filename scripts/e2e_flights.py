@@ -24,8 +24,10 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-CHI2_3_95 = 7.814727903251178
-METHODS = ("dlt", "vision", "range", "los", "fusion-raw", "fusion", "ridge", "mle")
+sys.path.insert(0, str(REPO))
+
+from pipeline.solve.uncertainty import CHI2_3_95  # noqa: E402
+from pipeline.solve_options import METHODS  # noqa: E402
 
 
 def _ridgeloc(*args: str) -> float:

@@ -62,11 +62,11 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.solve import solve
 from pipeline.solve.observations import Observations, Sigma
+from pipeline.solve.uncertainty import CHI2_3_95
+from pipeline.solve_options import METHODS
 
-METHODS = ("dlt", "vision", "range", "los", "fusion-raw", "fusion", "ridge", "mle")
 FAMILIES = ("independent", "gauss_markov", "bias", "random_walk", "gnss_drift", "range_outliers", "mistracked")
 SHAPES = ("arc", "straight", "bursts")
-CHI2_3_95 = 7.814727903251178  # scipy.stats.chi2.ppf(0.95, 3)
 IMAGES = ((600, 400), (640, 480), (960, 540), (1280, 720), (1920, 1080))
 FPS = (25.0, 29.97, 30.0)
 

@@ -7,6 +7,17 @@ import math
 import numpy as np
 
 
+def camera_rays_m(P: np.ndarray, pixel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Camera centres C = -M^-1 p4 (n, 3) and unit directions (n, 3) through the pixels (n, 2) of 3x4 cameras
+    P (n, 3, 4), in P's world frame (NaN rows where a pixel is NaN). The direction sign(det M) M^-1 [u, v, 1]
+    points in front of the camera."""
+    M, p4 = P[:, :, :3], P[:, :, 3]
+    C = -np.linalg.solve(M, p4[..., None])[..., 0]
+    xh = np.concatenate([pixel, np.ones((pixel.shape[0], 1))], axis=1)
+    a = np.linalg.solve(M, xh[..., None])[..., 0] * np.where(np.linalg.det(M) < 0, -1.0, 1.0)[:, None]
+    return C, a / np.linalg.norm(a, axis=1, keepdims=True)
+
+
 def meeting_point(origins: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(X (3,), miss distances (n,), covariance scale N^-1 (3, 3)) of the rays' least-squares meeting point,
     with one Cauchy-like reweighting pass so that a few stray rays do not drag it. NaN when the rays are parallel.

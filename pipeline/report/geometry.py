@@ -9,6 +9,7 @@ import numpy as np
 
 from pipeline.geometry.camera import project
 from pipeline.geometry.frames import lla_from_enu
+from pipeline.geometry.rays import camera_rays_m
 from pipeline.results import GroupResult
 from pipeline.solve.estimate import Estimate
 from pipeline.solve.observations import Observations
@@ -28,13 +29,7 @@ def geodetic_from_enu(enu_m: np.ndarray, origin_lla: tuple[float, float, float])
 def camera_rays(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
     """Camera centres (n, 3) m and unit viewing directions (n, 3) through each frame's target pixel (rows of NaN
     where the target was not seen). The direction's sign puts the target in front of the camera."""
-    M = obs.P[:, :, :3]
-    p4 = obs.P[:, :, 3]
-    centre = -np.linalg.solve(M, p4[..., None])[..., 0]
-    xh = np.concatenate([obs.pixel, np.ones((obs.n, 1))], axis=1)
-    d = np.linalg.solve(M, xh[..., None])[..., 0] * np.sign(np.linalg.det(M))[:, None]
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    return centre, d
+    return camera_rays_m(obs.P, obs.pixel)
 
 
 def lines_of_sight_m(obs: Observations, reference_m: np.ndarray | None = None,

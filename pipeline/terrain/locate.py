@@ -12,20 +12,11 @@ import numpy as np
 
 from pipeline.errors import GeometryError, ObservationError
 from pipeline.geometry.frames import R_ecef_from_enu, enu_from_lla, lla_from_enu
+from pipeline.geometry.rays import camera_rays_m
 from pipeline.solve.estimate import Estimate, Status
 from pipeline.solve.observations import Observations
 from pipeline.terrain.dem import Dem
 from pipeline.terrain.raycast import intersect_rays
-
-
-def view_rays(P: np.ndarray, pixel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Camera centres C = -M^-1 p4 (n, 3) and unit directions (n, 3) through the pixels (n, 2) of 3x4 cameras
-    P (n, 3, 4), in P's world frame. The direction sign(det M) M^-1 [u, v, 1] points in front of the camera."""
-    M, p4 = P[:, :, :3], P[:, :, 3]
-    C = -np.linalg.solve(M, p4[..., None])[..., 0]
-    xh = np.concatenate([pixel, np.ones((pixel.shape[0], 1))], axis=1)
-    a = np.linalg.solve(M, xh[..., None])[..., 0] * np.where(np.linalg.det(M) < 0, -1.0, 1.0)[:, None]
-    return C, a / np.linalg.norm(a, axis=1, keepdims=True)
 
 
 def dem_points(obs: Observations, dem: Dem, origin_lla, labels: list[str] | None = None, pixels_shown=None):
@@ -42,7 +33,7 @@ def dem_points(obs: Observations, dem: Dem, origin_lla, labels: list[str] | None
     if idx.size == 0:
         return points, misses
     try:
-        C, a = view_rays(obs.P[idx], obs.pixel[idx])
+        C, a = camera_rays_m(obs.P[idx], obs.pixel[idx])
     except np.linalg.LinAlgError:
         raise ObservationError("a view's camera matrix P has a singular left 3x3 block") from None
     C_lla = lla_from_enu(C, origin)

@@ -11,20 +11,20 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from pipeline.errors import InputError
 from pipeline.geometry.frames import lla_from_enu
 from pipeline.geometry.geoid import geoid_undulation_m, patch_around
 from pipeline.geometry.lens import undistort_pixels
 from pipeline.geometry.pose import frame_poses
+from pipeline.ingest.frames import quat_ned_from_frd_euler
 from pipeline.ingest.photo import Photo
 
 
-def quat_wxyz_from_ypr_deg(ypr_deg) -> np.ndarray:
-    """(n, 4) quaternions (w, x, y, z) rotating FRD into local NED from (n, 3) ZYX yaw, pitch, roll degrees."""
-    q = Rotation.from_euler("ZYX", np.asarray(ypr_deg, dtype=np.float64).reshape(-1, 3), degrees=True).as_quat()
-    return q[:, [3, 0, 1, 2]]
+def _quat_ned_from_ypr_deg(ypr_deg) -> np.ndarray:
+    """(n, 4) quaternions (w, x, y, z) FRD -> local NED from (n, 3) yaw, pitch, roll degrees (the photos' tags)."""
+    r = np.radians(np.asarray(ypr_deg, dtype=np.float64).reshape(-1, 3))
+    return quat_ned_from_frd_euler(r[:, 2], r[:, 1], r[:, 0])
 
 
 def photo_heights_ellipsoid_m(photos: list[Photo]) -> np.ndarray:
@@ -95,8 +95,8 @@ def photo_views(photos: list[Photo], origin_lla: tuple[float, float, float] | No
     h = photo_heights_ellipsoid_m(photos)
     if origin_lla is None:
         origin_lla = (float(lat[0]), float(lon[0]), float(h[0]))
-    gimbal = quat_wxyz_from_ypr_deg([p.gimbal_ypr_deg for p in photos])
-    body = quat_wxyz_from_ypr_deg([p.flight_ypr_deg or (p.gimbal_ypr_deg[0], 0.0, 0.0) for p in photos])
+    gimbal = _quat_ned_from_ypr_deg([p.gimbal_ypr_deg for p in photos])
+    body = _quat_ned_from_ypr_deg([p.flight_ypr_deg or (p.gimbal_ypr_deg[0], 0.0, 0.0) for p in photos])
     poses = frame_poses(lat, lon, h, body, gimbal, np.zeros(len(photos), bool), origin_lla)
     K = np.stack([p.intrinsics.K for p in photos])
     dist = np.array([p.intrinsics.dist for p in photos], dtype=np.float64)

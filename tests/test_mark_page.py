@@ -40,11 +40,13 @@ window.addEventListener('load', function () { setTimeout(function () {
   document.getElementById('name').value = 'mast'; click(251, 101);
   document.getElementById('name').value = 'mast'; click(30, 30);
   var dup = document.getElementById('error').textContent;
+  document.getElementById('name').value = '.hidden'; click(60, 60);
+  var dot = document.getElementById('error').textContent;
   var sel = document.getElementById('frames'); sel.value = '1'; sel.dispatchEvent(new Event('change'));
   setTimeout(function () {
     document.getElementById('name').value = 'mast'; click(40, 41);
     var r = img.getBoundingClientRect();
-    document.body.setAttribute('data-result', JSON.stringify({csv: document.getElementById('csv').value, dup: dup,
+    document.body.setAttribute('data-result', JSON.stringify({csv: document.getElementById('csv').value, dup: dup, dot: dot,
       corner: [r.left, r.top],
       pins: document.querySelectorAll('.pin').length, img: img.naturalWidth + 'x' + img.naturalHeight,
       css: img.clientWidth}));
@@ -79,6 +81,7 @@ def test_clicks_become_the_marks_csv(tmp_path):
     assert res["img"] == "300x120" and res["css"] == 300  # drawn at natural size: offsets are pixels + 0.5
     assert all(float(v).is_integer() for v in res["corner"])
     assert res["dup"].startswith("duplicate name mast on frame 4")
+    assert res["dot"].startswith("a name must not")  # as targets.check_name: a run would refuse it
     assert res["pins"] == 1  # frame 7 shows its own mark only
     assert res["csv"] == ("name,frame_or_image,x_px,y_px\nT1,4,10.50,20.50\nmast,4,250.50,100.50\n"
                           "mast,7,39.50,40.50\n")

@@ -42,7 +42,7 @@ _JS = r"""
     var o = document.createElement('option'); o.value = i; o.textContent = 'frame ' + f.index; sel.appendChild(o);
   });
   function csvText() {
-    var lines = ['name,frame_or_image,x_px,y_px'];
+    var lines = [%(header)s];
     marks.forEach(function (m) { lines.push([m.name, m.frame, m.x.toFixed(2), m.y.toFixed(2)].join(',')); });
     return lines.join('\n') + '\n';
   }
@@ -76,7 +76,9 @@ _JS = r"""
   window.ridgelocMark = function (x, y, name) {
     var f = FRAMES[current];
     name = (name || '').trim() || nextName();
-    if (/[,\/\\:]/.test(name)) { err.textContent = 'a name must not contain , / \\ or :'; return false; }
+    if (/[,\/\\:\n\r\t]|^\./.test(name)) {  // as pipeline.targets.check_name
+      err.textContent = 'a name must not contain , / \\ : or a tab, nor start with a dot'; return false;
+    }
     if (x < 0 || y < 0 || x > f.width - 1 || y > f.height - 1) { err.textContent = 'outside the image'; return false; }
     if (marks.some(function (m) { return m.name === name && m.frame === f.index; })) {
       err.textContent = 'duplicate name ' + name + ' on frame ' + f.index; return false;
@@ -119,7 +121,8 @@ def mark_page(frames: Mapping[int, np.ndarray], title: str, marks: Sequence[dict
              for i, img in sorted(frames.items())]
     if not items:
         raise ValueError("no frame to mark")
-    js = _JS % {"frames": json.dumps(items), "marks": json.dumps(list(marks)), "csv_name": json.dumps(csv_name)}
+    js = _JS % {"header": json.dumps(",".join(MARKS_CSV_HEADER)), "frames": json.dumps(items),
+                "marks": json.dumps(list(marks)), "csv_name": json.dumps(csv_name)}
     return (f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>{escape(title)}</title>"
             f"<style>{_CSS}</style></head><body><h1>{escape(title)}</h1>"
             "<p>Choose a frame, type a name (or leave it empty for T1, T2 ...) and click the point. A target may be "

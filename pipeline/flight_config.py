@@ -29,7 +29,7 @@ from annotated_types import Ge, Gt, Le, Lt
 from pipeline.config_schema import NonNegative, Positive, load_dataclass, read_yaml
 from pipeline.errors import ConfigError, InputError
 from pipeline.solve_options import Method, SolveOptions, given_options, not_in_config_problem
-from pipeline.targets import TargetEntry, check_mark
+from pipeline.targets import Geodetic, TargetEntry, check_mark
 
 # ---- the flight configuration ------------------------------------------------------------------------------
 
@@ -234,16 +234,6 @@ class ObservationSelection:
     def __post_init__(self):
         if self.mode == "frames" and not self.frame_indices:
             raise ValueError("mode 'frames' needs 'frame_indices'")
-
-
-@dataclass(frozen=True)
-class Geodetic:
-    lat_deg: Annotated[float, Ge(-90), Le(90)]
-    lon_deg: Annotated[float, Ge(-180), Le(360)]
-    alt_m: float
-
-    def as_tuple(self) -> tuple[float, float, float]:
-        return (self.lat_deg, self.lon_deg, self.alt_m)
 
 
 @dataclass(frozen=True)

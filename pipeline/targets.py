@@ -27,6 +27,9 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Annotated
+
+from annotated_types import Ge, Le
 
 from pipeline.errors import ConfigError
 from pipeline.frames_csv import read_frames_csv
@@ -72,17 +75,26 @@ class NamedTarget:
 # ---- the `targets:` list of a flight config ----------------------------------------------------------------
 
 
+FrameIndex = Annotated[int, Ge(0)]
+
+
 @dataclass(frozen=True)
 class FramePixel:
-    frame_index: int
+    frame_index: FrameIndex
     pixel: tuple[float, float]
 
 
 @dataclass(frozen=True)
-class TargetTruth:
-    lat_deg: float
-    lon_deg: float
+class Geodetic:
+    """A WGS84 position: latitude, longitude (degrees), ellipsoidal height (m); the flight config's `origin:` and
+    `truth:` and a named target's `truth:`."""
+
+    lat_deg: Annotated[float, Ge(-90), Le(90)]
+    lon_deg: Annotated[float, Ge(-180), Le(360)]
     alt_m: float
+
+    def as_tuple(self) -> tuple[float, float, float]:
+        return (self.lat_deg, self.lon_deg, self.alt_m)
 
 
 @dataclass(frozen=True)
@@ -90,12 +102,12 @@ class TargetEntry:
     """One entry of the flight config's `targets:` list."""
 
     name: str
-    frame_index: int | None = None
+    frame_index: FrameIndex | None = None
     pixel: tuple[float, float] | None = None
     template: str | None = None
     template_pixel: tuple[float, float] | None = None
     marks: tuple[FramePixel, ...] = field(default_factory=tuple)
-    truth: TargetTruth | None = None
+    truth: Geodetic | None = None
 
     def __post_init__(self):
         check_name(self.name)

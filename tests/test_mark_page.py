@@ -46,8 +46,8 @@ window.addEventListener('load', function () { setTimeout(function () {
   setTimeout(function () {
     document.getElementById('name').value = 'mast'; click(40, 41);
     var r = img.getBoundingClientRect();
-    document.body.setAttribute('data-result', JSON.stringify({csv: document.getElementById('csv').value, dup: dup, dot: dot,
-      corner: [r.left, r.top],
+    document.body.setAttribute('data-result', JSON.stringify({csv: document.getElementById('csv').value, dup: dup,
+      dot: dot, corner: [r.left, r.top],
       pins: document.querySelectorAll('.pin').length, img: img.naturalWidth + 'x' + img.naturalHeight,
       css: img.clientWidth}));
   }, 300);

@@ -112,6 +112,11 @@ def test_single_target_stays_a_one_element_unnamed_list(tmp_path):
     ({"targets": [{"name": "a/b", "frame_index": 4, "pixel": [300.0, 200.0]}]}, "folder-safe"),
     ({"targets": [{"name": "A", "frame_index": 400, "pixel": [300.0, 200.0]}]},
      "targets[0] (A): frame index 400 out of range"),
+    ({"targets": [{"name": "A", "frame_index": -4, "pixel": [300.0, 200.0]}]},
+     "targets[0].frame_index: must be >= 0, got -4"),
+    ({"targets": [{"name": "A", "frame_index": 4, "pixel": [300.0, 200.0],
+                   "truth": {"lat_deg": 400.0, "lon_deg": 7.5, "alt_m": 0.0}}]},
+     "targets[0].truth.lat_deg: must be <= 90, got 400"),
 ])
 def test_targets_list_errors(tmp_path, keys, problem):
     with pytest.raises(ConfigError, match=None) as exc:

@@ -21,15 +21,10 @@ from pipeline.solve.estimate import BatchEstimate, Estimate, Status
 from pipeline.solve.iterate import start_status
 from pipeline.solve.observations import ObservationBatch, Observations, Sigma
 from pipeline.solve.stacked import Stacked, pixel_model, range_model
-from pipeline.solve_options import METHODS
+from pipeline.solve_options import METHODS, NOT_IN_CONFIG, OPTIONS
 
-_COMMON = {"tol_m", "max_iterations", "initial_m"}
-_OPTIONS = {
-    "dlt": set(), "los": set(),
-    "vision": _COMMON, "range": _COMMON, "fusion-raw": _COMMON, "fusion": _COMMON,
-    "ridge": _COMMON | {"hkb", "k"},
-    "mle": _COMMON | {"robust", "sigma", "estimate_variance_components", "bias_prior_deg", "terrain"},
-}
+# the keyword options of each method: the config table's, plus what only code can pass (terrain: a function)
+_OPTIONS = {m: {o.name for o in OPTIONS[m]} | NOT_IN_CONFIG.get(m, frozenset()) for m in METHODS}
 _USES_PIXELS = {"dlt", "vision", "fusion-raw", "fusion", "ridge", "mle"}
 
 

@@ -4,7 +4,7 @@ error against the truth, C the reported covariance: chi-square with 3 degrees of
 it estimates a boresight bias and checks its fit) and, for comparison, the independent-error model with the
 Huber loss and no bias (the default before issue 12; its fit checks still inflate the covariance).
 
-    python -m pipeline.solve.consistency OUTDIR    (OUTDIR from `ridgeloc run -o OUTDIR`)
+    python scripts/consistency.py OUTDIR    (OUTDIR from `ridgeloc run -o OUTDIR`)
 """
 
 from __future__ import annotations

@@ -27,6 +27,7 @@ from pipeline.ingest.photo_views import PhotoViews, photo_heights_ellipsoid_m, p
 from pipeline.photo_errors import PhotoErrorModel, photo_error_model
 from pipeline.solve import METHODS, Estimate, Status, solve, unsolved_status
 from pipeline.solve.observations import Observations, Sigma
+from pipeline.targets import in_image
 
 #: a pixel within this fraction of the image width from the centre is taken to be where the laser points
 LASER_PIXEL_TOLERANCE = 0.01
@@ -201,7 +202,7 @@ def check_pixels(photos: list[Photo], pixel_px) -> None:
     for p, (u, v) in zip(photos, np.asarray(pixel_px, dtype=np.float64).reshape(-1, 2), strict=True):
         if np.isnan(u) and np.isnan(v):  # not marked in this photo
             continue
-        if not (-0.5 <= u <= p.width_px - 0.5 and -0.5 <= v <= p.height_px - 0.5):
+        if not in_image(u, v, p.width_px, p.height_px):
             raise InputError(f"pixel ({u:g}, {v:g}) is outside the {p.width_px}x{p.height_px} image", path=p.path)
 
 

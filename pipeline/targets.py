@@ -183,9 +183,17 @@ def _pixel(x: str, y: str, path, row: int) -> tuple[float, float]:
         raise marks_error(path, row, f"pixel ({x!r}, {y!r}) is not two numbers") from None
     if not all(abs(v) < float("inf") for v in px):
         raise marks_error(path, row, f"pixel {px} is not finite")
-    if px[0] < 0 or px[1] < 0:
-        raise marks_error(path, row, f"pixel ({px[0]:g}, {px[1]:g}) is outside the image (negative)")
+    if not in_image(px[0], px[1]):
+        raise marks_error(path, row, f"pixel ({px[0]:g}, {px[1]:g}) is outside the image (left of or above it)")
     return px
+
+
+def in_image(u_px: float, v_px: float, width_px: int | None = None, height_px: int | None = None) -> bool:
+    """Whether pixel (u, v) lies on an image of width_px x height_px (either None: of any size). The one rule of
+    marks, photo marks and the marking page: pixel centres at integers (OpenCV's convention), so the image
+    covers -0.5 .. width_px - 0.5 and -0.5 .. height_px - 0.5."""
+    return (-0.5 <= u_px <= (width_px - 0.5 if width_px is not None else float("inf"))
+            and -0.5 <= v_px <= (height_px - 0.5 if height_px is not None else float("inf")))
 
 
 def _file_mark(frame: int | None, image: str | None, pixel_px: tuple[float, float], source: str) -> Mark:
@@ -320,7 +328,7 @@ def check_marks_in_video(targets: Sequence[NamedTarget], frame_indices, width_px
                 lo, hi = (min(frames), max(frames)) if frames else (None, None)
                 raise ConfigError(f"{src}: frame index {m.frame_index} out of range (the video has frames "
                                   f"{lo}..{hi})")
-            if width_px is not None and not (0 <= m.pixel[0] <= width_px - 1 and 0 <= m.pixel[1] <= height_px - 1):
+            if width_px is not None and not in_image(m.pixel[0], m.pixel[1], width_px, height_px):
                 raise ConfigError(f"{src}: pixel ({m.pixel[0]:g}, {m.pixel[1]:g}) is outside the image "
                                   f"({width_px}x{height_px} px)")
 

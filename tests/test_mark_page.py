@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from pipeline.report.mark_page import mark_page
-from pipeline.targets import read_marks_csv
+from pipeline.targets import in_image, read_marks_csv
 
 ROOT = Path(__file__).resolve().parents[1]
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -42,12 +42,13 @@ window.addEventListener('load', function () { setTimeout(function () {
   var dup = document.getElementById('error').textContent;
   document.getElementById('name').value = '.hidden'; click(60, 60);
   var dot = document.getElementById('error').textContent;
+  var edge = [window.ridgelocMark(299.6, 10, 'e1'), window.ridgelocMark(10, -0.6, 'e2')];  // just off the image
   var sel = document.getElementById('frames'); sel.value = '1'; sel.dispatchEvent(new Event('change'));
   setTimeout(function () {
     document.getElementById('name').value = 'mast'; click(40, 41);
     var r = img.getBoundingClientRect();
     document.body.setAttribute('data-result', JSON.stringify({csv: document.getElementById('csv').value, dup: dup,
-      dot: dot, corner: [r.left, r.top],
+      dot: dot, edge: edge, corner: [r.left, r.top],
       pins: document.querySelectorAll('.pin').length, img: img.naturalWidth + 'x' + img.naturalHeight,
       css: img.clientWidth}));
   }, 300);
@@ -82,6 +83,7 @@ def test_clicks_become_the_marks_csv(tmp_path):
     assert all(float(v).is_integer() for v in res["corner"])
     assert res["dup"].startswith("duplicate name mast on frame 4")
     assert res["dot"].startswith("a name must not")  # as targets.check_name: a run would refuse it
+    assert res["edge"] == [in_image(299.6, 10, 300, 120), in_image(10, -0.6, 300, 120)] == [False, False]
     assert res["pins"] == 1  # frame 7 shows its own mark only
     assert res["csv"] == ("name,frame_or_image,x_px,y_px\nT1,4,10.50,20.50\nmast,4,250.50,100.50\n"
                           "mast,7,39.50,40.50\n")

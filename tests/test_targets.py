@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from pipeline.errors import ConfigError
+from pipeline.errors import ConfigError, InputError
 from pipeline.flight_config import load_flight_config
-from pipeline.targets import flight_targets, read_gcp_list, read_marks_csv
+from pipeline.targets import flight_targets, in_image, read_gcp_list, read_marks_csv
 
 ROOT = Path(__file__).resolve().parents[1]
 GROUP1 = ROOT / "sample_data" / "group1"
@@ -66,6 +66,8 @@ def test_gcp_list_marks_with_their_surveyed_truth(tmp_path):
     ("B,nope.png,10,10", "row 3: unknown image 'nope.png'"),
     ("B,5,700,10", "row 3: pixel (700, 10) is outside the image (600x400 px)"),
     ("B,5,-1,10", "row 3: pixel (-1, 10) is outside the image"),
+    ("B,5,599.6,10", "row 3: pixel (599.6, 10) is outside the image (600x400 px)"),
+    ("B,5,10,-0.51", "row 3: pixel (10, -0.51) is outside the image"),
     ("B,5,ten,10", "row 3: pixel ('ten', '10') is not two numbers"),
     ("B,5,10", "row 3: expected 4 columns"),
 ])
@@ -76,6 +78,30 @@ def test_a_bad_marks_file_is_one_line_naming_file_row_and_problem(tmp_path, rows
         load_flight_config(_flight(tmp_path, marks_file="marks.csv"))
     msg = str(exc.value)
     assert msg.startswith(f"{marks}: {problem}") and "\n" not in msg, msg
+
+
+@pytest.mark.parametrize("u, v, inside", [
+    (-0.5, -0.5, True), (599.5, 399.5, True), (0, 0, True), (300, 200, True),  # pixel centres at integers:
+    (-0.51, 10, False), (10, -0.51, False), (599.51, 10, False), (10, 399.51, False)])  # the image spans +-0.5
+def test_one_pixel_in_image_rule_for_marks_and_photos(tmp_path, u, v, inside):
+    from pipeline.locate import check_pixels
+
+    assert in_image(u, v, 600, 400) is inside
+    marks = tmp_path / "marks.csv"
+    marks.write_text(f"name,frame_or_image,x_px,y_px\nA,4,{u},{v}\n")
+    try:
+        load_flight_config(_flight(tmp_path, marks_file="marks.csv"))
+        marks_ok = True
+    except ConfigError as exc:
+        assert "outside the image" in str(exc)
+        marks_ok = False
+    photo = type("P", (), {"width_px": 600, "height_px": 400, "path": "p.jpg"})()
+    try:
+        check_pixels([photo], [(u, v)])
+        photo_ok = True
+    except InputError:
+        photo_ok = False
+    assert marks_ok is photo_ok is inside
 
 
 def test_a_bad_marks_file_stops_the_run_before_anything_is_written(tmp_path):

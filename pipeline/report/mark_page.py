@@ -79,7 +79,9 @@ _JS = r"""
     if (/[,\/\\:\n\r\t]|^\./.test(name)) {  // as pipeline.targets.check_name
       err.textContent = 'a name must not contain , / \\ : or a tab, nor start with a dot'; return false;
     }
-    if (x < 0 || y < 0 || x > f.width - 1 || y > f.height - 1) { err.textContent = 'outside the image'; return false; }
+    if (!(x >= -0.5 && y >= -0.5 && x <= f.width - 0.5 && y <= f.height - 0.5)) {  // as pipeline.targets.in_image
+      err.textContent = 'outside the image'; return false;
+    }
     if (marks.some(function (m) { return m.name === name && m.frame === f.index; })) {
       err.textContent = 'duplicate name ' + name + ' on frame ' + f.index; return false;
     }

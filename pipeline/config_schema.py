@@ -34,6 +34,8 @@ Positive = typing.Annotated[float, Gt(0)]
 T = TypeVar("T")
 
 _CONFIG = pydantic.ConfigDict(strict=True, extra="forbid", allow_inf_nan=False)
+#: a dataclass's `__pydantic_config__` for a file of which only some keys are read (others are another tool's)
+OTHER_KEYS_IGNORED = pydantic.ConfigDict(strict=True, extra="ignore", allow_inf_nan=False)
 _UNKNOWN = ("extra_forbidden", "unexpected_keyword_argument")
 _NUMBER = {"int_type": "an integer", "int_parsing": "an integer", "int_from_float": "an integer",
            "float_type": "a finite number", "float_parsing": "a finite number", "finite_number": "a finite number"}

@@ -29,7 +29,7 @@ from annotated_types import Ge, Gt, Le, Lt
 from pipeline.config_schema import NonNegative, Positive, load_dataclass, read_yaml
 from pipeline.errors import ConfigError, InputError
 from pipeline.solve_options import Method, SolveOptions, given_options, not_in_config_problem
-from pipeline.targets import Geodetic, TargetEntry, check_mark
+from pipeline.targets import Geodetic, TargetEntry, check_mark, read_truth_file
 
 # ---- the flight configuration ------------------------------------------------------------------------------
 
@@ -318,12 +318,10 @@ class FlightConfig:
             return self.truth.as_tuple()
         if self.truth_file is None:
             return None
-        try:
-            doc = json.loads(Path(self.truth_file).read_text())
-            t = doc["target"]
-            return float(t["lat_deg"]), float(t["lon_deg"]), float(t["alt_m"])
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            raise ConfigError(f"cannot read the target truth: {exc}", self.truth_file) from None
+        target = read_truth_file(self.truth_file).target
+        if target is None:
+            raise ConfigError("cannot read the target truth: no 'target' in it", self.truth_file)
+        return target.as_tuple()
 
 
 def _resolve(base: Path, p: str | None, what: str, where: Path) -> str | None:
@@ -362,6 +360,8 @@ def flight_config_from_dict(doc: dict, path: str | PathLike | None = None) -> Fl
     cfg = dataclasses.replace(cfg, files=files, target=target,
                               truth_file=_resolve(base, cfg.truth_file, "truth_file", where),
                               path=None if where is None else str(where.resolve()))
+    if cfg.truth_file is not None:
+        read_truth_file(cfg.truth_file)  # a broken truth file is refused at load, not after tracking
     from pipeline.targets import resolve_config_targets  # paths resolved, marks file read and checked
 
     return resolve_config_targets(cfg, base, where, _resolve)

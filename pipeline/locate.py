@@ -233,7 +233,7 @@ def process_photo_group(config):
         if pixels is not None:
             check_pixels(photos, pixels)
         return _photo_result(config, photos, pixels, dem, dem_sigma, notes, config.truth_lla(), None)
-    from pipeline.target_stage import named_truth_lla, truth_file_targets
+    from pipeline.target_stage import truth_file_targets
 
     results, failed = [], []
     truth_entries = truth_file_targets(config)  # read once for every target
@@ -241,7 +241,7 @@ def process_photo_group(config):
         try:
             pixels = target_pixels(t, photos)
             check_pixels(photos, pixels)
-            truth = t.truth_lla if t.truth_lla is not None else named_truth_lla(config, t.name, truth_entries)
+            truth = t.truth_lla if t.truth_lla is not None else truth_entries.get(t.name)
             results.append(_photo_result(config, photos, pixels, dem, dem_sigma, notes, truth, t.name))
         except RidgelocError as exc:
             failed.append(TargetFailure(t.name, str(exc), tuple([*METHODS, "dem", "dji"])))

@@ -13,11 +13,9 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import functools
-import json
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -36,7 +34,7 @@ from pipeline.solve.estimate import Estimate
 from pipeline.solve.observations import Observations, Sigma
 from pipeline.sync.assemble import assemble_observations
 from pipeline.sync.select import ObservationPlan
-from pipeline.targets import Mark, NamedTarget
+from pipeline.targets import Mark, NamedTarget, read_truth_file
 from pipeline.terrain.flight import add_dem_estimate, terrain_solve_options
 from pipeline.track.sift import SiftTracker, TrackResult, ViewCache
 
@@ -91,7 +89,7 @@ class FlightPass:
     clock_estimate: ClockEstimate | None = None
 
     @functools.cached_property
-    def truth_targets(self) -> list:
+    def truth_targets(self) -> dict[str, tuple[float, float, float]]:
         """The truth_file's targets (`truth_file_targets`), read once for every target of the flight."""
         return truth_file_targets(self.flight.config)
 
@@ -197,26 +195,12 @@ def _synchronize(flight: Flight, plan: ObservationPlan, track: TrackResult, rang
     return obs, useful, inside
 
 
-def truth_file_targets(config: FlightConfig) -> list:
-    """The `targets` list ({name, lat_deg, lon_deg, alt_m} each) of the config's truth_file (synthetic flights with
-    several targets); [] without a truth_file or when the config states its truth."""
+def truth_file_targets(config: FlightConfig) -> dict[str, tuple[float, float, float]]:
+    """{name: (lat_deg, lon_deg, alt_m)} of the config's truth_file's named targets (synthetic flights with several
+    targets); {} without a truth_file or when the config states its truth."""
     if config.truth is not None or config.truth_file is None:
-        return []
-    try:
-        return list(json.loads(Path(config.truth_file).read_text()).get("targets") or [])
-    except (OSError, ValueError, TypeError, AttributeError) as exc:
-        raise ConfigError(f"cannot read the targets' truth: {exc}", config.truth_file) from None
-
-
-def named_truth_lla(config: FlightConfig, name: str, entries: list) -> tuple[float, float, float] | None:
-    """A named target's truth among the truth_file's `entries` (`truth_file_targets`), else None."""
-    try:
-        for t in entries:
-            if t.get("name") == name:
-                return float(t["lat_deg"]), float(t["lon_deg"]), float(t["alt_m"])
-    except (ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise ConfigError(f"cannot read the targets' truth: {exc}", config.truth_file) from None
-    return None
+        return {}
+    return read_truth_file(config.truth_file).named()
 
 
 def _truth_lla(fp: FlightPass, target: NamedTarget | None):
@@ -225,7 +209,7 @@ def _truth_lla(fp: FlightPass, target: NamedTarget | None):
         return target.truth_lla
     if target is None or target.name is None:
         return config.truth_lla()
-    return named_truth_lla(config, target.name, fp.truth_targets)
+    return fp.truth_targets.get(target.name)
 
 
 def locate_target(fp: FlightPass, target: NamedTarget | None, marks: list[TargetMark] | None = None

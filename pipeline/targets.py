@@ -23,6 +23,7 @@ Errors are one line naming the file, the row and the problem (`marks_error`).
 from __future__ import annotations
 
 import csv
+import json
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -31,6 +32,7 @@ from typing import Annotated
 
 from annotated_types import Ge, Le
 
+from pipeline.config_schema import OTHER_KEYS_IGNORED, load_dataclass
 from pipeline.errors import ConfigError
 from pipeline.frames_csv import read_frames_csv
 
@@ -95,6 +97,39 @@ class Geodetic:
 
     def as_tuple(self) -> tuple[float, float, float]:
         return (self.lat_deg, self.lon_deg, self.alt_m)
+
+
+@dataclass(frozen=True)
+class NamedTruth(Geodetic):
+    """A named target's true position in a truth file's `targets` list (other keys there are the generator's)."""
+
+    __pydantic_config__ = OTHER_KEYS_IGNORED
+    name: str
+
+
+@dataclass(frozen=True)
+class TruthFile:
+    """What ridgeloc reads of a `truth_file` (the synth's truth.json: docs/synth.md): the target's true WGS84
+    position (`target`) and the named targets' (`targets`); its other keys describe the generated flight and are
+    not read. Latitude and longitude in range, heights finite: `read_truth_file` refuses anything else."""
+
+    __pydantic_config__ = OTHER_KEYS_IGNORED
+    target: Geodetic | None = None
+    targets: tuple[NamedTruth, ...] = ()
+
+    def named(self) -> dict[str, tuple[float, float, float]]:
+        """{name: (lat_deg, lon_deg, alt_m)} of the named targets."""
+        return {t.name: t.as_tuple() for t in self.targets}
+
+
+def read_truth_file(path) -> TruthFile:
+    """The truth file at `path`, or one ConfigError naming it and the problem (unreadable, not JSON, a key out of
+    range or of the wrong type, e.g. `targets.1.lat_deg: must be <= 90, got 400`)."""
+    try:
+        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+        raise ConfigError(f"cannot read the target truth: {exc}", path) from None
+    return load_dataclass(TruthFile, doc, source=path)
 
 
 @dataclass(frozen=True)

@@ -163,3 +163,31 @@ def test_check_names_a_target_marked_on_a_frame_the_video_does_not_have(tmp_path
     assert r.returncode != 0, r.stdout + r.stderr
     assert "problem: target 'pole' (" in r.stdout and "frame 500 is not a frame of the video" in r.stdout, r.stdout
     assert "'panel'" not in r.stdout
+
+
+@pytest.mark.parametrize("change, problem", [
+    (lambda d: d["targets"][1].update(lat_deg=400.0), "targets[1].lat_deg: must be <= 90, got 400"),
+    (lambda d: d["targets"][0].update(alt_m="372"), "targets[0].alt_m: must be a finite number, got str"),
+    (lambda d: d["targets"][2].pop("name"), "targets[2].name: is required"),
+    (lambda d: d["target"].update(lon_deg=float("nan")), "target.lon_deg: must be a finite number"),
+])
+def test_a_broken_truth_file_is_refused_at_load_naming_file_and_key(tmp_path, change, problem):
+    import json
+
+    doc = json.loads((ROOT / "sample_data" / "three_targets" / "truth.json").read_text())
+    change(doc)
+    truth = tmp_path / "truth.json"
+    truth.write_text(json.dumps(doc))  # NaN written as the JSON extension NaN, as Python reads it
+    with pytest.raises(ConfigError) as exc:
+        load_flight_config(_flight(tmp_path, truth_file=str(truth)))
+    msg = str(exc.value)
+    assert msg.startswith(f"{truth}: {problem}") and "\n" not in msg, msg
+
+
+def test_the_truth_file_gives_each_named_target_its_truth(tmp_path):
+    from pipeline.target_stage import truth_file_targets
+
+    cfg = load_flight_config(_flight(tmp_path, truth_file=str(ROOT / "sample_data" / "three_targets" / "truth.json")))
+    named = truth_file_targets(cfg)
+    assert list(named) == ["panel", "small_grey", "far_north"]
+    assert named["panel"] == (34.36, 108.76, 372.0) == cfg.truth_lla()  # the main target is the first, at the origin

@@ -28,7 +28,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pipeline.geometry.frames import enu_from_lla, lla_from_enu
-from pipeline.geometry.geoid import patch_around
+from pipeline.geometry.geoid import geoid_undulation_m
 from pipeline.geometry.lens import distort_pixels
 from pipeline.synth.noise import gauss_markov_filter
 
@@ -122,8 +122,7 @@ def simulate_photo_flight(spec: PhotoFlightSpec) -> PhotoFlight:
     gnss_sigma = rng.uniform(*spec.gnss_offset_sigma_m)
     gnss = np.zeros((n, 3))
     gnss[:, :2] = gauss_markov_filter(rng.normal(0, gnss_sigma, (n, 2)), spec.dt_s, spec.gnss_tau_s)
-    geoid = patch_around(round(lat0, 1), round(lon0, 1))  # EGM2008 around the target, read once per area
-    N = geoid(cams[:, 0], cams[:, 1])
+    N = geoid_undulation_m(cams[:, 0], cams[:, 1])  # EGM2008 (the grid window around them is read once)
     K = np.array([[spec.fx_px, 0, (spec.width_px - 1) / 2], [0, spec.fx_px, (spec.height_px - 1) / 2], [0, 0, 1]])
     tags, marks, rotations = [], [], []
     t0 = 1_700_000_000
@@ -157,7 +156,7 @@ def simulate_photo_flight(spec: PhotoFlightSpec) -> PhotoFlight:
         if spec.laser:
             measured = true_range + rng.normal(0, spec.laser_sigma_m[0] + spec.laser_sigma_m[1] * true_range)
             dji = _point_along(rec, rec_yaw, rec_pitch, measured)
-            n_dji = float(geoid(dji[0], dji[1]))
+            n_dji = float(geoid_undulation_m(dji[0], dji[1]))
             tag.update(lrf_range_m=float(measured), lrf_status="Normal", dji_target=(float(dji[0]), float(dji[1]),
                                                                                       float(dji[2] - n_dji)))
         tag.update(rtk_flag=spec.rtk_flag, rtk_std_m=tuple(spec.rtk_std_m))

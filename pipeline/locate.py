@@ -127,9 +127,12 @@ def _with_alt(p: Photo, lat, lon, alt) -> Photo:
 
 
 def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: int = 0,
-                  errors: PhotoErrorModel | None = None, dem_sigma_m: float = 5.0, methods=None) -> PhotoLocation:
+                  errors: PhotoErrorModel | None = None, dem_sigma_m: float | None = None,
+                  methods=None) -> PhotoLocation:
     """Run every method (or `methods`) on the photos and one pixel per photo (see photo_observations), under the
-    error model `errors` (default: the source's, pipeline.photo_errors)."""
+    error model `errors` (default: the source's, pipeline.photo_errors). `dem` (pipeline.terrain.Dem) adds the
+    `dem` method, and the MLE's terrain prior when its vertical sigma `dem_sigma_m` is stated (as a video flight's
+    `terrain.vertical_sigma_m`: no stated sigma, no prior; docs/locate.md says why)."""
     views = photo_views(photos, rotation_deg=rotation_deg)
     obs = photo_observations(views, pixel_px, None if errors is None else errors.sigma)
     if errors is None:
@@ -137,7 +140,7 @@ def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: in
     out = PhotoLocation(views, obs, errors)
     wanted = list(methods) if methods is not None else [*METHODS, "dem", "dji"]
     terrain = None
-    if dem is not None:
+    if dem is not None and dem_sigma_m is not None:
         terrain = (dem.local(*views.origin_lla), float(dem_sigma_m))
     for m in wanted:
         try:
@@ -222,12 +225,10 @@ def process_photo_group(config):
         raise InputError("no readable photo in files.photos", config.path)
     for p in photos:
         notes.extend(f"{p.name}: {w}" for w in p.warnings)
-    dem, dem_sigma = None, 5.0
-    terrain_cfg = getattr(config, "terrain", None)
-    if terrain_cfg is not None:
-        from pipeline.terrain import Dem
-        dem = Dem.open(terrain_cfg.dem, vertical_datum=terrain_cfg.vertical_datum)
-        dem_sigma = terrain_cfg.vertical_sigma_m or dem_sigma
+    from pipeline.terrain.flight import open_flight_dem
+
+    dem = open_flight_dem(config.terrain)  # as a video flight: the `dem` method, a prior only with a stated sigma
+    dem_sigma = None if config.terrain is None else config.terrain.vertical_sigma_m
     if not (config.targets or config.marks_file):
         pixels = read_marks(config.files.marks, photos) if config.files.marks else None
         if pixels is not None:

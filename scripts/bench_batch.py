@@ -22,15 +22,15 @@ import tempfile
 import time
 from pathlib import Path
 
-from pipeline.batch import Job, discover_flights, run_jobs
-from pipeline.geometry.rays import intersection_angle_deg
-from pipeline.report.outputs import write_group_outputs
-from pipeline.results import GroupResult
-from pipeline.solve.observations import Observations
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # this checkout's pipeline; test support (support.synthetic)
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test support: support.synthetic
-
-from support.synthetic import DEFAULT_ORIGIN_LLA, solve_all, synthetic_observations
+from pipeline.batch import Job, discover_flights, run_jobs  # noqa: E402
+from pipeline.geometry.rays import intersection_angle_deg  # noqa: E402
+from pipeline.report.outputs import write_group_outputs  # noqa: E402
+from pipeline.results import GroupResult  # noqa: E402
+from pipeline.solve.observations import Observations  # noqa: E402
+from support.synthetic import DEFAULT_ORIGIN_LLA, solve_all, synthetic_observations  # noqa: E402
 
 
 def standin_job(payload: dict) -> str:

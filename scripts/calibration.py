@@ -42,14 +42,14 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pipeline.geometry.camera import look_at_rotation, project, projection_matrix
-from pipeline.solve import solve, solve_batch
-from pipeline.solve.observations import ObservationBatch, Observations, Sigma
-from pipeline.solve.uncertainty import CHI2_3_95
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # this checkout's pipeline; test support (support.scenes)
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test support: support.scenes
-
-from support.scenes import PAPER_K, arc_platforms_m, gauss_markov
+from pipeline.geometry.camera import look_at_rotation, project, projection_matrix  # noqa: E402
+from pipeline.solve import solve, solve_batch  # noqa: E402
+from pipeline.solve.observations import ObservationBatch, Observations, Sigma  # noqa: E402
+from pipeline.solve.uncertainty import CHI2_3_95  # noqa: E402
+from support.scenes import PAPER_K, arc_platforms_m, gauss_markov  # noqa: E402
 
 TOLD = Sigma(pixel_px=0.5, range_m=5.0, position_m=2.0, attitude_deg=0.2)
 FAMILIES = ("independent", "gauss_markov", "bias", "random_walk", "gnss_drift", "range_outliers", "mistracked")

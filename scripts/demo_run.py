@@ -9,9 +9,10 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test support: support.synthetic
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # this checkout's pipeline; test support (support.synthetic)
 
-from support.synthetic import demo_run
+from support.synthetic import demo_run  # noqa: E402
 
 if __name__ == "__main__":
     demo_run(sys.argv[1] if len(sys.argv) > 1 else "out/demo")

@@ -17,9 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test support: support.scenes
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # this checkout's pipeline; test support (support.scenes)
 
-from support.scenes import PAPER_SIGMA, paper_problem
+from support.scenes import PAPER_SIGMA, paper_problem  # noqa: E402
 
 SEED = 2026
 DEFAULT_OUT = Path(__file__).resolve().parent.parent / "configs" / "example_observations.json"

@@ -107,7 +107,7 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--bias-prior-deg", type=float, default=None,
                     help="the compass bias prior instead of the error model's (pipeline/photo_errors.py)")
-    ap.add_argument("--dem-sigma-m", type=float, default=5.0, help="the DEM's stated vertical sigma (locate's default)")
+    ap.add_argument("--dem-sigma-m", type=float, default=5.0, help="the DEM's stated vertical sigma (as --dem-sigma-m)")
     ap.add_argument("--no-laser", action="store_true",
                     help="photos without laser (a consumer drone), the target up to 150 px from the centre")
     ap.add_argument("--rtk", action="store_true",

@@ -13,10 +13,11 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test support: support.scenes
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # this checkout's pipeline; test support (support.scenes)
 
-from pipeline.solve import solve_batch
-from support.scenes import paper_batch
+from pipeline.solve import solve_batch  # noqa: E402
+from support.scenes import paper_batch  # noqa: E402
 
 
 def main() -> None:

@@ -15,11 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.solve import solve_batch
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # this checkout's pipeline; test support (support.scenes)
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test support: support.scenes
-
-from support.scenes import paper_batch
+from pipeline.solve import solve_batch  # noqa: E402
+from support.scenes import paper_batch  # noqa: E402
 
 ANGLES = (10, 20, 30, 40, 50, 60, 70, 80)
 NS = (5, 10, 20, 50)

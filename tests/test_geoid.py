@@ -43,6 +43,11 @@ def test_vectorised_patch_and_longitude_conventions_agree():
     assert isinstance(patch, GeoidPatch)
     pts_lat, pts_lon = np.array([47.4, 47.6, 49.0]), np.array([8.5, 8.3, 8.5])
     np.testing.assert_allclose(patch(pts_lat, pts_lon), geoid_undulation_m(pts_lat, pts_lon), atol=1e-9)
+    # the cached window of one area (points within AREA_DEG) and a window over a wide box give the same bits
+    area_lat, area_lon = np.array([34.36, 34.41, 34.33]), np.array([108.76, 108.71, 108.79])
+    wide = geoid_undulation_m(np.append(area_lat, 36.0), np.append(area_lon, 110.0))
+    assert np.array_equal(geoid_undulation_m(area_lat, area_lon), wide[:3])
+    assert [float(geoid_undulation_m(a, b)) for a, b in zip(area_lat, area_lon, strict=True)] == wide[:3].tolist()
 
 
 def test_nan_and_shapes():

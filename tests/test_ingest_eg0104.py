@@ -17,6 +17,7 @@ from scipy.spatial.transform import Rotation
 from pipeline.check.frame_centre import GRID_NORTH, check_file, check_frame_centre, utm_convergence_deg
 from pipeline.ingest import read_flight
 from pipeline.ingest.klv import KlvTable, decode_eg0104, read_klv_table, scan_packets
+from pipeline.synth.writers.fmv import eg0104_set, klv_item
 
 FMV = Path(__file__).resolve().parents[1].parent / "shared" / "fmv"  # ../shared from the repo root
 CLIPS = {"aphill_short.ts": (48, 96), "aphill_klv_10s.ts": (300, 10)}  # KLV sets, video frames (README there)
@@ -25,13 +26,7 @@ UL = "060E2B34010101"  # EG 0104.5 table 1: every item key starts so; the 8th by
 
 
 def _item(version: str, rest: str, value_hex: str) -> bytes:
-    value = bytes.fromhex(value_hex)
-    return bytes.fromhex(UL + version + rest) + bytes([len(value)]) + value
-
-
-def _set(items: list[bytes]) -> bytes:
-    body = b"".join(items)
-    return SET_KEY + b"\x82" + len(body).to_bytes(2, "big") + body
+    return klv_item(bytes.fromhex(UL + version + rest), bytes.fromhex(value_hex))
 
 
 # (key after the version byte, version byte, value octets, the value worked by hand, column)
@@ -64,7 +59,7 @@ TIME = ("0702010101050000", "03", "000456F62CBCC960")  # User Defined Time Stamp
 
 def test_the_key_table_against_values_worked_by_hand():
     items = [_item(TIME[1], TIME[0], TIME[2])] + [_item(v, k, x) for k, v, x, _, _ in HAND]
-    row = decode_eg0104(_set(items))
+    row = decode_eg0104(eg0104_set(items))
     assert row["t_us"] == 1_221_515_219_356_000  # 2008-09-15 21:46:59.356 UTC
     assert row["_unknown"] == row["_damaged"] == 0 and row["set"] == "eg0104"
     for _, _, _, value, column in HAND:
@@ -74,7 +69,7 @@ def test_the_key_table_against_values_worked_by_hand():
 def test_any_version_byte_matches_and_text_items_stay_out_of_the_numbers():
     t = _item("00", TIME[0], TIME[2])
     for version in ("01", "02", "0A", "FF"):
-        row = decode_eg0104(_set([t, _item(version, "0701080101000000", "44D80000"),
+        row = decode_eg0104(eg0104_set([t, _item(version, "0701080101000000", "44D80000"),
                                   _item("01", "0101200100000000", "41424344")]))  # Device Designation "ABCD"
         assert row["slant_range_m"] == 1728.0 and "device_designation" not in row
 
@@ -88,22 +83,22 @@ def test_unknown_damaged_and_cut_off_items_are_skipped_and_counted():
              _item("01", "0701100102000000", "7FC00000"),  # NaN azimuth: damaged
              _item("03", "0701020102040200", "4059000000000000"),  # latitude 100 deg: out of range
              _item("07", "0701100106000000", "C2CD0000")]  # a good heading after them
-    row = decode_eg0104(_set(items))
+    row = decode_eg0104(eg0104_set(items))
     assert (row["_unknown"], row["_damaged"]) == (2, 3)
     assert row["heading_deg"] == -102.5 and "slant_range_m" not in row and "lat_deg" not in row
     # an item whose length runs past the set: the items before it are kept, the break counted
     past_end = bytes.fromhex(UL + "01" + "0701080101000000") + b"\x7f"  # claims 127 bytes, has none
-    cut = _set([t, _item("07", "0701100106000000", "C2CD0000"), past_end])
+    cut = eg0104_set([t, _item("07", "0701100106000000", "C2CD0000"), past_end])
     row = decode_eg0104(cut)
     assert row["heading_deg"] == -102.5 and row["_damaged"] == 1
-    assert decode_eg0104(_set([_item("07", "0701100106000000", "C2CD0000")])) is None  # no time stamp
+    assert decode_eg0104(eg0104_set([_item("07", "0701100106000000", "C2CD0000")])) is None  # no time stamp
 
 
 def test_a_raw_dump_reads_into_the_model_and_counts_in_a_warning(tmp_path):
     sets = []
     for k in range(3):
         t_us = 1_221_515_219_356_000 + k * 40_000
-        sets.append(_set([_item("03", TIME[0], f"{t_us:016X}"), *[_item(v, key, x) for key, v, x, _, _ in HAND],
+        sets.append(eg0104_set([_item("03", TIME[0], f"{t_us:016X}"), *[_item(v, key, x) for key, v, x, _, _ in HAND],
                           _item("01", "0E01020304050607", "3F800000")]))
     p = tmp_path / "eg.klv"
     p.write_bytes(b"\x00junk" + b"".join(sets))
@@ -271,7 +266,7 @@ def _write(tmp_path, packets) -> Path:
 
 
 def test_scan_finds_sets_among_junk():
-    sets = [_set([_item("03", TIME[0], f"{1_221_515_219_356_000 + k:016X}")]) for k in range(4)]
+    sets = [eg0104_set([_item("03", TIME[0], f"{1_221_515_219_356_000 + k:016X}")]) for k in range(4)]
     rows, bad, cut = scan_packets(b"xx" + sets[0] + b"\x06\x0e" + sets[1] + sets[2] + sets[3][:-3], SET_KEY,
                                   decode_eg0104)
     assert [r["t_us"] - 1_221_515_219_356_000 for r in rows] == [0, 1, 2] and cut == 1 and bad == 0

@@ -12,6 +12,7 @@ from scipy.spatial.transform import Rotation
 from pipeline.errors import ConfigError, InputError, LogReadError
 from pipeline.flight_config import load_run_config
 from pipeline.ingest import detect_format, read_flight
+from pipeline.ingest.ber import ber_length
 from pipeline.ingest.klv import ST0601_KEY, decode_packet, scan_packets
 from pipeline.intrinsics import K_from_field_of_view, frame_K, resolve_camera
 
@@ -119,6 +120,16 @@ def test_hostile_bytes_get_one_line_errors_and_stay_bounded(tmp_path):
     rows, bad, cut = scan_packets((ST0601_KEY + b"\x83\x00\xff\xff") * 5000)
     assert rows == [] and bad + cut == 5000
 
+
+
+def test_ber_length_short_long_malformed_and_cut_off():
+    # X.690 8.1.3 by hand: 0x7F = 127 (short form); 0x82 01 00 = 256; 0x84 00 01 00 00 = 65536
+    assert ber_length(b"\x7f", 0) == (127, 1)
+    assert ber_length(b"ab\x82\x01\x00xyz", 2) == (256, 5)
+    assert ber_length(b"\x84\x00\x01\x00\x00", 0) == (65536, 5)
+    assert ber_length(b"\x80", 0) is None and ber_length(b"\x85" + bytes(5), 0) is None  # indefinite, too long
+    data = b"\x83\x00\x01"  # a 3-byte length with 2 bytes left: cut off, reported past the end
+    assert ber_length(data, 0)[1] > len(data) and ber_length(data, 3)[1] > len(data)
 
 def _tiny_fmv(path, zoom_at_frame: int = 6, n: int = 12):
     from pipeline.synth.writers.fmv import write_fmv

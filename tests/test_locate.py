@@ -179,3 +179,22 @@ def test_named_targets_of_a_photo_flight(tmp_path):
     spot = enu_from_lla(*fl.truth["target_lla"], r.origin_lla)  # the laser's spot, 32 m away: not what was marked
     mle = r.estimates["mle"].position_m
     assert np.linalg.norm(mle - r.truth_m) < np.linalg.norm(mle - spot)
+
+
+def test_a_dem_is_the_mle_prior_only_with_a_stated_sigma(tmp_path, capsys):
+    """As for video flights: --dem alone adds the `dem` method and leaves the MLE as without a DEM; --dem-sigma-m
+    makes the DEM its terrain prior (the estimate moves); a sigma that is not > 0 is refused in one line."""
+    from pipeline.synth.photos import write_photo_sample
+
+    write_photo_sample(tmp_path / "f", PhotoFlightSpec(seed=3, n_photos=4), dem=True)
+    folder, dem = tmp_path / "f", tmp_path / "f" / "dem.tif"
+    marks = ("--marks", folder / "marks.csv")
+    _, plain = _locate(capsys, folder, *marks)
+    _, with_dem = _locate(capsys, folder, *marks, "--dem", dem)
+    _, prior = _locate(capsys, folder, *marks, "--dem", dem, "--dem-sigma-m", "0.5")
+    assert "lat_deg" in with_dem["estimates"]["dem"] and "lat_deg" not in plain["estimates"]["dem"]
+    assert with_dem["estimates"]["mle"] == plain["estimates"]["mle"]
+    assert prior["estimates"]["mle"]["h_m"] != plain["estimates"]["mle"]["h_m"]
+    assert cli_main(["locate", str(folder), "--dem", str(dem), "--dem-sigma-m", "0"]) != 0
+    err = capsys.readouterr().err
+    assert "--dem-sigma-m must be a finite number > 0, got 0" in err and len(err.strip().splitlines()) == 1

@@ -31,7 +31,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--alt-sigma-m", type=float, default=None,
                         help="1-sigma altitude offset shared by the photos (GNSS and datum; default 15 without RTK, "
                              "RtkStdHgt or 1 float, 0.3 fixed)")
-    parser.add_argument("--dem-sigma-m", type=float, default=5.0, help="vertical sigma of the DEM (m)")
+    parser.add_argument("--dem-sigma-m", type=float, default=None,
+                        help="the DEM's vertical error at the target, 1 sigma (m): adds the DEM as the MLE's terrain "
+                             "prior (default: none, the `dem` method only; docs/terrain.md says what to state)")
     parser.add_argument("--json", action="store_true", help="print one JSON document")
 
 
@@ -75,10 +77,14 @@ def main(args) -> int:
         pixels = None
     if pixels is not None:
         check_pixels(photos, pixels)
+    if args.dem_sigma_m is not None and not (0 < args.dem_sigma_m < float("inf")):
+        raise InputError(f"--dem-sigma-m must be a finite number > 0, got {args.dem_sigma_m}")
     dem = None
     if args.dem:
-        from pipeline.terrain import Dem
-        dem = Dem.open(args.dem)
+        from pipeline.flight_config import Terrain
+        from pipeline.terrain.flight import open_flight_dem
+
+        dem = open_flight_dem(Terrain(dem=args.dem, vertical_sigma_m=args.dem_sigma_m))
     errors = stated_errors(photos, args)
     loc = locate_photos(photos, pixels, dem=dem, rotation_deg=args.image_rotation, errors=errors,
                         dem_sigma_m=args.dem_sigma_m)

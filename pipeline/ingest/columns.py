@@ -4,6 +4,7 @@ the model's series (sorted by time) from them."""
 from __future__ import annotations
 
 from array import array
+from collections.abc import Callable
 
 import numpy as np
 
@@ -44,3 +45,24 @@ def sort_by_time(t_ns: np.ndarray, *columns: np.ndarray) -> tuple[np.ndarray, ..
         return (t_ns, *columns)
     order = np.argsort(t_ns, kind="stable")
     return (t_ns[order], *(c[order] for c in columns))
+
+
+def one_source(a: dict[str, np.ndarray], field: str, want=None, most_samples: bool = False,
+               on_several: Callable[[np.ndarray, int], None] | None = None) -> dict[str, np.ndarray]:
+    """The samples of one source (a sensor instance, a device, a system id: `a[field]`), so that two receivers,
+    mounts or rangefinders are never interleaved into one jumping series.
+
+    `want` (an int) chooses it; else the lowest value logged, or with `most_samples` the one with the most samples
+    (ties: the lowest), and `on_several(values logged (k,), the one chosen)` is called when there were several
+    (the caller's warning). `a` is returned as is when it has no `field`, no samples or a single source."""
+    if field not in a or not a[field].size:
+        return a
+    if want is None:
+        ids, n = np.unique(a[field], return_counts=True)
+        if ids.size == 1:
+            return a
+        want = int(ids[np.argmax(n)] if most_samples else ids[0])
+        if on_several is not None:
+            on_several(ids, want)
+    keep = a[field] == int(want)
+    return {k: v[keep] for k, v in a.items()}

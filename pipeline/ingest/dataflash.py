@@ -22,7 +22,7 @@ import numpy as np
 
 from pipeline.errors import ConfigError, LogReadError
 from pipeline.ingest.clocks import map_clock, series_to_clock, unix_ns_from_gps
-from pipeline.ingest.columns import Columns, sort_by_time
+from pipeline.ingest.columns import Columns, one_source, sort_by_time
 from pipeline.ingest.frames import quat_ned_from_frd_euler
 from pipeline.ingest.model import (
     AttitudeSeries,
@@ -259,20 +259,12 @@ def _time_untimed(arrays: dict[str, dict], tfield: dict, clock_msg: str, mapping
 
 def _one_instance(a: dict | None, cfg: dict, quantity: str, warnings: list[str], path: Path) -> dict | None:
     """The records of one sensor instance (GPS, MNT, RFND carry an instance field `I`/`Instance` on firmware
-    with several): `cfg["instance"]`, or the lowest one logged, with a warning when there are several, so two
-    receivers or mounts are never interleaved into one series."""
-    if a is None or "instance" not in a or not a["t"].size:
-        return a
-    want = cfg.get("instance")
-    if want is None:
-        found = np.unique(a["instance"]).astype(int)
-        if found.size == 1:
-            return a
-        want = int(found.min())
-        warnings.append(f"{path}: {cfg['message']} records of instances {found.tolist()}; {quantity} from instance "
-                        f"{want} (set dataflash.{quantity}.instance to choose)")
-    keep = a["instance"] == int(want)
-    return {k: v[keep] for k, v in a.items()}
+    with several): `cfg["instance"]`, or the lowest one logged, with a warning when there are several."""
+    def warn(ids: np.ndarray, want: int) -> None:
+        warnings.append(f"{path}: {cfg['message']} records of instances {ids.astype(int).tolist()}; {quantity} from "
+                        f"instance {want} (set dataflash.{quantity}.instance to choose)")
+
+    return None if a is None else one_source(a, "instance", cfg.get("instance"), on_several=warn)
 
 
 def _streams(df, types: list, scan_all: bool) -> list[StreamInfo]:

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pipeline.errors import InputError, LogReadError, RidgelocError
+from pipeline.errors import InputError, LogReadError
+from pipeline.ingest.boundary import reader_boundary
 from pipeline.ingest.mapping import check_override, mapping_for
 from pipeline.ingest.merge import merge_logs
 from pipeline.ingest.model import FlightLog
@@ -65,31 +66,10 @@ def read_file(path: str | Path, mapping: dict | None = None, scan_all: bool = Fa
     """Read one log, bag folder, video or SRT into a FlightLog. scan_all: also time every stream the
     quantities do not need (for `inspect`; otherwise those are only counted where the format allows).
 
-    Damaged bytes can make a third-party parser (pymavlink, pyulog, rosbags, mcap, zstd, sqlite) raise anything;
-    such an exception becomes a one-line LogReadError naming the file. One raised in ridgeloc's own code is a bug
-    and is not translated (scripts/fuzz.py hunts for those)."""
-    try:
+    What a third-party parser raises on damaged bytes becomes one LogReadError naming the file
+    (`boundary.reader_boundary`); one raised in ridgeloc's own code is a bug and is not translated."""
+    with reader_boundary(path, "file", LogReadError):
         return _read_file(path, mapping, scan_all)
-    except RidgelocError:
-        raise
-    except MemoryError:
-        raise LogReadError("cannot be read within the memory available (a damaged length field?)", path=path) from None
-    except Exception as exc:
-        if not _raised_by_library(exc):
-            raise
-        text = str(exc).splitlines()[0][:200] if str(exc) else ""
-        raise LogReadError(f"damaged file: {type(exc).__name__} {text}".rstrip(), path=path) from None
-
-
-def _raised_by_library(exc: BaseException) -> bool:
-    """True when the innermost Python frame of exc's traceback lies outside the pipeline package."""
-    tb = exc.__traceback__
-    while tb is not None and tb.tb_next is not None:
-        tb = tb.tb_next
-    return tb is not None and not Path(tb.tb_frame.f_code.co_filename).resolve().is_relative_to(_PACKAGE)
-
-
-_PACKAGE = Path(__file__).resolve().parents[1]
 
 
 def _read_file(path: str | Path, mapping: dict | None, scan_all: bool) -> FlightLog:

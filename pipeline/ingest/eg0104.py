@@ -20,6 +20,8 @@ from __future__ import annotations
 import math
 import struct
 
+from pipeline.ingest.ber import ber_length
+
 SET_KEY = bytes.fromhex("060E2B34020101010E01010201010000")
 _UL_PREFIX = bytes.fromhex("060E2B34010101")  # bytes 1-7 of every item key (byte 8, the version, ignored)
 
@@ -58,19 +60,6 @@ ITEMS: dict[bytes, tuple[str, str, tuple[float, float] | None]] = {
 COLUMNS = tuple(dict.fromkeys(name for name, kind, _ in ITEMS.values() if kind == "float"))
 
 
-def _ber(data: bytes, pos: int) -> tuple[int, int] | None:
-    """(length, position after it) of the BER length at data[pos], or None when it is malformed or cut off."""
-    if pos >= len(data):
-        return None
-    first = data[pos]
-    if first < 0x80:
-        return first, pos + 1
-    nb = first & 0x7F
-    if nb == 0 or nb > 4 or pos + 1 + nb > len(data):
-        return None
-    return int.from_bytes(data[pos + 1:pos + 1 + nb], "big"), pos + 1 + nb
-
-
 def decode_set(value: bytes) -> tuple[dict, int, int]:
     """The value of one EG 0104 set (after its key and length) -> (row, unknown items, damaged items).
 
@@ -83,7 +72,7 @@ def decode_set(value: bytes) -> tuple[dict, int, int]:
         if pos + 16 > n:
             return row, unknown, damaged + 1
         key = value[pos:pos + 16]
-        ln = _ber(value, pos + 16)
+        ln = ber_length(value, pos + 16)
         if ln is None or ln[1] + ln[0] > n:
             return row, unknown, damaged + 1  # the structure breaks here: nothing after it can be trusted
         length, start = ln

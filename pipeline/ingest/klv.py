@@ -29,6 +29,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.errors import LogReadError
 from pipeline.ingest import eg0104
+from pipeline.ingest.ber import ber_length
 from pipeline.ingest.frames import quat_wxyz_from_rotation
 from pipeline.ingest.model import (
     AttitudeSeries,
@@ -83,19 +84,14 @@ def scan_packets(data: bytes, key: bytes = ST0601_KEY, decode=None) -> tuple[lis
         if k < 0:
             return rows, bad, cut
         pos = k + 16
-        if pos >= n:
-            cut += 1
-            continue
-        first = data[pos]
-        nb = 0 if first < 0x80 else first & 0x7F
-        if nb > 4 or (first >= 0x80 and nb == 0):
+        ln = ber_length(data, pos)
+        if ln is None:
             bad += 1
             continue
-        if pos + 1 + nb > n:
+        length, start = ln
+        if start > n:
             cut += 1
             continue
-        length = first if nb == 0 else int.from_bytes(data[pos + 1:pos + 1 + nb], "big")
-        start = pos + 1 + nb
         if length > MAX_PACKET_BYTES:
             bad += 1
             continue
@@ -125,9 +121,10 @@ def decode_checked(packet: bytes) -> dict | None:
 def decode_eg0104(packet: bytes) -> dict | None:
     """An EG 0104 universal set (key, BER length, items) -> row as `decode_packet` gives, plus "_unknown" and
     "_damaged" item counts and "set" = "eg0104"; None without a valid time stamp (nothing to place it by)."""
-    first = packet[16]
-    start = 17 + (first & 0x7F if first >= 0x80 else 0)
-    row, unknown, damaged = eg0104.decode_set(packet[start:])
+    ln = ber_length(packet, 16)
+    if ln is None:
+        return None
+    row, unknown, damaged = eg0104.decode_set(packet[ln[1]:])
     if not 0 <= row.get("t_us", -1) <= MAX_T_US:
         return None
     out: dict = {k: v for k, v in row.items() if not isinstance(v, str)}

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.errors import InputError
+from pipeline.ingest.boundary import reader_boundary
 from pipeline.ingest.photo_camera import PhotoIntrinsics, photo_intrinsics
 
 PHOTO_SUFFIXES = (".jpg", ".jpeg")
@@ -366,31 +367,17 @@ def read_photos(paths, alt_datum: str | None = None) -> tuple[list[Photo], list[
     for p in expand_photo_paths(paths):
         try:
             photos.append(read_photo_checked(p, alt_datum))
-        except InputError as exc:
+        except InputError as exc:  # damaged or unreadable (permissions, I/O): listed, the folder goes on
             bad.append((str(p), str(exc)))
-        except OSError as exc:  # unreadable (permissions, I/O): listed like a damaged photo, the folder goes on
-            bad.append((str(p), str(InputError(f"cannot read: {exc.strerror or exc}", path=p))))
     photos.sort(key=lambda ph: (ph.t_ns if ph.t_ns is not None else np.iinfo(np.int64).max, ph.name))
     return photos, bad
 
 
 def read_photo_checked(path, alt_datum: str | None = None) -> Photo:
-    """read_photo, with anything a third-party parser raises on damaged bytes turned into one InputError naming
-    the file (the fuzz target checks that ridgeloc's own code raises nothing else)."""
-    from pipeline.ingest.dispatch import _raised_by_library
-
+    """read_photo, with anything a third-party parser raises on damaged bytes, or an I/O failure, turned into one
+    InputError naming the file (`boundary.reader_boundary`; the fuzz target checks that ridgeloc's own code
+    raises nothing else)."""
     if not Path(path).is_file():
         raise InputError("no such photo", path=path)
-    try:
+    with reader_boundary(path, "photo"):
         return read_photo(path, alt_datum)
-    except InputError:
-        raise
-    except MemoryError:
-        raise InputError("cannot be read within the memory available (a damaged length field?)", path=path) from None
-    except Exception as exc:
-        if isinstance(exc, OSError) and exc.errno is not None:
-            raise
-        if not _raised_by_library(exc):
-            raise
-        text = str(exc).splitlines()[0][:160] if str(exc) else ""
-        raise InputError(f"damaged photo: {type(exc).__name__} {text}".rstrip(), path=path) from None

@@ -14,7 +14,7 @@ import numpy as np
 
 from pipeline.errors import InputError
 from pipeline.geometry.frames import lla_from_enu
-from pipeline.geometry.geoid import geoid_undulation_m, patch_around
+from pipeline.geometry.geoid import geoid_undulation_m
 from pipeline.geometry.lens import undistort_pixels
 from pipeline.geometry.pose import frame_poses
 from pipeline.ingest.frames import quat_ned_from_frd_euler
@@ -34,11 +34,7 @@ def photo_heights_ellipsoid_m(photos: list[Photo]) -> np.ndarray:
     if amsl.any():
         lat = np.array([p.lat_deg for p in photos])
         lon = np.array([p.lon_deg for p in photos])
-        la, lo = lat[amsl], lon[amsl]
-        if np.ptp(la) < 0.4 and np.ptp(lo) < 0.4:  # one area: the cached grid patch around it
-            alt[amsl] += patch_around(round(float(la[0]), 1), round(float(lo[0]), 1))(la, lo)
-        else:
-            alt[amsl] += geoid_undulation_m(la, lo)
+        alt[amsl] += geoid_undulation_m(lat[amsl], lon[amsl])
     return alt
 
 

@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.ingest.columns import one_source
+
 # Old mapping key names, still accepted (with a FutureWarning naming the new key): format -> {old: new}.
 DEPRECATED_RANGE_KEYS = {"tlog": {"distance_sensor_orientations": "orientations", "distance_sensor_id": "instance"}}
 
@@ -55,16 +57,9 @@ def one_instance(a: dict, instance, source: str, fmt: str, warnings: list[str], 
                  label: Callable[[int], str] = lambda i: f"instance {i}") -> dict:
     """The samples of one instance (`a["instance"]`): `instance` (an int), else the lowest one, or with
     `instance="most_samples"` the one with the most samples (ties: the lowest); a warning when several."""
-    if "instance" not in a or not a["instance"].size:
-        return a
-    if instance is None or instance == "most_samples":
-        ids, n = np.unique(a["instance"], return_counts=True)
-        if ids.size == 1:
-            return a
-        want = int(ids[np.argmax(n)] if instance == "most_samples" else ids[0])
+    def warn(ids: np.ndarray, want: int) -> None:
         warnings.append(f"{path}: {source} from several rangefinders ({', '.join(label(int(i)) for i in ids)}); "
                         f"range from {label(want)} (set {fmt}.range.instance to choose)")
-    else:
-        want = int(instance)
-    keep = a["instance"] == want
-    return {k: v[keep] for k, v in a.items()}
+
+    most = instance == "most_samples"
+    return one_source(a, "instance", None if instance is None or most else instance, most, warn)

@@ -18,7 +18,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from pipeline.errors import LogReadError
 from pipeline.ingest.clocks import map_clock
-from pipeline.ingest.columns import Columns, sort_by_time
+from pipeline.ingest.columns import Columns, one_source, sort_by_time
 from pipeline.ingest.frames import quat_ned_from_frd_euler, quat_wxyz_from_rotation, rotation_from_quat_wxyz
 from pipeline.ingest.model import (
     AttitudeSeries,
@@ -284,17 +284,14 @@ def _pick(coll: _Collector, names: list[str], mapping: dict, what: str, warnings
         if cols is None or len(cols) == 0:
             continue
         a = cols.arrays()
-        sysids, n = np.unique(a["sys"], return_counts=True)
-        want = mapping["system_id"]
-        if want is None and sysids.size > 1:
-            want = int(sysids[np.argmax(n)])
-            warnings.append(f"{path}: {name} comes from systems {sysids.tolist()}; using system {want} for {what} "
+
+        def warn(ids: np.ndarray, want: int, name: str = name) -> None:
+            warnings.append(f"{path}: {name} comes from systems {ids.tolist()}; using system {want} for {what} "
                             "(set tlog.system_id to choose)")
-        if want is not None:
-            keep = a["sys"] == want
-            if not keep.any():
-                continue
-            a = {k: v[keep] for k, v in a.items()}
+
+        a = one_source(a, "sys", mapping["system_id"], most_samples=True, on_several=warn)
+        if not a["sys"].size:
+            continue
         if what in ("gimbal", "range"):
             a = _one_device(a, name, what, mapping, warnings, path)
         return name, a
@@ -311,18 +308,12 @@ def _one_device(a: dict, name: str, what: str, mapping: dict, warnings: list[str
                  else (lambda d: f"component {d}"))
         return one_instance({**a, "instance": a["dev"]}, None if isinstance(want, int) else want, name, "tlog",
                             warnings, path, label)
-    want = mapping["gimbal"]["component_id"]
-    if want is not None:
-        keep = a["dev"] == int(want)
-    else:
-        devs, n = np.unique(a["dev"], return_counts=True)
-        if devs.size == 1:
-            return a
-        keep = a["dev"] == devs[np.argmax(n)]
-        label = [f"component {d}" for d in devs]
-        warnings.append(f"{path}: {name} from several devices ({', '.join(label)}); using "
-                        f"{label[int(np.argmax(n))]} for {what} (set tlog.gimbal.component_id)")
-    return {k: v[keep] for k, v in a.items()}
+
+    def warn(ids: np.ndarray, want: int) -> None:
+        warnings.append(f"{path}: {name} from several devices ({', '.join(f'component {d}' for d in ids)}); using "
+                        f"component {want} for {what} (set tlog.gimbal.component_id)")
+
+    return one_source(a, "dev", mapping["gimbal"]["component_id"], most_samples=True, on_several=warn)
 
 
 def _times(a: dict, mapping: dict, link: ClockLink | None, name: str = "", warnings: list | None = None):

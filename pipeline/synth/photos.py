@@ -28,7 +28,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pipeline.geometry.frames import enu_from_lla, lla_from_enu
-from pipeline.geometry.geoid import patch_around
+from pipeline.geometry.geoid import geoid_undulation_m
 from pipeline.geometry.lens import distort_pixels
 from pipeline.synth.noise import gauss_markov_filter
 
@@ -122,8 +122,7 @@ def simulate_photo_flight(spec: PhotoFlightSpec) -> PhotoFlight:
     gnss_sigma = rng.uniform(*spec.gnss_offset_sigma_m)
     gnss = np.zeros((n, 3))
     gnss[:, :2] = gauss_markov_filter(rng.normal(0, gnss_sigma, (n, 2)), spec.dt_s, spec.gnss_tau_s)
-    geoid = patch_around(round(lat0, 1), round(lon0, 1))  # EGM2008 around the target, read once per area
-    N = geoid(cams[:, 0], cams[:, 1])
+    N = geoid_undulation_m(cams[:, 0], cams[:, 1])  # EGM2008 (the grid window around them is read once)
     K = np.array([[spec.fx_px, 0, (spec.width_px - 1) / 2], [0, spec.fx_px, (spec.height_px - 1) / 2], [0, 0, 1]])
     tags, marks, rotations = [], [], []
     t0 = 1_700_000_000
@@ -136,13 +135,7 @@ def simulate_photo_flight(spec: PhotoFlightSpec) -> PhotoFlight:
         d_pitch = -np.degrees(np.arctan2(offset_px[1], spec.fx_px))
         R = Rotation.from_euler("ZYX", [yaw - d_yaw, pitch - d_pitch, 0.0], degrees=True)
         rotations.append(R)
-        # target direction in the camera: optical (x right, y down, z forward) from gimbal FRD (x fwd, y right, z down)
-        d_ned = _ned_towards(cams[i], target)
-        d_g = R.inv().apply(d_ned)
-        d_opt = np.array([d_g[1], d_g[2], d_g[0]])
-        pin = K @ (d_opt / d_opt[2])
-        pix = distort_pixels(pin[None, :2], K, spec.dist)[0]
-        marks.append(pix + rng.normal(0, spec.mark_sigma_px, 2))
+        marks.append(_true_pixel(cams[i], target, R, K, spec.dist) + rng.normal(0, spec.mark_sigma_px, 2))
         yaw_true, pitch_true = R.as_euler("ZYX", degrees=True)[:2]
         rec_yaw = yaw_true + bias + rng.normal(0, spec.attitude_jitter_deg)
         rec_pitch = pitch_true + pitch_bias + rng.normal(0, spec.attitude_jitter_deg)
@@ -157,7 +150,7 @@ def simulate_photo_flight(spec: PhotoFlightSpec) -> PhotoFlight:
         if spec.laser:
             measured = true_range + rng.normal(0, spec.laser_sigma_m[0] + spec.laser_sigma_m[1] * true_range)
             dji = _point_along(rec, rec_yaw, rec_pitch, measured)
-            n_dji = float(geoid(dji[0], dji[1]))
+            n_dji = float(geoid_undulation_m(dji[0], dji[1]))
             tag.update(lrf_range_m=float(measured), lrf_status="Normal", dji_target=(float(dji[0]), float(dji[1]),
                                                                                       float(dji[2] - n_dji)))
         tag.update(rtk_flag=spec.rtk_flag, rtk_std_m=tuple(spec.rtk_std_m))
@@ -185,16 +178,25 @@ def _extra_targets(spec: PhotoFlightSpec, target, cams, rotations, K) -> dict:
         lla = (float(lat), float(lon), h)
         px = np.full((len(cams), 2), np.nan)
         for i, R in enumerate(rotations):
-            d_g = R.inv().apply(_ned_towards(cams[i], lla))
-            d_opt = np.array([d_g[1], d_g[2], d_g[0]])
-            if d_opt[2] <= 0:
+            pix = _true_pixel(cams[i], lla, R, K, spec.dist)
+            if pix is None:
                 continue
-            pin = K @ (d_opt / d_opt[2])
-            pix = distort_pixels(pin[None, :2], K, spec.dist)[0] + rng.normal(0, spec.mark_sigma_px, 2)
+            pix = pix + rng.normal(0, spec.mark_sigma_px, 2)
             if 0 <= pix[0] <= spec.width_px - 1 and 0 <= pix[1] <= spec.height_px - 1:
                 px[i] = pix
         out[name] = (lla, px)
     return out
+
+
+def _true_pixel(camera_lla, target_lla, R: Rotation, K: np.ndarray, dist) -> np.ndarray | None:
+    """(2,) distorted pixel of a target (lat, lon, h) seen from a camera at camera_lla whose gimbal attitude is R
+    (local NED from gimbal FRD); None when it is behind the camera."""
+    d_g = R.inv().apply(_ned_towards(camera_lla, target_lla))
+    d_opt = np.array([d_g[1], d_g[2], d_g[0]])  # optical (x right, y down, z forward) from FRD (x fwd, y right, z down)
+    if d_opt[2] <= 0:
+        return None
+    pin = K @ (d_opt / d_opt[2])
+    return distort_pixels(pin[None, :2], K, dist)[0]
 
 
 def _ned_towards(camera_lla, target_lla) -> np.ndarray:

@@ -38,22 +38,26 @@ def project_target_px(cfg: SynthConfig, K: np.ndarray, states: TrueState, point_
     return px, t[:, 2] > 0
 
 
-def frame_truth(cfg: SynthConfig, tl: Timeline, flight: Flight, states: TrueState, K: np.ndarray) -> list[dict]:
-    """One dict per written frame: times, true camera pose (ECEF), true target pixel and visibility."""
-    px, in_front = project_target_px(cfg, K, states)
+def target_in_frames(cfg: SynthConfig, tl: Timeline, states: TrueState, K: np.ndarray, point_enu,
+                     occluded_observations) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One target (at `point_enu`, m) in every written frame: (n, 2) true distorted pixels, (n,) whether it is in
+    front of the camera and inside the image, (n,) whether it is occluded (within LOST_WINDOW_NS of one of the
+    `occluded_observations`, observation indices)."""
+    px, in_front = project_target_px(cfg, K, states, point_enu)
     w, h = cfg.camera.width_px, cfg.camera.height_px
     inside = in_front & (px[:, 0] >= 0) & (px[:, 0] <= w - 1) & (px[:, 1] >= 0) & (px[:, 1] <= h - 1)
     occluded = np.zeros(len(px), bool)
-    for k in cfg.lost_target.occluded_observations:
+    for k in occluded_observations:
         occluded |= np.abs(states.t_ns - tl.obs_t_ns[k]) <= LOST_WINDOW_NS
-    extra = {}  # the other targets' pixels, visibility and occlusion per frame
-    for x in cfg.site.extra_targets:
-        xpx, xfront = project_target_px(cfg, K, states, (x.east_m, x.north_m, 0.0))
-        xin = xfront & (xpx[:, 0] >= 0) & (xpx[:, 0] <= w - 1) & (xpx[:, 1] >= 0) & (xpx[:, 1] <= h - 1)
-        xocc = np.zeros(len(xpx), bool)
-        for k in x.occluded_observations:
-            xocc |= np.abs(states.t_ns - tl.obs_t_ns[k]) <= LOST_WINDOW_NS
-        extra[x.name] = (xpx, xin, xocc)
+    return px, inside, occluded
+
+
+def frame_truth(cfg: SynthConfig, tl: Timeline, flight: Flight, states: TrueState, K: np.ndarray) -> list[dict]:
+    """One dict per written frame: times, true camera pose (ECEF), true target pixel and visibility."""
+    px, inside, occluded = target_in_frames(cfg, tl, states, K, (0.0, 0.0, 0.0),
+                                            cfg.lost_target.occluded_observations)
+    extra = {x.name: target_in_frames(cfg, tl, states, K, (x.east_m, x.north_m, 0.0), x.occluded_observations)
+             for x in cfg.site.extra_targets}  # the other targets' pixels, visibility and occlusion per frame
     cam_lla = flight.enu_to_lla(states.camera_enu)
     cam_ecef = _ecef(cam_lla)
     R_ecef_from_optical = flight.R_ecef_from_enu_t @ states.R_enu_from_optical
@@ -79,22 +83,22 @@ def targets_truth(cfg: SynthConfig, flight: Flight, frames: list[dict], obs: lis
     height), size, contrast, its mark (the first observation frame showing it, at its true pixel) and in which
     observations it is visible."""
     s = cfg.site
-    main_vis = [o["target_visible"] for o in obs]
-    main_mark = next((frames[o["frame_index"]] for o in obs if o["target_visible"]), None)
-    out = [{"name": s.target_name, "lat_deg": s.lat_deg, "lon_deg": s.lon_deg, "alt_m": s.alt_m,
-            "east_m": 0.0, "north_m": 0.0, "size_m": s.target_size_m, "contrast": 1.0,
-            "mark": None if main_mark is None else {"frame_index": main_mark["frame_index"], "pixel": [
-                round(v, 2) for v in main_mark["true_target_pixel"]]},
-            "visible_observations": [i for i, v in enumerate(main_vis) if v]}]
+
+    def entry(name, lat_deg, lon_deg, alt_m, east_m, north_m, size_m, contrast, vis, pixel_in) -> dict:
+        first = next((o["frame_index"] for o, v in zip(obs, vis, strict=True) if v), None)
+        return {"name": name, "lat_deg": lat_deg, "lon_deg": lon_deg, "alt_m": alt_m, "east_m": east_m,
+                "north_m": north_m, "size_m": size_m, "contrast": contrast,
+                "mark": None if first is None else {"frame_index": first, "pixel": [
+                    round(v, 2) for v in pixel_in(frames[first])]},
+                "visible_observations": [i for i, v in enumerate(vis) if v]}
+
+    out = [entry(s.target_name, s.lat_deg, s.lon_deg, s.alt_m, 0.0, 0.0, s.target_size_m, 1.0,
+                 [o["target_visible"] for o in obs], lambda f: f["true_target_pixel"])]
     for x in s.extra_targets:
         lla = flight.enu_to_lla(np.array([[x.east_m, x.north_m, 0.0]]))[0]
-        vis = [frames[o["frame_index"]]["targets"][x.name]["visible"] for o in obs]
-        first = next((o["frame_index"] for o, v in zip(obs, vis, strict=True) if v), None)
-        out.append({"name": x.name, "lat_deg": float(lla[0]), "lon_deg": float(lla[1]), "alt_m": float(lla[2]),
-                    "east_m": x.east_m, "north_m": x.north_m, "size_m": x.size_m, "contrast": x.contrast,
-                    "mark": None if first is None else {"frame_index": first, "pixel": [
-                        round(v, 2) for v in frames[first]["targets"][x.name]["pixel"]]},
-                    "visible_observations": [i for i, v in enumerate(vis) if v]})
+        out.append(entry(x.name, float(lla[0]), float(lla[1]), float(lla[2]), x.east_m, x.north_m, x.size_m,
+                         x.contrast, [frames[o["frame_index"]]["targets"][x.name]["visible"] for o in obs],
+                         lambda f, name=x.name: f["targets"][name]["pixel"]))
     return out
 
 

@@ -257,30 +257,31 @@ def _seed_klv_dump(folder: Path) -> Path:
 def _eg0104_sets(n: int) -> list[bytes]:
     """n MISB EG 0104 universal sets 40 ms apart: 16-byte item keys (EG 0104.5's table), BER lengths, IEEE 754
     big-endian values, as the KWIVER Fort A.P. Hill clips carry them (doubles for latitudes/longitudes)."""
+    from pipeline.synth.writers.fmv import eg0104_set, klv_item
+
     def item(key_hex: str, value: bytes) -> bytes:
-        return bytes.fromhex(key_hex) + bytes([len(value)]) + value
+        return klv_item(bytes.fromhex(ul + key_hex), value)
 
     ul = "060E2B34010101"
     out = []
     for k in range(n):
-        body = b"".join([
-            item(ul + "030702010101050000", struct.pack(">Q", T0_NS // 1000 + k * 40_000)),
-            item(ul + "010101200100000000", b"ABCD"),
-            item(ul + "030701020102040200", struct.pack(">d", 38.25 + k * 1e-5)),
-            item(ul + "030701020102060200", struct.pack(">d", -77.37)),
-            item(ul + "010701020102020000", struct.pack(">f", 1054.4)),
-            item(ul + "070701100104000000", struct.pack(">f", 1.8)),
-            item(ul + "070701100105000000", struct.pack(">f", 1.1)),
-            item(ul + "070701100106000000", struct.pack(">f", -102.8 + k)),
-            item(ul + "020420020101080000", struct.pack(">f", 0.8)),
-            item(ul + "0704200201010A0100", struct.pack(">f", 0.6)),
-            item(ul + "010701080101000000", struct.pack(">f", 1730.0)),
-            item(ul + "010701100102000000", struct.pack(">f", 124.5)),
-            item(ul + "010701100103000000", struct.pack(">f", -37.5)),
-            item(ul + "010701020103020000", struct.pack(">d", 38.2456)),
-            item(ul + "010701020103040000", struct.pack(">d", -77.3537)),
-            item(ul + "030701020103070100", struct.pack(">d", 38.2456))])
-        out.append(bytes.fromhex("060E2B34020101010E01010201010000") + b"\x82" + len(body).to_bytes(2, "big") + body)
+        out.append(eg0104_set([
+            item("030702010101050000", struct.pack(">Q", T0_NS // 1000 + k * 40_000)),
+            item("010101200100000000", b"ABCD"),
+            item("030701020102040200", struct.pack(">d", 38.25 + k * 1e-5)),
+            item("030701020102060200", struct.pack(">d", -77.37)),
+            item("010701020102020000", struct.pack(">f", 1054.4)),
+            item("070701100104000000", struct.pack(">f", 1.8)),
+            item("070701100105000000", struct.pack(">f", 1.1)),
+            item("070701100106000000", struct.pack(">f", -102.8 + k)),
+            item("020420020101080000", struct.pack(">f", 0.8)),
+            item("0704200201010A0100", struct.pack(">f", 0.6)),
+            item("010701080101000000", struct.pack(">f", 1730.0)),
+            item("010701100102000000", struct.pack(">f", 124.5)),
+            item("010701100103000000", struct.pack(">f", -37.5)),
+            item("010701020103020000", struct.pack(">d", 38.2456)),
+            item("010701020103040000", struct.pack(">d", -77.3537)),
+            item("030701020103070100", struct.pack(">d", 38.2456))]))
     return out
 
 
@@ -300,22 +301,31 @@ def _read_klv_checked(path: Path) -> None:
         json.dumps(r.to_dict())
 
 
-def _seed_fmv(folder: Path) -> Path:
-    """A 6-frame 32x24 H.264 MPEG-TS with a KLV data stream (the synth's MISB writer), ~6 KB."""
+def _fmv(folder: Path, name: str, packets: list[bytes]) -> Path:
+    """A 6-frame 32x24 H.264 MPEG-TS whose KLV data stream carries `packets` (one per frame), ~6 KB."""
     import numpy as np
 
     from pipeline.synth.writers.fmv import write_fmv
 
-    path = folder / "flight.ts"
+    path = folder / name
     frames = []
     for i in range(6):
         img = np.zeros((24, 32, 3), np.uint8)
         img[4:20, 2 + i:10 + i] = 255
         frames.append(img)
     pts = np.arange(6, dtype=np.int64) * 40_000_000 + 1_000_000_000
-    write_fmv(path, frames, pts, list(zip(pts.tolist(), _klv_packets(6), strict=True)), 25, (32, 24),
-              preset="ultrafast")
+    write_fmv(path, frames, pts, list(zip(pts.tolist(), packets, strict=True)), 25, (32, 24), preset="ultrafast")
     return path
+
+
+def _seed_fmv(folder: Path) -> Path:
+    """An MPEG-TS with ST 0601 packets (the synth's MISB writer)."""
+    return _fmv(folder, "flight.ts", _klv_packets(6))
+
+
+def _seed_fmv_eg0104(folder: Path) -> Path:
+    """An MPEG-TS whose KLV stream carries EG 0104 sets, as the KWIVER Fort A.P. Hill clips do."""
+    return _fmv(folder, "eg0104.ts", _eg0104_sets(6))
 
 
 def _seed_video(folder: Path) -> Path:
@@ -449,6 +459,7 @@ TARGETS: tuple[Target, ...] = (
     Target("klv-dump", _seed_klv_dump, _read_log),
     Target("fmv-ts", _seed_fmv, _read_log),
     Target("eg0104-dump", _seed_eg0104_dump, _read_klv_checked),
+    Target("fmv-eg0104-ts", _seed_fmv_eg0104, _read_klv_checked),
     Target("video", _seed_video, _read_video),
     Target("frames-csv", _seed_frames_csv, _read_frames_csv),
     Target("marks-csv", _seed_marks_csv, _read_marks),

@@ -10,9 +10,12 @@ Huber loss and no bias (the default before issue 12; its fit checks still inflat
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's pipeline
 
 from pipeline.solve import solve
 from pipeline.solve.observations import Observations

@@ -357,6 +357,25 @@ def _seed_marks_csv(folder: Path) -> Path:
     return path
 
 
+def _seed_truth_file(folder: Path) -> Path:
+    """A flight's `truth_file`: the truth.json keys ridgeloc reads (target, named targets), and others it does not."""
+    path = folder / "truth.json"
+    path.write_text(json.dumps({
+        "format_version": 1, "target": {"lat_deg": 34.36, "lon_deg": 108.76, "alt_m": 372.0, "size_m": 36.0},
+        "targets": [{"name": "panel", "lat_deg": 34.36, "lon_deg": 108.76, "alt_m": 372.0},
+                    {"name": "pole_1", "lat_deg": 34.3588, "lon_deg": 108.7641, "alt_m": 372.01,
+                     "mark": {"frame_index": 4}}]},
+        indent=1))
+    return path
+
+
+def _read_truth_file(path: Path) -> None:
+    """`truth_file:` as a flight config's load reads it."""
+    from pipeline.targets import read_truth_file
+
+    read_truth_file(path)
+
+
 def _seed_gcp_list(folder: Path) -> Path:
     path = folder / "gcp_list.txt"
     path.write_text("EPSG:4326\n112.9390 28.2284 61.5 301.5 198.0 4 panel\n112.9391 28.2285 60.0 120.0 80.5 9 pole_1\n"
@@ -465,6 +484,7 @@ TARGETS: tuple[Target, ...] = (
     Target("marks-csv", _seed_marks_csv, _read_marks),
     Target("gcp-list", _seed_gcp_list, _read_marks),
     Target("photo-marks", _seed_photo_marks, _read_photo_marks),
+    Target("truth-file", _seed_truth_file, _read_truth_file, tree="json"),
     Target("flight-config", _seed_flight_config, _read_flight_config, tree="yaml"),
     Target("run-config", _seed_run_config, _read_run_config, tree="yaml"),
     Target("observations", _seed_observations, _read_observations, tree="json"),

@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 from pipeline.check.frame_centre import GRID_NORTH, check_file, check_frame_centre, utm_convergence_deg
 from pipeline.ingest import read_flight
 from pipeline.ingest.klv import KlvTable, decode_eg0104, read_klv_table, scan_packets
-from pipeline.synth.writers.fmv import eg0104_set, klv_item
+from support.writers import eg0104_set, klv_item
 
 FMV = Path(__file__).resolve().parents[1].parent / "shared" / "fmv"  # ../shared from the repo root
 CLIPS = {"aphill_short.ts": (48, 96), "aphill_klv_10s.ts": (300, 10)}  # KLV sets, video frames (README there)

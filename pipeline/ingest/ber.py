@@ -1,5 +1,7 @@
 """The BER length of a KLV triplet (SMPTE 336 / ITU-T X.690 definite form), as ST 0601 packets, EG 0104 sets
-and their items all carry it: one byte < 0x80 is the length; 0x81-0x84 say that 1-4 big-endian bytes follow."""
+and their items all carry it: one byte < 0x80 is the length; 0x81-0x84 say that 1-4 big-endian bytes follow.
+Decoded by stanag4609 (`klv.decode_ber_length`, the library that decodes the ST 0601 sets); this module only
+turns its exceptions into what the packet scans count: malformed or cut off."""
 
 from __future__ import annotations
 
@@ -11,14 +13,13 @@ def ber_length(data: bytes, pos: int) -> tuple[int, int] | None:
 
     When the field itself is cut off by the end of `data`, the position returned is past len(data) (and the
     length 0): callers tell "cut off" from "malformed" that way. O(1)."""
-    if pos >= len(data):
-        return 0, pos + 1
-    first = data[pos]
-    if first < 0x80:
-        return first, pos + 1
-    nb = first & 0x7F
-    if nb == 0 or nb > MAX_LENGTH_BYTES:
+    from stanag4609.errors import DecodeError, NeedMoreData  # imported on first use: the package takes ~0.5 s
+    from stanag4609.klv import decode_ber_length
+
+    try:
+        length, used = decode_ber_length(data, pos, canonical=False, max_octets=MAX_LENGTH_BYTES)
+    except NeedMoreData:
+        return 0, len(data) + 1
+    except DecodeError:
         return None
-    if pos + 1 + nb > len(data):
-        return 0, pos + 1 + nb
-    return int.from_bytes(data[pos + 1:pos + 1 + nb], "big"), pos + 1 + nb
+    return length, pos + used

@@ -257,7 +257,7 @@ def _seed_klv_dump(folder: Path) -> Path:
 def _eg0104_sets(n: int) -> list[bytes]:
     """n MISB EG 0104 universal sets 40 ms apart: 16-byte item keys (EG 0104.5's table), BER lengths, IEEE 754
     big-endian values, as the KWIVER Fort A.P. Hill clips carry them (doubles for latitudes/longitudes)."""
-    from pipeline.synth.writers.fmv import eg0104_set, klv_item
+    from support.writers import eg0104_set, klv_item
 
     def item(key_hex: str, value: bytes) -> bytes:
         return klv_item(bytes.fromhex(ul + key_hex), value)

@@ -183,3 +183,21 @@ def dataflash_text_from_binary(src, dst, newline: str = "\n") -> int:
             out.write(", ".join([m.get_type(), *vals]) + newline)
             n += 1
     return n
+
+
+# ---- MISB EG 0104 (no library writes it) -----------------------------------------------------------------------
+
+EG0104_SET_KEY = bytes.fromhex("060E2B34020101010E01010201010000")  # EG 0104.5: Predator UAV Basic Universal Set
+
+
+def klv_item(key: bytes, value: bytes) -> bytes:
+    """One KLV triplet: key, BER length (stanag4609's encoder, not the reader's parser), value."""
+    from stanag4609.klv import encode_ber_length
+
+    return key + encode_ber_length(len(value)) + value
+
+
+def eg0104_set(items) -> bytes:
+    """An EG 0104 universal set holding `items` (each a `klv_item` with a 16-byte SMPTE key), for the tests'
+    hand-worked sets and the fuzz seeds."""
+    return klv_item(EG0104_SET_KEY, b"".join(items))

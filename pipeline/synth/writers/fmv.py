@@ -9,10 +9,6 @@ fired, its range as the slant range (21) and the frame centre (23/24/25) where t
 range (pymap3d's aer2geodetic from the logged attitude; elevation MSL), as a payload computes it.
 `sensor_angles="earth"` writes a deliberate convention error: tags 18/19/20 earth-referenced (azimuth from true
 north, elevation from the horizon) instead of relative to the platform, the frame centre still the true one.
-
-`eg0104_set` builds a MISB EG 0104 universal set from raw (16-byte key, value) items, for the tests' hand-worked
-sets and the fuzz seeds (no library writes EG 0104; the set's key and the BER lengths are written out here, not
-taken from the reader).
 """
 
 from __future__ import annotations
@@ -26,26 +22,6 @@ from scipy.spatial.transform import Rotation, Slerp
 
 TS_TIME_BASE = Fraction(1, 90000)
 UAS_LS_VERSION = 19
-EG0104_SET_KEY = bytes.fromhex("060E2B34020101010E01010201010000")  # EG 0104.5: Predator UAV Basic Universal Set
-
-
-def ber_bytes(length: int) -> bytes:
-    """The BER encoding of a length (X.690 definite form): one byte under 128, else 0x80 + n and n big-endian
-    bytes."""
-    if length < 0x80:
-        return bytes([length])
-    body = length.to_bytes((length.bit_length() + 7) // 8, "big")
-    return bytes([0x80 | len(body)]) + body
-
-
-def klv_item(key: bytes, value: bytes) -> bytes:
-    """One KLV triplet: key, BER length, value."""
-    return key + ber_bytes(len(value)) + value
-
-
-def eg0104_set(items: Iterable[bytes]) -> bytes:
-    """An EG 0104 universal set holding `items` (each a `klv_item` with a 16-byte SMPTE key)."""
-    return klv_item(EG0104_SET_KEY, b"".join(items))
 
 
 def _interp_rot(t_src: np.ndarray, q_wxyz: np.ndarray, t: np.ndarray) -> Rotation:

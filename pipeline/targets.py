@@ -224,11 +224,12 @@ def _pixel(x: str, y: str, path, row: int) -> tuple[float, float]:
 
 
 def in_image(u_px: float, v_px: float, width_px: int | None = None, height_px: int | None = None) -> bool:
-    """Whether pixel (u, v) lies on an image of width_px x height_px (either None: of any size). The one rule of
-    marks, photo marks and the marking page: pixel centres at integers (OpenCV's convention), so the image
-    covers -0.5 .. width_px - 0.5 and -0.5 .. height_px - 0.5."""
-    return (-0.5 <= u_px <= (width_px - 0.5 if width_px is not None else float("inf"))
-            and -0.5 <= v_px <= (height_px - 0.5 if height_px is not None else float("inf")))
+    """Whether pixel (u, v) (scalars or arrays) lies on an image of width_px x height_px (either None: of any
+    size). The one rule of marks, photo marks, `ridgeloc check` and the marking page: pixel centres at integers
+    (OpenCV's convention), so the image covers -0.5 .. width_px - 0.5 and -0.5 .. height_px - 0.5."""
+    u_max = width_px - 0.5 if width_px is not None else float("inf")
+    v_max = height_px - 0.5 if height_px is not None else float("inf")
+    return (-0.5 <= u_px) & (u_px <= u_max) & (-0.5 <= v_px) & (v_px <= v_max)  # numpy arrays too
 
 
 def _file_mark(frame: int | None, image: str | None, pixel_px: tuple[float, float], source: str) -> Mark:
@@ -363,9 +364,12 @@ def check_marks_in_video(targets: Sequence[NamedTarget], frame_indices, width_px
                 lo, hi = (min(frames), max(frames)) if frames else (None, None)
                 raise ConfigError(f"{src}: frame index {m.frame_index} out of range (the video has frames "
                                   f"{lo}..{hi})")
-            if width_px is not None and not in_image(m.pixel[0], m.pixel[1], width_px, height_px):
-                raise ConfigError(f"{src}: pixel ({m.pixel[0]:g}, {m.pixel[1]:g}) is outside the image "
-                                  f"({width_px}x{height_px} px)")
+            u, v = m.pixel
+            if width_px is not None and not in_image(u, v, width_px, height_px):
+                swapped = "; it looks like [row, column]: give [x (column), y (row)]" \
+                    if in_image(v, u, width_px, height_px) else ""
+                raise ConfigError(f"{src}: pixel ({u:g}, {v:g}) is outside the image ({width_px}x{height_px} px)"
+                                  f"{swapped}")
 
 
 def flight_targets(config) -> list[NamedTarget]:
@@ -379,9 +383,9 @@ def flight_targets(config) -> list[NamedTarget]:
         return out
     if config.target is None:
         return []
-    t = config.target
-    mark = (Mark(template=t.template, template_pixel=t.template_pixel, source="target") if t.template is not None
-            else Mark(frame_index=t.frame_index, pixel=t.pixel, source="target"))
+    t, src = config.target, (f"{config.path}: " if config.path else "") + "target"
+    mark = (Mark(template=t.template, template_pixel=t.template_pixel, source=src) if t.template is not None
+            else Mark(frame_index=t.frame_index, pixel=t.pixel, source=src))
     return [NamedTarget(None, (mark,), None)]
 
 
@@ -394,15 +398,16 @@ def first_mark(config) -> Mark | None:
 def resolve_config_targets(cfg, base: Path, where, resolve):
     """The flight config with its targets' template paths and marks file made absolute (`resolve(base, p, what,
     where)`), the marks file read (its errors raised now, before anything runs) and, when the config gives the
-    image size and a frames CSV, every mark checked against them."""
+    image size and a frames CSV, every mark (the single `target:`'s too) checked against them."""
     import dataclasses
 
-    if not cfg.targets and cfg.marks_file is None:
+    if cfg.targets or cfg.marks_file is not None:
+        entries = tuple(t if t.template is None else
+                        dataclasses.replace(t, template=resolve(base, t.template, f"targets[{i}].template", where))
+                        for i, t in enumerate(cfg.targets))
+        cfg = dataclasses.replace(cfg, targets=entries, marks_file=resolve(base, cfg.marks_file, "marks_file", where))
+    elif cfg.target is None or cfg.target.pixel is None:
         return cfg
-    entries = tuple(t if t.template is None else
-                    dataclasses.replace(t, template=resolve(base, t.template, f"targets[{i}].template", where))
-                    for i, t in enumerate(cfg.targets))
-    cfg = dataclasses.replace(cfg, targets=entries, marks_file=resolve(base, cfg.marks_file, "marks_file", where))
     frames = None
     if cfg.files.frames_csv is not None:  # the frame numbers too (else once `run` reads the video's index)
         frames = read_frames_csv(Path(cfg.files.frames_csv))[0]

@@ -138,8 +138,9 @@ def test_template_mark_and_a_bad_mark_frame(tiny_flight):
     assert by_template.tracking["mark"]["frame_index"] == by_pixel.tracking["frame_index"][0]
     np.testing.assert_allclose(by_template.observations.pixel, by_pixel.observations.pixel, atol=0.5)
     (root / "badmark.yaml").write_text(text.replace(mark_line, "target: {frame_index: 99999, pixel: [300, 200]}"))
-    with pytest.raises(ConfigError, match=r"target\.frame_index 99999 is not a frame"):
-        process_group(load_flight_config(root / "badmark.yaml"))
+    with pytest.raises(ConfigError, match=r"badmark\.yaml: target: frame index 99999 out of range \(the video has "
+                       r"frames 0\.\.\d+\)$"):  # at load: the config has a frames CSV
+        load_flight_config(root / "badmark.yaml")
 
 
 def test_hard_outliers_tracking_lists_every_frame_with_its_reason():

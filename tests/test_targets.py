@@ -191,3 +191,15 @@ def test_the_truth_file_gives_each_named_target_its_truth(tmp_path):
     named = truth_file_targets(cfg)
     assert list(named) == ["panel", "small_grey", "far_north"]
     assert named["panel"] == (34.36, 108.76, 372.0) == cfg.truth_lla()  # the main target is the first, at the origin
+
+
+@pytest.mark.parametrize("pixel, problem", [
+    ([-40, 99999], "target: pixel (-40, 99999) is outside the image (600x400 px)"),
+    ([200, 500], "target: pixel (200, 500) is outside the image (600x400 px); it looks like [row, column]: give "
+                 "[x (column), y (row)]"),
+])
+def test_the_single_target_mark_is_checked_at_load_too(tmp_path, pixel, problem):
+    path = _flight(tmp_path, target={"frame_index": 4, "pixel": pixel})
+    with pytest.raises(ConfigError) as exc:
+        load_flight_config(path)
+    assert str(exc.value) == f"{path.resolve()}: {problem}"

@@ -25,7 +25,7 @@ from pipeline.check.geometry import Cluster, _fmt_m, cluster, meet_undetermined_
 from pipeline.errors import RidgelocError
 from pipeline.flight import Flight
 from pipeline.flight_config import CLOCK_SOURCES
-from pipeline.targets import flight_targets
+from pipeline.targets import flight_targets, in_image
 
 # ---- the resolved mapping ---------------------------------------------------------------------------------------
 
@@ -202,7 +202,7 @@ def mark_checks(r: Flight, centre_m: np.ndarray | None, conv: Convention | None 
     frame_numbers = {int(k): i for i, k in enumerate(np.asarray(r.frames.index))} if r.frames is not None else None
 
     def inside(a, b):  # OpenCV convention: integer coordinates at pixel centres, the image spans -0.5 .. size-0.5
-        return -0.5 <= a <= w - 0.5 and -0.5 <= b <= h - 0.5
+        return in_image(a, b, w, h)
 
     first = True
     for target in flight_targets(r.config):

@@ -18,7 +18,7 @@ import pymap3d
 from scipy.spatial.transform import Rotation
 
 from pipeline.geometry.frames import R_ecef_from_ned, ecef_from_lla
-from pipeline.geometry.geoid import patch_around
+from pipeline.geometry.geoid import geoid_undulation_m
 from pipeline.ingest.klv import KlvTable, _platform_rotation, sensor_position, sensor_rotation, table_sensor_rotation
 
 CONSISTENT_M = 30.0  # median at or below: the conventions agree with the payload's
@@ -147,9 +147,7 @@ def check_frame_centre(table: KlvTable) -> FrameCentreCheck | None:
         return None
     lat, lon = c["lat_deg"][m], c["lon_deg"][m]
     c_lat, c_lon = c["centre_lat_deg"][m], c["centre_lon_deg"][m]
-    # EGM2008 from one cached patch around the flight (points outside it are looked up on their own)
-    patch = patch_around(round(float(np.median(lat)), 1), round(float(np.median(lon)), 1))
-    n_sensor, n_centre = patch(lat, lon), patch(c_lat, c_lon)
+    n_sensor, n_centre = geoid_undulation_m(lat, lon), geoid_undulation_m(c_lat, c_lon)  # EGM2008, cached area
     h_read = alt[m] + (n_sensor if datum == "amsl" else 0.0)  # the reader's datum, as ellipsoid height
     h_other = alt[m] + (0.0 if datum == "amsl" else -n_sensor)  # the other datum
     c_h = c["centre_alt_m"][m] + n_centre  # ST 0601 tag 25 and EG 0104: MSL

@@ -57,7 +57,7 @@ def geoid_separation_m(config: FlightConfig, log: FlightLog) -> float | None:
     value = config.altitude.geoid_separation_m
     if value != "auto":
         return value
-    from pipeline.geometry.geoid import patch_around
+    from pipeline.geometry.geoid import geoid_undulation_m
 
     pos = log.position
     ok = np.zeros(0, bool) if pos is None else np.isfinite(pos.lat_deg) & np.isfinite(pos.lon_deg)
@@ -65,7 +65,7 @@ def geoid_separation_m(config: FlightConfig, log: FlightLog) -> float | None:
         raise InputError("altitude.geoid_separation_m: auto needs a position in the logs", config.path)
     i = int(np.flatnonzero(ok)[0])
     lat, lon = float(pos.lat_deg[i]), float(pos.lon_deg[i])
-    return float(patch_around(lat, lon)(lat, lon))
+    return float(geoid_undulation_m(lat, lon))
 
 
 def flight_origin(config: FlightConfig, log: FlightLog, separation_m: float | None) -> tuple[float, float, float]:

@@ -18,7 +18,7 @@ from os import PathLike
 import numpy as np
 
 from pipeline.atomic import atomic_write_bytes, atomic_write_text
-from pipeline.geometry.geoid import GEOID_MODEL_LONG, patch_around
+from pipeline.geometry.geoid import GEOID_MODEL_LONG, geoid_undulation_m
 from pipeline.report.geometry import (
     ALT_DATUM,
     best_reference_m,
@@ -59,19 +59,11 @@ def _num(x, decimals: int = M_DECIMALS):
     return round(x, decimals) if np.isfinite(x) else None
 
 
-def _geoid(r: GroupResult):
-    """The geoid look-up of a group's area (one grid read per group); NaN everywhere without a valid origin."""
-    lat, lon = float(r.origin_lla[0]), float(r.origin_lla[1])
-    if not (np.isfinite(lat) and np.isfinite(lon) and abs(lat) <= 90.0):
-        return lambda la, lo: np.full(np.broadcast(np.asarray(la), np.asarray(lo)).shape, np.nan)
-    return patch_around(lat, lon)
-
-
-def msl_lla(lla: np.ndarray, geoid) -> np.ndarray:
-    """(..., 3) lat, lon, ellipsoidal h -> lat, lon, height above the geoid (h - N)."""
+def msl_lla(lla: np.ndarray) -> np.ndarray:
+    """(..., 3) lat, lon, ellipsoidal h -> lat, lon, height above the EGM2008 geoid (h - N)."""
     lla = np.asarray(lla, dtype=np.float64)
     out = lla.copy()
-    out[..., 2] = lla[..., 2] - geoid(lla[..., 0], lla[..., 1])
+    out[..., 2] = lla[..., 2] - geoid_undulation_m(lla[..., 0], lla[..., 1])
     return out
 
 
@@ -146,14 +138,13 @@ def target_rows(results: Iterable[GroupResult | FlightResult]) -> list[dict]:
             rows.extend(_failed_rows(*r))
             continue
         lat0, lon0, alt0 = r.origin_lla
-        geoid = _geoid(r)
         for method in group_methods(r):
             e = r.estimates.get(method)
             status, reason = _status_reason(r, method)
             pos = np.full(3, np.nan) if e is None else np.asarray(e.position_m, dtype=np.float64)
             finite = bool(np.isfinite(pos).all())
             lla = geodetic_from_enu(pos, r.origin_lla) if finite else np.full(3, np.nan)
-            n_m = float(geoid(lla[0], lla[1])) if finite else None
+            n_m = float(geoid_undulation_m(lla[0], lla[1])) if finite else None
             err = None if e is None else e.error_m(r.truth_m)
             d = None if (err is None or r.truth_m is None) else pos - r.truth_m
             u = uncertainty(e) if e is not None else dict.fromkeys(
@@ -282,7 +273,7 @@ def _mle_rejected(r: GroupResult) -> dict[int, str]:
 
 
 def _truth_props(r: GroupResult, lla: np.ndarray) -> dict:
-    n_m = float(_geoid(r)(lla[0], lla[1]))
+    n_m = float(geoid_undulation_m(lla[0], lla[1]))
     return {"kind": "truth", "group": r.name, "alt_m": _num(lla[2]), "alt_datum": ALT_DATUM,
             "alt_msl_m": _num(lla[2] - n_m), "geoid_undulation_m": _num(n_m), "alt_msl_datum": ALT_MSL_DATUM,
             "e_m": _num(r.truth_m[0]), "n_m": _num(r.truth_m[1]), "u_m": _num(r.truth_m[2])}
@@ -421,7 +412,6 @@ def targets_kml(results: Iterable[GroupResult], max_lines_of_sight: int | None =
         folder = _sub(doc, "Folder")
         _sub(folder, "name", r.label)
         tgt = {} if r.target is None else {"target": r.target}
-        geoid = _geoid(r)
         rows = {row["method"]: row for row in target_rows([r])}
         for method in ordered_methods(r.estimates):
             e = r.estimates[method]
@@ -430,11 +420,11 @@ def targets_kml(results: Iterable[GroupResult], max_lines_of_sight: int | None =
             row = rows[method]
             style = f"est-{method}" if method in METHOD_COLORS else "truth"
             pm = _placemark(folder, f"{r.label}: {method_label(method)}", style, "estimate", row, schemas)
-            _geometry(pm, "Point", msl_lla(geodetic_from_enu(e.position_m, r.origin_lla), geoid))
+            _geometry(pm, "Point", msl_lla(geodetic_from_enu(e.position_m, r.origin_lla)))
             if row["ellipse95_semi_major_m"] is not None and row["ellipse95_semi_major_m"] >= MIN_ELLIPSE_M:
                 ring_en = ellipse_points_en_m(np.asarray(e.covariance_m2)[:2, :2], ELLIPSE_CONFIDENCE)
                 ring_enu = np.column_stack([ring_en + e.position_m[:2], np.full(len(ring_en), e.position_m[2])])
-                ring_msl = msl_lla(geodetic_from_enu(ring_enu, r.origin_lla), geoid)
+                ring_msl = msl_lla(geodetic_from_enu(ring_enu, r.origin_lla))
                 ring_msl[-1] = ring_msl[0]
                 pm = _placemark(folder, f"{r.label}: {method_label(method)} 95 % error ellipse", style,
                                 "error_ellipse", {
@@ -450,16 +440,16 @@ def targets_kml(results: Iterable[GroupResult], max_lines_of_sight: int | None =
         if r.truth_m is not None:
             lla = geodetic_from_enu(r.truth_m, r.origin_lla)
             pm = _placemark(folder, f"{r.label}: truth", "truth", "truth", {**_truth_props(r, lla), **tgt}, schemas)
-            _geometry(pm, "Point", msl_lla(lla, geoid))
+            _geometry(pm, "Point", msl_lla(lla))
         obs = r.observations
         if obs.n >= 2:
             pm = _placemark(folder, f"{r.label}: flight path", "path")
-            _geometry(pm, "LineString", msl_lla(geodetic_from_enu(obs.platform_m, r.origin_lla), geoid))
+            _geometry(pm, "LineString", msl_lla(geodetic_from_enu(obs.platform_m, r.origin_lla)))
         seg, _ = lines_of_sight_m(obs, best_reference_m(r), max_lines_of_sight)
         if len(seg):
             pm = _placemark(folder, f"{r.label}: lines of sight", "los")
             multi = _sub(pm, "MultiGeometry")
-            seg_msl = msl_lla(geodetic_from_enu(seg, r.origin_lla), geoid)
+            seg_msl = msl_lla(geodetic_from_enu(seg, r.origin_lla))
             for s in seg_msl:
                 _geometry(multi, "LineString", s)
     ET.indent(root)

@@ -360,8 +360,10 @@ def flight_config_from_dict(doc: dict, path: str | PathLike | None = None) -> Fl
     cfg = dataclasses.replace(cfg, files=files, target=target,
                               truth_file=_resolve(base, cfg.truth_file, "truth_file", where),
                               path=None if where is None else str(where.resolve()))
-    if cfg.truth_file is not None:
-        read_truth_file(cfg.truth_file)  # a broken truth file is refused at load, not after tracking
+    if cfg.truth_file is not None:  # a broken truth file is refused at load, not after tracking
+        if read_truth_file(cfg.truth_file).target is None and not (cfg.targets or cfg.marks_file):
+            raise ConfigError(f"truth_file: no 'target' in {cfg.truth_file} (the truth of the flight's one target)",
+                              where)
     from pipeline.targets import resolve_config_targets  # paths resolved, marks file read and checked
 
     return resolve_config_targets(cfg, base, where, _resolve)

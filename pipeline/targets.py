@@ -23,6 +23,7 @@ Errors are one line naming the file, the row and the problem (`marks_error`).
 from __future__ import annotations
 
 import csv
+import functools
 import json
 import re
 from collections.abc import Sequence
@@ -115,16 +116,32 @@ class TruthFile:
 
     __pydantic_config__ = OTHER_KEYS_IGNORED
     target: Geodetic | None = None
-    targets: tuple[NamedTruth, ...] = ()
+    targets: tuple[NamedTruth, ...] | None = None
+
+    def __post_init__(self):
+        names = [t.name for t in self.targets or ()]
+        if len(set(names)) < len(names):
+            raise ValueError(f"targets: duplicate name {next(n for n in names if names.count(n) > 1)!r}")
 
     def named(self) -> dict[str, tuple[float, float, float]]:
         """{name: (lat_deg, lon_deg, alt_m)} of the named targets."""
-        return {t.name: t.as_tuple() for t in self.targets}
+        return {t.name: t.as_tuple() for t in self.targets or ()}
 
 
 def read_truth_file(path) -> TruthFile:
     """The truth file at `path`, or one ConfigError naming it and the problem (unreadable, not JSON, a key out of
-    range or of the wrong type, e.g. `targets.1.lat_deg: must be <= 90, got 400`)."""
+    range or of the wrong type, e.g. `targets[1].lat_deg: must be <= 90, got 400`, a name given twice). Parsed
+    once per version of the file (a flight reads it at load and per target)."""
+    path = Path(path)
+    try:
+        st = path.stat()
+    except OSError as exc:
+        raise ConfigError(f"cannot read the target truth: {exc.strerror or exc}", path) from None
+    return _read_truth_file(str(path), st.st_mtime_ns, st.st_size)
+
+
+@functools.lru_cache(maxsize=8)
+def _read_truth_file(path: str, mtime_ns: int, size: int) -> TruthFile:
     try:
         doc = json.loads(Path(path).read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:

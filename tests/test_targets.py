@@ -170,6 +170,7 @@ def test_check_names_a_target_marked_on_a_frame_the_video_does_not_have(tmp_path
     (lambda d: d["targets"][0].update(alt_m="372"), "targets[0].alt_m: must be a finite number, got str"),
     (lambda d: d["targets"][2].pop("name"), "targets[2].name: is required"),
     (lambda d: d["target"].update(lon_deg=float("nan")), "target.lon_deg: must be a finite number"),
+    (lambda d: d["targets"][2].update(name="panel"), "targets: duplicate name 'panel'"),
 ])
 def test_a_broken_truth_file_is_refused_at_load_naming_file_and_key(tmp_path, change, problem):
     import json
@@ -203,3 +204,17 @@ def test_the_single_target_mark_is_checked_at_load_too(tmp_path, pixel, problem)
     with pytest.raises(ConfigError) as exc:
         load_flight_config(path)
     assert str(exc.value) == f"{path.resolve()}: {problem}"
+
+
+def test_a_truth_file_without_the_single_targets_truth_is_refused_at_load(tmp_path):
+    import json
+
+    truth = tmp_path / "truth.json"
+    truth.write_text(json.dumps({"targets": [{"name": "a", "lat_deg": 1.0, "lon_deg": 2.0, "alt_m": 3.0}]}))
+    path = _flight(tmp_path, truth_file=str(truth), target={"frame_index": 4, "pixel": [300, 200]})
+    with pytest.raises(ConfigError) as exc:
+        load_flight_config(path)
+    assert str(exc.value) == (f"{path.resolve()}: truth_file: no 'target' in {truth} (the truth of the flight's one "
+                              "target)")
+    truth.write_text(json.dumps({"targets": None, "target": {"lat_deg": 1.0, "lon_deg": 2.0, "alt_m": 3.0}}))
+    assert load_flight_config(path).truth_lla() == (1.0, 2.0, 3.0)  # a rewritten file is read again

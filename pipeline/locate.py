@@ -139,9 +139,9 @@ def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: in
         errors = photo_error_model(photos, obs.range_m)
     out = PhotoLocation(views, obs, errors)
     wanted = list(methods) if methods is not None else [*METHODS, "dem", "dji"]
-    terrain = None
-    if dem is not None and dem_sigma_m is not None:
-        terrain = (dem.local(*views.origin_lla), float(dem_sigma_m))
+    from pipeline.terrain.flight import terrain_prior
+
+    terrain = terrain_prior(dem, dem_sigma_m, views.origin_lla)
     for m in wanted:
         try:
             if m == "dji":

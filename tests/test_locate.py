@@ -195,6 +195,11 @@ def test_a_dem_is_the_mle_prior_only_with_a_stated_sigma(tmp_path, capsys):
     assert "lat_deg" in with_dem["estimates"]["dem"] and "lat_deg" not in plain["estimates"]["dem"]
     assert with_dem["estimates"]["mle"] == plain["estimates"]["mle"]
     assert prior["estimates"]["mle"]["h_m"] != plain["estimates"]["mle"]["h_m"]
+    assert with_dem["notes"] and "--dem-sigma-m" in with_dem["notes"][0] and not prior["notes"] + plain["notes"]
     assert cli_main(["locate", str(folder), "--dem", str(dem), "--dem-sigma-m", "0"]) != 0
     err = capsys.readouterr().err
     assert "--dem-sigma-m must be a finite number > 0, got 0" in err and len(err.strip().splitlines()) == 1
+    assert cli_main(["locate", str(folder), "--dem-sigma-m", "2"]) != 0  # a DEM's sigma without a DEM
+    err = capsys.readouterr().err
+    assert "--dem-sigma-m is the DEM's vertical error: give the DEM with --dem" in err
+    assert len(err.strip().splitlines()) == 1

@@ -64,6 +64,16 @@ def main(args) -> int:
     from pipeline.ingest.photo import read_photos
     from pipeline.locate import check_pixels, estimate_row, locate_photos, read_marks
 
+    terrain = None
+    if args.dem_sigma_m is not None and not args.dem:
+        raise InputError("--dem-sigma-m is the DEM's vertical error: give the DEM with --dem")
+    if args.dem:
+        from pipeline.flight_config import Terrain
+
+        try:
+            terrain = Terrain(dem=args.dem, vertical_sigma_m=args.dem_sigma_m)
+        except ValueError:
+            raise InputError(f"--dem-sigma-m must be a finite number > 0, got {args.dem_sigma_m}") from None
     photos, bad = read_photos(args.photos, alt_datum=args.alt_datum)
     for _path, err in bad:
         print(f"ridgeloc: error: {err}", file=sys.stderr)
@@ -77,14 +87,9 @@ def main(args) -> int:
         pixels = None
     if pixels is not None:
         check_pixels(photos, pixels)
-    if args.dem_sigma_m is not None and not (0 < args.dem_sigma_m < float("inf")):
-        raise InputError(f"--dem-sigma-m must be a finite number > 0, got {args.dem_sigma_m}")
-    dem = None
-    if args.dem:
-        from pipeline.flight_config import Terrain
-        from pipeline.terrain.flight import open_flight_dem
+    from pipeline.terrain.flight import open_flight_dem
 
-        dem = open_flight_dem(Terrain(dem=args.dem, vertical_sigma_m=args.dem_sigma_m))
+    dem = open_flight_dem(terrain)
     errors = stated_errors(photos, args)
     loc = locate_photos(photos, pixels, dem=dem, rotation_deg=args.image_rotation, errors=errors,
                         dem_sigma_m=args.dem_sigma_m)
@@ -94,7 +99,10 @@ def main(args) -> int:
     doc = {"photos": [p.path for p in photos], "bad_photos": [{"path": p, "error": e} for p, e in bad],
            "origin_lla": list(loc.views.origin_lla), "ranges_used": int(loc.obs.has_range.sum()),
            "error_model": loc.errors.to_dict(),
-           "estimates": rows}
+           "estimates": rows, "notes": []}
+    if dem is not None and args.dem_sigma_m is None:
+        doc["notes"].append("the DEM serves the dem method only: state its vertical error with --dem-sigma-m to "
+                            "add it to the mle as a terrain prior (docs/terrain.md)")
     if args.json:
         print(json.dumps(doc, indent=2))
     else:
@@ -107,6 +115,8 @@ def main(args) -> int:
                       f"{r['alt_msl_m']:.1f} m MSL{cep}")
             else:
                 print(f"  {m:10s} {r['status']}: {r['reason']}")
+        for note in doc["notes"]:
+            print(f"note: {note}")
     if not loc.estimates:  # like `ridgeloc solve`: exit 0 only when at least one method located the target
         print("ridgeloc: error: no method located the target from these photos (the reasons above; several "
               "photos need the target marked in each: --marks or --pixel)", file=sys.stderr)

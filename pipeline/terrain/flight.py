@@ -21,14 +21,21 @@ def open_flight_dem(terrain) -> Dem | None:
     return Dem.open(terrain.dem, vertical_datum=terrain.vertical_datum)
 
 
+def terrain_prior(dem: Dem | None, vertical_sigma_m: float | None, origin_lla):
+    """The MLE's terrain prior `(fn, vertical_sigma_m)`, fn the DEM in the ENU frame at the origin (Dem.local), or
+    None: no DEM, or no stated vertical sigma (then the DEM serves the `dem` method only; docs/terrain.md)."""
+    if dem is None or vertical_sigma_m is None:
+        return None
+    return dem.local(*origin_lla), float(vertical_sigma_m)
+
+
 def terrain_solve_options(dem: Dem | None, terrain, origin_lla, options: dict) -> dict:
-    """`options` (method -> options) with the MLE's terrain prior `terrain=(fn, vertical_sigma_m)` added, fn the
-    DEM in the ENU frame at the origin (Dem.local), when there is a DEM with a stated vertical sigma; otherwise
-    `options` unchanged."""
-    if dem is None or terrain.vertical_sigma_m is None:
+    """`options` (method -> options) with the MLE's `terrain_prior` added where there is one."""
+    prior = terrain_prior(dem, None if terrain is None else terrain.vertical_sigma_m, origin_lla)
+    if prior is None:
         return options
     mle = dict(options.get("mle") or {})
-    mle.setdefault("terrain", (dem.local(*origin_lla), float(terrain.vertical_sigma_m)))
+    mle.setdefault("terrain", prior)
     return {**options, "mle": mle}
 
 

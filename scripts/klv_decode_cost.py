@@ -39,8 +39,7 @@ def main() -> int:
         path = Path(tmp) / "packets.klv"
         gen_klv(path, args.packets)
         data = path.read_bytes()
-    packets = [data[i:j] for i, j in zip(_starts(data, ST0601_KEY), [*_starts(data, ST0601_KEY)[1:], len(data)],
-                                         strict=True)]
+    packets = scan_packets(data, ST0601_KEY, decode=lambda p: p)[0]  # the packets' bytes, undecoded
     assert len(packets) == args.packets and len(scan_packets(data)[0]) == args.packets
 
     def ours() -> None:
@@ -65,14 +64,6 @@ def main() -> int:
     ratio = statistics.median(a / b for a, b in zip(*times.values(), strict=True))
     print(f"ours / library, median of the rounds: {ratio:.2f}")
     return 0
-
-
-def _starts(data: bytes, key: bytes) -> list[int]:
-    out, pos = [], data.find(key)
-    while pos >= 0:
-        out.append(pos)
-        pos = data.find(key, pos + 16)
-    return out
 
 
 if __name__ == "__main__":

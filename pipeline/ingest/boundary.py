@@ -35,8 +35,9 @@ def reader_boundary(path, what: str = "file", error: type[InputError] = InputErr
     except MemoryError:
         raise error("cannot be read within the memory available (a damaged length field?)", path=path) from None
     except Exception as exc:
-        if isinstance(exc, OSError) and exc.errno is not None:
-            raise error(f"cannot read: {exc.strerror or exc}", path=path) from None
+        if isinstance(exc, OSError) and exc.errno is not None:  # naming the file it was about when not `path`
+            other = f" ({exc.filename})" if exc.filename and Path(exc.filename) != Path(path) else ""
+            raise error(f"cannot read: {exc.strerror or exc}{other}", path=path) from None
         if not raised_by_library(exc):
             raise
         text = str(exc).splitlines()[0][:200] if str(exc) else ""

@@ -12,8 +12,10 @@ For each frame (processed outward from the mark frame, forward and backward in t
 4. Quality: inlier count and ratio, RANSAC reprojection RMS, peak correlation. Below thresholds the frame is
    flagged lost (pixel NaN), never guessed. A failed frame is retried against the mark frame itself
    (re-acquisition) and through intermediate frames (stepping stones) when the caller offers them; with a
-   `ViewCache` that shares matches (a flight's named targets), not where the key frame's homography holds and
-   puts the target outside the image: it has left the view, and stones would only cost decoding and SIFT.
+   `ViewCache` that shares matches (a flight's named targets), not where the key frame's homography holds: it
+   then puts the target outside the image (it has left the view) or inside but not found there (covered, washed
+   out: too low a correlation or contrast), and stones, which only change the homography, would cost decoding and
+   SIFT for the same view of it.
    (Without one, as for a flight's single `target:`, they are tried there too: every match draws from one random
    stream, so skipping one would shift every later frame's matches.)
 5. The current frame becomes the key frame when its inliers fall below a fraction of the key's first match, or
@@ -317,8 +319,10 @@ class SiftTracker:
                 if H is None and key.view is not mark:  # re-acquisition against the mark itself
                     ft2, H = self._attempt(_Key(mark, np.eye(3)), mark, p0, cur, "reacquired")
                     ft = ft2 if H is not None else ft
-                left_view = ft.via == "out of image" and self._pairs is not None  # see the module docstring, 4.
-                if H is None and not left_view:
+                # the key frame's homography held: the target left the view, or is in view but not found (covered,
+                # washed out); stones would give the same view of it (see the module docstring, 4.)
+                held = ft.via in ("out of image", "low correlation", "low contrast") and self._pairs is not None
+                if H is None and not held:
                     ft, H = self._bridge(decode_views, key, mark, p0, cur, avail, direction, views, ft)
                 out[idx] = ft
                 if H is None:

@@ -4,7 +4,9 @@
 target's marks and estimates the clock once, into a `FlightPass`; `locate_target` then tracks one target from its
 mark(s) through the planned frames (decoded frames and their SIFT features come from the pass's `ViewCache`: each
 frame is decoded and described once whatever the number of targets), drops the ranges not on it, assembles its
-observations and solves them with every method. `locate_targets` runs every named target of a flight: one that
+observations and solves them with every method. `locate_targets` runs every named target of a flight: each is
+tracked and synchronised, then all are solved together (`pipeline.solve.methods.solve_problems`: the same answers
+as one at a time, each estimator's kernel run once for the targets with the same number of frames); one that
 cannot be located becomes a `TargetFailure` (status and reason) and the others go on.
 """
 

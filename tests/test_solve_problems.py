@@ -68,9 +68,14 @@ def _assert_same(a, b):
 
 @pytest.mark.parametrize("options", [{}, {"mle": {"tol_m": 1e-6}, "vision": {"max_iterations": 7}}],
                          ids=["defaults", "own-options"])
-def test_solve_problems_equals_solve_one_at_a_time(options):
+def test_solve_problems_equals_solve_one_at_a_time(options, monkeypatch):
+    from pipeline.solve import correlated
+
     problems = _problems()
     expected = _one_by_one(problems, METHODS, options)
+    batched = []  # the learned drift models fitted side by side (problems with the same rows)
+    gls_problems = correlated.gls_problems
+    monkeypatch.setattr(correlated, "gls_problems", lambda sts, *a: batched.append(len(sts)) or gls_problems(sts, *a))
     got = solve_problems(problems, METHODS, options)
     assert len(got) == len(problems)
     for a, b in zip(expected, got, strict=True):
@@ -79,6 +84,7 @@ def test_solve_problems_equals_solve_one_at_a_time(options):
     assert isinstance(got[5]["fusion"], Exception) and not isinstance(got[5]["mle"], Exception)
     if not options:
         assert all("error_model" in g["mle"].extras for g in got[7:])
+        assert batched == [3]
 
 
 def test_solve_problems_reports_a_bad_option_for_every_problem():

@@ -319,11 +319,16 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
     drift model's (`_learned_tau`) where its residuals drift and the sigma gives no correlation time (the
     configured sigma's: size_unknown of `mle.bias_prior_deg`); res otherwise. The learned drift model
     (generalized least squares) takes no terrain prior: the first answer stands."""
-    if (st.size == 1 and st.t_ns is not None and size_unknown and o.get("terrain") is None and _drifts(res[5])
-            and _real_times(st)):
+    if _needs_learned_tau(st, o, res, size_unknown):
         res = _learned_tau(st, res, sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"],
                            o["max_iterations"])
     return res
+
+
+def _needs_learned_tau(st: Stacked, o: dict, res: tuple, size_unknown: bool) -> bool:
+    """Whether `_with_learned_tau` fits the learned drift model to one problem's first answer res."""
+    return bool(st.size == 1 and st.t_ns is not None and size_unknown and o.get("terrain") is None
+                and _drifts(res[5]) and _real_times(st))
 
 
 def _replace_rows(res: tuple, sub: tuple, idx: np.ndarray) -> tuple:
@@ -430,7 +435,12 @@ def _learned_tau(st: Stacked, res: tuple, sigma, robust, vce, tol, itmax) -> tup
     if not np.isfinite(X[0]).all():
         return res
     clean = _learned.without_rejected(st, ex["rejected"][0])
-    got = _learned.learn_tau(clean, X[0], sigma, robust, vce, tol, itmax)
+    return _learned_answer(res, _learned.learn_tau(clean, X[0], sigma, robust, vce, tol, itmax), sigma)
+
+
+def _learned_answer(res: tuple, got, sigma) -> tuple:
+    """`_learned_tau`'s answer from the first answer res and `learned_tau.learn_tau`'s got."""
+    X, ex = res[0], res[5]
     if got is None:
         return res
     _, att, _, (Xg, it, status, cond, cov, exg) = got
@@ -648,8 +658,9 @@ def solve_problems(problems: Sequence[Observations], methods: Sequence[str], opt
     and arrays of a problem are built once for every method; each kernel runs once for the problems of one
     number of frames, sigma and truth (`_groups`: problems are independent, so a problem's answer does not depend
     on the others); `mle`'s first fit too (but with time-correlated errors or a terrain prior, one problem at a
-    time), its learned drift model and multistart per problem, the multistart reusing the start estimators'
-    answers solved here with the mle's tol_m and max_iterations."""
+    time), its learned drift model's fits side by side for the problems with the same rows in use
+    (`learned_tau.learn_tau_many`), its multistart per problem, reusing the start estimators' answers solved here
+    with the mle's tol_m and max_iterations."""
     obs_list = list(problems)
     for obs in obs_list:
         if not isinstance(obs, Observations):
@@ -720,15 +731,7 @@ def _groups(sts: list[Stacked], todo: list[int]) -> list[list[int]]:
 
 def _stack(sts: list[Stacked]) -> Stacked:
     """One Stacked of the problems of several (of one group, `_groups`)."""
-    if len(sts) == 1:
-        return sts[0]
-    cat = np.concatenate
-    first = sts[0]
-    return Stacked(M=cat([s.M for s in sts]), p4=cat([s.p4 for s in sts]), pix=cat([s.pix for s in sts]),
-                   has_pix=cat([s.has_pix for s in sts]), platform_m=cat([s.platform_m for s in sts]),
-                   range_m=cat([s.range_m for s in sts]), has_range=cat([s.has_range for s in sts]),
-                   sigma=first.sigma, truth_m=None if first.truth_m is None else cat([s.truth_m for s in sts]),
-                   t_ns=None if first.t_ns is None else cat([s.t_ns for s in sts]))
+    return _correlated.stack_problems(sts)
 
 
 def _row(be: BatchEstimate, b: int) -> BatchEstimate:
@@ -777,11 +780,21 @@ def _mle_first_fits(sts: list[Stacked], todo: list[int], o: dict, out: list[dict
                 bias_deg, size_unknown = _mle.bias_prior_deg(sigma, o)
                 res = _mle.mle(st, x0, sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"],
                                o["max_iterations"], init_status, bias_deg, size_unknown, None)
-                for b, i in enumerate(g):  # the refit without the bias and the drift model as for one problem
+                firsts = {}
+                for b, i in enumerate(g):  # the refit without the bias as for one problem
                     sl = slice(b, b + 1)
-                    r = _bias_refit(sts[i], o, x0[sl], None if init_status is None else init_status[sl], sigma, vce,
-                                    _res_row(res, b), bias_deg, size_unknown)
-                    got[i] = _with_learned_tau(sts[i], o, r, sigma, vce, size_unknown)
+                    firsts[i] = _bias_refit(sts[i], o, x0[sl], None if init_status is None else init_status[sl],
+                                            sigma, vce, _res_row(res, b), bias_deg, size_unknown)
+                # the learned drift model (`_with_learned_tau`), the problems with the same rows side by side
+                need = [i for i in g if _needs_learned_tau(sts[i], o, firsts[i], size_unknown)
+                        and np.isfinite(firsts[i][0][0]).all()]
+                learned = _learned.learn_tau_many(
+                    [_learned.without_rejected(sts[i], firsts[i][5]["rejected"][0]) for i in need],
+                    np.array([firsts[i][0][0] for i in need]).reshape(-1, 3), sigma,
+                    o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"], o["max_iterations"])
+                for i, lt in zip(need, learned, strict=True):
+                    firsts[i] = _learned_answer(firsts[i], lt, sigma)
+                got.update(firsts)
                 continue
             except SOLVE_ERRORS:
                 got = {i: v for i, v in got.items() if i not in g}

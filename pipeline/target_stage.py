@@ -93,6 +93,11 @@ class FlightPass:
     clock_estimate: ClockEstimate | None = None
 
     @functools.cached_property
+    def available_frames(self) -> list[int]:
+        """The frame index's frame numbers (the tracker's stepping stones), one list for every target."""
+        return np.asarray(self.flight.frames.index).tolist()
+
+    @functools.cached_property
     def truth_targets(self) -> list:
         """The truth_file's targets (`truth_file_targets`), read once for every target of the flight."""
         return truth_file_targets(self.flight.config)
@@ -258,7 +263,7 @@ def _track_and_sync(fp: FlightPass, target: NamedTarget | None, marks: list[Targ
             marks = [fp.acquire(m, notes) for m in (target.marks if target is not None else [None])]
         tracks = [(m.frame_index, fp.tracker.track(flight.decoder, m.frame_index, m.pixel_px,
                                                    plan.frame_index.tolist(),
-                                                   available=np.asarray(flight.frames.index).tolist(),
+                                                   available=fp.available_frames,
                                                    cache=fp.cache)) for m in marks]
         track = _combine(tracks)
     if flight.decoder.failed:

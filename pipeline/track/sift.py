@@ -24,6 +24,7 @@ For each frame (processed outward from the mark frame, forward and backward in t
 
 from __future__ import annotations
 
+import bisect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -156,6 +157,7 @@ class SiftTracker:
 
     def __init__(self, settings: TrackerSettings | None = None):
         self._pairs: dict | None = None  # a ViewCache's shared homographies during track(), when it shares them
+        self._available: tuple = (None, [])  # the last `available` given to track() and its frames sorted
         self.s = settings or TrackerSettings()
         self._sift = cv2.SIFT_create(nfeatures=self.s.n_features)
         self._matcher = cv2.FlannBasedMatcher({"algorithm": 1, "trees": 4}, {"checks": 48})
@@ -266,9 +268,9 @@ class SiftTracker:
 
         `decode(indices)` returns {index: image} (BGR or gray) for frame numbers; `available` lists every frame
         number that could be decoded, from which stepping stones are taken when a wanted frame cannot be matched
-        directly. `cache`: frames' features shared with other targets' tracks (each frame decoded once); without
-        it only the mark and key frames are kept (memory stays flat). Returns the wanted frames' tracks in the
-        order of `wanted`."""
+        directly (given again as the same list, unchanged, for another target: it is sorted once). `cache`:
+        frames' features shared with other targets' tracks (each frame decoded once); without it only the mark and
+        key frames are kept (memory stays flat). Returns the wanted frames' tracks in the order of `wanted`."""
         cv2.setRNGSeed(0x5EED)  # FLANN's randomised trees draw from OpenCV's RNG: same input, same answer
         self._pairs = cache.pairs if cache is not None else None
         try:
@@ -301,7 +303,13 @@ class SiftTracker:
         out: dict[int, FrameTrack] = {mark_index: FrameTrack(
             mark_index, pixel_px=p0_t, lost=False, inliers=len(mark.keypoints_px), inlier_ratio=1.0, reproj_px=0.0,
             correlation=1.0, contrast=1.0, keyframe=True, via="mark", predicted_px=p0_t)}
-        avail = sorted(set(int(i) for i in (available if available is not None else [])))
+        if available is None:
+            avail = []
+        elif available is self._available[0]:  # a flight's frame index, sorted once for all its targets
+            avail = self._available[1]
+        else:
+            avail = sorted(set(int(i) for i in available))
+            self._available = (available, avail)
         for direction in (1, -1):
             seq = sorted((i for i in set(wanted) if (i - mark_index) * direction > 0), key=lambda i: i * direction)
             key = _Key(mark, np.eye(3))
@@ -341,7 +349,7 @@ class SiftTracker:
         """Try intermediate frames between the key frame and `cur` as stepping stones (nearest to the key first,
         at most `neighbours` of them); `decode_views(indices)` -> {index: view}."""
         lo, hi = sorted((key.view.index, cur.index))
-        between = [i for i in avail if lo < i < hi]
+        between = avail[bisect.bisect_right(avail, lo):bisect.bisect_left(avail, hi)]  # avail: sorted, unique
         if not between or self.s.neighbours <= 0:
             return failed, None
         between.sort(key=lambda i: abs(i - key.view.index))

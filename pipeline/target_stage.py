@@ -4,7 +4,9 @@
 target's marks and estimates the clock once, into a `FlightPass`; `locate_target` then tracks one target from its
 mark(s) through the planned frames (decoded frames and their SIFT features come from the pass's `ViewCache`: each
 frame is decoded and described once whatever the number of targets), drops the ranges not on it, assembles its
-observations and solves them with every method. `locate_targets` runs every named target of a flight: one that
+observations and solves them with every method. `locate_targets` runs every named target of a flight: each is
+tracked and synchronised, then all are solved together (`pipeline.solve.methods.solve_problems`: the same answers
+as one at a time, each estimator's kernel run once for the targets with the same number of frames); one that
 cannot be located becomes a `TargetFailure` (status and reason) and the others go on.
 """
 
@@ -89,6 +91,11 @@ class FlightPass:
     clock_estimate: ClockEstimate | None = None
 
     @functools.cached_property
+    def available_frames(self) -> list[int]:
+        """The frame index's frame numbers (the tracker's stepping stones), one list for every target."""
+        return np.asarray(self.flight.frames.index).tolist()
+
+    @functools.cached_property
     def truth_targets(self) -> dict[str, tuple[float, float, float]]:
         """The truth_file's targets (`truth_file_targets`), read once for every target of the flight."""
         return truth_file_targets(self.flight.config)
@@ -114,17 +121,20 @@ def methods_of(config: FlightConfig) -> list[str]:
     return methods
 
 
-def solve_all(obs: Observations, methods: Sequence[str], options: dict) -> tuple[dict[str, Estimate], dict]:
-    """Every method on one problem: (estimates, {method: {"status", "reason"}} for those that could not run)."""
-    from pipeline.solve import solve, unsolved_status
+def solve_all(problems: Sequence[Observations], methods: Sequence[str], options: dict
+              ) -> list[tuple[dict[str, Estimate], dict]]:
+    """Every method on each problem (a flight's targets, together: `pipeline.solve.methods.solve_problems`): per
+    problem (estimates, {method: {"status", "reason"}} for those that could not run)."""
+    from pipeline.solve import unsolved_status
+    from pipeline.solve.methods import solve_problems
 
-    estimates, failures = {}, {}
-    for m in methods:
-        try:
-            estimates[m] = solve(m, obs, **dict(options.get(m) or {}))
-        except (RidgelocError, ValueError, np.linalg.LinAlgError) as exc:
-            failures[m] = {"status": unsolved_status(exc), "reason": str(exc)}
-    return estimates, failures
+    out = []
+    for answers in solve_problems(problems, methods, options):
+        estimates = {m: a for m, a in answers.items() if not isinstance(a, Exception)}
+        failures = {m: {"status": unsolved_status(a), "reason": str(a)} for m, a in answers.items()
+                    if isinstance(a, Exception)}
+        out.append((estimates, failures))
+    return out
 
 
 def _frame_reason(lost: bool, via: str, inside: bool, used: bool) -> str | None:
@@ -212,19 +222,32 @@ def _truth_lla(fp: FlightPass, target: NamedTarget | None):
     return fp.truth_targets.get(target.name)
 
 
-def locate_target(fp: FlightPass, target: NamedTarget | None, marks: list[TargetMark] | None = None
-                  ) -> tuple[GroupResult, StageTimes]:
-    """Track, synchronise and solve one target of the flight (None: the crosshair): (its result with the flight's
-    settings, notes and times added, its own stage times). `marks`: the target's marks already acquired (the
-    first target's are, for the clock estimate). Raises a RidgelocError when the target cannot be located."""
-    flight, plan, config = fp.flight, fp.plan, fp.flight.config
+@dataclass
+class _Tracked:
+    """One target tracked and synchronised (`_track_and_sync`), waiting for its solve."""
+
+    target: NamedTarget | None
+    marks: list[TargetMark]
+    track: TrackResult
+    obs: Observations
+    useful: np.ndarray
+    inside: np.ndarray
+    truth_m: np.ndarray | None
+    notes: list[str]
+    times: StageTimes
+
+
+def _track_and_sync(fp: FlightPass, target: NamedTarget | None, marks: list[TargetMark] | None) -> _Tracked:
+    """Track one target from its mark(s), drop the ranges off its axis, synchronise. Raises a RidgelocError when
+    it has no usable observation."""
+    flight, plan = fp.flight, fp.plan
     times, notes = StageTimes(), []
     with times("track", flight.decoder):
         if marks is None:
             marks = [fp.acquire(m, notes) for m in (target.marks if target is not None else [None])]
         tracks = [(m.frame_index, fp.tracker.track(flight.decoder, m.frame_index, m.pixel_px,
                                                    plan.frame_index.tolist(),
-                                                   available=np.asarray(flight.frames.index).tolist(),
+                                                   available=fp.available_frames,
                                                    cache=fp.cache)) for m in marks]
         track = _combine(tracks)
     if flight.decoder.failed:
@@ -236,17 +259,38 @@ def locate_target(fp: FlightPass, target: NamedTarget | None, marks: list[Target
     truth_m = None if truth_lla is None else enu_from_lla(*truth_lla, fp.origin)
     with times("sync"):
         obs, useful, inside = _synchronize(flight, plan, track, range_m, truth_m, notes)
-    with times("solve"):  # with terrain: the `dem` method and the MLE's terrain prior
-        estimates, failures = solve_all(obs, methods_of(config),
-                                        terrain_solve_options(fp.dem, config.terrain, fp.origin, config.solve.options))
-        add_dem_estimate(fp.dem, obs, fp.origin, estimates, failures, [f"frame {i}" for i in plan.frame_index[useful]])
+    return _Tracked(target, marks, track, obs, useful, inside, truth_m, notes, times)
+
+
+def _solve_tracked(fp: FlightPass, tracked: list[_Tracked]) -> list[tuple[dict[str, Estimate], dict]]:
+    """Every method on every tracked target of the flight at once (`solve_all`), with terrain the `dem` method
+    and the MLE's terrain prior; the solve's time is booked to each target's times in equal shares (they are
+    solved together)."""
+    config = fp.flight.config
+    times = StageTimes()
+    with times("solve"):
+        solved = solve_all([t.obs for t in tracked], methods_of(config),
+                           terrain_solve_options(fp.dem, config.terrain, fp.origin, config.solve.options))
+        for t, (estimates, failures) in zip(tracked, solved, strict=True):
+            add_dem_estimate(fp.dem, t.obs, fp.origin, estimates, failures,
+                             [f"frame {i}" for i in fp.plan.frame_index[t.useful]])
+    for t in tracked:
+        t.times._add("solve", times.wall["solve"] / len(tracked), times.cpu["solve"] / len(tracked))
+    return solved
+
+
+def _result(fp: FlightPass, t: _Tracked, estimates: dict[str, Estimate], failures: dict) -> GroupResult:
+    """One target's result with the flight's settings, notes and times added. Raises an InputError when no
+    estimator could solve it."""
+    flight, plan, config = fp.flight, fp.plan, fp.flight.config
+    obs, useful, inside, track, marks, notes = t.obs, t.useful, t.inside, t.track, t.marks, t.notes
     if not estimates:
         reasons = "; ".join(f"{m}: {f['reason']}" for m, f in failures.items())
         raise InputError(f"no estimator could solve the flight: {reasons}", config.path)
     if "mle" in estimates:  # its fit message, boresight bias and rejected observations
         notes.extend(mle_outputs.notes(estimates["mle"].extras, obs.t_ns, plan.frame_index[useful]))
 
-    reference = truth_m
+    reference = t.truth_m
     if reference is None:
         best = estimates.get("mle") or next(iter(estimates.values()))
         reference = best.position_m
@@ -256,12 +300,12 @@ def locate_target(fp: FlightPass, target: NamedTarget | None, marks: list[Target
     tracking["used"] = [bool(u) for u in useful]  # True: a row of observations.json, in the same order
     tracking["reason"] = [_frame_reason(lost, via, ins, use) for lost, via, ins, use in
                           zip(track.lost, tracking["via"], inside, useful, strict=True)]
-    tracking["t_ns"] = [int(t) for t in plan.t_ns]
-    tracking["range_t_ns"] = [int(t) for t in plan.range_t_ns]
+    tracking["t_ns"] = [int(x) for x in plan.t_ns]
+    tracking["range_t_ns"] = [int(x) for x in plan.range_t_ns]
     tracking["mark"] = marks[0].to_dict()
     if len(marks) > 1:
         tracking["marks"] = [m.to_dict() for m in marks]
-    total = fp.times.plus(times)  # the flight's ingest and track (marks, clock) count in each target's
+    total = fp.times.plus(t.times)  # the flight's ingest and track (marks, clock) count in each target's
     cam = flight.camera
     settings = config.to_dict()
     settings["camera_resolved"] = {"source": flight.camera_source, **{k: getattr(cam, k) for k in (
@@ -273,23 +317,42 @@ def locate_target(fp: FlightPass, target: NamedTarget | None, marks: list[Target
     settings["frames_decoded"] = flight.decoder.decoded
     settings["cpu_s"] = total.cpu
     return GroupResult(name=config.name, origin_lla=fp.origin, observations=obs, estimates=estimates,
-                       truth_m=truth_m, intersection_angle_deg=gamma, timings_s=total.wall, settings=settings,
-                       tracking=tracking, target=None if target is None else target.name), times
+                       truth_m=t.truth_m, intersection_angle_deg=gamma, timings_s=total.wall, settings=settings,
+                       tracking=tracking, target=None if t.target is None else t.target.name)
+
+
+def locate_target(fp: FlightPass, target: NamedTarget | None, marks: list[TargetMark] | None = None
+                  ) -> tuple[GroupResult, StageTimes]:
+    """Track, synchronise and solve one target of the flight (None: the crosshair): (its result with the flight's
+    settings, notes and times added, its own stage times). `marks`: the target's marks already acquired (the
+    first target's are, for the clock estimate). Raises a RidgelocError when the target cannot be located."""
+    t = _track_and_sync(fp, target, marks)
+    (estimates, failures), = _solve_tracked(fp, [t])
+    return _result(fp, t, estimates, failures), t.times
 
 
 def locate_targets(fp: FlightPass, targets: list[NamedTarget], first_marks: list[TargetMark]) -> FlightResult:
     """Every named target of the flight; those that cannot be located become TargetFailures. Raises InputError
     when none can."""
-    results, failed = [], []
-    total = fp.times
-    for i, t in enumerate(targets):
+    outcome: list[GroupResult | TargetFailure] = [None] * len(targets)
+    tracked: dict[int, _Tracked] = {}
+    methods = tuple(methods_of(fp.flight.config))
+    for i, t in enumerate(targets):  # each tracked and synchronised; then all solved at once
         try:
-            r, own = locate_target(fp, t, first_marks if i == 0 else None)
+            tracked[i] = _track_and_sync(fp, t, first_marks if i == 0 else None)
         except RidgelocError as exc:
-            failed.append(TargetFailure(t.name, str(exc), tuple(methods_of(fp.flight.config))))
-            continue
-        total = total.plus(own)  # the flight's stages once, each target's own added
-        results.append(r)
+            outcome[i] = TargetFailure(t.name, str(exc), methods)
+    total = fp.times
+    if tracked:
+        for (i, t), (estimates, failures) in zip(tracked.items(), _solve_tracked(fp, list(tracked.values())),
+                                                 strict=True):
+            try:
+                outcome[i] = _result(fp, t, estimates, failures)
+            except RidgelocError as exc:
+                outcome[i] = TargetFailure(t.target.name, str(exc), methods)
+            total = total.plus(t.times)  # the flight's stages once, each target's own added
+    results = [o for o in outcome if isinstance(o, GroupResult)]
+    failed = [o for o in outcome if isinstance(o, TargetFailure)]
     if not results:
         raise InputError("no target could be located: " + "; ".join(f"{f.target}: {f.message}" for f in failed),
                          fp.flight.config.path)

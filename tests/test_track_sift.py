@@ -160,3 +160,33 @@ def test_a_target_gone_out_of_view_is_bridged_only_without_a_shared_cache(ground
     assert results[True, "asked"] == set(wanted)  # no stone for a target that has left the view
     stones = results[False, "asked"] - set(wanted)
     assert stones and stones <= set(range(1, 8))  # stones between the key frame and the lost frame
+
+
+def test_a_covered_target_is_bridged_only_without_a_shared_cache(ground):
+    """A frame whose key-frame homography holds and puts the target inside the image, where it is covered (low
+    correlation): with a ViewCache sharing matches no stepping stone is decoded for it (they would only change the
+    homography, not the view of the target); without one stones are tried as before. Either way the frame is
+    lost, "low correlation", and the others agree."""
+    from pipeline.track.sift import ViewCache
+
+    Hs = {k: homography(k) for k in range(9)}
+    frames = {k: render(ground, H) for k, H in Hs.items()}
+    covered = frames[8].copy()
+    p8 = true_px(Hs[8]).round().astype(int)
+    covered[p8[1] - 18:p8[1] + 19, p8[0] - 18:p8[0] + 19] = 128  # target covered, scene intact
+    frames[8] = covered
+    wanted = [0, 4, 8]
+    results = {}
+    for shared in (True, False):
+        dec = Decoder(frames)
+        cache = ViewCache(share_matches=True) if shared else None
+        results[shared] = SiftTracker().track(dec, 0, true_px(Hs[0]), wanted, available=list(frames), cache=cache)
+        results[shared, "asked"] = set(dec.asked)
+    for shared in (True, False):
+        r = results[shared]
+        np.testing.assert_array_equal(r.lost, [False, False, True])
+        assert r.frames[2].via == "low correlation"
+    np.testing.assert_array_equal(results[True].pixel_px[:2], results[False].pixel_px[:2])
+    assert results[True, "asked"] == set(wanted)  # no stone for a target in view but covered
+    stones = results[False, "asked"] - set(wanted)
+    assert stones and stones <= set(range(1, 8))  # stones between the key frame and the lost frame

@@ -225,7 +225,10 @@ def quadratic_forms_stacked(sk: Stack, A: np.ndarray, w: np.ndarray, vf: np.ndar
         Rinv, Y = Rinv_all[:, rows], A[:, rows]
         scale = vf[:, 0] if gi < 2 else vf[:, 1]
         RiY = Rinv[:, :, None] * Y
-        logdet = [float(np.sum(np.log(scale[j] / Rinv[j][Rinv[j] > 0]))) for j in range(K)]
+        if (Rinv > 0).all():  # one pass; the same sums as row by row
+            logdet = np.log(scale[:, None] / Rinv).sum(axis=1)
+        else:
+            logdet = np.array([np.sum(np.log(scale[j] / Rinv[j][Rinv[j] > 0])) for j in range(K)])
         if p == 0:
             CY = RiY / scale[:, None, None]
         else:
@@ -244,12 +247,11 @@ def quadratic_forms_stacked(sk: Stack, A: np.ndarray, w: np.ndarray, vf: np.ndar
             GtRiY = (G[:, :, :, None] * RiY[:, :, None, :]).reshape(K * k * p, -1)
             Z = _pbtrs(cb, GtRiY, lower=1)[0].reshape(K, k, p, -1)  # info is nonzero only for bad arguments
             CY = (RiY - Rinv[:, :, None] * np.einsum("jkp,jkpq->jkq", G, Z)) / scale[:, None, None]
-            for j in range(K):
-                logdet[j] += 2.0 * float(np.log(cb[0, j * k * p:(j + 1) * k * p]).sum()) + float(log_inn[j])
+            logdet = logdet + (2.0 * np.log(cb[0]).reshape(K, k * p).sum(axis=1) + log_inn)
         forms = np.swapaxes(Y, 1, 2) @ CY
         counts = np.count_nonzero(Rinv, axis=1)
         for j in range(K):
-            out[j].append((forms[j], logdet[j], int(counts[j])))
+            out[j].append((forms[j], float(logdet[j]), int(counts[j])))
     return out
 
 
@@ -274,6 +276,36 @@ def gls_models(st: Stacked, X0: np.ndarray, models: list, robust: str | None, vc
                     max_iterations)
 
 
+def gls_problems(sts: list, X0s: np.ndarray, models: list, robust: str | None, vce: bool, tol_m: float,
+                 max_iterations: int, rows0: list):
+    """`gls_models` of T problems (B = 1 each) with the same rows in use (the same frames with a pixel and with
+    a range, in the same time order: `stack_models` checks), K models each, all T K fits side by side (each
+    exactly as alone); X0s (T,3) the problems' starts, models the T K models (problem by problem), rows0 the
+    problems' `rows_in_use` at their start. Returns `mle.finish`'s tuple over the T K fits."""
+    T = len(sts)
+    K = len(models) // T
+    X = np.repeat(np.asarray(X0s, dtype=np.float64).reshape(T, 3), K, axis=0)
+    status, bad = start_status(X, None)
+    stk = stack_problems([st.take(np.zeros(K, dtype=np.intp)) for st in sts])
+    rows = [r for r in rows0 for _ in range(K)]
+    return _mle.run(Correlated(stk, models, X, vce, rows), stk, X, status, bad, X.copy(), robust, tol_m,
+                    max_iterations)
+
+
+def stack_problems(sts: list) -> Stacked:
+    """One Stacked of the problems of several with the same number of frames and sigma (truth and timestamps
+    kept only where every one has them)."""
+    if len(sts) == 1:
+        return sts[0]
+    cat = np.concatenate
+    truth = None if any(s.truth_m is None for s in sts) else cat([s.truth_m for s in sts])
+    t_ns = None if any(s.t_ns is None for s in sts) else cat([s.t_ns for s in sts])
+    return Stacked(M=cat([s.M for s in sts]), p4=cat([s.p4 for s in sts]), pix=cat([s.pix for s in sts]),
+                   has_pix=cat([s.has_pix for s in sts]), platform_m=cat([s.platform_m for s in sts]),
+                   range_m=cat([s.range_m for s in sts]), has_range=cat([s.has_range for s in sts]),
+                   sigma=sts[0].sigma, truth_m=truth, t_ns=t_ns)
+
+
 class Correlated(_iterate.Model):
     """The `mle` model of one problem (B = 1) with time-correlated errors, as `iterate.drive` and `mle.finish`
     use it: iteratively reweighted generalized least squares, under K models of the residual covariance at once
@@ -285,8 +317,10 @@ class Correlated(_iterate.Model):
 
     drift_modelled = True
 
-    def __init__(self, st: Stacked, models: list, X: np.ndarray, vce: bool, rows: np.ndarray | None = None):
-        """st: the problem, once per model (K copies); X (K,3) the start of every model, one point."""
+    def __init__(self, st: Stacked, models: list, X: np.ndarray, vce: bool, rows=None):
+        """st: the problem, once per model (K copies); X (K,3) the start of every model, one point; rows: its
+        `rows_in_use` there where the caller has it. Or (`gls_problems`) st several problems with the same rows
+        in use, each once per model, X their starts and rows the list of each model's rows at its start."""
         K = len(models)
         m, npix = models[0].m, models[0].npix
         self.st, self.models, self.X, self.vce = st, models, X, vce
@@ -299,7 +333,7 @@ class Correlated(_iterate.Model):
         self._at = np.concatenate([(np.arange(2)[None, :] * st.n + pf[:, None]).ravel(), 2 * st.n + rf])
         self.ok = self._planes(np.ones((m, K)), 0.0) > 0
         A = rows_in_use(st.take(np.zeros(1, dtype=np.intp)), X[0]) if rows is None else rows
-        self.A = [A] * K  # per model; replaced, never changed in place
+        self.A = list(A) if isinstance(A, list) else [A] * K  # per model; replaced, never changed in place
         self._last_forms = [None] * K
         self._stack = stack_models(models)
         self._scaled_vf = None  # the variance factors of the row scales self._s and self._isd

@@ -84,15 +84,69 @@ def learn_tau(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce
     result tuple of that model (its fit checks and extras, and error_model_tau_s, error_model_attitude_deg,
     error_model_log_likelihoods over TAU_GRID_S at its attitude sigma) with the mixture's estimate and
     covariance), or None when no model gave an answer."""
-    lls: dict[tuple, float] = {}
-    fits = []
     # every candidate's fit starts from X0: the frames' layout and the rows there (no tau in them) are built
     # once, and the fits iterate side by side (each as alone)
-    frames0, rows0 = _correlated.problem_frames(st, X0), _correlated.rows_in_use(st, X0)
-    sigmas = [dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau, attitude_deg=att)
-              for tau, att in candidates(sigma)]
-    models = [_correlated.problem_model(st, X0, s, frames0) for s in sigmas]
-    out = _correlated.gls_models(st, X0, models, robust, vce, tol_m, max_iterations, rows0)
+    sigmas = _sigmas(sigma)
+    models, rows0 = _models(st, X0, sigmas)
+    return _mixture(st, sigmas, _correlated.gls_models(st, X0, models, robust, vce, tol_m, max_iterations, rows0))
+
+
+def learn_tau_many(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
+                   max_iterations: int) -> list:
+    """`learn_tau` of T problems (B = 1 each, without their rejected rows) from their X0s (T,3): [its answer] per
+    problem. Problems with the same rows in use (`correlated.gls_problems`) have all their candidates' fits
+    iterate side by side (each as alone); the others one problem at a time."""
+    sigmas = _sigmas(sigma)
+    built = [_models(st, X0, sigmas) for st, X0 in zip(sts, X0s, strict=True)]
+    out: list = [None] * len(sts)
+    groups: list[list[int]] = []
+    for i, st in enumerate(sts):  # the same frames with a pixel and with a range (`stack_models` checks the rest)
+        for g in groups:
+            j = g[0]
+            if (st.n == sts[j].n and np.array_equal(st.has_pix, sts[j].has_pix)
+                    and np.array_equal(st.has_range, sts[j].has_range)):
+                g.append(i)
+                break
+        else:
+            groups.append([i])
+    K = len(sigmas)
+    for g in groups:
+        if len(g) > 1:
+            try:
+                fits = _correlated.gls_problems([sts[i] for i in g], np.asarray([X0s[i] for i in g]),
+                                                [md for i in g for md in built[i][0]], robust, vce, tol_m,
+                                                max_iterations, [built[i][1] for i in g])
+            except ValueError:  # the models' states differ (`stack_models`): one problem at a time
+                pass
+            else:
+                for t, i in enumerate(g):
+                    sl = slice(t * K, (t + 1) * K)
+                    out[i] = _mixture(sts[i], sigmas, (*(a[sl] for a in fits[:5]),
+                                                       {k: v[sl] for k, v in fits[5].items()}))
+                continue
+        for i in g:
+            models, rows0 = built[i]
+            out[i] = _mixture(sts[i], sigmas, _correlated.gls_models(sts[i], X0s[i], models, robust, vce, tol_m,
+                                                                     max_iterations, rows0))
+    return out
+
+
+def _sigmas(sigma: Sigma) -> list:
+    """The candidate sigmas (`candidates`)."""
+    return [dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau, attitude_deg=att)
+            for tau, att in candidates(sigma)]
+
+
+def _models(st: Stacked, X0: np.ndarray, sigmas: list) -> tuple[list, np.ndarray]:
+    """The candidates' `Model`s of one problem at X0 and its rows in use there."""
+    frames0 = _correlated.problem_frames(st, X0)
+    return [_correlated.problem_model(st, X0, s, frames0) for s in sigmas], _correlated.rows_in_use(st, X0)
+
+
+def _mixture(st: Stacked, sigmas: list, out: tuple):
+    """`learn_tau`'s answer from the candidates' fits out (`mle.finish`'s tuple over the K sigmas)."""
+    lls: dict[tuple, float] = {}
+    fits = []
     X, status = out[0], out[2]
     answered = [k for k in range(len(sigmas)) if status[k] not in (Status.DIVERGED, Status.DEGENERATE)
                 and np.isfinite(X[k]).all()]

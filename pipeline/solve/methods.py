@@ -8,10 +8,11 @@ One implementation per estimator: `solve(method, obs)` runs the same kernel as `
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
 
-from pipeline.errors import GeometryError, ObservationError, SolverError
+from pipeline.errors import GeometryError, ObservationError, RidgelocError, SolverError
 from pipeline.solve import correlated as _correlated
 from pipeline.solve import learned_tau as _learned
 from pipeline.solve import least_squares, linear, mle_outputs, uncertainty
@@ -173,14 +174,19 @@ def _solve_stacked(method: str, st: Stacked, o: dict) -> BatchEstimate:
         extras = {**uncertainty.summaries(cov), **ex}
     else:  # pragma: no cover - _check_options rejects it
         raise ValueError(method)
-    if method in _USES_PIXELS:
-        behind = _behind_camera(st, X)
-        if behind.any():
-            status[behind] = Status.DEGENERATE
-            X[behind] = np.nan
-        extras["behind_camera"] = behind
-    return BatchEstimate(method=method, position_m=X, iterations=it, status=status.astype(np.int8),
-                         condition_number=cond, covariance_m2=cov, extras=extras)
+    be = BatchEstimate(method=method, position_m=X, iterations=it, status=status.astype(np.int8),
+                       condition_number=cond, covariance_m2=cov, extras=extras)
+    return _mark_behind(st, be) if method in _USES_PIXELS else be
+
+
+def _mark_behind(st: Stacked, be: BatchEstimate) -> BatchEstimate:
+    """be with the answers behind a camera with a pixel DEGENERATE and NaN (in place), the flags in extras."""
+    behind = _behind_camera(st, be.position_m)
+    if behind.any():
+        be.status[behind] = Status.DEGENERATE
+        be.position_m[behind] = np.nan
+    be.extras["behind_camera"] = behind
+    return be
 
 
 def _mle_start(st: Stacked, o: dict):
@@ -203,11 +209,16 @@ def _mle_start(st: Stacked, o: dict):
             need = ~np.isfinite(x0).all(axis=1)
             if need.any():
                 x0[need], init_status[need] = _terrain_start(st.take(np.flatnonzero(need)), o["terrain"][0])
+    return x0, init_status, *_mle_sigma(st, o)
+
+
+def _mle_sigma(st: Stacked, o: dict):
+    """The mle's sigma (the option's, else the observations') and whether to estimate variance components."""
     sigma = o.get("sigma") or st.sigma
     vce = o.get("estimate_variance_components")
     if vce is None:
         vce = sigma.pixel_px is None or sigma.range_m is None
-    return x0, init_status, sigma, bool(vce)
+    return sigma, bool(vce)
 
 
 def _terrain_start(st: Stacked, fn) -> tuple[np.ndarray, np.ndarray]:
@@ -244,9 +255,10 @@ def _terrain_start(st: Stacked, fn) -> tuple[np.ndarray, np.ndarray]:
     return X, status
 
 
-def _mle_dispatch(st: Stacked, o: dict):
+def _mle_dispatch(st: Stacked, o: dict, learn: bool = True):
     """`mle.mle` on the batch, or `correlated.gls` for one problem whose sigma has correlation times (and
-    whose residual covariance is not diagonal: with vanishing correlation it is the independent problem)."""
+    whose residual covariance is not diagonal: with vanishing correlation it is the independent problem); for one
+    problem (learn) then the learned drift model where its residuals drift (`_with_learned_tau`)."""
     x0, init_status, sigma, vce = _mle_start(st, o)
     robust, tol, itmax = o.get("robust", _mle.DEFAULT_ROBUST), o["tol_m"], o["max_iterations"]
     bias_deg, size_unknown = _mle.bias_prior_deg(sigma, o)  # configured correlation times win, even vanishing ones
@@ -268,6 +280,15 @@ def _mle_dispatch(st: Stacked, o: dict):
             return _correlated.gls(st, x0[0], model, robust, vce, tol, itmax)
         sigma = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
     res = _mle.mle(st, x0, sigma, robust, vce, tol, itmax, init_status, bias_deg, size_unknown, o.get("terrain"))
+    res = _bias_refit(st, o, x0, init_status, sigma, vce, res, bias_deg, size_unknown)
+    return _with_learned_tau(st, o, res, sigma, vce, size_unknown) if learn else res
+
+
+def _bias_refit(st: Stacked, o: dict, x0: np.ndarray, init_status, sigma, vce: bool, res: tuple, bias_deg,
+                size_unknown: bool) -> tuple:
+    """The independent-error fit res (`mle.mle` from x0 (B,3) with the bias prior bias_deg, `mle.bias_prior_deg`)
+    refitted without the bias where the bias came out far beyond the stated attitude sigma."""
+    robust, tol, itmax = o.get("robust", _mle.DEFAULT_ROBUST), o["tol_m"], o["max_iterations"]
     if bias_deg and size_unknown:
         # the stated attitude sigma is the largest bias: a bias estimated far beyond it (as the learned drift
         # model's limit) is the bias explaining the pixels away, not a bias of this flight; refit without it
@@ -285,11 +306,24 @@ def _mle_dispatch(st: Stacked, o: dict):
             shared = (sigma.position_m or 0.0) ** 2 * np.eye(3)
             r2 = (*r2[:4], r2[4] + shared + d[:, :, None] * d[:, None, :], r2[5])
             res = _replace_rows(res, r2, idx)
-    # the learned drift model (generalized least squares) takes no terrain prior: the first answer stands
-    if (st.size == 1 and st.t_ns is not None and size_unknown and o.get("terrain") is None and _drifts(res[5])
-            and _real_times(st)):
-        res = _learned_tau(st, res, sigma, robust, vce, tol, itmax)
     return res
+
+
+def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_unknown: bool) -> tuple:
+    """The mle answer res of one problem (B = 1) under the independent-error sigma, replaced by the learned
+    drift model's (`_learned_tau`) where its residuals drift and the sigma gives no correlation time (the
+    configured sigma's: size_unknown of `mle.bias_prior_deg`); res otherwise. The learned drift model
+    (generalized least squares) takes no terrain prior: the first answer stands."""
+    if _needs_learned_tau(st, o, res, size_unknown):
+        res = _learned_tau(st, res, sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"],
+                           o["max_iterations"])
+    return res
+
+
+def _needs_learned_tau(st: Stacked, o: dict, res: tuple, size_unknown: bool) -> bool:
+    """Whether `_with_learned_tau` fits the learned drift model to one problem's first answer res."""
+    return bool(st.size == 1 and st.t_ns is not None and size_unknown and o.get("terrain") is None
+                and _drifts(res[5]) and _real_times(st))
 
 
 def _replace_rows(res: tuple, sub: tuple, idx: np.ndarray) -> tuple:
@@ -310,22 +344,29 @@ def _replace_rows(res: tuple, sub: tuple, idx: np.ndarray) -> tuple:
     return (*out, ex)
 
 
-def _mle_multistart(st: Stacked, o: dict):
+def _mle_multistart(st: Stacked, o: dict, first: tuple | None = None, answers: dict | None = None):
     """`_mle_dispatch` on one problem, never an answer that explains the pixels away (`starts`): the fit from the
     default start is kept when it does not; otherwise mle is run again from every other estimator's answer and
     the fit of the lowest common robust cost among those that do not explain the pixels away is kept; when
     every fit does, the target is not determined (DEGENERATE, with the reason in `not_determined`). The other
-    estimators' answers outside the kept fit's ellipsoid (chi-square 99.9 %) are listed (`disagree`)."""
-    res = _mle_dispatch(st, o)
+    estimators' answers outside the kept fit's ellipsoid (chi-square 99.9 %) are listed (`disagree`).
+
+    first: the default start's fit (`_mle_dispatch`'s tuple) where the caller has it; answers: {method: its
+    BatchEstimate (B = 1)} of start estimators the caller has solved with the mle's tol_m and max_iterations and
+    no other option (`solve_problems`), not solved again."""
+    res = _mle_dispatch(st, o) if first is None else first
     npix = int(st.has_pix[0].sum())
     cands = {}
     plain = {"tol_m": o["tol_m"], "max_iterations": o["max_iterations"]}
-    plain["vision_from_dlt"] = _vision_from_dlt(st, plain)  # vision, fusion and range all begin from it
     for name in _starts.START_METHODS:
-        try:
-            be = _solve_stacked(name, st, plain)
-        except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - the kernels report failures as statuses
-            continue
+        be = (answers or {}).get(name)
+        if be is None:
+            if name in ("vision", "fusion", "range") and "vision_from_dlt" not in plain:  # each begins from it
+                plain["vision_from_dlt"] = _vision_from_dlt(st, plain)
+            try:
+                be = _solve_stacked(name, st, plain)
+            except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - the kernels report failures as statuses
+                continue
         X, s = be.position_m[0], int(be.status[0])
         if np.isfinite(X).all() and s not in (Status.DEGENERATE, Status.DIVERGED) and (
                 name != "range" or s == Status.CONVERGED):
@@ -389,7 +430,12 @@ def _learned_tau(st: Stacked, res: tuple, sigma, robust, vce, tol, itmax) -> tup
     if not np.isfinite(X[0]).all():
         return res
     clean = _learned.without_rejected(st, ex["rejected"][0])
-    got = _learned.learn_tau(clean, X[0], sigma, robust, vce, tol, itmax)
+    return _learned_answer(res, _learned.learn_tau(clean, X[0], sigma, robust, vce, tol, itmax), sigma)
+
+
+def _learned_answer(res: tuple, got, sigma) -> tuple:
+    """`_learned_tau`'s answer from the first answer res and `learned_tau.learn_tau`'s got."""
+    X, ex = res[0], res[5]
     if got is None:
         return res
     _, att, _, (Xg, it, status, cond, cov, exg) = got
@@ -540,6 +586,11 @@ def solve(method: str, obs: Observations, **options) -> Estimate:
     _check_inputs(method, obs, st, o)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         be = _solve_stacked(method, st, o)
+    return _estimate(method, obs, st, o, be)
+
+
+def _estimate(method: str, obs: Observations, st: Stacked, o: dict, be: BatchEstimate) -> Estimate:
+    """One problem's answer be (B = 1) as `solve` returns it, or the error `solve` raises for it."""
     X, it, cond = be.position_m[0], int(be.iterations[0]), float(be.condition_number[0])
     status = Status(int(be.status[0]))
     info = {k: v[0] for k, v in be.extras.items()}
@@ -588,6 +639,173 @@ def solve(method: str, obs: Observations, **options) -> Estimate:
     cov = None if be.covariance_m2 is None else be.covariance_m2[0]
     return Estimate(method=method, position_m=X, iterations=it, status=status,
                     residuals=_residuals(method, st, X), condition_number=cond, covariance_m2=cov, extras=extras)
+
+
+#: the errors `solve` raises for a problem it cannot solve (`solve_problems` returns them per problem)
+SOLVE_ERRORS = (RidgelocError, ValueError, np.linalg.LinAlgError)
+
+
+def solve_problems(problems: Sequence[Observations], methods: Sequence[str], options: dict | None = None
+                   ) -> list[dict]:
+    """Every method of `methods` on each of several problems (a flight's targets), options {method: options}:
+    per problem {method: its `Estimate`, or the error (`SOLVE_ERRORS`) that `solve(method, obs, **options)`
+    raises}, in the order of `methods`. The same answers as `solve` one problem at a time, for less: the checks
+    and arrays of a problem are built once for every method; each kernel runs once for the problems of one
+    number of frames, sigma and truth (`_groups`: problems are independent, so a problem's answer does not depend
+    on the others); `mle`'s first fit too (but with time-correlated errors or a terrain prior, one problem at a
+    time), its learned drift model's fits side by side for the problems with the same rows in use
+    (`learned_tau.learn_tau_many`), its multistart per problem, reusing the start estimators' answers solved here
+    with the mle's tol_m and max_iterations."""
+    obs_list = list(problems)
+    for obs in obs_list:
+        if not isinstance(obs, Observations):
+            raise TypeError(f"solve_problems wants Observations, got {type(obs).__name__}")
+    out: list[dict] = [{} for _ in obs_list]
+    sts = [Stacked.from_observations(obs) for obs in obs_list]
+    ok: dict[str, tuple[dict, list[int]]] = {}  # method -> (options, the problems that pass its checks)
+    for m in methods:
+        try:
+            o = _check_options(m, dict((options or {}).get(m) or {}))
+        except ValueError as exc:
+            for r in out:
+                r[m] = exc
+            continue
+        todo = []
+        for i, (obs, st) in enumerate(zip(obs_list, sts, strict=True)):
+            try:
+                _check_inputs(m, obs, st, o)
+                todo.append(i)
+            except SOLVE_ERRORS as exc:
+                out[i][m] = exc
+        ok[m] = (o, todo)
+    answers: dict[str, dict[int, BatchEstimate]] = {}
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        for m, (o, todo) in ok.items():
+            if m == "mle":
+                continue
+            answers[m] = _solve_grouped(m, sts, todo, o, out)
+        if "mle" in ok:
+            o, todo = ok["mle"]
+            plain = {"tol_m": o["tol_m"], "max_iterations": o["max_iterations"]}
+            reuse = [m for m in _starts.START_METHODS if m in ok and ok[m][0] == plain]
+            for i, first in _mle_first_fits(sts, todo, o, out).items():
+                try:
+                    if o.get("initial_m") is None:
+                        res = _mle_multistart(sts[i], o, first, {m: answers[m][i] for m in reuse if i in answers[m]})
+                        extras = {**uncertainty.summaries(res[4]), **res[5]}
+                        be = BatchEstimate("mle", res[0], res[1], res[2].astype(np.int8), res[3], res[4], extras)
+                        be = _mark_behind(sts[i], be)
+                    else:
+                        be = first
+                    answers.setdefault("mle", {})[i] = be
+                except SOLVE_ERRORS as exc:
+                    out[i]["mle"] = exc
+    for m, per in answers.items():
+        o = ok[m][0]
+        for i, be in per.items():
+            try:
+                out[i][m] = _estimate(m, obs_list[i], sts[i], o, be)
+            except SOLVE_ERRORS as exc:
+                out[i][m] = exc
+    return [{m: r[m] for m in methods if m in r} for r in out]
+
+
+def _groups(sts: list[Stacked], todo: list[int]) -> list[list[int]]:
+    """The problems of `todo` in groups that stack (the same number of frames, sigma and presence of a truth)."""
+    groups: list[tuple[tuple, list[int]]] = []
+    for i in todo:
+        key = (sts[i].n, sts[i].sigma, sts[i].truth_m is None)
+        for k, g in groups:
+            if k == key:
+                g.append(i)
+                break
+        else:
+            groups.append((key, [i]))
+    return [g for _, g in groups]
+
+
+def _stack(sts: list[Stacked]) -> Stacked:
+    """One Stacked of the problems of several (of one group, `_groups`)."""
+    return _correlated.stack_problems(sts)
+
+
+def _row(be: BatchEstimate, b: int) -> BatchEstimate:
+    """Problem b of a BatchEstimate, as a BatchEstimate of one (copies)."""
+    sl = slice(b, b + 1)
+    return BatchEstimate(method=be.method, position_m=be.position_m[sl].copy(), iterations=be.iterations[sl].copy(),
+                         status=be.status[sl].copy(), condition_number=be.condition_number[sl].copy(),
+                         covariance_m2=None if be.covariance_m2 is None else be.covariance_m2[sl].copy(),
+                         extras={k: v[sl].copy() for k, v in be.extras.items()})
+
+
+def _solve_grouped(method: str, sts: list[Stacked], todo: list[int], o: dict, out: list[dict]
+                   ) -> dict[int, BatchEstimate]:
+    """{problem: its answer (B = 1)} of a method other than mle on the problems of todo, one kernel call per group;
+    a group whose call raises is solved one problem at a time (the error then goes to its problem in out)."""
+    got = {}
+    for g in _groups(sts, todo):
+        if len(g) > 1:
+            try:
+                be = _solve_stacked(method, _stack([sts[i] for i in g]), o)
+                got.update({i: _row(be, b) for b, i in enumerate(g)})
+                continue
+            except SOLVE_ERRORS:
+                pass
+        for i in g:
+            try:
+                got[i] = _solve_stacked(method, sts[i], o)
+            except SOLVE_ERRORS as exc:
+                out[i][method] = exc
+    return got
+
+
+def _mle_first_fits(sts: list[Stacked], todo: list[int], o: dict, out: list[dict]) -> dict[int, tuple]:
+    """{problem: the mle fit from its default start (`_mle_dispatch`'s tuple, B = 1, the learned drift model
+    included)} for the problems of todo: the independent-error fit once per group; one problem at a time with
+    time-correlated errors or a terrain prior, or where a group's call raises (the error then goes to its problem
+    in out). With initial_m (no multistart: `_solve_stacked`) one problem at a time, and the fits are the answers
+    (a BatchEstimate each)."""
+    got = {}
+    for g in _groups(sts, todo):
+        sigma, vce = _mle_sigma(sts[g[0]], o)
+        if not (len(g) == 1 or sigma.correlated or o.get("terrain") is not None or o.get("initial_m") is not None):
+            try:
+                st = _stack([sts[i] for i in g])
+                x0, init_status, sigma, vce = _mle_start(st, o)
+                bias_deg, size_unknown = _mle.bias_prior_deg(sigma, o)
+                res = _mle.mle(st, x0, sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"],
+                               o["max_iterations"], init_status, bias_deg, size_unknown, None)
+                firsts = {}
+                for b, i in enumerate(g):  # the refit without the bias as for one problem
+                    sl = slice(b, b + 1)
+                    firsts[i] = _bias_refit(sts[i], o, x0[sl], None if init_status is None else init_status[sl],
+                                            sigma, vce, _res_row(res, b), bias_deg, size_unknown)
+                # the learned drift model (`_with_learned_tau`), the problems with the same rows side by side
+                need = [i for i in g if _needs_learned_tau(sts[i], o, firsts[i], size_unknown)
+                        and np.isfinite(firsts[i][0][0]).all()]
+                learned = _learned.learn_tau_many(
+                    [_learned.without_rejected(sts[i], firsts[i][5]["rejected"][0]) for i in need],
+                    np.array([firsts[i][0][0] for i in need]).reshape(-1, 3), sigma,
+                    o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"], o["max_iterations"])
+                for i, lt in zip(need, learned, strict=True):
+                    firsts[i] = _learned_answer(firsts[i], lt, sigma)
+                got.update(firsts)
+                continue
+            except SOLVE_ERRORS:
+                got = {i: v for i, v in got.items() if i not in g}
+        for i in g:
+            try:
+                got[i] = (_solve_stacked("mle", sts[i], o) if o.get("initial_m") is not None
+                          else _mle_dispatch(sts[i], o))
+            except SOLVE_ERRORS as exc:
+                out[i]["mle"] = exc
+    return got
+
+
+def _res_row(res: tuple, b: int) -> tuple:
+    """Problem b of an mle answer (X, it, status, cond, cov, extras) as an answer of one (copies)."""
+    sl = slice(b, b + 1)
+    return (*(a[sl].copy() for a in res[:5]), {k: v[sl].copy() for k, v in res[5].items()})
 
 
 def _residuals(method: str, st: Stacked, X: np.ndarray) -> np.ndarray:

@@ -12,8 +12,10 @@ For each frame (processed outward from the mark frame, forward and backward in t
 4. Quality: inlier count and ratio, RANSAC reprojection RMS, peak correlation. Below thresholds the frame is
    flagged lost (pixel NaN), never guessed. A failed frame is retried against the mark frame itself
    (re-acquisition) and through intermediate frames (stepping stones) when the caller offers them; with a
-   `ViewCache` that shares matches (a flight's named targets), not where the key frame's homography holds and
-   puts the target outside the image: it has left the view, and stones would only cost decoding and SIFT.
+   `ViewCache` that shares matches (a flight's named targets), not where the key frame's homography holds: it
+   then puts the target outside the image (it has left the view) or inside but not found there (covered, washed
+   out: too low a correlation or contrast), and stones, which only change the homography, would cost decoding and
+   SIFT for the same view of it.
    (Without one, as for a flight's single `target:`, they are tried there too: every match draws from one random
    stream, so skipping one would shift every later frame's matches.)
 5. The current frame becomes the key frame when its inliers fall below a fraction of the key's first match, or
@@ -22,6 +24,7 @@ For each frame (processed outward from the mark frame, forward and backward in t
 
 from __future__ import annotations
 
+import bisect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -154,6 +157,7 @@ class SiftTracker:
 
     def __init__(self, settings: TrackerSettings | None = None):
         self._pairs: dict | None = None  # a ViewCache's shared homographies during track(), when it shares them
+        self._available: tuple = (None, [])  # the last `available` given to track() and its frames sorted
         self.s = settings or TrackerSettings()
         self._sift = cv2.SIFT_create(nfeatures=self.s.n_features)
         self._matcher = cv2.FlannBasedMatcher({"algorithm": 1, "trees": 4}, {"checks": 48})
@@ -264,9 +268,9 @@ class SiftTracker:
 
         `decode(indices)` returns {index: image} (BGR or gray) for frame numbers; `available` lists every frame
         number that could be decoded, from which stepping stones are taken when a wanted frame cannot be matched
-        directly. `cache`: frames' features shared with other targets' tracks (each frame decoded once); without
-        it only the mark and key frames are kept (memory stays flat). Returns the wanted frames' tracks in the
-        order of `wanted`."""
+        directly (given again as the same list, unchanged, for another target: it is sorted once). `cache`:
+        frames' features shared with other targets' tracks (each frame decoded once); without it only the mark and
+        key frames are kept (memory stays flat). Returns the wanted frames' tracks in the order of `wanted`."""
         cv2.setRNGSeed(0x5EED)  # FLANN's randomised trees draw from OpenCV's RNG: same input, same answer
         self._pairs = cache.pairs if cache is not None else None
         try:
@@ -299,7 +303,13 @@ class SiftTracker:
         out: dict[int, FrameTrack] = {mark_index: FrameTrack(
             mark_index, pixel_px=p0_t, lost=False, inliers=len(mark.keypoints_px), inlier_ratio=1.0, reproj_px=0.0,
             correlation=1.0, contrast=1.0, keyframe=True, via="mark", predicted_px=p0_t)}
-        avail = sorted(set(int(i) for i in (available if available is not None else [])))
+        if available is None:
+            avail = []
+        elif available is self._available[0]:  # a flight's frame index, sorted once for all its targets
+            avail = self._available[1]
+        else:
+            avail = sorted(set(int(i) for i in available))
+            self._available = (available, avail)
         for direction in (1, -1):
             seq = sorted((i for i in set(wanted) if (i - mark_index) * direction > 0), key=lambda i: i * direction)
             key = _Key(mark, np.eye(3))
@@ -317,8 +327,10 @@ class SiftTracker:
                 if H is None and key.view is not mark:  # re-acquisition against the mark itself
                     ft2, H = self._attempt(_Key(mark, np.eye(3)), mark, p0, cur, "reacquired")
                     ft = ft2 if H is not None else ft
-                left_view = ft.via == "out of image" and self._pairs is not None  # see the module docstring, 4.
-                if H is None and not left_view:
+                # the key frame's homography held: the target left the view, or is in view but not found (covered,
+                # washed out); stones would give the same view of it (see the module docstring, 4.)
+                held = ft.via in ("out of image", "low correlation", "low contrast") and self._pairs is not None
+                if H is None and not held:
                     ft, H = self._bridge(decode_views, key, mark, p0, cur, avail, direction, views, ft)
                 out[idx] = ft
                 if H is None:
@@ -337,7 +349,7 @@ class SiftTracker:
         """Try intermediate frames between the key frame and `cur` as stepping stones (nearest to the key first,
         at most `neighbours` of them); `decode_views(indices)` -> {index: view}."""
         lo, hi = sorted((key.view.index, cur.index))
-        between = [i for i in avail if lo < i < hi]
+        between = avail[bisect.bisect_right(avail, lo):bisect.bisect_left(avail, hi)]  # avail: sorted, unique
         if not between or self.s.neighbours <= 0:
             return failed, None
         between.sort(key=lambda i: abs(i - key.view.index))

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.solve.stacked import SINGULAR_DET
+from pipeline.solve.stacked import FULL3, cofactors3
 
 #: the bias's prior standard deviation over the stated attitude sigma: the candidates, equally likely a priori
 PHI_GRID = np.linspace(0.0, 1.0, 9)
@@ -108,20 +108,14 @@ def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None,
     n00, n01, n02, n11, n12, n22 = (both[:, e] - (fh[:, c] * h[:, d]).sum(axis=1) for e, (c, d) in enumerate(PAIRS))
     g = both[:, _JR] - (fh * t[:, None]).sum(axis=2)  # (G,3,b)
     q = both[:, _RR] - (f * t * t).sum(axis=1)
-    # the inverse by cofactors, singular as `stacked.inverse3` judges it
-    c00, c01, c02 = n11 * n22 - n12 * n12, n02 * n12 - n01 * n22, n01 * n12 - n02 * n11
-    det = n00 * c00 + n01 * c01 + n02 * c02
-    with np.errstate(divide="ignore", invalid="ignore"):
-        singular = ~((n00 > 0) & (n11 > 0) & (n22 > 0) & (det / (n00 * n11 * n22) > SINGULAR_DET))
-        C = np.stack([c00, c01, c02, n00 * n22 - n02 * n02, n01 * n02 - n00 * n12, n00 * n11 - n01 * n01]) / det
-    C = np.where(singular, np.nan, C)  # (6,G,b) in PAIRS order
-    full = ((0, 1, 2), (1, 3, 4), (2, 4, 5))  # the PAIRS entry of (c, d)
-    d = np.stack([sum(C[full[c][e]] * g[:, e] for e in range(3)) for c in range(3)], axis=1)  # (G,3,b)
+    C, det, singular = cofactors3([n00, n01, n02, n11, n12, n22])  # (G,b) planes, in PAIRS order
+    C = np.stack(C)
+    d = np.stack([sum(C[FULL3[c][e]] * g[:, e] for e in range(3)) for c in range(3)], axis=1)  # (G,3,b)
     with np.errstate(divide="ignore", invalid="ignore"):
         ll = -0.5 * (q - (g * d).sum(axis=1) + np.log1p(p[..., None] * s).sum(axis=1) + np.log(det) + logdet_rows)
     logL = np.where(singular | ~np.isfinite(ll), -np.inf, ll)
     singular_all = singular.all(axis=0)
-    Ch = np.stack([sum(C[full[c][e]][:, None] * h[:, e] for e in range(3)) for c in range(3)], axis=1)  # (G,3,2,b)
+    Ch = np.stack([sum(C[FULL3[c][e]][:, None] * h[:, e] for e in range(3)) for c in range(3)], axis=1)  # (G,3,2,b)
     bias = f * (t - (h * d[:, :, None]).sum(axis=1))  # (G,2,b)
     bvar = f + f * f * (h * Ch).sum(axis=1)
     cross = -f[:, None] * Ch  # (G,3,2,b)

@@ -15,11 +15,13 @@ from pipeline.solve.estimate import Status
 from pipeline.solve.iterate import problem_scale_m, start_status
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import (
-    SINGULAR_DET,
+    FULL3,
     Planes,
     Stacked,
+    cofactors3,
     condition_numbers,
     evaluate,
+    full3,
     inverse3,
     put_last,
     take_last,
@@ -177,19 +179,12 @@ def _normal(J: np.ndarray, E: np.ndarray, w, wn=None):
 
 
 def _solve3(N, g, lam=None):
-    """Closed-form solution (b,3) of (N + lam diag N) x = g from the six entries, the `stacked.solve_spd`
-    singular flag (b,) and the cofactors and determinant (for the inverse)."""
-    a, b, c, d, f, i = N
+    """Closed-form solution (b,3) of (N + lam diag N) x = g from the six entries (`stacked.cofactors3`) and
+    the singular flag (b,)."""
     if lam is not None:
-        a, d, i = a + lam * a, d + lam * d, i + lam * i
-    A0, B0, C0 = d * i - f * f, c * f - b * i, b * f - c * d
-    det = a * A0 + b * B0 + c * C0
-    singular = ~((a > 0) & (d > 0) & (i > 0) & (det / (a * d * i) > SINGULAR_DET))
-    D0, E0, F0 = a * i - c * c, b * c - a * f, a * d - b * b
-    g0, g1, g2 = g
-    x = np.stack([(A0 * g0 + B0 * g1 + C0 * g2), (B0 * g0 + D0 * g1 + E0 * g2), (C0 * g0 + E0 * g1 + F0 * g2)],
-                 axis=1) / det[:, None]
-    return x, singular, (A0, B0, C0, D0, E0, F0), det
+        N = [x + lam * x if k in (0, 3, 5) else x for k, x in enumerate(N)]
+    inv, _, singular = cofactors3(N)
+    return np.stack([sum(inv[FULL3[c][e]] * g[e] for e in range(3)) for c in range(3)], axis=1), singular
 
 
 def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
@@ -446,7 +441,7 @@ class White(_iterate.Model):
             _bias_schur(N, Ji, ai, wi)
         if self.terrain is not None:
             _add_terrain(N, g, *_terrain_rows(self.terrain, X))
-        dX, singular, _, _ = _solve3(N, g, lam)
+        dX, singular = _solve3(N, g, lam)
         return dX, singular
 
     def trial(self, idx, Xn):
@@ -523,7 +518,7 @@ class White(_iterate.Model):
             jt, et, _ = _terrain_rows(self.terrain, self.X)
             _add_terrain(N6, None, jt, et)
             chi2 = chi2 + et ** 2
-        return _full3(N6), chi2
+        return full3(N6), chi2
 
     def adjust(self, cov, cov0, infl, vf_chi, failed, drift_pix):
         """The bias averaged over its size (`_mixture`) where it is unknown: (cov, cov0, E_report, singular)."""
@@ -631,11 +626,6 @@ def _add_terrain(N, g, jt, et, use=None):
             g[c] = g[c] + jt[c] * et
 
 
-def _full3(N6):
-    a, b, c, d, f, i = N6
-    return np.stack([a, b, c, b, d, f, c, f, i], axis=1).reshape(-1, 3, 3)
-
-
 def _profile_bias(E, a, robust, z):
     """The bias-corrected residuals E - a z (3,n,b) and z (3,b): the bias (in prior standard deviations) that
     minimizes sum rho(E - a z) + |z|^2 / 2 for the u and v rows (a few IRLS rounds from the previous z; the
@@ -722,8 +712,7 @@ def _vce_factors(J, E, ok, robust, a=None, terrain_rows=None):
     hs = _bias_schur(N, J, a, w) if a is not None else None
     if terrain_rows is not None:
         _add_terrain(N, None, *terrain_rows)
-    _, singular, (A0, B0, C0, D0, E0, F0), det = _solve3(N, [N[0]] * 3)
-    inv = [np.where(singular, np.nan, x / det) for x in (A0, B0, C0, D0, E0, F0)]
+    inv = cofactors3(N)[0]
     j0, j1, j2 = J
     quad = (inv[0] * j0 * j0 + inv[3] * j1 * j1 + inv[5] * j2 * j2
             + 2.0 * (inv[1] * j0 * j1 + inv[2] * j0 * j2 + inv[4] * j1 * j2))

@@ -42,6 +42,9 @@ REDESCEND_A_PIXEL = 3.44
 REDESCEND_B = 6.0
 #: the boresight bias prior when the sigma gives no attitude accuracy (deg)
 DEFAULT_BIAS_PRIOR_DEG = 0.5
+#: the Huber phase before the redescending one ends where its step is below this many standard deviations of
+#: the target (the redescending phase moves the answer by about one standard deviation from there)
+START_TOL_SIGMA = 0.1
 VCE_MAX_ROUNDS = 10
 VCE_TOL = 0.01
 
@@ -251,6 +254,7 @@ def run(m, st: Stacked, X: np.ndarray, status: np.ndarray, bad: np.ndarray, X0: 
             active = ~((status == Status.DIVERGED) | (status == Status.DEGENERATE)) & ~bad
             status[active] = Status.MAX_ITERATIONS
         m.start(phase)
+        m.start_only = phase != robust  # the Huber phase: the redescending phase's start
         _iterate.drive(m, X, status, active, iterations, bound, centre, tol_m, max_iterations, damped=m.damped)
     return finish(m, X, status, iterations)
 
@@ -366,6 +370,7 @@ class White(_iterate.Model):
         self.bias_size_unknown = False
         self.split_attitude = False
         self.mix = None
+        self.start_only = False
 
     def _eval(self, pl, a, X, z, robust):
         """J, bias-corrected E, ok, z, cost, IRLS weights at X (the sub-batch of pl, a, z)."""
@@ -442,7 +447,19 @@ class White(_iterate.Model):
         if self.terrain is not None:
             _add_terrain(N, g, *_terrain_rows(self.terrain, X))
         dX, singular = _solve3(N, g, lam)
+        self._N = N
         return dX, singular
+
+    def negligible(self, idx, dX):
+        """In the Huber phase before the redescending one (a start), a step shorter than START_TOL_SIGMA of the
+        target's standard deviation as that step's normal matrix N gives it (dX^T N dX, the rows standardized)."""
+        if not self.start_only:
+            return np.zeros(idx.size, dtype=bool)
+        x0, x1, x2 = dX.T
+        n00, n01, n02, n11, n12, n22 = self._N
+        q = (n00 * x0 * x0 + n11 * x1 * x1 + n22 * x2 * x2
+             + 2.0 * (n01 * x0 * x1 + n02 * x0 * x2 + n12 * x1 * x2))
+        return q <= START_TOL_SIGMA ** 2
 
     def trial(self, idx, Xn):
         z, a = self._active(idx)[4:]
@@ -464,10 +481,12 @@ class White(_iterate.Model):
         return retry
 
     def converged(self, d_idx):
-        """Variance components at convergence: the problems whose factors changed go on."""
+        """Variance components at convergence (at the final iterate: `drive` takes a last small step without
+        evaluating it): the problems whose factors changed go on."""
         if not self.vce:
             return np.zeros(d_idx.size, dtype=bool)
         self.settle()  # the variance components rescale the full arrays
+        self._reevaluate(d_idx)
         factors, usable = _vce_factors(take_last(self.J, d_idx), take_last(self.E, d_idx), take_last(self.ok, d_idx),
                                        self.robust, None if self.a is None else take_last(self.a, d_idx),
                                        None if self.terrain is None else _terrain_rows(self.terrain, self.X[d_idx]))
@@ -479,13 +498,17 @@ class White(_iterate.Model):
         if rd.size:  # rescale the standardized rows: sigma_g -> sigma_g sqrt(factor_g)
             self.rescale(rd, 0, change[again, 0])
             self.rescale(rd, 1, change[again, 1])
-            J, E, _, z, cost, w_rd = self._eval(self.pl.take(rd), None if self.a is None else take_last(self.a, rd),
-                                                self.X[rd], take_last(self.z, rd), self.robust)
-            self.cost[rd] = cost
-            for old, new in ((self.J, J), (self.E, E), (self.z, z), (self.wr, w_rd)):
-                if old is not None:
-                    put_last(old, rd, new)
+            self._reevaluate(rd)
         return again
+
+    def _reevaluate(self, idx):
+        """The state (J, E, ok, z, weights, cost) of the problems idx evaluated again at self.X (after `settle`)."""
+        J, E, ok, z, cost, w = self._eval(self.pl.take(idx), None if self.a is None else take_last(self.a, idx),
+                                          self.X[idx], take_last(self.z, idx), self.robust)
+        self.cost[idx] = cost
+        for old, new in ((self.J, J), (self.E, E), (self.ok, ok), (self.z, z), (self.wr, w)):
+            if old is not None:
+                put_last(old, idx, new)
 
     def rescale(self, idx, g, factor):
         """Multiply the variances of group g (0 pixels, 1 ranges) of problems idx (indices, or a slice) by factor."""

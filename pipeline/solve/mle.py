@@ -45,6 +45,8 @@ DEFAULT_BIAS_PRIOR_DEG = 0.5
 #: the Huber phase before the redescending one ends where its step is below this many standard deviations of
 #: the target (the redescending phase moves the answer by about one standard deviation from there)
 START_TOL_SIGMA = 0.1
+#: the bias profile's IRLS rounds end once no problem's bias (in prior standard deviations) moves by more
+PROFILE_TOL = 1e-12
 VCE_MAX_ROUNDS = 10
 VCE_TOL = 0.01
 
@@ -652,7 +654,7 @@ def _add_terrain(N, g, jt, et, use=None):
 def _profile_bias(E, a, robust, z):
     """The bias-corrected residuals E - a z (3,n,b) and z (3,b): the bias (in prior standard deviations) that
     minimizes sum rho(E - a z) + |z|^2 / 2 for the u and v rows (a few IRLS rounds from the previous z; the
-    range rows carry no bias)."""
+    range rows carry no bias; the rounds stop once no problem's bias moves by more than PROFILE_TOL)."""
     a2 = a[:2]
     aE, aa = a2 * E[:2], a2 * a2  # (2,n,b)
     if robust is None:
@@ -665,7 +667,11 @@ def _profile_bias(E, a, robust, z):
         else:
             w = _rho_and_weight(Euv, robust, rho=False)[1]
             num, den = np.einsum("knb,knb->kb", w, aE), np.einsum("knb,knb->kb", w, aa)
-        z[:2] = num / (1.0 + den)
+        zn = num / (1.0 + den)
+        still = np.abs(zn - z[:2]).max(initial=0.0) > PROFILE_TOL
+        z[:2] = zn
+        if not still:  # the weights did not change: the profile is exact
+            break
     return E - a * z[:, None, :], z
 
 

@@ -309,9 +309,13 @@ def finish(m, X: np.ndarray, status: np.ndarray, iterations: np.ndarray):
     Ew = E if wr is None else np.sqrt(wr) * E
     # a slow drift under white noise hardly shows at lag 1 but does in the means over blocks of frames (batch
     # means): the larger factor inflates; it does not call for the learned drift model (`methods._drifts`)
+    # a run of consecutive frames beyond the redescending loss's full-weight zone (rejected ones included) is one
+    # outlying segment (a mistracked run), not drift: left out of the lag-1 test (the batch means keep it)
+    seg_pix = fit_checks.outlying_runs(ok[0] & (np.hypot(E[0], E[1]) > REDESCEND_A_PIXEL))
+    use_acf = use & ~np.stack([seg_pix, seg_pix, fit_checks.outlying_runs(ok[2] & (np.abs(E[2]) > REDESCEND_A))])
     rho, drift, ratio, block, infl = [], [], [], [], []
     for rows in (slice(0, 2), slice(2, 3)):
-        r, pairs = fit_checks.lag1_autocorrelation(Ew, use, rows)
+        r, pairs = fit_checks.lag1_autocorrelation(Ew, use_acf, rows)
         d = fit_checks.acf_significant(r, pairs) & (not m.drift_modelled)
         vr, blocks = fit_checks.batch_means_ratio(Ew, use, rows)
         blk = fit_checks.batch_means_significant(vr, blocks) & (not m.drift_modelled)

@@ -5,8 +5,6 @@ estimation, posterior covariance, CEP and error ellipsoid. Batched over B proble
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
 from pipeline.solve import bias_mixture, fit_checks
@@ -269,11 +267,13 @@ def robust_scale(m) -> None:
     components)."""
     E, ok = m.E, m.ok
     for g, rows in ((0, slice(0, 2)), (1, slice(2, 3))):
-        e = np.where(ok[rows], np.abs(E[rows]), np.nan).reshape(-1, E.shape[-1])
+        # the median of each problem's usable |e| (NaN where none): sorted, the unusable ones (inf) last
+        e = np.sort(np.where(ok[rows], np.abs(E[rows]), np.inf).reshape(-1, E.shape[-1]), axis=0)
         cnt = ok[rows].reshape(-1, E.shape[-1]).sum(axis=0)
-        with np.errstate(all="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            mad = 1.4826 * np.nanmedian(e, axis=0)
+        lo = np.take_along_axis(e, np.maximum(cnt - 1, 0)[None] // 2, axis=0)[0]
+        hi = np.take_along_axis(e, np.minimum(cnt // 2, e.shape[0] - 1)[None], axis=0)[0]
+        with np.errstate(all="ignore"):
+            mad = np.where(cnt > 0, 1.4826 * (0.5 * (lo + hi)), np.nan)
         big = np.isfinite(mad) & (cnt >= 4) & (mad > 1.0 + 2.34 / np.sqrt(np.maximum(cnt, 1)))
         f = np.where(big, mad ** 2, 1.0)
         m.rescale(slice(None), g, f)

@@ -99,18 +99,21 @@ def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iteratio
         # a step this small ends the problem: taken without evaluating the model there (the model's state stays
         # at the previous iterate, less than the tolerance away)
         done = ~singular & ~exploded & ((step_norm <= tol_m) | model.negligible(idx, dX))
-        X[idx[done]] = Xn[done]
-        t = ~done  # the others are evaluated at their trial point
+        any_done = done.any()
+        if any_done:
+            X[idx[done]] = Xn[done]
+        t = np.flatnonzero(~done) if any_done else slice(None)  # the others: evaluated at their trial point
+        it = idx[t]
         accept = np.zeros(idx.size, dtype=bool)
         retry = np.zeros(idx.size, dtype=bool)
-        if t.any():
-            it, Xt, sing_t, expl_t = idx[t], Xi[t], singular[t], exploded[t]
-            acc_t = ~sing_t & ~expl_t & model.trial(it, np.where(expl_t[:, None], Xt, Xn[t]))
+        if it.size:
+            Xt, expl_t = Xi[t], exploded[t]
+            acc_t = ~singular[t] & ~expl_t & model.trial(it, np.where(expl_t[:, None], Xt, Xn[t]))
             X[it] = np.where((acc_t | (expl_t & finite[t]))[:, None], Xn[t], Xt)
             accept[t], retry[t] = acc_t, model.accept(it, acc_t)
         if damped:
             lam[idx[accept]] = np.where(lam[idx[accept]] / 10 < 1e-9, 0.0, lam[idx[accept]] / 10)
-            rej = idx[~accept & ~retry & ~done]
+            rej = idx[~accept & ~retry]
             lam[rej] = np.where(lam[rej] == 0, 1e-4, lam[rej] * 10)
         still = ~singular & ~exploded & ~done
         stuck = still & ~accept & (lam[idx] > 1e12)  # damping that cannot help: the minimum is reached

@@ -317,7 +317,9 @@ def cofactors3(N6, singular_below: float = SINGULAR_DET):
     det = a * A0 + b * B0 + c * C0
     with np.errstate(divide="ignore", invalid="ignore"):
         singular = ~((a > 0) & (e > 0) & (i > 0) & (det / (a * e * i) > singular_below))
-        inv = [np.where(singular, np.nan, x / det) for x in (A0, B0, C0, a * i - c * c, b * c - a * f, a * e - b * b)]
+        inv = [x / det for x in (A0, B0, C0, a * i - c * c, b * c - a * f, a * e - b * b)]
+    if singular.any():
+        inv = [np.where(singular, np.nan, x) for x in inv]
     return inv, det, singular
 
 

@@ -125,8 +125,10 @@ def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None,
     pi = np.where(np.isfinite(pi), pi, 0.0)
     total = pi.sum(axis=0)
     pi = np.where(total > 0, pi / np.where(total > 0, total, 1.0), 1.0 / G)
-    # a singular candidate has no weight (pi = 0); keep its NaNs out of the sums
-    d, C, bias, bvar, cross = (np.where(np.isfinite(x), x, 0.0) for x in (d, C, bias, bvar, cross))
+    # a singular candidate has no weight (pi = 0); keep its NaNs out of the sums (a candidate with a finite
+    # likelihood has finite terms: only the others can hold any)
+    if not np.isfinite(logL).all():
+        d, C, bias, bvar, cross = (np.where(np.isfinite(x), x, 0.0) for x in (d, C, bias, bvar, cross))
     step = (pi[:, None] * d).sum(axis=0)  # (3,b)
     dev = d - step
     cov6 = np.stack([(pi * (C[e] + dev[:, c] * dev[:, dd])).sum(axis=0) for e, (c, dd) in enumerate(PAIRS)])

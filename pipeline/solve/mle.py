@@ -599,8 +599,10 @@ class White(_iterate.Model):
         keep = ~failed
         a0 = np.zeros_like(self.a)
         J, E, ok = self.J, self.E + self.a * self.z[:, None, :], self.ok
+        rows = None
         for rnd in range(2):
             if rnd:
+                ok_first = ok
                 J, E, ok = evaluate(self.pl, self.X)
             a0[:2] = np.where(ok[:2], self.a[:2], 0.0)
             w = np.where(ok, 1.0 if self.wr is None else self.wr, 0.0)
@@ -608,7 +610,10 @@ class White(_iterate.Model):
             # the attitude's share of each row's variance, as the columns passed weigh it (a bias at the
             # largest prior is the whole attitude error); none where the residuals drift
             share = np.where(drift_pix, 0.0, np.minimum(a_mix[:2] ** 2, 1.0)) if self.split_attitude else None
-            mix = bias_mixture.mixture(*self._with_terrain(J * s, E * s, a_mix, w, share))
+            Jm, Em, am, wm, share = self._with_terrain(J * s, E * s, a_mix, w, share)
+            if share is not None and (rows is None or not np.array_equal(ok, ok_first)):  # else the same rows
+                rows = bias_mixture.ratios(share, wm)
+            mix = bias_mixture.mixture(Jm, Em, am, wm, rows, step_only=rnd == 0)
             step = np.where(keep[:, None] & np.isfinite(mix["step"]), mix["step"], 0.0)
             self.X += step
         # the same point as stated (rows and bias columns scaled by g): where nothing scaled them (s = g = 1) the
@@ -620,8 +625,9 @@ class White(_iterate.Model):
             g0 = take_last(g, restate)
             share0 = (np.where(take_last(drift_pix, restate), 0.0, np.minimum(a0g[:2] ** 2, 1.0))
                       if self.split_attitude else None)
-            cov_stated[restate] = bias_mixture.mixture(*self._with_terrain(J0 * g0, E0 * g0, a0g, w0, share0,
-                                                                           restate))["covariance"]
+            Jm, Em, am, wm, share0 = self._with_terrain(J0 * g0, E0 * g0, a0g, w0, share0, restate)
+            cov_stated[restate] = bias_mixture.mixture(Jm, Em, am, wm, None if share0 is None
+                                                       else bias_mixture.ratios(share0, wm))["covariance"]
         # the bias in units of the stated prior: the columns passed carry the misfit's scaling s_bias / s
         unit = (s_bias / s)[0, 0]
         mix["bias"] = mix["bias"] * unit[:, None]

@@ -24,21 +24,15 @@ def dlt(st: Stacked, with_condition: bool = True):
     c = st.platform_m.mean(axis=1)  # (B,3)
     spread = np.sqrt(((st.platform_m - c[:, None, :]) ** 2).sum(-1).mean(-1))
     sc = np.where(spread > 1.0, spread, 1.0)
-    # P' = P [[sc I, c], [0, 1]], on (B,n) planes of each entry (`Stacked.planes`: numpy is slow on tiny axes)
-    Mc, p4c, pixc = st.planes()
-    Pp = [[Mc[k, 0] * sc[:, None], Mc[k, 1] * sc[:, None], Mc[k, 2] * sc[:, None],
-           Mc[k, 0] * c[:, 0, None] + Mc[k, 1] * c[:, 1, None] + Mc[k, 2] * c[:, 2, None] + p4c[k]] for k in range(3)]
-    A = []  # the unit rows (B,n) planes [u p3' - p1', v p3' - p2'], zero where the frame has no pixel
-    for k in (0, 1):
-        row = [pixc[k] * Pp[2][j] - Pp[k][j] for j in range(4)]
-        norm = np.sqrt(row[0] * row[0] + row[1] * row[1] + row[2] * row[2] + row[3] * row[3])
-        ok = st.has_pix & (norm > 0)
-        inv = np.where(ok, 1.0 / np.where(ok, norm, 1.0), 0.0)
-        A.append([x * inv for x in row])
-    N = np.empty((st.size, 4, 4))
-    for i in range(4):
-        for j in range(i, 4):
-            N[:, i, j] = N[:, j, i] = (A[0][i] * A[0][j] + A[1][i] * A[1][j]).sum(axis=1)
+    # P' = P [[sc I, c], [0, 1]]
+    Mp = st.M * sc[:, None, None, None]
+    p4p = (st.M @ c[:, None, :, None])[..., 0] + st.p4
+    Pp = np.concatenate([Mp, p4p[..., None]], axis=-1)  # (B,n,3,4)
+    rows = st.pix[..., :, None] * Pp[..., 2:3, :] - Pp[..., :2, :]  # (B,n,2,4)
+    norm = np.sqrt((rows * rows).sum(axis=-1, keepdims=True))
+    ok = st.has_pix[..., None, None] & (norm > 0)
+    A = np.where(ok, rows / np.where(ok, norm, 1.0), 0.0).reshape(st.size, -1, 4)
+    N = np.swapaxes(A, 1, 2) @ A
     enough = st.has_pix.sum(axis=1) >= 2
     evals, evecs = np.linalg.eigh(N)
     x = evecs[..., 0]

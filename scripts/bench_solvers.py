@@ -16,6 +16,10 @@ Reports, in one run:
     python scripts/bench_solvers.py [--problems 40] [--batch 8000] [--gamma 30]
     python scripts/bench_solvers.py --against COMMIT[,COMMIT...] [--batch 0]   (before / after, interleaved)
     python scripts/bench_solvers.py --scale [--sizes 300,600,1200,1800,18000] [--timeout 600] [--memory-gb 4]
+    OPENBLAS_NUM_THREADS=1 python scripts/bench_solvers.py --profile [--batch 8000] [--top 35]
+
+`--profile`: the batched mle on the paper's problems (issue 19's throughput): problems/s of CPU (best of 3) and a
+cProfile of one solve_batch("mle") call, sorted by cumulative time.
 
 `--scale` (issue 19): `solve("mle", obs)` on one long continuous-video flight per size (scripts/zoo.py's
 generator: an orbit at 20 m/s, 5 km slant, 2 km height, fx 4,000 px, every frame at 30 Hz with a pixel, the laser
@@ -29,9 +33,11 @@ against the ratio of their sizes, and the batched mle on the paper's problems (p
 from __future__ import annotations
 
 import argparse
+import cProfile
 import dataclasses
 import itertools
 import os
+import pstats
 import statistics
 import sys
 import time
@@ -42,14 +48,14 @@ import numpy as np
 import scipy.linalg
 from scipy.optimize import least_squares
 
-from pipeline.geometry.camera import project
-from pipeline.solve import METHODS, solve, solve_batch
-from pipeline.solve.mle import HUBER_C, base_variances
-from pipeline.solve.stacked import Stacked
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # this checkout's pipeline; test support (support.scenes)
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test support: support.scenes
-
-from support.scenes import paper_batch, paper_problem
+from pipeline.geometry.camera import project  # noqa: E402
+from pipeline.solve import METHODS, solve, solve_batch  # noqa: E402
+from pipeline.solve.mle import HUBER_C, base_variances  # noqa: E402
+from pipeline.solve.stacked import Stacked  # noqa: E402
+from support.scenes import paper_batch, paper_problem  # noqa: E402
 
 
 def _time_calls(fn, items, repeats: int) -> tuple[float, float]:
@@ -390,6 +396,21 @@ def _scale(sizes: list[int], timeout_s: float, batch_size: int, memory_gb: float
               f"{batch_size / best[1]:.0f} problems/s CPU ({batch_size / best[0]:.0f} wall)")
 
 
+def _profile(batch_size: int, gamma: float, top: int) -> None:
+    """Problems/s of CPU of solve_batch("mle") on paper problems (best of 3) and a cProfile of one call."""
+    b = paper_batch(batch_size, 10, gamma, seed=1)
+    solve_batch("mle", b)  # warm-up
+    times = []
+    for _ in range(3):
+        t = time.process_time()
+        solve_batch("mle", b)
+        times.append(time.process_time() - t)
+    print(f"{batch_size / min(times):.0f} problems/s CPU (best of 3), load average {os.getloadavg()[0]:.1f}")
+    prof = cProfile.Profile()
+    prof.runcall(solve_batch, "mle", b)
+    pstats.Stats(prof).sort_stats("cumulative").print_stats(top)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--problems", type=int, default=40, help="distinct problems for the single-solve timings")
@@ -404,8 +425,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sizes", default="300,600,1200,1800,18000", help="with --scale: observations per case")
     ap.add_argument("--timeout", type=float, default=600.0, help="with --scale: seconds per case")
     ap.add_argument("--memory-gb", type=float, default=4.0, help="with --scale: address-space limit per case")
+    ap.add_argument("--profile", action="store_true", help="instead: profile the batched mle (above)")
+    ap.add_argument("--top", type=int, default=35, help="with --profile: functions listed")
     ap.add_argument("--scale-child", type=int, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.profile:
+        _profile(args.batch, args.gamma, args.top)
+        return 0
     if args.scale_child:
         _scale_child(args.scale_child)
         return 0

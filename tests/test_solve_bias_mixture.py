@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 
 from pipeline.solve import solve, solve_batch
-from pipeline.solve.bias_mixture import PHI_GRID, RATIO_FLOOR, mixture
+from pipeline.solve.bias_mixture import PHI_GRID, RATIO_FLOOR, mixture, ratios
 from pipeline.solve.mle_outputs import DETERMINED_BELOW, notes
 from support.scenes import PAPER_SIGMA, paper_batch, paper_problem
 
@@ -77,7 +77,7 @@ def test_closed_form_matches_dense_linear_algebra():
         if w is not None:  # unused rows are zero in J and r
             J, r = J * (w > 0), r * (w > 0)
         share = rng.uniform(0.0, 0.95, (2, n, 1)) if trial < 4 else None
-        got = mixture(J, r, a, w, share)
+        got = mixture(J, r, a, w, None if share is None else ratios(share, w))
         want = _dense(J, r, a, w, share)
         for key in ("posterior", "step", "covariance", "bias", "bias_var", "bias_cross"):
             np.testing.assert_allclose(got[key][0], want[key], rtol=1e-8, atol=1e-10, err_msg=key)

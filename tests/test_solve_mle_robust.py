@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from pipeline.solve import fit_checks, solve, solve_batch
-from pipeline.solve.mle import REDESCEND_A_PIXEL, REDESCEND_B, _redescending, pixel_pair_redescending
+from pipeline.solve.mle import REDESCEND_A_PIXEL, REDESCEND_B, _redescending, base_variances, pixel_pair_redescending
 from pipeline.solve.observations import Observations
+from pipeline.solve.stacked import Stacked
 from support.scenes import PAPER_SIGMA, paper_batch, paper_problem
 
 
@@ -125,6 +126,25 @@ def test_batch_means_see_a_slow_drift_under_white_noise_that_lag1_misses():
     assert np.mean(fit_checks.batch_means_significant(w_ratio, w_blocks)) < 0.05
     assert (fit_checks.batch_means_inflation(np.array([3.0, 0.5, 500.0]), np.array([True, True, True]))
             == [3.0, 1.0, fit_checks.MAX_ACF_INFLATION]).all()
+
+
+def test_a_run_of_mistracked_frames_is_an_outlying_segment_not_drift():
+    """Five consecutive frames of 40 mistracked by 5 sigma (one direction per problem; white errors otherwise):
+    the plain lag-1 autocorrelation of the residuals calls nearly every problem drifting; the fit checks leave
+    runs of frames beyond the full-weight zone out of the lag-1 test, and call few."""
+    assert (fit_checks.outlying_runs(np.array([[1, 0, 1, 1, 0, 1, 1, 1, 0, 1]], dtype=bool).T)[:, 0]
+            == [0, 0, 1, 1, 0, 1, 1, 1, 0, 0]).all()
+    B, n, run = 300, 40, slice(12, 17)
+    b = paper_batch(B, n, 30.0, seed=3)
+    sd = np.sqrt(base_variances(Stacked.from_batch(b), b.truth_m, b.sigma)[:, :2 * n].reshape(B, n, 2))
+    theta = np.random.default_rng(4).uniform(0.0, 2.0 * np.pi, B)
+    pixel = b.pixel.copy()
+    pixel[:, run] += 5.0 * np.stack([np.cos(theta), np.sin(theta)], axis=1)[:, None, :] * sd[:, run]
+    ex = solve_batch("mle", dataclasses.replace(b, pixel=pixel)).extras
+    e = ex["residual_sigmas"].transpose(2, 1, 0)
+    plain = fit_checks.acf_significant(*fit_checks.lag1_autocorrelation(e, np.ones(e.shape, dtype=bool), slice(0, 2)))
+    assert plain.mean() > 0.9
+    assert ex["drift_pixel"].mean() < 0.25  # 0.61 when the run counted in the lag-1 test
 
 
 def test_misfit_is_said_in_words_and_inflates_the_covariance():

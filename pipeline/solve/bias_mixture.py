@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.solve.stacked import SINGULAR_DET
+from pipeline.solve.stacked import FULL3, cofactors3
 
 #: the bias's prior standard deviation over the stated attitude sigma: the candidates, equally likely a priori
 PHI_GRID = np.linspace(0.0, 1.0, 9)
@@ -65,19 +65,31 @@ def _row_products(J: np.ndarray, r: np.ndarray, a: np.ndarray, W: np.ndarray) ->
     return F
 
 
-def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None,
-            share: np.ndarray | None = None) -> dict:
+def ratios(share: np.ndarray, w: np.ndarray | None):
+    """Each candidate's ratios of the u and v rows' frame-to-frame variance to the stated one, 1 - p c (at least
+    RATIO_FLOOR), for the attitude's share c (2,n,b) of each row's variance (0 where the weight w (3,n,b) is 0:
+    rows not in use): their inverses (G,2,n,b) and the sums of their logs over the rows (G,b), for `mixture`
+    (they depend on the rows' shares and weights only, not on where the model is linearized)."""
+    if w is not None:
+        share = np.where(np.asarray(w)[:2] > 0, share, 0.0)
+    p = PHI_GRID * PHI_GRID
+    ratio = np.maximum(1.0 - p[:, None, None, None] * share, RATIO_FLOOR)
+    return 1.0 / ratio, np.log(ratio).reshape(len(PHI_GRID), -1, share.shape[-1]).sum(axis=1)
+
+
+def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None, rows=None,
+            step_only: bool = False) -> dict:
     """The bias-averaged linear step and covariance of b problems (module docstring).
 
     J (3,3,n,b), r (3,n,b), a (3,n,b) (rows 0 and 1 used), w (3,n,b) or None (unit weights); rows that are not
-    in use must be zero in J and r and have zero weight (or zero a); share (2,n,b) or None: the attitude's
-    share c in [0, 1] of each u and v row's variance (None: the frame-to-frame part keeps it all, the bias adds
-    to it). Returns step (b,3) m, covariance (b,3,3) m^2, posterior (b,G) over PHI_GRID, bias (b,2) and
-    bias_var (b,2) in units of a's prior (u, v), bias_cross (b,2,3) m the covariance of each bias with the
-    target, singular (b,) where no candidate solves.
+    in use must be zero in J and r and have zero weight (or zero a); rows: `ratios` of the attitude's share
+    of each u and v row's variance, or None (the frame-to-frame part keeps it all, the bias adds to it).
+    Returns step (b,3) m, covariance (b,3,3) m^2, posterior (b,G) over PHI_GRID, bias (b,2) and bias_var (b,2)
+    in units of a's prior (u, v), bias_cross (b,2,3) m the covariance of each bias with the target, singular
+    (b,) where no candidate solves; with step_only the step and singular alone.
 
-    Only the u and v rows' weights depend on the candidate (through share): the rows' weighted products are
-    formed once (`_row_products`) and each candidate sums them over the frames with its ratios; the range
+    Only the u and v rows' weights depend on the candidate (through the ratios): the rows' weighted products
+    are formed once (`_row_products`) and each candidate sums them over the frames with its ratios; the range
     rows' sums are the same for all. Then all candidates at once as (G,b) planes, 3x3 solves by cofactors.
     """
     W1 = np.ones(r.shape) if w is None else np.asarray(w, dtype=np.float64)
@@ -89,17 +101,14 @@ def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None,
     WJr = Jr * Wr
     range_sums = np.stack([(WJr[c] * Jr[d]).sum(axis=0) for c, d in PAIRS]
                           + [(WJr[c] * rr).sum(axis=0) for c in range(3)] + [(Wr * rr * rr).sum(axis=0)])
-    if share is None:  # the same sums for every candidate
+    if rows is None:  # the same sums for every candidate
         S = np.broadcast_to(F.sum(axis=2), (G, 15, 2, b))
         logdet_rows = np.zeros((G, b))
     else:  # the frame-to-frame attitude variance is what the bias leaves of the stated one
+        inv_ratio, logdet_rows = rows
         S = np.empty((G, 15, 2, b))
-        logdet_rows = np.empty((G, b))
-        share = np.where(W1[:2] > 0, share, 0.0)  # rows not in use: ratio 1, no log det
         for j in range(G):
-            ratio = np.maximum(1.0 - p[j, 0] * share, RATIO_FLOOR)
-            np.einsum("fknb,knb->fkb", F, 1.0 / ratio, out=S[j])
-            logdet_rows[j] = np.log(ratio).reshape(-1, b).sum(axis=0)
+            np.einsum("fknb,knb->fkb", F, inv_ratio[j], out=S[j])
     both = S[:, :10].sum(axis=2) + range_sums  # (G,10,b): N0's six entries, g0, c0
     s, t = S[:, _AA], S[:, _AR]  # (G,2,b)
     h = S[:, _AJ]  # (G,3,2,b)
@@ -108,32 +117,34 @@ def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None,
     n00, n01, n02, n11, n12, n22 = (both[:, e] - (fh[:, c] * h[:, d]).sum(axis=1) for e, (c, d) in enumerate(PAIRS))
     g = both[:, _JR] - (fh * t[:, None]).sum(axis=2)  # (G,3,b)
     q = both[:, _RR] - (f * t * t).sum(axis=1)
-    # the inverse by cofactors, singular as `stacked.inverse3` judges it
-    c00, c01, c02 = n11 * n22 - n12 * n12, n02 * n12 - n01 * n22, n01 * n12 - n02 * n11
-    det = n00 * c00 + n01 * c01 + n02 * c02
-    with np.errstate(divide="ignore", invalid="ignore"):
-        singular = ~((n00 > 0) & (n11 > 0) & (n22 > 0) & (det / (n00 * n11 * n22) > SINGULAR_DET))
-        C = np.stack([c00, c01, c02, n00 * n22 - n02 * n02, n01 * n02 - n00 * n12, n00 * n11 - n01 * n01]) / det
-    C = np.where(singular, np.nan, C)  # (6,G,b) in PAIRS order
-    full = ((0, 1, 2), (1, 3, 4), (2, 4, 5))  # the PAIRS entry of (c, d)
-    d = np.stack([sum(C[full[c][e]] * g[:, e] for e in range(3)) for c in range(3)], axis=1)  # (G,3,b)
+    C, det, singular = cofactors3([n00, n01, n02, n11, n12, n22])  # (G,b) planes, in PAIRS order
+    C = np.stack(C)
+    d = np.stack([sum(C[FULL3[c][e]] * g[:, e] for e in range(3)) for c in range(3)], axis=1)  # (G,3,b)
     with np.errstate(divide="ignore", invalid="ignore"):
         ll = -0.5 * (q - (g * d).sum(axis=1) + np.log1p(p[..., None] * s).sum(axis=1) + np.log(det) + logdet_rows)
     logL = np.where(singular | ~np.isfinite(ll), -np.inf, ll)
     singular_all = singular.all(axis=0)
-    Ch = np.stack([sum(C[full[c][e]][:, None] * h[:, e] for e in range(3)) for c in range(3)], axis=1)  # (G,3,2,b)
-    bias = f * (t - (h * d[:, :, None]).sum(axis=1))  # (G,2,b)
-    bvar = f + f * f * (h * Ch).sum(axis=1)
-    cross = -f[:, None] * Ch  # (G,3,2,b)
     top = logL.max(axis=0)
     with np.errstate(invalid="ignore"):
         pi = np.exp(logL - np.where(np.isfinite(top), top, 0.0))
     pi = np.where(np.isfinite(pi), pi, 0.0)
     total = pi.sum(axis=0)
     pi = np.where(total > 0, pi / np.where(total > 0, total, 1.0), 1.0 / G)
-    # a singular candidate has no weight (pi = 0); keep its NaNs out of the sums
-    d, C, bias, bvar, cross = (np.where(np.isfinite(x), x, 0.0) for x in (d, C, bias, bvar, cross))
+    # a singular candidate has no weight (pi = 0); keep its NaNs out of the sums (a candidate with a finite
+    # likelihood has finite terms: only the others can hold any)
+    unclean = not np.isfinite(logL).all()
+    d0, C0 = d, C
+    if unclean:
+        d, C = (np.where(np.isfinite(x), x, 0.0) for x in (d, C))
     step = (pi[:, None] * d).sum(axis=0)  # (3,b)
+    if step_only:
+        return {"step": step.T, "singular": singular_all}
+    Ch = np.stack([sum(C0[FULL3[c][e]][:, None] * h[:, e] for e in range(3)) for c in range(3)], axis=1)  # (G,3,2,b)
+    bias = f * (t - (h * d0[:, :, None]).sum(axis=1))  # (G,2,b)
+    bvar = f + f * f * (h * Ch).sum(axis=1)
+    cross = -f[:, None] * Ch  # (G,3,2,b)
+    if unclean:
+        bias, bvar, cross = (np.where(np.isfinite(x), x, 0.0) for x in (bias, bvar, cross))
     dev = d - step
     cov6 = np.stack([(pi * (C[e] + dev[:, c] * dev[:, dd])).sum(axis=0) for e, (c, dd) in enumerate(PAIRS)])
     cov = cov6[[0, 1, 2, 1, 3, 4, 2, 4, 5]].T.reshape(b, 3, 3)

@@ -42,6 +42,16 @@ def lag1_autocorrelation(E: np.ndarray, use: np.ndarray, rows: slice) -> tuple[n
     return rho, pairs
 
 
+def outlying_runs(off: np.ndarray) -> np.ndarray:
+    """(n,b) bool: the frames of off (n,b) (a residual beyond the loss's full-weight zone) that have an off
+    neighbour: runs of two or more consecutive frames. Under the error model two in a row happen with
+    probability ~1e-5 per pair: such a run is one outlying segment (a mistracked run), not drift."""
+    near = np.zeros_like(off)
+    near[1:] |= off[:-1]
+    near[:-1] |= off[1:]
+    return off & near
+
+
 def batch_means_ratio(E: np.ndarray, use: np.ndarray, rows: slice) -> tuple[np.ndarray, np.ndarray]:
     """(ratio (b,), blocks (b,)): the batch-means variance ratio of the residuals E (3,n,b) over the frames, per
     row of `rows` (u and v apart) pooled: the used frames (`use` (3,n,b) bool) in order, cut into blocks of
@@ -71,8 +81,10 @@ def batch_means_ratio(E: np.ndarray, use: np.ndarray, rows: slice) -> tuple[np.n
 
 def batch_means_significant(ratio: np.ndarray, blocks: np.ndarray) -> np.ndarray:
     """(b,) True where blocks * ratio exceeds the chi-square quantile of white residuals at DRIFT_ALPHA."""
+    # the quantile once per distinct number of blocks (scipy's per-call cost dominates on a batch)
+    dof, at = np.unique(np.maximum(blocks, 1), return_inverse=True)
     with np.errstate(invalid="ignore"):
-        return np.isfinite(ratio) & (blocks >= 2) & (ratio * blocks > _chi2.isf(DRIFT_ALPHA, np.maximum(blocks, 1)))
+        return np.isfinite(ratio) & (blocks >= 2) & (ratio * blocks > _chi2.isf(DRIFT_ALPHA, dof)[at.reshape(-1)])
 
 
 def batch_means_inflation(ratio: np.ndarray, significant: np.ndarray) -> np.ndarray:

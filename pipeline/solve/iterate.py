@@ -61,6 +61,10 @@ class Model:
     def converged(self, idx):
         return np.zeros(idx.size, dtype=bool)
 
+    def negligible(self, idx, dX):
+        """(k,) bool: steps dX (k,3) of the problems idx small enough to end them (besides ||dX|| <= tol_m)."""
+        return np.zeros(idx.size, dtype=bool)
+
     def settle(self):
         """After the iteration: the state of the problems complete (a model keeping the active ones apart)."""
 
@@ -91,15 +95,26 @@ def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iteratio
         Xn = Xi + np.where(singular[:, None], 0.0, dX)
         finite = np.isfinite(Xn).all(axis=1)
         exploded = ~finite | (np.sqrt(((Xn - centre[idx]) ** 2).sum(axis=1)) > bound[idx])
-        accept = ~singular & ~exploded & model.trial(idx, np.where(exploded[:, None], Xi, Xn))
-        X[idx] = np.where((accept | (exploded & finite))[:, None], Xn, Xi)
-        retry = model.accept(idx, accept)
+        step_norm = np.where(singular, np.inf, np.sqrt((dX * dX).sum(axis=1)))
+        # a step this small ends the problem: taken without evaluating the model there (the model's state stays
+        # at the previous iterate, less than the tolerance away)
+        done = ~singular & ~exploded & ((step_norm <= tol_m) | model.negligible(idx, dX))
+        any_done = done.any()
+        if any_done:
+            X[idx[done]] = Xn[done]
+        t = np.flatnonzero(~done) if any_done else slice(None)  # the others: evaluated at their trial point
+        it = idx[t]
+        accept = np.zeros(idx.size, dtype=bool)
+        retry = np.zeros(idx.size, dtype=bool)
+        if it.size:
+            Xt, expl_t = Xi[t], exploded[t]
+            acc_t = ~singular[t] & ~expl_t & model.trial(it, np.where(expl_t[:, None], Xt, Xn[t]))
+            X[it] = np.where((acc_t | (expl_t & finite[t]))[:, None], Xn[t], Xt)
+            accept[t], retry[t] = acc_t, model.accept(it, acc_t)
         if damped:
             lam[idx[accept]] = np.where(lam[idx[accept]] / 10 < 1e-9, 0.0, lam[idx[accept]] / 10)
             rej = idx[~accept & ~retry]
             lam[rej] = np.where(lam[rej] == 0, 1e-4, lam[rej] * 10)
-        step_norm = np.where(singular, np.inf, np.sqrt((dX * dX).sum(axis=1)))
-        done = (step_norm <= tol_m) & ~singular & ~exploded
         still = ~singular & ~exploded & ~done
         stuck = still & ~accept & (lam[idx] > 1e12)  # damping that cannot help: the minimum is reached
         done |= stuck

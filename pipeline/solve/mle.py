@@ -5,8 +5,6 @@ estimation, posterior covariance, CEP and error ellipsoid. Batched over B proble
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
 from pipeline.solve import bias_mixture, fit_checks
@@ -15,11 +13,13 @@ from pipeline.solve.estimate import Status
 from pipeline.solve.iterate import problem_scale_m, start_status
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import (
-    SINGULAR_DET,
+    FULL3,
     Planes,
     Stacked,
+    cofactors3,
     condition_numbers,
     evaluate,
+    full3,
     inverse3,
     put_last,
     take_last,
@@ -40,6 +40,11 @@ REDESCEND_A_PIXEL = 3.44
 REDESCEND_B = 6.0
 #: the boresight bias prior when the sigma gives no attitude accuracy (deg)
 DEFAULT_BIAS_PRIOR_DEG = 0.5
+#: the Huber phase before the redescending one ends where its step is below this many standard deviations of
+#: the target (the redescending phase moves the answer by about one standard deviation from there)
+START_TOL_SIGMA = 0.1
+#: the bias profile's IRLS rounds end once no problem's bias (in prior standard deviations) moves by more
+PROFILE_TOL = 1e-12
 VCE_MAX_ROUNDS = 10
 VCE_TOL = 0.01
 
@@ -177,19 +182,12 @@ def _normal(J: np.ndarray, E: np.ndarray, w, wn=None):
 
 
 def _solve3(N, g, lam=None):
-    """Closed-form solution (b,3) of (N + lam diag N) x = g from the six entries, the `stacked.solve_spd`
-    singular flag (b,) and the cofactors and determinant (for the inverse)."""
-    a, b, c, d, f, i = N
+    """Closed-form solution (b,3) of (N + lam diag N) x = g from the six entries (`stacked.cofactors3`) and
+    the singular flag (b,)."""
     if lam is not None:
-        a, d, i = a + lam * a, d + lam * d, i + lam * i
-    A0, B0, C0 = d * i - f * f, c * f - b * i, b * f - c * d
-    det = a * A0 + b * B0 + c * C0
-    singular = ~((a > 0) & (d > 0) & (i > 0) & (det / (a * d * i) > SINGULAR_DET))
-    D0, E0, F0 = a * i - c * c, b * c - a * f, a * d - b * b
-    g0, g1, g2 = g
-    x = np.stack([(A0 * g0 + B0 * g1 + C0 * g2), (B0 * g0 + D0 * g1 + E0 * g2), (C0 * g0 + E0 * g1 + F0 * g2)],
-                 axis=1) / det[:, None]
-    return x, singular, (A0, B0, C0, D0, E0, F0), det
+        N = [x + lam * x if k in (0, 3, 5) else x for k, x in enumerate(N)]
+    inv, _, singular = cofactors3(N)
+    return np.stack([sum(inv[FULL3[c][e]] * g[e] for e in range(3)) for c in range(3)], axis=1), singular
 
 
 def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
@@ -256,6 +254,7 @@ def run(m, st: Stacked, X: np.ndarray, status: np.ndarray, bad: np.ndarray, X0: 
             active = ~((status == Status.DIVERGED) | (status == Status.DEGENERATE)) & ~bad
             status[active] = Status.MAX_ITERATIONS
         m.start(phase)
+        m.start_only = phase != robust  # the Huber phase: the redescending phase's start
         _iterate.drive(m, X, status, active, iterations, bound, centre, tol_m, max_iterations, damped=m.damped)
     return finish(m, X, status, iterations)
 
@@ -268,11 +267,13 @@ def robust_scale(m) -> None:
     components)."""
     E, ok = m.E, m.ok
     for g, rows in ((0, slice(0, 2)), (1, slice(2, 3))):
-        e = np.where(ok[rows], np.abs(E[rows]), np.nan).reshape(-1, E.shape[-1])
+        # the median of each problem's usable |e| (NaN where none): sorted, the unusable ones (inf) last
+        e = np.sort(np.where(ok[rows], np.abs(E[rows]), np.inf).reshape(-1, E.shape[-1]), axis=0)
         cnt = ok[rows].reshape(-1, E.shape[-1]).sum(axis=0)
-        with np.errstate(all="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            mad = 1.4826 * np.nanmedian(e, axis=0)
+        lo = np.take_along_axis(e, np.maximum(cnt - 1, 0)[None] // 2, axis=0)[0]
+        hi = np.take_along_axis(e, np.minimum(cnt // 2, e.shape[0] - 1)[None], axis=0)[0]
+        with np.errstate(all="ignore"):
+            mad = np.where(cnt > 0, 1.4826 * (0.5 * (lo + hi)), np.nan)
         big = np.isfinite(mad) & (cnt >= 4) & (mad > 1.0 + 2.34 / np.sqrt(np.maximum(cnt, 1)))
         f = np.where(big, mad ** 2, 1.0)
         m.rescale(slice(None), g, f)
@@ -308,9 +309,13 @@ def finish(m, X: np.ndarray, status: np.ndarray, iterations: np.ndarray):
     Ew = E if wr is None else np.sqrt(wr) * E
     # a slow drift under white noise hardly shows at lag 1 but does in the means over blocks of frames (batch
     # means): the larger factor inflates; it does not call for the learned drift model (`methods._drifts`)
+    # a run of consecutive frames beyond the redescending loss's full-weight zone (rejected ones included) is one
+    # outlying segment (a mistracked run), not drift: left out of the lag-1 test (the batch means keep it)
+    seg_pix = fit_checks.outlying_runs(ok[0] & (np.hypot(E[0], E[1]) > REDESCEND_A_PIXEL))
+    use_acf = use & ~np.stack([seg_pix, seg_pix, fit_checks.outlying_runs(ok[2] & (np.abs(E[2]) > REDESCEND_A))])
     rho, drift, ratio, block, infl = [], [], [], [], []
     for rows in (slice(0, 2), slice(2, 3)):
-        r, pairs = fit_checks.lag1_autocorrelation(Ew, use, rows)
+        r, pairs = fit_checks.lag1_autocorrelation(Ew, use_acf, rows)
         d = fit_checks.acf_significant(r, pairs) & (not m.drift_modelled)
         vr, blocks = fit_checks.batch_means_ratio(Ew, use, rows)
         blk = fit_checks.batch_means_significant(vr, blocks) & (not m.drift_modelled)
@@ -371,6 +376,7 @@ class White(_iterate.Model):
         self.bias_size_unknown = False
         self.split_attitude = False
         self.mix = None
+        self.start_only = False
 
     def _eval(self, pl, a, X, z, robust):
         """J, bias-corrected E, ok, z, cost, IRLS weights at X (the sub-batch of pl, a, z)."""
@@ -446,8 +452,20 @@ class White(_iterate.Model):
             _bias_schur(N, Ji, ai, wi)
         if self.terrain is not None:
             _add_terrain(N, g, *_terrain_rows(self.terrain, X))
-        dX, singular, _, _ = _solve3(N, g, lam)
+        dX, singular = _solve3(N, g, lam)
+        self._N = N
         return dX, singular
+
+    def negligible(self, idx, dX):
+        """In the Huber phase before the redescending one (a start), a step shorter than START_TOL_SIGMA of the
+        target's standard deviation as that step's normal matrix N gives it (dX^T N dX, the rows standardized)."""
+        if not self.start_only:
+            return np.zeros(idx.size, dtype=bool)
+        x0, x1, x2 = dX.T
+        n00, n01, n02, n11, n12, n22 = self._N
+        q = (n00 * x0 * x0 + n11 * x1 * x1 + n22 * x2 * x2
+             + 2.0 * (n01 * x0 * x1 + n02 * x0 * x2 + n12 * x1 * x2))
+        return q <= START_TOL_SIGMA ** 2
 
     def trial(self, idx, Xn):
         z, a = self._active(idx)[4:]
@@ -469,10 +487,12 @@ class White(_iterate.Model):
         return retry
 
     def converged(self, d_idx):
-        """Variance components at convergence: the problems whose factors changed go on."""
+        """Variance components at convergence (at the final iterate: `drive` takes a last small step without
+        evaluating it): the problems whose factors changed go on."""
         if not self.vce:
             return np.zeros(d_idx.size, dtype=bool)
         self.settle()  # the variance components rescale the full arrays
+        self._reevaluate(d_idx)
         factors, usable = _vce_factors(take_last(self.J, d_idx), take_last(self.E, d_idx), take_last(self.ok, d_idx),
                                        self.robust, None if self.a is None else take_last(self.a, d_idx),
                                        None if self.terrain is None else _terrain_rows(self.terrain, self.X[d_idx]))
@@ -484,13 +504,17 @@ class White(_iterate.Model):
         if rd.size:  # rescale the standardized rows: sigma_g -> sigma_g sqrt(factor_g)
             self.rescale(rd, 0, change[again, 0])
             self.rescale(rd, 1, change[again, 1])
-            J, E, _, z, cost, w_rd = self._eval(self.pl.take(rd), None if self.a is None else take_last(self.a, rd),
-                                                self.X[rd], take_last(self.z, rd), self.robust)
-            self.cost[rd] = cost
-            for old, new in ((self.J, J), (self.E, E), (self.z, z), (self.wr, w_rd)):
-                if old is not None:
-                    put_last(old, rd, new)
+            self._reevaluate(rd)
         return again
+
+    def _reevaluate(self, idx):
+        """The state (J, E, ok, z, weights, cost) of the problems idx evaluated again at self.X (after `settle`)."""
+        J, E, ok, z, cost, w = self._eval(self.pl.take(idx), None if self.a is None else take_last(self.a, idx),
+                                          self.X[idx], take_last(self.z, idx), self.robust)
+        self.cost[idx] = cost
+        for old, new in ((self.J, J), (self.E, E), (self.ok, ok), (self.z, z), (self.wr, w)):
+            if old is not None:
+                put_last(old, idx, new)
 
     def rescale(self, idx, g, factor):
         """Multiply the variances of group g (0 pixels, 1 ranges) of problems idx (indices, or a slice) by factor."""
@@ -523,7 +547,7 @@ class White(_iterate.Model):
             jt, et, _ = _terrain_rows(self.terrain, self.X)
             _add_terrain(N6, None, jt, et)
             chi2 = chi2 + et ** 2
-        return _full3(N6), chi2
+        return full3(N6), chi2
 
     def adjust(self, cov, cov0, infl, vf_chi, failed, drift_pix):
         """The bias averaged over its size (`_mixture`) where it is unknown: (cov, cov0, E_report, singular)."""
@@ -575,8 +599,10 @@ class White(_iterate.Model):
         keep = ~failed
         a0 = np.zeros_like(self.a)
         J, E, ok = self.J, self.E + self.a * self.z[:, None, :], self.ok
+        rows = None
         for rnd in range(2):
             if rnd:
+                ok_first = ok
                 J, E, ok = evaluate(self.pl, self.X)
             a0[:2] = np.where(ok[:2], self.a[:2], 0.0)
             w = np.where(ok, 1.0 if self.wr is None else self.wr, 0.0)
@@ -584,7 +610,10 @@ class White(_iterate.Model):
             # the attitude's share of each row's variance, as the columns passed weigh it (a bias at the
             # largest prior is the whole attitude error); none where the residuals drift
             share = np.where(drift_pix, 0.0, np.minimum(a_mix[:2] ** 2, 1.0)) if self.split_attitude else None
-            mix = bias_mixture.mixture(*self._with_terrain(J * s, E * s, a_mix, w, share))
+            Jm, Em, am, wm, share = self._with_terrain(J * s, E * s, a_mix, w, share)
+            if share is not None and (rows is None or not np.array_equal(ok, ok_first)):  # else the same rows
+                rows = bias_mixture.ratios(share, wm)
+            mix = bias_mixture.mixture(Jm, Em, am, wm, rows, step_only=rnd == 0)
             step = np.where(keep[:, None] & np.isfinite(mix["step"]), mix["step"], 0.0)
             self.X += step
         # the same point as stated (rows and bias columns scaled by g): where nothing scaled them (s = g = 1) the
@@ -596,15 +625,17 @@ class White(_iterate.Model):
             g0 = take_last(g, restate)
             share0 = (np.where(take_last(drift_pix, restate), 0.0, np.minimum(a0g[:2] ** 2, 1.0))
                       if self.split_attitude else None)
-            cov_stated[restate] = bias_mixture.mixture(*self._with_terrain(J0 * g0, E0 * g0, a0g, w0, share0,
-                                                                           restate))["covariance"]
+            Jm, Em, am, wm, share0 = self._with_terrain(J0 * g0, E0 * g0, a0g, w0, share0, restate)
+            cov_stated[restate] = bias_mixture.mixture(Jm, Em, am, wm, None if share0 is None
+                                                       else bias_mixture.ratios(share0, wm))["covariance"]
         # the bias in units of the stated prior: the columns passed carry the misfit's scaling s_bias / s
         unit = (s_bias / s)[0, 0]
         mix["bias"] = mix["bias"] * unit[:, None]
         mix["bias_var"] = mix["bias_var"] * (unit * unit)[:, None]
         mix["bias_cross"] = mix["bias_cross"] * unit[:, None, None]
         mix["prior_scale"] = unit
-        E_report = evaluate(self.pl, self.X)[1]
+        # the residuals at the final X: the second round's, moved by its (millimetre) step to first order
+        E_report = E - np.einsum("cknb,bc->knb", J, step)
         E_report[:2] -= a0[:2] * mix["bias"].T[:, None, :]
         return mix, cov_stated, E_report
 
@@ -631,15 +662,10 @@ def _add_terrain(N, g, jt, et, use=None):
             g[c] = g[c] + jt[c] * et
 
 
-def _full3(N6):
-    a, b, c, d, f, i = N6
-    return np.stack([a, b, c, b, d, f, c, f, i], axis=1).reshape(-1, 3, 3)
-
-
 def _profile_bias(E, a, robust, z):
     """The bias-corrected residuals E - a z (3,n,b) and z (3,b): the bias (in prior standard deviations) that
     minimizes sum rho(E - a z) + |z|^2 / 2 for the u and v rows (a few IRLS rounds from the previous z; the
-    range rows carry no bias)."""
+    range rows carry no bias; the rounds stop once no problem's bias moves by more than PROFILE_TOL)."""
     a2 = a[:2]
     aE, aa = a2 * E[:2], a2 * a2  # (2,n,b)
     if robust is None:
@@ -652,7 +678,11 @@ def _profile_bias(E, a, robust, z):
         else:
             w = _rho_and_weight(Euv, robust, rho=False)[1]
             num, den = np.einsum("knb,knb->kb", w, aE), np.einsum("knb,knb->kb", w, aa)
-        z[:2] = num / (1.0 + den)
+        zn = num / (1.0 + den)
+        still = np.abs(zn - z[:2]).max(initial=0.0) > PROFILE_TOL
+        z[:2] = zn
+        if not still:  # the weights did not change: the profile is exact
+            break
     return E - a * z[:, None, :], z
 
 
@@ -722,8 +752,7 @@ def _vce_factors(J, E, ok, robust, a=None, terrain_rows=None):
     hs = _bias_schur(N, J, a, w) if a is not None else None
     if terrain_rows is not None:
         _add_terrain(N, None, *terrain_rows)
-    _, singular, (A0, B0, C0, D0, E0, F0), det = _solve3(N, [N[0]] * 3)
-    inv = [np.where(singular, np.nan, x / det) for x in (A0, B0, C0, D0, E0, F0)]
+    inv = cofactors3(N)[0]
     j0, j1, j2 = J
     quad = (inv[0] * j0 * j0 + inv[3] * j1 * j1 + inv[5] * j2 * j2
             + 2.0 * (inv[1] * j0 * j1 + inv[2] * j0 * j2 + inv[4] * j1 * j2))

@@ -307,19 +307,37 @@ def _cholesky_solve(N: np.ndarray, g: np.ndarray, singular_below: float):
     return out, singular
 
 
-def inverse3(N: np.ndarray, singular_below: float = SINGULAR_DET):
-    """Inverses (B,3,3) of symmetric 3x3 N by cofactors, and the `solve_spd` singular flag (B,): the
-    Jacobi-scaled determinant det / (N00 N11 N22). Singular ones are NaN."""
-    a, b, c = N[:, 0, 0], N[:, 0, 1], N[:, 0, 2]
-    e, f, i = N[:, 1, 1], N[:, 1, 2], N[:, 2, 2]
+def cofactors3(N6, singular_below: float = SINGULAR_DET):
+    """The inverse of symmetric 3x3 matrices given as their six entries N00 N01 N02 N11 N12 N22 (each an array
+    of any one shape), by cofactors: the six entries of the inverse in the same order (NaN where singular),
+    the determinant and the `solve_spd` singular flag (the Jacobi-scaled determinant det / (N00 N11 N22) below
+    singular_below, or a non-positive diagonal). The one 3x3 inverse of the batched kernels."""
+    a, b, c, e, f, i = N6
     A0, B0, C0 = e * i - f * f, c * f - b * i, b * f - c * e
     det = a * A0 + b * B0 + c * C0
     with np.errstate(divide="ignore", invalid="ignore"):
         singular = ~((a > 0) & (e > 0) & (i > 0) & (det / (a * e * i) > singular_below))
-        E0, F0, I0 = a * i - c * c, b * c - a * f, a * e - b * b
-        inv = np.stack([A0, B0, C0, B0, E0, F0, C0, F0, I0], axis=-1).reshape(-1, 3, 3) / det[:, None, None]
-    inv[singular] = np.nan
-    return inv, singular
+        inv = [x / det for x in (A0, B0, C0, a * i - c * c, b * c - a * f, a * e - b * b)]
+    if singular.any():
+        inv = [np.where(singular, np.nan, x) for x in inv]
+    return inv, det, singular
+
+
+#: the entry of the six (N00 N01 N02 N11 N12 N22) holding (row, column) of a symmetric 3x3 matrix
+FULL3 = ((0, 1, 2), (1, 3, 4), (2, 4, 5))
+
+
+def full3(N6) -> np.ndarray:
+    """(B,3,3) symmetric matrices from their six entries (each (B,))."""
+    return np.stack([N6[k] for row in FULL3 for k in row], axis=-1).reshape(-1, 3, 3)
+
+
+def inverse3(N: np.ndarray, singular_below: float = SINGULAR_DET):
+    """Inverses (B,3,3) of symmetric 3x3 N (`cofactors3`), and the `solve_spd` singular flag (B,). Singular
+    ones are NaN."""
+    inv, _, singular = cofactors3([N[:, r, c] for r, c in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))],
+                                  singular_below)
+    return full3(inv), singular
 
 
 def is_singular(N: np.ndarray) -> np.ndarray:

@@ -211,3 +211,17 @@ def test_the_bias_is_reported_in_degrees_when_the_sigmas_were_stated_too_small()
     ex = solve_batch("mle", biased).extras
     assert np.mean(~ex["consistent"]) > 0.8
     assert abs(np.median(ex["bias_deg"][:, 0]) - 0.3) < 0.08  # measured 0.25 (shrunk to the prior); 0.17 unscaled
+
+
+@pytest.mark.parametrize("robust", ["redescending", None])
+def test_what_mle_reports_belongs_to_the_position_it_returns(robust):
+    """The residuals (and so the weights, chi-square and covariance built from them) are those at the returned
+    position, even with a coarse tolerance that ends the iteration on a long step (no bias, no variance
+    components: nothing moves the position after the iteration)."""
+    from pipeline.solve.stacked import pixel_model
+
+    b = paper_batch(200, seed=5)
+    be = solve_batch("mle", b, tol_m=0.5, estimate_variance_components=False, bias_prior_deg=0.0, robust=robust)
+    _, r, ok = pixel_model(Stacked.from_batch(b), be.position_m)
+    reported = be.extras["residuals"][:, :, :2].reshape(200, -1)
+    assert np.abs(np.where(ok, reported - r, 0.0)).max() < 1e-9

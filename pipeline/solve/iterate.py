@@ -96,9 +96,10 @@ def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iteratio
         finite = np.isfinite(Xn).all(axis=1)
         exploded = ~finite | (np.sqrt(((Xn - centre[idx]) ** 2).sum(axis=1)) > bound[idx])
         step_norm = np.where(singular, np.inf, np.sqrt((dX * dX).sum(axis=1)))
-        # a step this small ends the problem: taken without evaluating the model there (the model's state stays
-        # at the previous iterate, less than the tolerance away)
-        done = ~singular & ~exploded & ((step_norm <= tol_m) | model.negligible(idx, dX))
+        # a step the model calls negligible (an undamped one ending a start phase) ends the problem without a
+        # trial: the next phase evaluates there. Every other step is tried, the last one too, so that what a
+        # model reports (residuals, weights, covariance) belongs to the X it returns
+        done = ~singular & ~exploded & model.negligible(idx, dX) & (lam[idx] == 0)
         any_done = done.any()
         if any_done:
             X[idx[done]] = Xn[done]
@@ -115,6 +116,7 @@ def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iteratio
             lam[idx[accept]] = np.where(lam[idx[accept]] / 10 < 1e-9, 0.0, lam[idx[accept]] / 10)
             rej = idx[~accept & ~retry]
             lam[rej] = np.where(lam[rej] == 0, 1e-4, lam[rej] * 10)
+        done |= (step_norm <= tol_m) & ~singular & ~exploded
         still = ~singular & ~exploded & ~done
         stuck = still & ~accept & (lam[idx] > 1e12)  # damping that cannot help: the minimum is reached
         done |= stuck

@@ -487,8 +487,8 @@ class White(_iterate.Model):
         return retry
 
     def converged(self, d_idx):
-        """Variance components at convergence (at the final iterate: `drive` takes a last small step without
-        evaluating it): the problems whose factors changed go on."""
+        """Variance components at convergence (at the final iterate; a step that ended a start phase was taken
+        without a trial, so the state is evaluated there first): the problems whose factors changed go on."""
         if not self.vce:
             return np.zeros(d_idx.size, dtype=bool)
         self.settle()  # the variance components rescale the full arrays
@@ -665,11 +665,13 @@ def _add_terrain(N, g, jt, et, use=None):
 def _profile_bias(E, a, robust, z):
     """The bias-corrected residuals E - a z (3,n,b) and z (3,b): the bias (in prior standard deviations) that
     minimizes sum rho(E - a z) + |z|^2 / 2 for the u and v rows (a few IRLS rounds from the previous z; the
-    range rows carry no bias; the rounds stop once no problem's bias moves by more than PROFILE_TOL)."""
+    range rows carry no bias; a problem keeps its bias once it moves by at most PROFILE_TOL, the rounds stop when
+    every problem has)."""
     a2 = a[:2]
     aE, aa = a2 * E[:2], a2 * a2  # (2,n,b)
     if robust is None:
         z[:2] = aE.sum(axis=1) / (1.0 + aa.sum(axis=1))
+    live = np.ones(z.shape[1], dtype=bool)  # the problems whose profile still moves (the others keep theirs)
     for _ in range(0 if robust is None else 4):
         Euv = E[:2] - a2 * z[:2, None, :]
         if robust == "redescending":  # one weight per frame for both rows
@@ -679,9 +681,10 @@ def _profile_bias(E, a, robust, z):
             w = _rho_and_weight(Euv, robust, rho=False)[1]
             num, den = np.einsum("knb,knb->kb", w, aE), np.einsum("knb,knb->kb", w, aa)
         zn = num / (1.0 + den)
-        still = np.abs(zn - z[:2]).max(initial=0.0) > PROFILE_TOL
-        z[:2] = zn
-        if not still:  # the weights did not change: the profile is exact
+        moved = (np.abs(zn - z[:2]) > PROFILE_TOL).any(axis=0)  # per problem: its weights changed (NaN: no)
+        z[:2] = np.where(live, zn, z[:2])
+        live &= moved
+        if not live.any():  # every problem's weights stand: its profile is exact
             break
     return E - a * z[:, None, :], z
 

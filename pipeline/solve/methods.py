@@ -129,7 +129,10 @@ def _range_init(st: Stacked, o: dict):
     return x0, init_status
 
 
-def _solve_stacked(method: str, st: Stacked, o: dict) -> BatchEstimate:
+def _solve_stacked(method: str, st: Stacked, o: dict, first: tuple | None = None,
+                   answers: dict | None = None) -> BatchEstimate:
+    """One method's kernel on the batch st. mle: first, its fit from the default start where the caller has it
+    (`_mle_dispatch`'s tuple); answers, the start estimators' answers for the multistart (`_mle_multistart`)."""
     B = st.size
     tol, itmax = o["tol_m"], o["max_iterations"]
     extras: dict = {}
@@ -168,9 +171,9 @@ def _solve_stacked(method: str, st: Stacked, o: dict) -> BatchEstimate:
             extras["k"] = ex["k"]
     elif method == "mle":
         if st.size == 1 and o.get("initial_m") is None:
-            X, it, status, cond, cov, ex = _mle_multistart(st, o)
+            X, it, status, cond, cov, ex = _mle_multistart(st, o, first, answers)
         else:
-            X, it, status, cond, cov, ex = _mle_dispatch(st, o)
+            X, it, status, cond, cov, ex = first if first is not None else _mle_dispatch(st, o)
         extras = {**uncertainty.summaries(cov), **ex}
     else:  # pragma: no cover - _check_options rejects it
         raise ValueError(method)
@@ -255,10 +258,10 @@ def _terrain_start(st: Stacked, fn) -> tuple[np.ndarray, np.ndarray]:
     return X, status
 
 
-def _mle_dispatch(st: Stacked, o: dict, learn: bool = True):
+def _mle_dispatch(st: Stacked, o: dict):
     """`mle.mle` on the batch, or `correlated.gls` for one problem whose sigma has correlation times (and
-    whose residual covariance is not diagonal: with vanishing correlation it is the independent problem); for one
-    problem (learn) then the learned drift model where its residuals drift (`_with_learned_tau`)."""
+    whose residual covariance is not diagonal: with vanishing correlation it is the independent problem); then,
+    for the problems with timestamps whose residuals drift, the learned drift model (`_with_learned_tau`)."""
     x0, init_status, sigma, vce = _mle_start(st, o)
     robust, tol, itmax = o.get("robust", _mle.DEFAULT_ROBUST), o["tol_m"], o["max_iterations"]
     bias_deg, size_unknown = _mle.bias_prior_deg(sigma, o)  # configured correlation times win, even vanishing ones
@@ -281,7 +284,7 @@ def _mle_dispatch(st: Stacked, o: dict, learn: bool = True):
         sigma = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
     res = _mle.mle(st, x0, sigma, robust, vce, tol, itmax, init_status, bias_deg, size_unknown, o.get("terrain"))
     res = _bias_refit(st, o, x0, init_status, sigma, vce, res, bias_deg, size_unknown)
-    return _with_learned_tau(st, o, res, sigma, vce, size_unknown) if learn else res
+    return _with_learned_tau(st, o, res, sigma, vce, size_unknown)
 
 
 def _bias_refit(st: Stacked, o: dict, x0: np.ndarray, init_status, sigma, vce: bool, res: tuple, bias_deg,
@@ -310,36 +313,55 @@ def _bias_refit(st: Stacked, o: dict, x0: np.ndarray, init_status, sigma, vce: b
 
 
 def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_unknown: bool) -> tuple:
-    """The mle answer res of one problem (B = 1) under the independent-error sigma, replaced by the learned
-    drift model's (`_learned_tau`) where its residuals drift and the sigma gives no correlation time (the
-    configured sigma's: size_unknown of `mle.bias_prior_deg`); res otherwise. The learned drift model
-    (generalized least squares) takes no terrain prior: the first answer stands."""
-    if _needs_learned_tau(st, o, res, size_unknown):
-        res = _learned_tau(st, res, sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"],
-                           o["max_iterations"])
+    """The mle answers res (B problems) under the independent-error sigma, each replaced by the learned drift
+    model's (`_learned_answer`) where its residuals drift and the sigma gives no correlation time (the configured
+    sigma's: size_unknown of `mle.bias_prior_deg`); the problems with the same rows in use are fitted side by side
+    (`learned_tau.learn_tau_many`). The learned drift model (generalized least squares) takes no terrain prior:
+    with one, the first answers stand."""
+    if st.t_ns is None or not size_unknown or o.get("terrain") is not None:
+        return res
+    need = [b for b in range(st.size) if np.isfinite(res[0][b]).all() and _drifts(res[5], b)
+            and _real_times(st, b)]
+    if not need:
+        return res
+    sts = [_learned.without_rejected(st.take(np.array([b])), res[5]["rejected"][b]) for b in need]
+    learned = _learned.learn_tau_many(sts, res[0][need], sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce,
+                                      o["tol_m"], o["max_iterations"])
+    for b, got in zip(need, learned, strict=True):
+        res = _replace_rows(res, _learned_answer(_res_row(res, b), got, sigma), np.array([b]))
     return res
 
 
-def _needs_learned_tau(st: Stacked, o: dict, res: tuple, size_unknown: bool) -> bool:
-    """Whether `_with_learned_tau` fits the learned drift model to one problem's first answer res."""
-    return bool(st.size == 1 and st.t_ns is not None and size_unknown and o.get("terrain") is None
-                and _drifts(res[5]) and _real_times(st))
-
-
 def _replace_rows(res: tuple, sub: tuple, idx: np.ndarray) -> tuple:
-    """The mle answer res (X, it, status, cond, cov, extras) with problems idx replaced by sub's; an extra sub
-    lacks (the bias's) is NaN there."""
-    if idx.size == res[0].shape[0]:
-        return sub
+    """The mle answers res (X, it, status, cond, cov, extras) with problems idx replaced by sub's. An extra only
+    one of them has is absent for the other's problems: NaN (False for a flag, None for an object)."""
     out = []
     for a, b in zip(res[:5], sub[:5], strict=True):
         a = a.copy()
         a[idx] = b
         out.append(a)
     ex = {}
-    for k, v in res[5].items():
-        v = np.array(v, dtype=np.float64 if k not in sub[5] and v.dtype.kind in "iub" else v.dtype, copy=True)
-        v[idx] = sub[5][k] if k in sub[5] else np.nan
+    B = res[0].shape[0]
+    for k in [*res[5], *(k for k in sub[5] if k not in res[5])]:
+        old, new = res[5].get(k), sub[5].get(k)
+        like = old if old is not None else new
+        shape = (B, *like.shape[1:])
+        if old is not None and new is not None:
+            v = np.array(old, dtype=np.result_type(old, new), copy=True)
+        elif like.dtype.kind == "b":
+            v = np.zeros(shape, dtype=bool) if old is None else old.copy()
+        elif like.dtype.kind == "O":
+            v = np.full(shape, None, dtype=object) if old is None else old.copy()
+        else:
+            v = np.full(shape, np.nan) if old is None else np.array(old, dtype=np.float64, copy=True)
+        if new is not None:
+            v[idx] = new
+        elif v.dtype.kind == "b":
+            v[idx] = False
+        elif v.dtype.kind == "O":
+            v[idx] = None
+        else:
+            v[idx] = np.nan
         ex[k] = v
     return (*out, ex)
 
@@ -413,24 +435,13 @@ def _mle_multistart(st: Stacked, o: dict, first: tuple | None = None, answers: d
     return X, it, status, cond, cov, ex
 
 
-def _drifts(ex: dict) -> bool:
-    return bool(ex["drift_pixel"][0] or ex["drift_range"][0])
+def _drifts(ex: dict, b: int = 0) -> bool:
+    return bool(ex["drift_pixel"][b] or ex["drift_range"][b])
 
 
-def _real_times(st: Stacked) -> bool:
-    t = st.t_ns[0]
+def _real_times(st: Stacked, b: int = 0) -> bool:
+    t = st.t_ns[b]
     return t.size > 1 and int(t.max() - t.min()) >= 1_000_000
-
-
-def _learned_tau(st: Stacked, res: tuple, sigma, robust, vce, tol, itmax) -> tuple:
-    """One problem whose residuals drift and whose sigma gives no correlation time: the GLS answer with the
-    correlation time of the largest likelihood (`learned_tau`), without the rows the first solve rejected;
-    the first answer when no tau gives one."""
-    X, ex = res[0], res[5]
-    if not np.isfinite(X[0]).all():
-        return res
-    clean = _learned.without_rejected(st, ex["rejected"][0])
-    return _learned_answer(res, _learned.learn_tau(clean, X[0], sigma, robust, vce, tol, itmax), sigma)
 
 
 def _learned_answer(res: tuple, got, sigma) -> tuple:
@@ -690,14 +701,8 @@ def solve_problems(problems: Sequence[Observations], methods: Sequence[str], opt
             reuse = [m for m in _starts.START_METHODS if m in ok and ok[m][0] == plain]
             for i, first in _mle_first_fits(sts, todo, o, out).items():
                 try:
-                    if o.get("initial_m") is None:
-                        res = _mle_multistart(sts[i], o, first, {m: answers[m][i] for m in reuse if i in answers[m]})
-                        extras = {**uncertainty.summaries(res[4]), **res[5]}
-                        be = BatchEstimate("mle", res[0], res[1], res[2].astype(np.int8), res[3], res[4], extras)
-                        be = _mark_behind(sts[i], be)
-                    else:
-                        be = first
-                    answers.setdefault("mle", {})[i] = be
+                    answers.setdefault("mle", {})[i] = _solve_stacked(
+                        "mle", sts[i], o, first, {m: answers[m][i] for m in reuse if i in answers[m]})
                 except SOLVE_ERRORS as exc:
                     out[i]["mle"] = exc
     for m, per in answers.items():
@@ -724,11 +729,6 @@ def _groups(sts: list[Stacked], todo: list[int]) -> list[list[int]]:
     return [g for _, g in groups]
 
 
-def _stack(sts: list[Stacked]) -> Stacked:
-    """One Stacked of the problems of several (of one group, `_groups`)."""
-    return _correlated.stack_problems(sts)
-
-
 def _row(be: BatchEstimate, b: int) -> BatchEstimate:
     """Problem b of a BatchEstimate, as a BatchEstimate of one (copies)."""
     sl = slice(b, b + 1)
@@ -746,7 +746,7 @@ def _solve_grouped(method: str, sts: list[Stacked], todo: list[int], o: dict, ou
     for g in _groups(sts, todo):
         if len(g) > 1:
             try:
-                be = _solve_stacked(method, _stack([sts[i] for i in g]), o)
+                be = _solve_stacked(method, _correlated.stack_problems([sts[i] for i in g]), o)
                 got.update({i: _row(be, b) for b, i in enumerate(g)})
                 continue
             except SOLVE_ERRORS:
@@ -760,43 +760,22 @@ def _solve_grouped(method: str, sts: list[Stacked], todo: list[int], o: dict, ou
 
 
 def _mle_first_fits(sts: list[Stacked], todo: list[int], o: dict, out: list[dict]) -> dict[int, tuple]:
-    """{problem: the mle fit from its default start (`_mle_dispatch`'s tuple, B = 1, the learned drift model
-    included)} for the problems of todo: the independent-error fit once per group; one problem at a time with
-    time-correlated errors or a terrain prior, or where a group's call raises (the error then goes to its problem
-    in out). With initial_m (no multistart: `_solve_stacked`) one problem at a time, and the fits are the answers
-    (a BatchEstimate each)."""
+    """{problem: its mle fit from the default start (`_mle_dispatch`'s tuple, B = 1)} for the problems of todo:
+    one `_mle_dispatch` per group (`_groups`); one problem at a time with time-correlated errors, a terrain prior or
+    initial_m, or where a group's call raises (the error then goes to its problem in out)."""
     got = {}
     for g in _groups(sts, todo):
-        sigma, vce = _mle_sigma(sts[g[0]], o)
-        if not (len(g) == 1 or sigma.correlated or o.get("terrain") is not None or o.get("initial_m") is not None):
+        sigma, _ = _mle_sigma(sts[g[0]], o)
+        if len(g) > 1 and not (sigma.correlated or o.get("terrain") is not None or o.get("initial_m") is not None):
             try:
-                st = _stack([sts[i] for i in g])
-                x0, init_status, sigma, vce = _mle_start(st, o)
-                bias_deg, size_unknown = _mle.bias_prior_deg(sigma, o)
-                res = _mle.mle(st, x0, sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"],
-                               o["max_iterations"], init_status, bias_deg, size_unknown, None)
-                firsts = {}
-                for b, i in enumerate(g):  # the refit without the bias as for one problem
-                    sl = slice(b, b + 1)
-                    firsts[i] = _bias_refit(sts[i], o, x0[sl], None if init_status is None else init_status[sl],
-                                            sigma, vce, _res_row(res, b), bias_deg, size_unknown)
-                # the learned drift model (`_with_learned_tau`), the problems with the same rows side by side
-                need = [i for i in g if _needs_learned_tau(sts[i], o, firsts[i], size_unknown)
-                        and np.isfinite(firsts[i][0][0]).all()]
-                learned = _learned.learn_tau_many(
-                    [_learned.without_rejected(sts[i], firsts[i][5]["rejected"][0]) for i in need],
-                    np.array([firsts[i][0][0] for i in need]).reshape(-1, 3), sigma,
-                    o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"], o["max_iterations"])
-                for i, lt in zip(need, learned, strict=True):
-                    firsts[i] = _learned_answer(firsts[i], lt, sigma)
-                got.update(firsts)
+                res = _mle_dispatch(_correlated.stack_problems([sts[i] for i in g]), o)
+                got.update({i: _res_row(res, b) for b, i in enumerate(g)})
                 continue
             except SOLVE_ERRORS:
-                got = {i: v for i, v in got.items() if i not in g}
+                pass
         for i in g:
             try:
-                got[i] = (_solve_stacked("mle", sts[i], o) if o.get("initial_m") is not None
-                          else _mle_dispatch(sts[i], o))
+                got[i] = _mle_dispatch(sts[i], o)
             except SOLVE_ERRORS as exc:
                 out[i]["mle"] = exc
     return got

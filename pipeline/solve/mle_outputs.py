@@ -60,7 +60,7 @@ def boresight_bias(ex: dict, b: int) -> dict | None:
     """The estimated constant boresight bias of problem b (deg, about the camera's vertical axis: u, and its
     horizontal axis: v), its posterior sigma, the prior's sigma, whether the flight determined it, its
     correlation with the target (2, 3) and, when its size was learned, the size the flight supports."""
-    if "bias_deg" not in ex:
+    if "bias_deg" not in ex or not np.isfinite(ex["bias_deg"][b]).all():  # no bias state (NaN: refitted without)
         return None
     bias, sd, prior = ex["bias_deg"][b], ex["bias_sigma_deg"][b], ex["bias_prior_deg"][b]
     out = {"u_deg": float(bias[0]), "v_deg": float(bias[1]), "u_sigma_deg": float(sd[0]),
@@ -145,7 +145,7 @@ def problem_extras(ex: dict, t_ns: np.ndarray) -> dict:
     bias = boresight_bias(ex, 0)
     if bias is not None:
         out["boresight_bias"] = bias
-    if "error_model_tau_s" in ex:
+    if "error_model_tau_s" in ex and np.isfinite(ex["error_model_tau_s"][0]):  # NaN: a problem without one
         from pipeline.solve.learned_tau import TAU_GRID_S
         out["error_model"] = {
             "attitude_tau_s": float(ex["error_model_tau_s"][0]), "position_tau_s": float(ex["error_model_tau_s"][0]),

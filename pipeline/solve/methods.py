@@ -717,16 +717,10 @@ def solve_problems(problems: Sequence[Observations], methods: Sequence[str], opt
 
 def _groups(sts: list[Stacked], todo: list[int]) -> list[list[int]]:
     """The problems of `todo` in groups that stack (the same number of frames, sigma and presence of a truth)."""
-    groups: list[tuple[tuple, list[int]]] = []
+    groups: dict[tuple, list[int]] = {}  # in the order of their first problem
     for i in todo:
-        key = (sts[i].n, sts[i].sigma, sts[i].truth_m is None)
-        for k, g in groups:
-            if k == key:
-                g.append(i)
-                break
-        else:
-            groups.append((key, [i]))
-    return [g for _, g in groups]
+        groups.setdefault((sts[i].n, sts[i].sigma, sts[i].truth_m is None), []).append(i)
+    return list(groups.values())
 
 
 def _row(be: BatchEstimate, b: int) -> BatchEstimate:

@@ -19,6 +19,7 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Rectangle
+from matplotlib.ticker import MaxNLocator
 from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
 from pipeline.report.geometry import (
@@ -45,7 +46,7 @@ _LOS_COLOR = "#9A9A9A"
 _TITLE_IN = 0.36      # the figure's suptitle (13 pt)
 _AX_TITLE_IN = 0.3    # an axes title (12 pt)
 _XAXIS_IN = 0.52      # x tick labels and x label under an axes
-_YAXIS_IN = 0.82      # y tick labels (up to "−10000") and y label left of an axes
+_YAXIS_IN = 0.92      # y tick labels (up to "−10000") and y label left of an axes
 _LEGEND_ROW_IN = 0.21  # one row of a 9 pt legend
 _LEGEND_PAD_IN = 0.12
 
@@ -58,6 +59,14 @@ def _place(fig: Figure, ax, left_in: float, bottom_in: float, width_in: float, h
     """Put `ax` at a rectangle given in inches from the figure's lower left corner."""
     w, h = fig.get_size_inches()
     ax.set_position([left_in / w, bottom_in / h, width_in / w, height_in / h])
+
+
+def _few_ticks(ax, nbins: int) -> None:
+    """At most about `nbins` intervals per axis of `ax` (matplotlib's default picks up to 9-11 here): each tick
+    is a label, a grid line and two marks to create and draw, a large share of a figure's cost."""
+    for axis in (ax.xaxis, ax.yaxis, getattr(ax, "zaxis", None)):
+        if axis is not None:
+            axis.set_major_locator(MaxNLocator(nbins=nbins, steps=[1, 2, 2.5, 5, 10]))
 
 
 def _los_proxy() -> Line2D:
@@ -173,6 +182,7 @@ def map_figure(r: GroupResult) -> Figure:
         ax0.plot(*r.truth_m[:2], marker="*", color="k", markersize=15, markerfacecolor="yellow", ls="none",
                  zorder=6)
     ax0.set_aspect("equal", adjustable="datalim")
+    _few_ticks(ax0, 6)
     ax0.set_xlabel("East (m)")
     ax0.set_ylabel("North (m)")
     ax0.set_title("Overview: flight path and lines of sight", y=1.0)
@@ -194,6 +204,7 @@ def map_figure(r: GroupResult) -> Figure:
         ax1.set_xlim(-half, half)
         ax1.set_ylim(-half, half)
         ax1.set_aspect("equal")
+        _few_ticks(ax1, 6)
         what = "truth" if r.truth_m is not None else "the reference estimate"
         ax1.set_xlabel(f"East of {what} (m)")
         ax1.set_ylabel(f"North of {what} (m)")
@@ -251,6 +262,7 @@ def view3d_figure(r: GroupResult) -> Figure:
     ax.set_xlabel("East (m)", labelpad=10)
     ax.set_ylabel("North (m)", labelpad=10)
     ax.set_zlabel("Up (m)", labelpad=8)
+    _few_ticks(ax, 5)
     ax.set_title(f"{r.label}: 3D view", y=1.0)
     fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=4, frameon=False, fontsize=9)
     w_in, h_in = fig.get_size_inches()
@@ -331,6 +343,8 @@ def residuals_figure(r: GroupResult) -> Figure:
     note_px = _mark_off_scale(ax0, t_s, px_series, shown, lim_px, -np.inf, "px")
     note_m = _mark_off_scale(ax1, t_s, m_series, shown, lim_m, -lim_m, "m")
     ax1.axhline(0, color="k", lw=0.8)
+    _few_ticks(ax0, 6)
+    _few_ticks(ax1, 6)
     ax0.set_ylabel("Reprojection error (px)")
     ax1.set_ylabel("Range residual |X − s| − d (m)")
     ax1.set_xlabel("Time since first frame (s)")

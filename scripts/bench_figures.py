@@ -8,8 +8,9 @@ OUT is a finished `ridgeloc run` output folder (e.g. `python -m pipeline run -q 
 read back (pipeline.report.outputs.load_finished_group) and split per target (pipeline.results.per_target). Each
 figure (map, view3d, residuals) of each (group, target) is built and encoded as PNG (`figure_png`), `--repeat`
 times after one warm-up render, in a child process per code (this worktree's, and with --against DIR that
-checkout's, e.g. main's, read-only), the children alternating; printed: the median process CPU time per figure
-and per (group, target) (the three figures), and the ratio of this code to the other. --save DIR writes this
+checkout's, e.g. main's, read-only), the children alternating, each code's figures made as its
+render_group_figures makes them (reused figures where the code has them); printed: the median process CPU time
+per figure and per (group, target) (the three figures), and the ratio of this code to the other. --save DIR writes this
 code's PNGs (and the other's under DIR/against) to look at them.
 """
 
@@ -28,6 +29,8 @@ FIGURES = ("map", "view3d", "residuals")
 
 def child(out: str, groups: list[str], repeat: int, save: str | None) -> None:
     """Time every figure of every (group, target) in this process (its code is the first on sys.path)."""
+    import functools
+    import inspect
     import time
 
     from pipeline.report import figures as F
@@ -35,6 +38,8 @@ def child(out: str, groups: list[str], repeat: int, save: str | None) -> None:
     from pipeline.results import per_target
 
     makers = {"map": F.map_figure, "view3d": F.view3d_figure, "residuals": F.residuals_figure}
+    if "reuse" in inspect.signature(F.map_figure).parameters:  # as render_group_figures makes them
+        makers = {k: functools.partial(f, reuse=True) for k, f in makers.items()}
     rows = {}
     for g in groups:
         r = load_finished_group(out, g)

@@ -7,7 +7,9 @@
     render_group_figures(r) -> {"map": png bytes, "view3d": ..., "residuals": ...}
 
 All coordinates are the group's local ENU metres. Figures are built with the object API (no pyplot), so they
-are headless and safe to make from several threads at once.
+are headless and safe to make from several threads at once. Cost (docs/outputs.md, figures): a fixed layout in
+inches, few ticks, and render_group_figures reusing its thread's figures (`reuse=True`) from one target to the
+next; `python scripts/bench_figures.py OUT --against DIR` measures it.
 """
 
 from __future__ import annotations

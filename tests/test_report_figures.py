@@ -93,3 +93,36 @@ def test_off_scale_labels_in_one_direction_do_not_overlap_and_light_colours_are_
 
     assert contrast_on_white("#F0E442") < 1.5 and contrast_on_white(text_color("#F0E442")) >= 4.5
     assert text_color("#0072B2") == "#0072B2"  # already legible: unchanged
+
+
+def test_reused_figures_give_the_same_pngs_as_new_ones(group):
+    """render_group_figures reuses this thread's figures: after a different group (no truth, far estimate, other
+    frame count, fewer methods) its PNGs are byte for byte those of new figures made in a new thread."""
+    import dataclasses
+    import threading
+
+    import numpy as np
+
+    from pipeline.report.figures import figure_png, render_group_figures
+
+    other = synthetic_group("other", seed=3, intersection_angle_deg=60, n_frames=20, truth_known=False)
+    far = dataclasses.replace(other.estimates["range"], position_m=other.estimates["mle"].position_m
+                              + np.array([900.0, 0.0, 0.0]))
+    other = dataclasses.replace(other, estimates={**{m: e for m, e in other.estimates.items() if m != "dlt"},
+                                                  "range": far})
+    fresh = {}
+
+    def render_new():
+        fresh.update(map=figure_png(map_figure(group)), view3d=figure_png(view3d_figure(group)),
+                     residuals=figure_png(residuals_figure(group)))
+
+    worker = threading.Thread(target=render_new)
+    worker.start()
+    worker.join()
+    first = render_group_figures(group)
+    render_group_figures(other)
+    again = render_group_figures(group)
+    assert set(fresh) == set(again) == {"map", "view3d", "residuals"}
+    for k in fresh:
+        assert again[k] == first[k] == fresh[k], k
+    assert render_group_figures(other)["map"] != again["map"]

@@ -138,13 +138,19 @@ def target_rows(results: Iterable[GroupResult | FlightResult]) -> list[dict]:
             rows.extend(_failed_rows(*r))
             continue
         lat0, lon0, alt0 = r.origin_lla
-        for method in group_methods(r):
+        methods = group_methods(r)
+        positions = np.full((len(methods), 3), np.nan)  # every method's position converted at once
+        for i, method in enumerate(methods):
+            if r.estimates.get(method) is not None:
+                positions[i] = r.estimates[method].position_m
+        ok = np.isfinite(positions).all(axis=1)
+        llas = np.full(positions.shape, np.nan)
+        llas[ok] = geodetic_from_enu(positions[ok], r.origin_lla)
+        undulations = geoid_undulation_m(llas[:, 0], llas[:, 1])
+        for method, pos, finite, lla, n_m in zip(methods, positions, ok, llas, undulations, strict=True):
             e = r.estimates.get(method)
             status, reason = _status_reason(r, method)
-            pos = np.full(3, np.nan) if e is None else np.asarray(e.position_m, dtype=np.float64)
-            finite = bool(np.isfinite(pos).all())
-            lla = geodetic_from_enu(pos, r.origin_lla) if finite else np.full(3, np.nan)
-            n_m = float(geoid_undulation_m(lla[0], lla[1])) if finite else None
+            n_m = float(n_m) if finite else None
             err = None if e is None else e.error_m(r.truth_m)
             d = None if (err is None or r.truth_m is None) else pos - r.truth_m
             u = uncertainty(e) if e is not None else dict.fromkeys(

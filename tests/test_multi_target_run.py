@@ -91,8 +91,9 @@ def test_a_target_is_unaffected_by_the_others(runs):
     assert isinstance(alone, FlightResult) and alone.targets[0].target == "small_grey"
     a, b = flight.targets[1], alone.targets[0]
     assert a.tracking["pixel_px"] == b.tracking["pixel_px"]
-    for m, e in b.estimates.items():
-        np.testing.assert_array_equal(a.estimates[m].position_m, e.position_m)
+    for m, e in b.estimates.items():  # solved with the others or alone: the same answer (to rounding: the
+        # targets are solved as one batch, whose BLAS calls may sum in another order on another CPU)
+        np.testing.assert_allclose(a.estimates[m].position_m, e.position_m, rtol=1e-12, atol=1e-9)
 
 
 def test_outputs_one_feature_per_target_and_method(runs, tmp_path):

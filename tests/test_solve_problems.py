@@ -24,6 +24,9 @@ def _problems():
     probs.append(dataclasses.replace(lost, pixel=pix))
     # drifting telemetry errors the stated sigma gives no correlation time for: the learned drift model
     probs += correlated_problems(3, n=16, seed=1, attitude_tau_s=30.0, position_tau_s=120.0)
+    # and in their group (n = 16, the same sigma) two with white errors: answers with and without a drift model in
+    # one batch, whose extras differ (error_model; the boresight bias)
+    probs += [paper_problem(n=16, seed=s) for s in (11, 12)]
     return probs
 
 
@@ -57,6 +60,14 @@ def _assert_same(a, b):
             sx, sy = x.extras["starts"], y.extras["starts"]
             assert (sx["chosen"], sx["not_determined"], sx["refits"]) == (sy["chosen"], sy["not_determined"],
                                                                          sy["refits"])
+            assert set(x.extras) == set(y.extras), m
+            assert x.extras["fit"]["consistent"] == y.extras["fit"]["consistent"]
+            assert x.extras["fit"]["message"] == y.extras["fit"]["message"]
+            bx, by = x.extras.get("boresight_bias"), y.extras.get("boresight_bias")
+            assert (bx is None) == (by is None), m
+            if bx is not None:
+                np.testing.assert_allclose([bx["u_deg"], bx["v_deg"]], [by["u_deg"], by["v_deg"]], rtol=1e-8,
+                                           atol=1e-12)
             ex, ey = x.extras.get("error_model"), y.extras.get("error_model")
             assert (ex is None) == (ey is None), m
             if ex is not None:  # the same model chosen; its likelihoods to rounding (the first fit ran in a batch)
@@ -83,7 +94,8 @@ def test_solve_problems_equals_solve_one_at_a_time(options, monkeypatch):
     # the cases the problems were built for did occur
     assert isinstance(got[5]["fusion"], Exception) and not isinstance(got[5]["mle"], Exception)
     if not options:
-        assert all("error_model" in g["mle"].extras for g in got[7:])
+        assert all("error_model" in g["mle"].extras for g in got[7:10])
+        assert not any("error_model" in g["mle"].extras for g in got[10:])  # white errors in the same batch
         assert batched == [3]
 
 

@@ -97,7 +97,6 @@ def learn_tau_many(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None,
     problem. Problems with the same rows in use (`correlated.gls_problems`) have all their candidates' fits
     iterate side by side (each as alone); the others one problem at a time."""
     sigmas = _sigmas(sigma)
-    built = [_models(st, X0, sigmas) for st, X0 in zip(sts, X0s, strict=True)]
     out: list = [None] * len(sts)
     groups: list[list[int]] = []
     for i, st in enumerate(sts):  # the same frames with a pixel and with a range (`stack_models` checks the rest)
@@ -112,6 +111,7 @@ def learn_tau_many(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None,
     K = len(sigmas)
     for g in groups:
         if len(g) > 1:
+            built = {i: _models(sts[i], X0s[i], sigmas) for i in g}
             try:
                 fits = _correlated.gls_problems([sts[i] for i in g], np.asarray([X0s[i] for i in g]),
                                                 [md for i in g for md in built[i][0]], robust, vce, tol_m,
@@ -125,9 +125,7 @@ def learn_tau_many(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None,
                                                        {k: v[sl] for k, v in fits[5].items()}))
                 continue
         for i in g:
-            models, rows0 = built[i]
-            out[i] = _mixture(sts[i], sigmas, _correlated.gls_models(sts[i], X0s[i], models, robust, vce, tol_m,
-                                                                     max_iterations, rows0))
+            out[i] = learn_tau(sts[i], X0s[i], sigma, robust, vce, tol_m, max_iterations)
     return out
 
 

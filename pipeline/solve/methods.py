@@ -320,15 +320,23 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
     with one, the first answers stand."""
     if st.t_ns is None or not size_unknown or o.get("terrain") is not None:
         return res
-    need = [b for b in range(st.size) if np.isfinite(res[0][b]).all() and _drifts(res[5], b)
-            and _real_times(st, b)]
-    if not need:
+    ex, t = res[5], st.t_ns
+    span = t.max(axis=1) - t.min(axis=1) if t.shape[1] > 1 else np.zeros(st.size, dtype=np.int64)
+    need = np.flatnonzero(np.isfinite(res[0]).all(axis=1) & (ex["drift_pixel"] | ex["drift_range"])
+                          & (span >= REAL_TIMES_NS))
+    if not need.size:
         return res
-    sts = [_learned.without_rejected(st.take(np.array([b])), res[5]["rejected"][b]) for b in need]
+    sts = [_learned.without_rejected(st.take(np.array([b])), ex["rejected"][b]) for b in need]
     learned = _learned.learn_tau_many(sts, res[0][need], sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce,
                                       o["tol_m"], o["max_iterations"])
+    replaced = []
     for b, got in zip(need, learned, strict=True):
-        res = _replace_rows(res, _learned_answer(_res_row(res, b), got, sigma), np.array([b]))
+        row = _res_row(res, b)
+        answer = _learned_answer(row, got, sigma)
+        if answer is not row:  # the drift model's answer was kept
+            replaced.append((b, answer))
+    for b, answer in replaced:
+        res = _replace_rows(res, answer, np.array([b]))
     return res
 
 
@@ -344,26 +352,23 @@ def _replace_rows(res: tuple, sub: tuple, idx: np.ndarray) -> tuple:
     B = res[0].shape[0]
     for k in [*res[5], *(k for k in sub[5] if k not in res[5])]:
         old, new = res[5].get(k), sub[5].get(k)
-        like = old if old is not None else new
-        shape = (B, *like.shape[1:])
         if old is not None and new is not None:
             v = np.array(old, dtype=np.result_type(old, new), copy=True)
-        elif like.dtype.kind == "b":
-            v = np.zeros(shape, dtype=bool) if old is None else old.copy()
-        elif like.dtype.kind == "O":
-            v = np.full(shape, None, dtype=object) if old is None else old.copy()
-        else:
-            v = np.full(shape, np.nan) if old is None else np.array(old, dtype=np.float64, copy=True)
-        if new is not None:
             v[idx] = new
-        elif v.dtype.kind == "b":
-            v[idx] = False
-        elif v.dtype.kind == "O":
-            v[idx] = None
         else:
-            v[idx] = np.nan
+            like = old if old is not None else new
+            dtype, fill = _absent(like.dtype)
+            v = np.full((B, *like.shape[1:]), fill, dtype=dtype)
+            if old is not None:
+                v[...] = old
+            v[idx] = new if new is not None else fill
         ex[k] = v
     return (*out, ex)
+
+
+def _absent(dtype: np.dtype) -> tuple:
+    """(dtype, value) that marks an extra a problem lacks: False for a flag, None for an object, else NaN."""
+    return {"b": (np.dtype(bool), False), "O": (np.dtype(object), None)}.get(dtype.kind, (np.dtype(np.float64), np.nan))
 
 
 def _mle_multistart(st: Stacked, o: dict, first: tuple | None = None, answers: dict | None = None):
@@ -435,17 +440,13 @@ def _mle_multistart(st: Stacked, o: dict, first: tuple | None = None, answers: d
     return X, it, status, cond, cov, ex
 
 
-def _drifts(ex: dict, b: int = 0) -> bool:
-    return bool(ex["drift_pixel"][b] or ex["drift_range"][b])
-
-
-def _real_times(st: Stacked, b: int = 0) -> bool:
-    t = st.t_ns[b]
-    return t.size > 1 and int(t.max() - t.min()) >= 1_000_000
+#: timestamps spanning less than this are frame numbers (0..n-1 when unknown), not times: no drift model is learned
+REAL_TIMES_NS = 1_000_000
 
 
 def _learned_answer(res: tuple, got, sigma) -> tuple:
-    """`_learned_tau`'s answer from the first answer res and `learned_tau.learn_tau`'s got."""
+    """One problem's answer from its first answer res (B = 1) and `learned_tau.learn_tau_many`'s got for it: the
+    drift model's where it is kept, else res itself."""
     X, ex = res[0], res[5]
     if got is None:
         return res

@@ -136,45 +136,33 @@ def test_a_target_washed_out_by_cloud_is_lost_although_it_still_correlates(groun
     assert f.correlation > TrackerSettings().min_correlation  # correlation alone would have accepted it
 
 
-def test_a_target_gone_out_of_view_is_bridged_only_without_a_shared_cache(ground):
-    """A frame whose held homography puts the target outside the image: with a ViewCache sharing matches (a
-    flight's named targets) no stepping stone is decoded for it; without one (a single `target:`, one random
-    stream) stones are tried as before. Either way the frame is lost, "out of image", and the others agree."""
-    from pipeline.track.sift import ViewCache
-
+def _target_out_of_view(ground):
+    """Frame 8's homography pushes the target out of the image, the scene still overlapping."""
     Hs = {k: homography(k) for k in range(9)}
-    Hs[8] = homography(8, shift=(400.0, 0.0))  # the target pushed out of the image, the scene still overlapping
-    frames = {k: render(ground, H) for k, H in Hs.items()}
-    wanted = [0, 4, 8]
-    results = {}
-    for shared in (True, False):
-        dec = Decoder(frames)
-        cache = ViewCache(share_matches=True) if shared else None
-        results[shared] = SiftTracker().track(dec, 0, true_px(Hs[0]), wanted, available=list(frames), cache=cache)
-        results[shared, "asked"] = set(dec.asked)
-    for shared in (True, False):
-        r = results[shared]
-        np.testing.assert_array_equal(r.lost, [False, False, True])
-        assert r.frames[2].via == "out of image"
-    np.testing.assert_array_equal(results[True].pixel_px[:2], results[False].pixel_px[:2])
-    assert results[True, "asked"] == set(wanted)  # no stone for a target that has left the view
-    stones = results[False, "asked"] - set(wanted)
-    assert stones and stones <= set(range(1, 8))  # stones between the key frame and the lost frame
+    Hs[8] = homography(8, shift=(400.0, 0.0))
+    return {k: render(ground, H) for k, H in Hs.items()}, Hs
 
 
-def test_a_covered_target_is_bridged_only_without_a_shared_cache(ground):
-    """A frame whose key-frame homography holds and puts the target inside the image, where it is covered (low
-    correlation): with a ViewCache sharing matches no stepping stone is decoded for it (they would only change the
-    homography, not the view of the target); without one stones are tried as before. Either way the frame is
-    lost, "low correlation", and the others agree."""
-    from pipeline.track.sift import ViewCache
-
+def _target_covered(ground):
+    """Frame 8's homography holds and puts the target inside the image, where it is covered (scene intact)."""
     Hs = {k: homography(k) for k in range(9)}
     frames = {k: render(ground, H) for k, H in Hs.items()}
-    covered = frames[8].copy()
     p8 = true_px(Hs[8]).round().astype(int)
-    covered[p8[1] - 18:p8[1] + 19, p8[0] - 18:p8[0] + 19] = 128  # target covered, scene intact
-    frames[8] = covered
+    frames[8] = frames[8].copy()
+    frames[8][p8[1] - 18:p8[1] + 19, p8[0] - 18:p8[0] + 19] = 128
+    return frames, Hs
+
+
+@pytest.mark.parametrize("scene, via", [(_target_out_of_view, "out of image"), (_target_covered, "low correlation")],
+                         ids=["out-of-view", "covered"])
+def test_a_lost_target_is_bridged_only_without_a_shared_cache(ground, scene, via):
+    """A frame whose key-frame homography holds but where the target is not found (it has left the view, or it is
+    covered): with a ViewCache sharing matches (a flight's named targets) no stepping stone is decoded for it (stones
+    would only change the homography, not the view of the target); without one (a single `target:`, one random
+    stream) stones are tried as before. Either way the frame is lost, for that reason, and the others agree."""
+    from pipeline.track.sift import ViewCache
+
+    frames, Hs = scene(ground)
     wanted = [0, 4, 8]
     results = {}
     for shared in (True, False):
@@ -185,8 +173,8 @@ def test_a_covered_target_is_bridged_only_without_a_shared_cache(ground):
     for shared in (True, False):
         r = results[shared]
         np.testing.assert_array_equal(r.lost, [False, False, True])
-        assert r.frames[2].via == "low correlation"
+        assert r.frames[2].via == via
     np.testing.assert_array_equal(results[True].pixel_px[:2], results[False].pixel_px[:2])
-    assert results[True, "asked"] == set(wanted)  # no stone for a target in view but covered
+    assert results[True, "asked"] == set(wanted)  # no stone for a target that is not there to be found
     stones = results[False, "asked"] - set(wanted)
     assert stones and stones <= set(range(1, 8))  # stones between the key frame and the lost frame

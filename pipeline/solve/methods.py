@@ -695,7 +695,7 @@ def solve_problems(problems: Sequence[Observations], methods: Sequence[str], opt
         for m, (o, todo) in ok.items():
             if m == "mle":
                 continue
-            answers[m] = _solve_grouped(m, sts, todo, o, out)
+            answers[m] = _solve_grouped(m, sts, todo, out, lambda st, m=m, o=o: _solve_stacked(m, st, o), _row)
         if "mle" in ok:
             o, todo = ok["mle"]
             plain = {"tol_m": o["tol_m"], "max_iterations": o["max_iterations"]}
@@ -733,47 +733,36 @@ def _row(be: BatchEstimate, b: int) -> BatchEstimate:
                          extras={k: v[sl].copy() for k, v in be.extras.items()})
 
 
-def _solve_grouped(method: str, sts: list[Stacked], todo: list[int], o: dict, out: list[dict]
-                   ) -> dict[int, BatchEstimate]:
-    """{problem: its answer (B = 1)} of a method other than mle on the problems of todo, one kernel call per group;
-    a group whose call raises is solved one problem at a time (the error then goes to its problem in out)."""
+def _solve_grouped(name: str, sts: list[Stacked], todo: list[int], out: list[dict], fn, row, batched=None
+                   ) -> dict:
+    """{problem: fn's answer for it (B = 1)} for the problems of todo: fn (a Stacked -> an answer of its problems)
+    once per group (`_groups`) where batched(the group's first Stacked) allows (default: always), row(answer, b)
+    taking problem b out; one problem at a time otherwise, or where a group's call raises (the error then goes to
+    its problem in out under `name`)."""
     got = {}
     for g in _groups(sts, todo):
-        if len(g) > 1:
+        if len(g) > 1 and (batched is None or batched(sts[g[0]])):
             try:
-                be = _solve_stacked(method, _correlated.stack_problems([sts[i] for i in g]), o)
-                got.update({i: _row(be, b) for b, i in enumerate(g)})
+                res = fn(_correlated.stack_problems([sts[i] for i in g]))
+                got.update({i: row(res, b) for b, i in enumerate(g)})
                 continue
             except SOLVE_ERRORS:
                 pass
         for i in g:
             try:
-                got[i] = _solve_stacked(method, sts[i], o)
+                got[i] = fn(sts[i])
             except SOLVE_ERRORS as exc:
-                out[i][method] = exc
+                out[i][name] = exc
     return got
 
 
 def _mle_first_fits(sts: list[Stacked], todo: list[int], o: dict, out: list[dict]) -> dict[int, tuple]:
-    """{problem: its mle fit from the default start (`_mle_dispatch`'s tuple, B = 1)} for the problems of todo:
-    one `_mle_dispatch` per group (`_groups`); one problem at a time with time-correlated errors, a terrain prior or
-    initial_m, or where a group's call raises (the error then goes to its problem in out)."""
-    got = {}
-    for g in _groups(sts, todo):
-        sigma, _ = _mle_sigma(sts[g[0]], o)
-        if len(g) > 1 and not (sigma.correlated or o.get("terrain") is not None or o.get("initial_m") is not None):
-            try:
-                res = _mle_dispatch(_correlated.stack_problems([sts[i] for i in g]), o)
-                got.update({i: _res_row(res, b) for b, i in enumerate(g)})
-                continue
-            except SOLVE_ERRORS:
-                pass
-        for i in g:
-            try:
-                got[i] = _mle_dispatch(sts[i], o)
-            except SOLVE_ERRORS as exc:
-                out[i]["mle"] = exc
-    return got
+    """{problem: its mle fit from the default start (`_mle_dispatch`'s tuple, B = 1)}: one `_mle_dispatch` per
+    group, but one problem at a time with time-correlated errors, a terrain prior or initial_m."""
+    def batched(st):
+        return not (_mle_sigma(st, o)[0].correlated or o.get("terrain") is not None or o.get("initial_m") is not None)
+
+    return _solve_grouped("mle", sts, todo, out, lambda st: _mle_dispatch(st, o), _res_row, batched)
 
 
 def _res_row(res: tuple, b: int) -> tuple:

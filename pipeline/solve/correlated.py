@@ -36,7 +36,6 @@ from pipeline.solve import iterate as _iterate
 from pipeline.solve import mle as _mle
 from pipeline.solve.iterate import start_status
 from pipeline.solve.mle import VCE_MAX_ROUNDS, VCE_TOL
-from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import Stacked, inverse3, pixel_model, range_model, solve_spd
 
 #: 1 - a^2 floor of a transition (frames at equal times): keeps the chain's precision finite
@@ -92,60 +91,35 @@ class Model:
         return self._Cii.copy()
 
 
-def _chain(t_s: np.ndarray, tau_s: float | None) -> np.ndarray:
-    """(k-1,) transitions exp(-dt / tau) between time-ordered frames; zeros (white) without tau."""
-    if not tau_s:
-        return np.zeros(max(t_s.size - 1, 0))
-    return np.exp(-np.diff(t_s) / tau_s)
-
-
-@dataclass(frozen=True)
-class Frames:
-    """What a `Model` takes from one problem at X0, whatever the sigmas: the frames with a pixel in time order
-    (order_p, their times tp (s), focal lengths fx, fy (px) and 1 / distance to X0 inv_d (1/m)), the ranged
-    frames in time order (order_r, times tr (s))."""
-    order_p: np.ndarray
-    tp: np.ndarray
-    fx: np.ndarray
-    fy: np.ndarray
-    inv_d: np.ndarray
-    order_r: np.ndarray
-    tr: np.ndarray
-
-
-def problem_frames(st: Stacked, X0: np.ndarray) -> Frames:
-    """The `Frames` of one problem (B = 1) at X0 (3,)."""
+def problem_models(st: Stacked, X0: np.ndarray, sigmas: list) -> list:
+    """The `Model` of one problem (B = 1) under each sigma of sigmas, with the focal lengths, the distances at X0
+    (3,) and the frames' times (frames with a pixel, ranged frames, each in time order). Unknown pixel / range
+    sigmas count as 1 px / 1 m (variance components then scale them), like `mle.base_variances`; a part without a
+    correlation time is white (on R)."""
     t_ns = st.t_ns[0]
     t_s = (t_ns - t_ns.min()).astype(np.float64) * 1e-9  # differences of int64 first: no rounding of epochs
     hp, hr = st.has_pix[0], st.has_range[0]
     fx, fy = st.focal_px()
     D = np.sqrt(((X0 - st.platform_m[0, hp]) ** 2).sum(axis=1))
-    inv_d = np.where(np.isfinite(D) & (D > 0), 1.0 / np.where(D > 0, D, 1.0), 0.0)
     order_p = np.argsort(t_s[hp], kind="stable")
     order_r = np.argsort(t_s[hr], kind="stable")
-    return Frames(order_p, t_s[hp][order_p], fx[0, hp][order_p], fy[0, hp][order_p], inv_d[order_p], order_r,
-                  t_s[hr][order_r])
-
-
-def problem_model(st: Stacked, X0: np.ndarray, sigma: Sigma, frames: Frames | None = None) -> Model:
-    """The `Model` of one problem (B = 1) under sigma, with the focal lengths, the distances at X0 (3,) and the
-    frames' times (frames: `problem_frames(st, X0)` where the caller has it). Unknown pixel / range sigmas count
-    as 1 px / 1 m (variance components then scale them), like `mle.base_variances`; a part without a
-    correlation time is white (on R)."""
-    s_px = 1.0 if sigma.pixel_px is None else sigma.pixel_px
-    s_r = 1.0 if sigma.range_m is None else sigma.range_m
-    s_pos = 0.0 if sigma.position_m is None else sigma.position_m
-    s_att = 0.0 if sigma.attitude_deg is None else math.radians(sigma.attitude_deg)
-    fr = problem_frames(st, X0) if frames is None else frames
-    k = fr.order_p.size
-    npix = 2 * k
-    groups = []
-    for axis, f in ((0, fr.fx), (1, fr.fy)):
-        parts = [(f * s_att, sigma.attitude_tau_s), (f * s_pos * fr.inv_d, sigma.position_tau_s)]
-        groups.append(_group(2 * fr.order_p + axis, np.full(k, s_px ** 2), parts, fr.tp))
-    groups.append(_group(npix + fr.order_r, np.full(fr.tr.size, s_r ** 2),
-                         [(np.full(fr.tr.size, s_pos), sigma.position_tau_s)], fr.tr))
-    return Model(tuple(groups), npix, npix + fr.tr.size)
+    inv_d = np.where(np.isfinite(D) & (D > 0), 1.0 / np.where(D > 0, D, 1.0), 0.0)[order_p]
+    tp, tr = t_s[hp][order_p], t_s[hr][order_r]
+    k = order_p.size
+    models = []
+    for sigma in sigmas:
+        s_px = 1.0 if sigma.pixel_px is None else sigma.pixel_px
+        s_r = 1.0 if sigma.range_m is None else sigma.range_m
+        s_pos = 0.0 if sigma.position_m is None else sigma.position_m
+        s_att = 0.0 if sigma.attitude_deg is None else math.radians(sigma.attitude_deg)
+        groups = []
+        for axis, f in ((0, fx[0, hp][order_p]), (1, fy[0, hp][order_p])):
+            parts = [(f * s_att, sigma.attitude_tau_s), (f * s_pos * inv_d, sigma.position_tau_s)]
+            groups.append(_group(2 * order_p + axis, np.full(k, s_px ** 2), parts, tp))
+        groups.append(_group(2 * k + order_r, np.full(tr.size, s_r ** 2), [(np.full(tr.size, s_pos),
+                                                                            sigma.position_tau_s)], tr))
+        models.append(Model(tuple(groups), 2 * k, 2 * k + tr.size))
+    return models
 
 
 def _group(rows, R0, parts, t_s) -> Group:
@@ -155,7 +129,7 @@ def _group(rows, R0, parts, t_s) -> Group:
             continue
         if tau:
             gains.append(g)
-            chains.append(_chain(t_s, tau))
+            chains.append(np.exp(-np.diff(t_s) / tau))  # the transitions between time-ordered frames
         else:
             R0 = R0 + g * g
     G = np.stack(gains, axis=1) if gains else np.zeros((rows.size, 0))
@@ -195,7 +169,7 @@ class Stack:
 
 
 def stack_models(models: list) -> Stack:
-    """The `Stack` of K models of the same rows (`problem_model` of one problem under K sigmas with the same
+    """The `Stack` of K models of the same rows (`problem_models` of one problem under K sigmas with the same
     parts: the candidates of `learned_tau`)."""
     groups = []
     for gs in zip(*(md.groups for md in models), strict=True):
@@ -225,10 +199,7 @@ def quadratic_forms_stacked(sk: Stack, A: np.ndarray, w: np.ndarray, vf: np.ndar
         Rinv, Y = Rinv_all[:, rows], A[:, rows]
         scale = vf[:, 0] if gi < 2 else vf[:, 1]
         RiY = Rinv[:, :, None] * Y
-        if (Rinv > 0).all():  # one pass; the same sums as row by row
-            logdet = np.log(scale[:, None] / Rinv).sum(axis=1)
-        else:
-            logdet = np.array([np.sum(np.log(scale[j] / Rinv[j][Rinv[j] > 0])) for j in range(K)])
+        logdet = np.log(scale[:, None] / np.where(Rinv > 0, Rinv, scale[:, None])).sum(axis=1)  # rows with weight
         if p == 0:
             CY = RiY / scale[:, None, None]
         else:
@@ -255,38 +226,20 @@ def quadratic_forms_stacked(sk: Stack, A: np.ndarray, w: np.ndarray, vf: np.ndar
     return out
 
 
-def gls(st: Stacked, X0: np.ndarray, model: Model, robust: str | None, vce: bool, tol_m: float,
-        max_iterations: int):
-    """Generalized least squares `mle` of one problem (B = 1) from a usable start X0 (3,) under `model`
-    (`problem_model`): `Correlated` through the one iteration and finish of `mle.run`. Returns `mle.finish`'s
-    tuple for B = 1."""
-    return gls_models(st, X0, [model], robust, vce, tol_m, max_iterations)
-
-
-def gls_models(st: Stacked, X0: np.ndarray, models: list, robust: str | None, vce: bool, tol_m: float,
-               max_iterations: int, rows0: np.ndarray | None = None):
-    """`gls` of one problem (B = 1) under each of several `Model`s of its rows (the candidates of
-    `learned_tau`), iterated side by side as K problems (each exactly as alone: one drive, one finish); rows0:
-    `rows_in_use` at X0 where the caller has it. Returns `mle.finish`'s tuple over the K models."""
-    K = len(models)
-    X = np.repeat(np.array(X0, dtype=np.float64).reshape(1, 3), K, axis=0)
-    status, bad = start_status(X, None)
-    stk = st if K == 1 else st.take(np.zeros(K, dtype=np.intp))
-    return _mle.run(Correlated(stk, models, X, vce, rows0), stk, X, status, bad, X.copy(), robust, tol_m,
-                    max_iterations)
-
-
-def gls_problems(sts: list, X0s: np.ndarray, models: list, robust: str | None, vce: bool, tol_m: float,
-                 max_iterations: int, rows0: list):
-    """`gls_models` of T problems (B = 1 each) with the same rows in use (the same frames with a pixel and with
-    a range, in the same time order: `stack_models` checks), K models each, all T K fits side by side (each
-    exactly as alone); X0s (T,3) the problems' starts, models the T K models (problem by problem), rows0 the
-    problems' `rows_in_use` at their start. Returns `mle.finish`'s tuple over the T K fits."""
+def gls(sts: list, X0s: np.ndarray, models: list, robust: str | None, vce: bool, tol_m: float,
+        max_iterations: int, rows0: list | None = None):
+    """Generalized least squares `mle` of T problems (B = 1 each) with the same rows in use (the same frames with
+    a pixel and with a range, in the same time order: `stack_models` checks) from usable starts X0s (T,3), each
+    under K `Model`s of its rows (models: T K, problem by problem), all T K fits side by side, each exactly as
+    alone: `Correlated` through the one iteration and finish of `mle.run`; rows0: the problems' `rows_in_use` at
+    their starts where the caller has them. Returns `mle.finish`'s tuple over the T K fits."""
     T = len(sts)
     K = len(models) // T
     X = np.repeat(np.asarray(X0s, dtype=np.float64).reshape(T, 3), K, axis=0)
     status, bad = start_status(X, None)
     stk = stack_problems([st.take(np.zeros(K, dtype=np.intp)) for st in sts])
+    if rows0 is None:
+        rows0 = [rows_in_use(st, X[t * K]) for t, st in enumerate(sts)]
     rows = [r for r in rows0 for _ in range(K)]
     return _mle.run(Correlated(stk, models, X, vce, rows), stk, X, status, bad, X.copy(), robust, tol_m,
                     max_iterations)
@@ -309,7 +262,7 @@ def stack_problems(sts: list) -> Stacked:
 class Correlated(_iterate.Model):
     """The `mle` model of one problem (B = 1) with time-correlated errors, as `iterate.drive` and `mle.finish`
     use it: iteratively reweighted generalized least squares, under K models of the residual covariance at once
-    (K independent problems on the same rows; `gls_models`). Every step takes the robust weights
+    (K independent problems on the same rows; `gls`). Every step takes the robust weights
     w_i = rho'(z)/z of the rows' marginal standardized residuals z_i = r_i / sqrt(C_ii vf) at the current
     estimate, applies them as inflated variances of an independent gross error, and takes the Gauss-Newton
     step of the correlated problem (`quadratic_forms_stacked`, O(n)); no damping. Its residual planes (3,n,K) hold the
@@ -317,10 +270,9 @@ class Correlated(_iterate.Model):
 
     drift_modelled = True
 
-    def __init__(self, st: Stacked, models: list, X: np.ndarray, vce: bool, rows=None):
-        """st: the problem, once per model (K copies); X (K,3) the start of every model, one point; rows: its
-        `rows_in_use` there where the caller has it. Or (`gls_problems`) st several problems with the same rows
-        in use, each once per model, X their starts and rows the list of each model's rows at its start."""
+    def __init__(self, st: Stacked, models: list, X: np.ndarray, vce: bool, rows: list):
+        """st: problems with the same rows in use, each once per model (`gls`); X (K,3) their starts, rows the
+        list of each model's rows at its start (`rows_in_use`)."""
         K = len(models)
         m, npix = models[0].m, models[0].npix
         self.st, self.models, self.X, self.vce = st, models, X, vce
@@ -332,8 +284,7 @@ class Correlated(_iterate.Model):
         # the rows' places in the (3,n,K) residual planes: u, v of the pixel frames (interleaved), the ranged frames
         self._at = np.concatenate([(np.arange(2)[None, :] * st.n + pf[:, None]).ravel(), 2 * st.n + rf])
         self.ok = self._planes(np.ones((m, K)), 0.0) > 0
-        A = rows_in_use(st.take(np.zeros(1, dtype=np.intp)), X[0]) if rows is None else rows
-        self.A = list(A) if isinstance(A, list) else [A] * K  # per model; replaced, never changed in place
+        self.A = list(rows)  # per model; replaced, never changed in place
         self._last_forms = [None] * K
         self._stack = stack_models(models)
         self._scaled_vf = None  # the variance factors of the row scales self._s and self._isd

@@ -275,12 +275,12 @@ def _mle_dispatch(st: Stacked, o: dict):
             return (nan, np.zeros(1, dtype=np.int64), status, np.full(1, np.nan), np.full((1, 3, 3), np.nan),
                     {"variance_factor_pixel": np.ones(1), "variance_factor_range": np.ones(1),
                      "sigma0_sq": np.full(1, np.nan), "vce_rounds": np.zeros(1, dtype=np.int64)})
-        model = _correlated.problem_model(st, x0[0], sigma)
+        model = _correlated.problem_models(st, x0[0], [sigma])[0]
         if model.correlated and o.get("terrain") is not None:
             raise ValueError("mle: the terrain option is not available with time-correlated errors (sigma "
                              "attitude_tau_s / position_tau_s)")
         if model.correlated:
-            return _correlated.gls(st, x0[0], model, robust, vce, tol, itmax)
+            return _correlated.gls([st], x0[:1], [model], robust, vce, tol, itmax)
         sigma = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
     res = _mle.mle(st, x0, sigma, robust, vce, tol, itmax, init_status, bias_deg, size_unknown, o.get("terrain"))
     res = _bias_refit(st, o, x0, init_status, sigma, vce, res, bias_deg, size_unknown)
@@ -316,7 +316,7 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
     """The mle answers res (B problems) under the independent-error sigma, each replaced by the learned drift
     model's (`_learned_answer`) where its residuals drift and the sigma gives no correlation time (the configured
     sigma's: size_unknown of `mle.bias_prior_deg`); the problems with the same rows in use are fitted side by side
-    (`learned_tau.learn_tau_many`). The learned drift model (generalized least squares) takes no terrain prior:
+    (`learned_tau.learn_tau`). The learned drift model (generalized least squares) takes no terrain prior:
     with one, the first answers stand."""
     if st.t_ns is None or not size_unknown or o.get("terrain") is not None:
         return res
@@ -327,7 +327,7 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
     if not need.size:
         return res
     sts = [_learned.without_rejected(st.take(np.array([b])), ex["rejected"][b]) for b in need]
-    learned = _learned.learn_tau_many(sts, res[0][need], sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce,
+    learned = _learned.learn_tau(sts, res[0][need], sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce,
                                       o["tol_m"], o["max_iterations"])
     replaced = []
     for b, got in zip(need, learned, strict=True):
@@ -445,7 +445,7 @@ REAL_TIMES_NS = 1_000_000
 
 
 def _learned_answer(res: tuple, got, sigma) -> tuple:
-    """One problem's answer from its first answer res (B = 1) and `learned_tau.learn_tau_many`'s got for it: the
+    """One problem's answer from its first answer res (B = 1) and `learned_tau.learn_tau`'s got for it: the
     drift model's where it is kept, else res itself."""
     X, ex = res[0], res[5]
     if got is None:
@@ -666,7 +666,7 @@ def solve_problems(problems: Sequence[Observations], methods: Sequence[str], opt
     number of frames, sigma and truth (`_groups`: problems are independent, so a problem's answer does not depend
     on the others); `mle`'s first fit too (but with time-correlated errors or a terrain prior, one problem at a
     time), its learned drift model's fits side by side for the problems with the same rows in use
-    (`learned_tau.learn_tau_many`), its multistart per problem, reusing the start estimators' answers solved here
+    (`learned_tau.learn_tau`), its multistart per problem, reusing the start estimators' answers solved here
     with the mle's tol_m and max_iterations."""
     obs_list = list(problems)
     for obs in obs_list:

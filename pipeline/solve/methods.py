@@ -82,22 +82,26 @@ def _initial(options: dict, B: int):
     return x0
 
 
+def _vision(st: Stacked, o: dict):
+    """vision's (X (B,3), iterations, status, cond) from initial_m, else from the DLT point: copies of
+    o["vision_from_dlt"] where the caller has it already (`_mle_multistart`: every start method that begins from
+    vision)."""
+    if "vision_from_dlt" in o:
+        return tuple(np.array(a, copy=True) for a in o["vision_from_dlt"])
+    x0, init_status = _initial(o, st.size), None
+    if x0 is None:
+        x0, init_status, _ = linear.dlt(st, with_condition=False)
+    return least_squares.vision(st, x0, o["tol_m"], o["max_iterations"], init_status)
+
+
 def _vision_init(st: Stacked, o: dict):
+    """The start of the methods that begin from vision: initial_m (status None), else vision's answer (one that
+    hit the iteration limit is still a usable start) and its status."""
     x0 = _initial(o, st.size)
     if x0 is not None:
         return x0, None
-    X, _, status, _ = _vision_from_dlt(st, o)
-    # a vision result that hit the iteration limit is still a usable initial value
+    X, _, status, _ = _vision(st, o)
     return X, status
-
-
-def _vision_from_dlt(st: Stacked, o: dict):
-    """vision from the DLT point: (X (B,3), iterations, status, cond), copies of o["vision_from_dlt"] where the
-    caller has it already (`_mle_multistart`: every start method that begins from vision)."""
-    if "vision_from_dlt" in o:
-        return tuple(np.array(a, copy=True) for a in o["vision_from_dlt"])
-    x0, init_status, _ = linear.dlt(st, with_condition=False)
-    return least_squares.vision(st, x0, o["tol_m"], o["max_iterations"], init_status)
 
 
 def _boresight_start(st: Stacked) -> np.ndarray:
@@ -146,11 +150,7 @@ def _solve_stacked(method: str, st: Stacked, o: dict, first: tuple | None = None
         cond = np.full(B, np.nan)
         extras = {"points_m": pts, "oracle_error_m": oracle}
     elif method == "vision":
-        x0 = _initial(o, B)
-        if x0 is None:
-            X, it, status, cond = _vision_from_dlt(st, o)
-        else:
-            X, it, status, cond = least_squares.vision(st, x0, tol, itmax, None)
+        X, it, status, cond = _vision(st, o)
     elif method == "range":
         x0, init_status = _range_init(st, o)
         X, it, status, cond, flat = least_squares.range_only(st, x0, tol, itmax, init_status)
@@ -160,11 +160,8 @@ def _solve_stacked(method: str, st: Stacked, o: dict, first: tuple | None = None
         X, it, status, cond = least_squares.fusion_raw(st, x0, tol, itmax, init_status)
     elif method in ("fusion", "ridge"):
         x0, init_status = _vision_init(st, o)
-        if method == "fusion":
-            k, hkb = None, None
-        else:
-            k = o.get("k")
-            hkb = None if k is not None else o.get("hkb", "paper")
+        k = o.get("k") if method == "ridge" else None
+        hkb = o.get("hkb", "paper") if method == "ridge" and k is None else None
         X, it, status, cond, ex = least_squares.normalized_fusion(st, x0, tol, itmax, init_status, k=k, hkb=hkb)
         extras = {"augmented_component": ex["augmented"]}
         if method == "ridge":
@@ -228,34 +225,31 @@ def _terrain_start(st: Stacked, fn) -> tuple[np.ndarray, np.ndarray]:
     """(B,3) starts and their status: the first pixel's line of sight met with the terrain fn (Newton on the
     distance t along the ray, from the terrain below the camera); NaN and DEGENERATE where it does not meet it
     in front of the camera."""
-    B = st.size
-    X = np.full((B, 3), np.nan)
-    status = np.full(B, Status.DEGENERATE, dtype=np.int8)
-    for b in range(B):
-        k = np.flatnonzero(st.has_pix[b])
-        if k.size == 0:
-            continue
-        M, p4, uv = st.M[b, k[0]], st.p4[b, k[0]], st.pix[b, k[0]]
-        c = -np.linalg.solve(M, p4)
-        d = np.linalg.solve(M, np.array([uv[0], uv[1], 1.0]))
-        d = d * np.sign(np.linalg.det(M))  # in front of the camera: positive depth
-        d = d / np.linalg.norm(d)
-        t = 0.0
-        for _ in range(50):
-            x = c + t * d
-            up, de, dn = (float(np.asarray(v).reshape(-1)[0]) for v in fn(np.array([x[0]]), np.array([x[1]])))
-            f = x[2] - up
-            df = d[2] - de * d[0] - dn * d[1]
-            if not (np.isfinite(f) and np.isfinite(df)) or df == 0:
-                break
-            dt = -f / df
-            t += dt
-            if abs(dt) < 1e-6 * (1.0 + abs(t)):
-                break
-        x = c + t * d
-        if t > 0 and np.isfinite(x).all():
-            X[b], status[b] = x, Status.CONVERGED
-    return X, status
+    b = np.arange(st.size)
+    k = np.argmax(st.has_pix, axis=1)  # the first frame with a pixel
+    M, uv1 = st.M[b, k], np.concatenate([st.pix[b, k], np.ones((st.size, 1))], axis=1)
+    c = -np.linalg.solve(M, st.p4[b, k][..., None])[..., 0]
+    d = np.linalg.solve(M, uv1[..., None])[..., 0] * np.sign(np.linalg.det(M))[:, None]  # in front: depth > 0
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    t = np.zeros(st.size)
+    todo = np.flatnonzero(st.has_pix.any(axis=1))
+    for _ in range(50):
+        if not todo.size:
+            break
+        x = c[todo] + t[todo, None] * d[todo]
+        up, de, dn = (np.asarray(v, dtype=np.float64).reshape(-1) for v in fn(x[:, 0], x[:, 1]))
+        f = x[:, 2] - up
+        df = d[todo, 2] - de * d[todo, 0] - dn * d[todo, 1]
+        ok = np.isfinite(f) & np.isfinite(df) & (df != 0)
+        dt = -f[ok] / df[ok]
+        t[todo[ok]] += dt
+        more = np.zeros(todo.size, dtype=bool)
+        more[ok] = np.abs(dt) >= 1e-6 * (1.0 + np.abs(t[todo[ok]]))
+        todo = todo[more]
+    X = c + t[:, None] * d
+    good = st.has_pix.any(axis=1) & (t > 0) & np.isfinite(X).all(axis=1)
+    X[~good] = np.nan
+    return X, np.where(good, Status.CONVERGED, Status.DEGENERATE).astype(np.int8)
 
 
 def _mle_dispatch(st: Stacked, o: dict):
@@ -329,14 +323,11 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
     sts = [_learned.without_rejected(st.take(np.array([b])), ex["rejected"][b]) for b in need]
     learned = _learned.learn_tau(sts, res[0][need], sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce,
                                       o["tol_m"], o["max_iterations"])
-    replaced = []
     for b, got in zip(need, learned, strict=True):
-        row = _res_row(res, b)
+        row = _row(res, b)
         answer = _learned_answer(row, got, sigma)
         if answer is not row:  # the drift model's answer was kept
-            replaced.append((b, answer))
-    for b, answer in replaced:
-        res = _replace_rows(res, answer, np.array([b]))
+            res = _replace_rows(res, answer, np.array([b]))
     return res
 
 
@@ -389,7 +380,7 @@ def _mle_multistart(st: Stacked, o: dict, first: tuple | None = None, answers: d
         be = (answers or {}).get(name)
         if be is None:
             if name in ("vision", "fusion", "range") and "vision_from_dlt" not in plain:  # each begins from it
-                plain["vision_from_dlt"] = _vision_from_dlt(st, plain)
+                plain["vision_from_dlt"] = _vision(st, plain)
             try:
                 be = _solve_stacked(name, st, plain)
             except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - the kernels report failures as statuses
@@ -490,16 +481,13 @@ def solve_batch(method: str, batch: ObservationBatch, **options) -> BatchEstimat
     x0 = _initial(o, batch.size)  # validated once; chunks get their rows
     # degenerate problems produce inf/NaN on the way to their status: expected, not worth a warning
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        st = Stacked.from_batch(batch)
         if batch.size <= CHUNK:
-            return _solve_stacked(method, Stacked.from_batch(batch), o)
+            return _solve_stacked(method, st, o)
         parts = []
         for lo in range(0, batch.size, CHUNK):
-            sl = slice(lo, lo + CHUNK)
-            sub = ObservationBatch(P=batch.P[sl], pixel=batch.pixel[sl], platform_m=batch.platform_m[sl],
-                                   range_m=batch.range_m[sl], sigma=batch.sigma,
-                                   truth_m=None if batch.truth_m is None else batch.truth_m[sl])
-            oc = o if x0 is None else {**o, "initial_m": x0[sl]}
-            parts.append(_solve_stacked(method, Stacked.from_batch(sub), oc))
+            idx = np.arange(lo, min(lo + CHUNK, batch.size))
+            parts.append(_solve_stacked(method, st.take(idx), o if x0 is None else {**o, "initial_m": x0[idx]}))
         return _concatenate(parts)
 
 
@@ -695,7 +683,7 @@ def solve_problems(problems: Sequence[Observations], methods: Sequence[str], opt
         for m, (o, todo) in ok.items():
             if m == "mle":
                 continue
-            answers[m] = _solve_grouped(m, sts, todo, out, lambda st, m=m, o=o: _solve_stacked(m, st, o), _row)
+            answers[m] = _solve_grouped(m, sts, todo, out, lambda st, m=m, o=o: _solve_stacked(m, st, o))
         if "mle" in ok:
             o, todo = ok["mle"]
             plain = {"tol_m": o["tol_m"], "max_iterations": o["max_iterations"]}
@@ -724,27 +712,29 @@ def _groups(sts: list[Stacked], todo: list[int]) -> list[list[int]]:
     return list(groups.values())
 
 
-def _row(be: BatchEstimate, b: int) -> BatchEstimate:
-    """Problem b of a BatchEstimate, as a BatchEstimate of one (copies)."""
-    sl = slice(b, b + 1)
-    return BatchEstimate(method=be.method, position_m=be.position_m[sl].copy(), iterations=be.iterations[sl].copy(),
-                         status=be.status[sl].copy(), condition_number=be.condition_number[sl].copy(),
-                         covariance_m2=None if be.covariance_m2 is None else be.covariance_m2[sl].copy(),
-                         extras={k: v[sl].copy() for k, v in be.extras.items()})
+def _row(res, b: int):
+    """Problem b of a BatchEstimate or of an mle answer (X, it, status, cond, cov, extras: the fields of a
+    BatchEstimate in their order), as one of one (copies)."""
+    be = isinstance(res, BatchEstimate)
+    parts = (res.position_m, res.iterations, res.status, res.condition_number, res.covariance_m2,
+             res.extras) if be else res
+    row = (*(None if a is None else a[b:b + 1].copy() for a in parts[:5]),
+           {k: v[b:b + 1].copy() for k, v in parts[5].items()})
+    return BatchEstimate(res.method, *row) if be else row
 
 
-def _solve_grouped(name: str, sts: list[Stacked], todo: list[int], out: list[dict], fn, row, batched=None
-                   ) -> dict:
-    """{problem: fn's answer for it (B = 1)} for the problems of todo: fn (a Stacked -> an answer of its problems)
-    once per group (`_groups`) where batched(the group's first Stacked) allows (default: always), row(answer, b)
-    taking problem b out; one problem at a time otherwise, or where a group's call raises (the error then goes to
-    its problem in out under `name`)."""
+def _solve_grouped(name: str, sts: list[Stacked], todo: list[int], out: list[dict], fn, batched=None) -> dict:
+    """{problem: fn's answer for it (B = 1)} for the problems of todo: fn (a Stacked -> an answer of its problems,
+    a BatchEstimate or an mle tuple) once per group (`_groups`) where batched(the group's first Stacked) allows
+    (default: always); one problem at a time otherwise, or where a group's call raises (the error then goes to
+    its problem in out under `name`): the kernels report a problem's failure as its status, but a problem can
+    still raise (a singular matrix LAPACK refuses), and then it alone gets the error."""
     got = {}
     for g in _groups(sts, todo):
         if len(g) > 1 and (batched is None or batched(sts[g[0]])):
             try:
                 res = fn(_correlated.stack_problems([sts[i] for i in g]))
-                got.update({i: row(res, b) for b, i in enumerate(g)})
+                got.update({i: _row(res, b) for b, i in enumerate(g)})
                 continue
             except SOLVE_ERRORS:
                 pass
@@ -762,13 +752,7 @@ def _mle_first_fits(sts: list[Stacked], todo: list[int], o: dict, out: list[dict
     def batched(st):
         return not (_mle_sigma(st, o)[0].correlated or o.get("terrain") is not None or o.get("initial_m") is not None)
 
-    return _solve_grouped("mle", sts, todo, out, lambda st: _mle_dispatch(st, o), _res_row, batched)
-
-
-def _res_row(res: tuple, b: int) -> tuple:
-    """Problem b of an mle answer (X, it, status, cond, cov, extras) as an answer of one (copies)."""
-    sl = slice(b, b + 1)
-    return (*(a[sl].copy() for a in res[:5]), {k: v[sl].copy() for k, v in res[5].items()})
+    return _solve_grouped("mle", sts, todo, out, lambda st: _mle_dispatch(st, o), batched)
 
 
 def _residuals(method: str, st: Stacked, X: np.ndarray) -> np.ndarray:

@@ -1,26 +1,12 @@
-"""Time-correlated telemetry errors for `mle` (generalized least squares), one problem, in O(n).
+"""Time-correlated telemetry errors for `mle` (generalized least squares) in O(n) (docs/solvers.md, "Time-correlated
+attitude and position errors").
 
-Attitude and platform position errors of real telemetry drift slowly (first-order Gauss-Markov processes:
-an IMU/AHRS attitude error with a correlation time of tens of seconds, a GNSS position error of a minute or
-more). With the correlation times `Sigma.attitude_tau_s` and `Sigma.position_tau_s` the residual covariance,
-per image axis (u, v) over the frames with a pixel and over the frames with a range, is
-
-    C_u[i, j] = pixel_px^2 delta_ij + fx_i fx_j (att^2 exp(-|t_i - t_j| / tau_att)
-                                                 + pos^2 / (D_i D_j) exp(-|t_i - t_j| / tau_pos))
-    C_d[i, j] = range_m^2 delta_ij + pos^2 exp(-|t_i - t_j| / tau_pos)
-
-(likewise C_v with fy; a tau of None or 0 leaves that part on the diagonal, which is then exactly the
-independent model of `mle.base_variances`). u, v and range rows stay mutually uncorrelated.
-
-The factor-graph form: each Gauss-Markov error is one state per frame chained by its transition
-x_(i+1) = a_i x_i + sqrt(1 - a_i^2) w_i, a_i = exp(-dt_i / tau), so its precision K^-1 is tridiagonal, and a
-group's covariance is C = R + G K G^T (R the white variances, G the per-row gains of the states). Eliminating
-the states (Woodbury) gives C^-1 y = R^-1 y - R^-1 G A^-1 G^T R^-1 y with A = K^-1 + G^T R^-1 G banded
-(bandwidth = the number of processes), and log det C = log det R + log det A + log det K: a banded Cholesky
-(LAPACK pbtrf through scipy.linalg.cholesky_banded), O(n) time and memory, no n x n matrix.
-
-With a robust loss a row with weight w carries an extra independent error that makes its variance C_ii / w
-(only R changes), so a gross error in one frame does not leak into the others.
+Per group of rows (u, v over the frames with a pixel, range over the ranged frames) C = R + G K G^T: R the white
+variances, G the rows' gains of the Gauss-Markov states (one per frame and process, chained by their transitions
+a_i = exp(-dt_i / tau), so K^-1 is tridiagonal). The states eliminate by Woodbury with A = K^-1 + G^T R^-1 G
+banded (bandwidth = the number of processes): C^-1 y = R^-1 y - R^-1 G A^-1 G^T R^-1 y and log det C = log det R
++ log det A + log det K, by LAPACK's banded Cholesky; no n x n matrix. A robust weight w makes a row's variance
+C_ii / w (only R changes), so a gross error in one frame does not leak into the others.
 """
 
 from __future__ import annotations

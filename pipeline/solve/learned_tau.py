@@ -1,19 +1,8 @@
 """The telemetry errors' correlation time (and, where the sigma does not state it, their size) learned from the
-flight by evidence, for `mle` on one problem whose sigma gives no correlation time.
-
-Attitude and GNSS errors drift: first-order Gauss-Markov with a correlation time tau. `mle` first solves the
-independent-error model with a boresight bias (`mle.mle`: redescending loss, fit checks); where it has timestamps
-and its residuals drift from frame to frame (`fit_checks`), it then fits the generalized least squares model
-(`correlated.gls`, O(n)) with one correlation time for the attitude and the position errors, for each tau of
-TAU_GRID_S, and where the attitude sigma is not stated for each attitude sigma of ATTITUDE_GRID_DEG too (without
-a size the drift has no covariance, and every tau would give the same likelihood), without the rows the first
-solve rejected, and keeps the model of the largest restricted (REML) Gaussian likelihood
-
-    log L = -1/2 (r^T C^-1 r / k + m log k + log det C + log det (J^T C^-1 J / k)),  k = max(r^T C^-1 r / m, 1)
-
-(r the m residuals at that model's estimate, the target integrated out with a flat prior; the covariance's size
-charged by log det, its overall scale k at its maximum likelihood but never below the stated sigmas). The chosen
-models' mixture is the answer, with the fit checks of the most likely one (`mle.finish`).
+flight by evidence, for `mle` on one problem whose sigma gives no correlation time (docs/solvers.md, "Correlation
+time learned from the flight"): the GLS fit (`correlated.gls`) under every candidate of `candidates`, without the
+rows the first solve rejected, weighted by its restricted (REML) Gaussian likelihood (`log_likelihoods`); the
+answer is the candidates' posterior mixture, with the fit checks of the most likely one.
 """
 
 from __future__ import annotations

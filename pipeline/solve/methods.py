@@ -1,9 +1,6 @@
-"""The eight estimators behind `solve` and `solve_batch`: option checks, the dispatch of each method to its
-batched kernel (linear.py, least_squares.py, mle.py; correlated.py for the generalized least squares mle), and
-for one problem the checks of unusable input and the conversion of the batch-of-one answer into an `Estimate`.
-
-One implementation per estimator: `solve(method, obs)` runs the same kernel as `solve_batch` on a batch of one.
-"""
+"""The eight estimators behind `solve`, `solve_batch` and `solve_problems`: option checks, each method's dispatch
+to its batched kernel, and for one problem the checks of unusable input and its `Estimate`. One implementation
+per estimator: `solve(method, obs)` runs the kernel of `solve_batch` on a batch of one."""
 
 from __future__ import annotations
 
@@ -105,9 +102,8 @@ def _vision_init(st: Stacked, o: dict):
 
 
 def _boresight_start(st: Stacked) -> np.ndarray:
-    """(B,3) a start for range-only without pixels: per ranged frame the point at the laser range along the
-    camera's optical axis (the rangefinder is boresighted with the camera; the axis is M's third row, pointed to
-    the front by the sign of det M), the component-wise median over the frames; NaN without a range."""
+    """(B,3) range-only's start without pixels: the component-wise median over the ranged frames of the point at
+    the laser range along the camera's optical axis (M's third row, to the front); NaN without a range."""
     m3 = st.M[..., 2, :] * st.depth_sign()[..., None]
     axis = m3 / np.linalg.norm(m3, axis=-1, keepdims=True)
     pts = np.where(st.has_range[..., None], st.platform_m + np.where(st.has_range, st.range_m, 0.0)[..., None] * axis,
@@ -119,9 +115,8 @@ def _boresight_start(st: Stacked) -> np.ndarray:
 
 
 def _range_init(st: Stacked, o: dict):
-    """The range-only start: vision's estimate (the paper's), or where fewer than two frames have a pixel (no
-    vision estimate) the boresight start. (Where vision fails on two or more pixels, range keeps its status:
-    the simulation's figures count those trials as flagged.)"""
+    """range's start: vision's estimate (the paper's), or with fewer than two pixels the boresight start. (Where
+    vision fails on two or more pixels, range keeps its status: the simulation counts those trials as flagged.)"""
     x0, init_status = _vision_init(st, o)
     if init_status is None:  # initial_m given
         return x0, init_status
@@ -135,8 +130,8 @@ def _range_init(st: Stacked, o: dict):
 
 def _solve_stacked(method: str, st: Stacked, o: dict, first: tuple | None = None,
                    answers: dict | None = None) -> BatchEstimate:
-    """One method's kernel on the batch st. mle: first, its fit from the default start where the caller has it
-    (`_mle_dispatch`'s tuple); answers, the start estimators' answers for the multistart (`_mle_multistart`)."""
+    """One method's kernel on the batch st; mle: first, its fit from the default start where the caller has it,
+    answers, the start estimators' answers for the multistart (`_mle_multistart`)."""
     B = st.size
     tol, itmax = o["tol_m"], o["max_iterations"]
     extras: dict = {}
@@ -190,11 +185,9 @@ def _mark_behind(st: Stacked, be: BatchEstimate) -> BatchEstimate:
 
 
 def _mle_start(st: Stacked, o: dict):
-    """Initial values (B,3) and their status, the sigmas and whether to estimate variance components.
-
-    The start is the DLT point; where there are fewer than two pixels, or the DLT point is not in front of
-    every camera with a pixel (no baseline: it is then a camera centre, or behind), the line-of-sight median.
-    """
+    """(B,3) starts and their status, the sigma and whether to estimate variance components: the DLT point; where
+    fewer than two pixels, or it is not in front of every camera with a pixel (no baseline), the line-of-sight
+    median; then, with a terrain prior, the first line of sight met with the terrain."""
     x0 = _initial(o, st.size)
     init_status = None
     if x0 is None:
@@ -253,9 +246,8 @@ def _terrain_start(st: Stacked, fn) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _mle_dispatch(st: Stacked, o: dict):
-    """`mle.mle` on the batch, or `correlated.gls` for one problem whose sigma has correlation times (and
-    whose residual covariance is not diagonal: with vanishing correlation it is the independent problem); then,
-    for the problems with timestamps whose residuals drift, the learned drift model (`_with_learned_tau`)."""
+    """`mle.mle` on the batch, or for one problem whose sigma has correlation times (a non-diagonal residual
+    covariance) `correlated.gls`; then the learned drift model (`_with_learned_tau`) where the residuals drift."""
     x0, init_status, sigma, vce = _mle_start(st, o)
     robust, tol, itmax = o.get("robust", _mle.DEFAULT_ROBUST), o["tol_m"], o["max_iterations"]
     bias_deg, size_unknown = _mle.bias_prior_deg(sigma, o)  # configured correlation times win, even vanishing ones
@@ -283,8 +275,8 @@ def _mle_dispatch(st: Stacked, o: dict):
 
 def _bias_refit(st: Stacked, o: dict, x0: np.ndarray, init_status, sigma, vce: bool, res: tuple, bias_deg,
                 size_unknown: bool) -> tuple:
-    """The independent-error fit res (`mle.mle` from x0 (B,3) with the bias prior bias_deg, `mle.bias_prior_deg`)
-    refitted without the bias where the bias came out far beyond the stated attitude sigma."""
+    """The independent-error fit res (`mle.mle` from x0 with the bias prior bias_deg) refitted without the bias
+    where the bias came out far beyond the stated attitude sigma."""
     robust, tol, itmax = o.get("robust", _mle.DEFAULT_ROBUST), o["tol_m"], o["max_iterations"]
     if bias_deg and size_unknown:
         # the stated attitude sigma is the largest bias: a bias estimated far beyond it (as the learned drift
@@ -307,11 +299,9 @@ def _bias_refit(st: Stacked, o: dict, x0: np.ndarray, init_status, sigma, vce: b
 
 
 def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_unknown: bool) -> tuple:
-    """The mle answers res (B problems) under the independent-error sigma, each replaced by the learned drift
-    model's (`_learned_answer`) where its residuals drift and the sigma gives no correlation time (the configured
-    sigma's: size_unknown of `mle.bias_prior_deg`); the problems with the same rows in use are fitted side by side
-    (`learned_tau.learn_tau`). The learned drift model (generalized least squares) takes no terrain prior:
-    with one, the first answers stand."""
+    """res with each problem's answer replaced by the learned drift model's (`learned_tau.learn_tau`,
+    `_learned_answer`) where its residuals drift, it has real timestamps and the configured sigma gives no
+    correlation time; not with a terrain prior (the drift model takes none)."""
     if st.t_ns is None or not size_unknown or o.get("terrain") is not None:
         return res
     ex, t = res[5], st.t_ns
@@ -332,8 +322,8 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
 
 
 def _replace_rows(res: tuple, sub: tuple, idx: np.ndarray) -> tuple:
-    """The mle answers res (X, it, status, cond, cov, extras) with problems idx replaced by sub's. An extra only
-    one of them has is absent for the other's problems: NaN (False for a flag, None for an object)."""
+    """The mle answers res (X, it, status, cond, cov, extras) with problems idx replaced by sub's; an extra only
+    one of them has is absent (`_absent`) for the other's problems."""
     out = []
     for a, b in zip(res[:5], sub[:5], strict=True):
         a = a.copy()
@@ -363,15 +353,12 @@ def _absent(dtype: np.dtype) -> tuple:
 
 
 def _mle_multistart(st: Stacked, o: dict, first: tuple | None = None, answers: dict | None = None):
-    """`_mle_dispatch` on one problem, never an answer that explains the pixels away (`starts`): the fit from the
-    default start is kept when it does not; otherwise mle is run again from every other estimator's answer and
-    the fit of the lowest common robust cost among those that do not explain the pixels away is kept; when
-    every fit does, the target is not determined (DEGENERATE, with the reason in `not_determined`). The other
-    estimators' answers outside the kept fit's ellipsoid (chi-square 99.9 %) are listed (`disagree`).
-
-    first: the default start's fit (`_mle_dispatch`'s tuple) where the caller has it; answers: {method: its
-    BatchEstimate (B = 1)} of start estimators the caller has solved with the mle's tol_m and max_iterations and
-    no other option (`solve_problems`), not solved again."""
+    """`_mle_dispatch` on one problem, never an answer that explains the pixels away (`starts`; docs/solvers.md):
+    if the default start's fit does, mle runs again from every other estimator's answer and keeps the fit of the
+    lowest common robust cost among those that do not; when all do, DEGENERATE with the reason in
+    `not_determined`. Other estimators' answers outside the kept fit's 99.9 % ellipsoid are listed (`disagree`).
+    first: the default start's fit where the caller has it; answers: {method: BatchEstimate (B = 1)} of start
+    estimators solved with the mle's tol_m and max_iterations and no other option, not solved again."""
     res = _mle_dispatch(st, o) if first is None else first
     npix = int(st.has_pix[0].sum())
     cands = {}
@@ -436,8 +423,8 @@ REAL_TIMES_NS = 1_000_000
 
 
 def _learned_answer(res: tuple, got, sigma) -> tuple:
-    """One problem's answer from its first answer res (B = 1) and `learned_tau.learn_tau`'s got for it: the
-    drift model's where it is kept, else res itself."""
+    """One problem's answer from its first answer res (B = 1) and `learned_tau.learn_tau`'s got for it: the drift
+    model's where it is kept, else res itself."""
     X, ex = res[0], res[5]
     if got is None:
         return res
@@ -471,8 +458,7 @@ def _behind_camera(st: Stacked, X: np.ndarray) -> np.ndarray:
 
 
 def solve_batch(method: str, batch: ObservationBatch, **options) -> BatchEstimate:
-    """Solve B problems with one estimator. Problems it cannot solve get status DEGENERATE (geometry does not
-    determine the target, too few observations, target behind a camera) or DIVERGED, and NaN positions."""
+    """Solve B problems with one estimator; problems it cannot solve get status DEGENERATE or DIVERGED and NaN."""
     o = _check_options(method, options)
     if o.get("terrain") is not None:
         raise ValueError("solve_batch: the terrain option takes one problem's ENU frame; use solve() per problem")
@@ -572,13 +558,9 @@ def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
 
 
 def solve(method: str, obs: Observations, **options) -> Estimate:
-    """Solve one problem with one estimator (see the module docstring for methods and options).
-
-    Raises ObservationError for unusable input (too few pixels or ranges, a singular P), GeometryError when
-    the geometry does not determine the target (coincident or collinear positions, rank-deficient design,
-    target behind a camera), SolverError when the iteration diverged. An estimate that reached max_iterations
-    is returned with status MAX_ITERATIONS (converged False).
-    """
+    """Solve one problem with one estimator (options: docs/solvers.md). Raises ObservationError for unusable input,
+    GeometryError where the geometry does not determine the target, SolverError where the iteration diverged; an
+    estimate that reached max_iterations has status MAX_ITERATIONS (converged False)."""
     o = _check_options(method, options)
     if not isinstance(obs, Observations):
         raise TypeError(f"solve wants an Observations, got {type(obs).__name__}")
@@ -647,15 +629,11 @@ SOLVE_ERRORS = (RidgelocError, ValueError, np.linalg.LinAlgError)
 
 def solve_problems(problems: Sequence[Observations], methods: Sequence[str], options: dict | None = None
                    ) -> list[dict]:
-    """Every method of `methods` on each of several problems (a flight's targets), options {method: options}:
-    per problem {method: its `Estimate`, or the error (`SOLVE_ERRORS`) that `solve(method, obs, **options)`
-    raises}, in the order of `methods`. The same answers as `solve` one problem at a time, for less: the checks
-    and arrays of a problem are built once for every method; each kernel runs once for the problems of one
-    number of frames, sigma and truth (`_groups`: problems are independent, so a problem's answer does not depend
-    on the others); `mle`'s first fit too (but with time-correlated errors or a terrain prior, one problem at a
-    time), its learned drift model's fits side by side for the problems with the same rows in use
-    (`learned_tau.learn_tau`), its multistart per problem, reusing the start estimators' answers solved here
-    with the mle's tol_m and max_iterations."""
+    """Every method of `methods` on each of several problems (a flight's targets), options {method: options}: per
+    problem {method: its `Estimate`, or the error (`SOLVE_ERRORS`) `solve` raises}, in the order of `methods`.
+    The answers of `solve` one problem at a time, for less: each problem's checks and arrays are built once; each
+    kernel runs once per group of problems that stack (`_groups`), mle's first fit too (one problem at a time with
+    correlated errors, a terrain prior or initial_m); the multistart reuses the start estimators' answers."""
     obs_list = list(problems)
     for obs in obs_list:
         if not isinstance(obs, Observations):
@@ -747,8 +725,7 @@ def _solve_grouped(name: str, sts: list[Stacked], todo: list[int], out: list[dic
 
 
 def _mle_first_fits(sts: list[Stacked], todo: list[int], o: dict, out: list[dict]) -> dict[int, tuple]:
-    """{problem: its mle fit from the default start (`_mle_dispatch`'s tuple, B = 1)}: one `_mle_dispatch` per
-    group, but one problem at a time with time-correlated errors, a terrain prior or initial_m."""
+    """{problem: its mle fit from the default start (`_mle_dispatch`'s tuple, B = 1)}, by groups where they stack."""
     def batched(st):
         return not (_mle_sigma(st, o)[0].correlated or o.get("terrain") is not None or o.get("initial_m") is not None)
 
@@ -756,8 +733,7 @@ def _mle_first_fits(sts: list[Stacked], todo: list[int], o: dict, out: list[dict
 
 
 def _residuals(method: str, st: Stacked, X: np.ndarray) -> np.ndarray:
-    """Observed minus predicted of the observations the method used: pixels (px, u v interleaved), then
-    ranges (m)."""
+    """Observed minus predicted of the observations the method used: pixels (px, u v interleaved), then ranges (m)."""
     if not np.isfinite(X).all():
         return np.zeros(0)
     parts = []
@@ -771,8 +747,7 @@ def _residuals(method: str, st: Stacked, X: np.ndarray) -> np.ndarray:
 
 
 def unsolved_status(exc: Exception) -> str:
-    """The status of an estimator that did not solve, from its error: degenerate (the geometry does not
-    determine the target), insufficient_data (too few or unusable observations), diverged."""
+    """The status of an estimator that did not solve, from its error: degenerate, insufficient_data or diverged."""
     if isinstance(exc, GeometryError):
         return "degenerate"
     if isinstance(exc, ObservationError):

@@ -77,16 +77,10 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
     sigmas = [dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau, attitude_deg=att)
               for tau, att in candidates(sigma)]
     K = len(sigmas)
-    groups: list[list[int]] = []
-    for i, st in enumerate(sts):  # the same frames with a pixel and with a range (`stack_models` checks the rest)
-        for g in groups:
-            j = g[0]
-            if (st.n == sts[j].n and np.array_equal(st.has_pix, sts[j].has_pix)
-                    and np.array_equal(st.has_range, sts[j].has_range)):
-                g.append(i)
-                break
-        else:
-            groups.append([i])
+    by_rows: dict[tuple, list[int]] = {}  # the same frames with a pixel and with a range (`stack_models`: the rest)
+    for i, st in enumerate(sts):
+        by_rows.setdefault((st.n, st.has_pix.tobytes(), st.has_range.tobytes()), []).append(i)
+    groups = list(by_rows.values())
     out: list = [None] * len(sts)
     while groups:
         g = groups.pop()

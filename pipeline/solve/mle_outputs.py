@@ -18,8 +18,7 @@ def _f(x) -> float | None:
 
 
 def rejected_observations(ex: dict, b: int, t_ns: np.ndarray) -> list[dict]:
-    """[{frame, t_ns, residual ("u" | "v" | "range"), value (px or m), sigmas}] of problem b's rows that the
-    redescending loss gave zero weight."""
+    """[{frame, t_ns, residual ("u" | "v" | "range"), value (px or m), sigmas}] of problem b's rows at zero weight."""
     rej = ex["rejected"][b]
     out = []
     for i, k in zip(*np.nonzero(rej), strict=True):
@@ -35,8 +34,7 @@ def _block_drift(ex: dict, b: int, group: str) -> float | None:
 
 
 def fit_summary(ex: dict, b: int) -> dict:
-    """The fit checks of problem b: chi-square, its degrees of freedom and p-value, the lag-1 autocorrelations,
-    whether the model fits, the covariance inflation and, when it does not fit, a message."""
+    """The fit checks of problem b (`fit_checks`) as JSON values, with the message when the model does not fit."""
     msg = fit_checks.describe(float(ex["chi2"][b]), float(ex["chi2_dof"][b]), float(ex["chi2_p"][b]),
                               float(ex["autocorrelation_pixel"][b]), float(ex["autocorrelation_range"][b]),
                               bool(ex["drift_pixel"][b]), bool(ex["drift_range"][b]),
@@ -58,8 +56,8 @@ DETERMINED_BELOW = 0.7
 
 def boresight_bias(ex: dict, b: int) -> dict | None:
     """The estimated constant boresight bias of problem b (deg, about the camera's vertical axis: u, and its
-    horizontal axis: v), its posterior sigma, the prior's sigma, whether the flight determined it, its
-    correlation with the target (2, 3) and, when its size was learned, the size the flight supports."""
+    horizontal axis: v), its posterior and prior sigmas, whether the flight determined it, its correlation with the
+    target (2, 3) and, where its size was learned, that size; None without a bias state."""
     if "bias_deg" not in ex or not np.isfinite(ex["bias_deg"][b]).all():  # no bias state (NaN: refitted without)
         return None
     bias, sd, prior = ex["bias_deg"][b], ex["bias_sigma_deg"][b], ex["bias_prior_deg"][b]
@@ -100,9 +98,8 @@ def _where(r: dict, t_ns: np.ndarray | None, video_frames) -> str:
 
 
 def notes(extras: dict, t_ns: np.ndarray | None = None, video_frames=None) -> list[str]:
-    """The mle's fit message, boresight bias and rejected observations in words, from `Estimate.extras` (for
-    the console and the report's notes). t_ns (n,): the observations' times, to say when a rejected one was
-    taken; video_frames (n,): their video frame numbers (a run knows them, an observations file does not)."""
+    """The mle's fit message, boresight bias and rejected observations in words from `Estimate.extras`, for the
+    console and the report; t_ns (n,) and video_frames (n,) (where known) say when a rejected one was taken."""
     if t_ns is not None:
         t_ns = np.asarray(t_ns, dtype=np.int64)
     out = []

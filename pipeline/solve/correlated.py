@@ -29,59 +29,40 @@ _MIN_INNOVATION = 1e-10
 
 
 @dataclass
-class Group:
-    """One uncorrelated block of rows (u, v or range) of one problem: rows (k,) into the rows in use (time
-    order), R0 (k,) white variances, gains (k, p) of p unit-variance Gauss-Markov states, a (k-1, p) their
-    transitions (empty p: white), marginal variances C_ii (k,). The parts of the banded matrix A (module
-    docstring) that do not depend on the row weights are built once (`quadratic_forms_stacked` uses them)."""
-    rows: np.ndarray
-    R0: np.ndarray
-    gains: np.ndarray
-    a: np.ndarray
-    Cii: np.ndarray
-
-    def __post_init__(self):
-        k, p = self.gains.shape
-        self._diag, self._ab, self._log_inn = np.zeros((k, p)), np.zeros((p + 1, k * p)), 0.0
-        if p == 0 or k == 0:
-            return
-        inn = np.maximum(1.0 - self.a ** 2, _MIN_INNOVATION)  # (k-1, p)
-        # A = K^-1 + G^T R^-1 G, states ordered frame by frame (index i p + j), lower banded storage ab[d, c]:
-        # K^-1's diagonal here, its transitions (offset p) in the template
-        diag = np.ones((k, p))
-        diag[1:] += 1.0 / inn - 1.0
-        diag[:-1] += self.a ** 2 / inn
-        ab = np.zeros((p + 1, k * p))
-        ab[p, :(k - 1) * p] = (-self.a / inn).ravel()
-        self._diag, self._ab, self._log_inn = diag, ab, float(np.log(inn).sum())
-
-
-@dataclass
-class Model:
-    """The GLS residual model of one problem's rows in use (`rows_in_use`): groups u, v, range; npix pixel
-    rows (u, v interleaved) first. correlated: some process has a nonzero transition (else C is diagonal)."""
+class Models:
+    """K GLS residual models of one problem's rows in use (`rows_in_use`: npix pixel rows, u v interleaved, then
+    the ranges), stacked over K (`problem_models`, `Models.concat`): per group u, v, range (rows (k,), gains
+    (K,k,p) of p unit-variance Gauss-Markov states, the band template of A (K,p+1,kp) and K^-1's diagonal (K,k,p)
+    (the parts of A that do not depend on the row weights), log det K (K,)); the marginal and white variances
+    Cii, R0 (K,m); correlated (K,): some state has a nonzero transition (else C is diagonal)."""
     groups: tuple
+    Cii: np.ndarray
+    R0: np.ndarray
     npix: int
-    m: int
+    correlated: np.ndarray
 
-    @property
-    def correlated(self) -> bool:
-        return any(g.a.size and (g.a > 0).any() and (g.gains != 0).any() for g in self.groups)
+    def take(self, idx: np.ndarray) -> Models:
+        return Models(tuple((r, G[idx], ab[idx], dg[idx], li[idx]) for r, G, ab, dg, li in self.groups),
+                      self.Cii[idx], self.R0[idx], self.npix, self.correlated[idx])
 
-    def __post_init__(self):
-        self._Cii, self._R0 = np.empty(self.m), np.empty(self.m)
-        for g in self.groups:
-            self._Cii[g.rows], self._R0[g.rows] = g.Cii, g.R0
+    @staticmethod
+    def concat(parts: list) -> Models:
+        """The models of parts side by side; ValueError where they differ in their rows or states."""
+        groups = []
+        for gs in zip(*(md.groups for md in parts), strict=True):
+            if any(g[1].shape[1:] != gs[0][1].shape[1:] or not np.array_equal(g[0], gs[0][0]) for g in gs):
+                raise ValueError("the models differ in their rows or states")
+            groups.append((gs[0][0], *(np.concatenate([g[j] for g in gs]) for j in range(1, 5))))
+        cat = np.concatenate
+        return Models(tuple(groups), cat([md.Cii for md in parts]), cat([md.R0 for md in parts]), parts[0].npix,
+                      cat([md.correlated for md in parts]))
 
-    def Cii(self) -> np.ndarray:
-        return self._Cii.copy()
 
-
-def problem_models(st: Stacked, X0: np.ndarray, sigmas: list) -> list:
-    """The `Model` of one problem (B = 1) under each sigma of sigmas, with the focal lengths, the distances at X0
-    (3,) and the frames' times (frames with a pixel, ranged frames, each in time order). Unknown pixel / range
-    sigmas count as 1 px / 1 m (variance components then scale them), like `mle.base_variances`; a part without a
-    correlation time is white (on R)."""
+def problem_models(st: Stacked, X0: np.ndarray, sigmas: list) -> Models:
+    """The `Models` of one problem (B = 1) under the sigmas, with the focal lengths, the distances at X0 (3,) and
+    the frames' times (frames with a pixel, ranged frames, each in time order). Unknown pixel / range sigmas count
+    as 1 px / 1 m (variance components then scale them), like `mle.base_variances`; a part without a correlation
+    time is white (on R). ValueError where the sigmas give different states."""
     t_ns = st.t_ns[0]
     t_s = (t_ns - t_ns.min()).astype(np.float64) * 1e-9  # differences of int64 first: no rounding of epochs
     hp, hr = st.has_pix[0], st.has_range[0]
@@ -92,23 +73,32 @@ def problem_models(st: Stacked, X0: np.ndarray, sigmas: list) -> list:
     inv_d = np.where(np.isfinite(D) & (D > 0), 1.0 / np.where(D > 0, D, 1.0), 0.0)[order_p]
     tp, tr = t_s[hp][order_p], t_s[hr][order_r]
     k = order_p.size
-    models = []
+    m = 2 * k + tr.size
+    out = []
     for sigma in sigmas:
         s_px = 1.0 if sigma.pixel_px is None else sigma.pixel_px
         s_r = 1.0 if sigma.range_m is None else sigma.range_m
         s_pos = 0.0 if sigma.position_m is None else sigma.position_m
         s_att = 0.0 if sigma.attitude_deg is None else math.radians(sigma.attitude_deg)
-        groups = []
+        built = []
         for axis, f in ((0, fx[0, hp][order_p]), (1, fy[0, hp][order_p])):
             parts = [(f * s_att, sigma.attitude_tau_s), (f * s_pos * inv_d, sigma.position_tau_s)]
-            groups.append(_group(2 * order_p + axis, np.full(k, s_px ** 2), parts, tp))
-        groups.append(_group(2 * k + order_r, np.full(tr.size, s_r ** 2), [(np.full(tr.size, s_pos),
+            built.append(_group(2 * order_p + axis, np.full(k, s_px ** 2), parts, tp))
+        built.append(_group(2 * k + order_r, np.full(tr.size, s_r ** 2), [(np.full(tr.size, s_pos),
                                                                             sigma.position_tau_s)], tr))
-        models.append(Model(tuple(groups), 2 * k, 2 * k + tr.size))
-    return models
+        Cii, R0 = np.empty(m), np.empty(m)
+        for g, r0, cii, _ in built:
+            Cii[g[0]], R0[g[0]] = cii, r0
+        out.append(Models(tuple((g[0], *(np.asarray(x)[None] for x in g[1:])) for g, _, _, _ in built), Cii[None],
+                          R0[None], 2 * k, np.array([any(c for _, _, _, c in built)])))
+    return Models.concat(out)
 
 
-def _group(rows, R0, parts, t_s) -> Group:
+def _group(rows, R0, parts, t_s):
+    """One uncorrelated block of rows (u, v or range) in time order: rows (k,), white variances R0 (k,), parts
+    [(gains (k,), tau_s)] (white without a tau, else a unit-variance Gauss-Markov state). Returns (rows, gains
+    (k,p), band template (p+1,kp), K^-1's diagonal (k,p), log det K), R0, marginal variances C_ii (k,) and
+    whether some state has a nonzero transition."""
     gains, chains = [], []
     for g, tau in parts:
         if not (g != 0).any():
@@ -120,7 +110,19 @@ def _group(rows, R0, parts, t_s) -> Group:
             R0 = R0 + g * g
     G = np.stack(gains, axis=1) if gains else np.zeros((rows.size, 0))
     a = np.stack(chains, axis=1) if chains else np.zeros((max(rows.size - 1, 0), 0))
-    return Group(rows, R0, G, a, R0 + (G * G).sum(axis=1))
+    k, p = G.shape
+    diag, ab, log_inn = np.zeros((k, p)), np.zeros((p + 1, k * p)), 0.0
+    if p and k:
+        inn = np.maximum(1.0 - a ** 2, _MIN_INNOVATION)  # (k-1, p)
+        # A = K^-1 + G^T R^-1 G, states ordered frame by frame (index i p + j), lower banded storage ab[d, c]:
+        # K^-1's diagonal here, its transitions (offset p) in the template
+        diag = np.ones((k, p))
+        diag[1:] += 1.0 / inn - 1.0
+        diag[:-1] += a ** 2 / inn
+        ab[p, :(k - 1) * p] = (-a / inn).ravel()
+        log_inn = float(np.log(inn).sum())
+    correlated = bool(a.size and (a > 0).any() and (G != 0).any())
+    return (rows, G, ab, diag, log_inn), R0, R0 + (G * G).sum(axis=1), correlated
 
 
 # ---- the estimator (one problem) ----------------------------------------------------------------------------
@@ -140,34 +142,8 @@ def rows_in_use(st: Stacked, X: np.ndarray) -> np.ndarray:
     return out[0] if one else out
 
 
-@dataclass
-class Stack:
-    """K `Model`s of one problem's rows (the same rows and number of states per group; `stack_models`), their
-    arrays stacked over K: per group (rows, gains (K,k,p), band template (K,p+1,kp), K^-1's diagonal (K,k,p),
-    log det K (K,)); Cii, R0 (K,m)."""
-    groups: tuple
-    Cii: np.ndarray
-    R0: np.ndarray
-
-    def take(self, idx: np.ndarray) -> Stack:
-        return Stack(tuple((r, G[idx], ab[idx], dg[idx], li[idx]) for r, G, ab, dg, li in self.groups),
-                     self.Cii[idx], self.R0[idx])
-
-
-def stack_models(models: list) -> Stack:
-    """The `Stack` of K models of the same rows (`problem_models` of one problem under K sigmas with the same
-    parts: the candidates of `learned_tau`)."""
-    groups = []
-    for gs in zip(*(md.groups for md in models), strict=True):
-        if any(g.gains.shape != gs[0].gains.shape or not np.array_equal(g.rows, gs[0].rows) for g in gs):
-            raise ValueError("stack_models: the models differ in their rows or states")
-        groups.append((gs[0].rows, np.stack([g.gains for g in gs]), np.stack([g._ab for g in gs]),
-                       np.stack([g._diag for g in gs]), np.array([g._log_inn for g in gs])))
-    return Stack(tuple(groups), np.stack([md._Cii for md in models]), np.stack([md._R0 for md in models]))
-
-
-def quadratic_forms_stacked(sk: Stack, A: np.ndarray, w: np.ndarray, vf: np.ndarray) -> list:
-    """Per group (u, v, range) of K models (a `Stack`) at once: ([J|r]^T C_w^-1 [J|r] (4,4), log det C_w, rows with
+def quadratic_forms_stacked(sk: Models, A: np.ndarray, w: np.ndarray, vf: np.ndarray) -> list:
+    """Per group (u, v, range) of K models (`Models`) at once: ([J|r]^T C_w^-1 [J|r] (4,4), log det C_w, rows with
     weight), each at its rows A (K,m,4), robust weights w (K,m) (row variance C_ii / w, the rest of C unchanged) and
     variance factors vf (K,2): one banded factorization per group for all K (their band matrices side by side
     are one block-diagonal band matrix). Returns the K lists of these forms."""
@@ -212,15 +188,15 @@ def quadratic_forms_stacked(sk: Stack, A: np.ndarray, w: np.ndarray, vf: np.ndar
     return out
 
 
-def gls(sts: list, X0s: np.ndarray, models: list, robust: str | None, vce: bool, tol_m: float,
+def gls(sts: list, X0s: np.ndarray, models: Models, robust: str | None, vce: bool, tol_m: float,
         max_iterations: int, rows0: list | None = None):
     """Generalized least squares `mle` of T problems (B = 1 each) with the same rows in use (the same frames with
-    a pixel and with a range, in the same time order: `stack_models` checks) from usable starts X0s (T,3), each
-    under K `Model`s of its rows (models: T K, problem by problem), all T K fits side by side, each exactly as
+    a pixel and with a range, in the same time order) from usable starts X0s (T,3), each
+    under K models of its rows (models: T K, problem by problem), all T K fits side by side, each exactly as
     alone: `Correlated` through the one iteration and finish of `mle.run`; rows0: the problems' `rows_in_use` at
     their starts where the caller has them. Returns `mle.finish`'s tuple over the T K fits."""
     T = len(sts)
-    K = len(models) // T
+    K = models.Cii.shape[0] // T
     X = np.repeat(np.asarray(X0s, dtype=np.float64).reshape(T, 3), K, axis=0)
     status, bad = start_status(X, None)
     stk = stack_problems([st.take(np.zeros(K, dtype=np.intp)) for st in sts])
@@ -256,14 +232,13 @@ class Correlated(_iterate.Model):
 
     drift_modelled = True
 
-    def __init__(self, st: Stacked, models: list, X: np.ndarray, vce: bool, rows: list):
+    def __init__(self, st: Stacked, models: Models, X: np.ndarray, vce: bool, rows: list):
         """st: problems with the same rows in use, each once per model (`gls`); X (K,3) their starts, rows the
         list of each model's rows at its start (`rows_in_use`)."""
-        K = len(models)
-        m, npix = models[0].m, models[0].npix
-        self.st, self.models, self.X, self.vce = st, models, X, vce
-        self.sd = np.stack([np.sqrt(md.Cii()) for md in models], axis=1)  # (m, K)
-        self.grp = np.r_[np.zeros(npix, dtype=int), np.ones(m - npix, dtype=int)]
+        K, m = models.Cii.shape
+        self.st, self.models, self.K, self.X, self.vce = st, models, K, X, vce
+        self.sd = np.sqrt(models.Cii).T  # (m, K)
+        self.grp = np.r_[np.zeros(models.npix, dtype=int), np.ones(m - models.npix, dtype=int)]
         self.vf, self.guard = np.ones((K, 2)), np.ones((K, 2))
         self.vce_rounds = np.zeros(K, dtype=np.int64)
         pf, rf = np.flatnonzero(st.has_pix[0]), np.flatnonzero(st.has_range[0])
@@ -272,7 +247,6 @@ class Correlated(_iterate.Model):
         self.ok = self._planes(np.ones((m, K)), 0.0) > 0
         self.A = list(rows)  # per model; replaced, never changed in place
         self._last_forms = [None] * K
-        self._stack = stack_models(models)
         self._scaled_vf = None  # the variance factors of the row scales self._s and self._isd
 
     def _planes(self, rows: np.ndarray, fill: float) -> np.ndarray:
@@ -307,7 +281,7 @@ class Correlated(_iterate.Model):
                 todo.append(j)
         if todo:
             ks = np.asarray(idx)[todo]
-            sk = self._stack if len(ks) == len(self.models) else self._stack.take(ks)
+            sk = self.models if len(ks) == self.K else self.models.take(ks)
             qs = quadratic_forms_stacked(sk, np.stack([self.A[k] for k in ks]), self.w[:, ks].T, vfs[todo])
             for j, k, q in zip(todo, ks, qs, strict=True):
                 out[j] = (q, sum(f for f, _, _ in q))
@@ -323,7 +297,7 @@ class Correlated(_iterate.Model):
         return solve_spd(G[:, :3, :3], G[:, :3, 3])
 
     def trial(self, idx, Xn):
-        Xall = np.repeat(Xn[:1], len(self.models), axis=0)  # every model's rows at once (the others discarded)
+        Xall = np.repeat(Xn[:1], self.K, axis=0)  # every model's rows at once (the others discarded)
         Xall[idx] = Xn
         A = rows_in_use(self.st, Xall)
         self._A = [A[k] for k in idx]
@@ -360,7 +334,7 @@ class Correlated(_iterate.Model):
         return self._isd
 
     def information(self, var_scale):
-        G = np.stack([f[1] for f in self._forms(np.arange(len(self.models)), var_scale)])
+        G = np.stack([f[1] for f in self._forms(np.arange(self.K), var_scale)])
         return G[:, :3, :3].copy(), G[:, 3, 3].copy()
 
 

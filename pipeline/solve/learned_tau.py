@@ -38,10 +38,11 @@ def log_likelihoods(st: Stacked, Xs: np.ndarray, sigmas: list, vfs: list) -> lis
     model); C's overall scale k = max(chi2 / m, 1) (the stated sigmas a lower bound: with sigmas stated too small,
     a model is not chosen for hiding the misfit in the target)."""
     K = len(sigmas)
-    models = [_correlated.problem_models(st, X, [s])[0] for X, s in zip(Xs, sigmas, strict=True)]
+    models = _correlated.Models.concat([_correlated.problem_models(st, X, [s]) for X, s in zip(Xs, sigmas,
+                                                                                              strict=True)])
     A = _correlated.rows_in_use(st.take(np.zeros(K, dtype=np.intp)), Xs)
-    m = models[0].m
-    qs = _correlated.quadratic_forms_stacked(_correlated.stack_models(models), A, np.ones((K, m)),
+    m = models.Cii.shape[1]
+    qs = _correlated.quadratic_forms_stacked(models, A, np.ones((K, m)),
                                              np.asarray(vfs, dtype=np.float64).reshape(K, 2))
     out = []
     for q in qs:
@@ -77,7 +78,7 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
     sigmas = [dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau, attitude_deg=att)
               for tau, att in candidates(sigma)]
     K = len(sigmas)
-    by_rows: dict[tuple, list[int]] = {}  # the same frames with a pixel and with a range (`stack_models`: the rest)
+    by_rows: dict[tuple, list[int]] = {}  # the same frames with a pixel and with a range (`Models.concat`: the rest)
     for i, st in enumerate(sts):
         by_rows.setdefault((st.n, st.has_pix.tobytes(), st.has_range.tobytes()), []).append(i)
     groups = list(by_rows.values())
@@ -85,11 +86,12 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
     while groups:
         g = groups.pop()
         X0 = np.asarray([X0s[i] for i in g])
-        models = [_correlated.problem_models(sts[i], X0[t], sigmas) for t, i in enumerate(g)]
         try:
-            fits = _correlated.gls([sts[i] for i in g], X0, [md for ms in models for md in ms], robust, vce, tol_m,
-                                   max_iterations, [_correlated.rows_in_use(sts[i], X0[t]) for t, i in enumerate(g)])
-        except ValueError:  # the models' states differ (`stack_models`): one problem at a time
+            models = _correlated.Models.concat([_correlated.problem_models(sts[i], X0[t], sigmas)
+                                                for t, i in enumerate(g)])
+            fits = _correlated.gls([sts[i] for i in g], X0, models, robust, vce, tol_m, max_iterations,
+                                   [_correlated.rows_in_use(sts[i], X0[t]) for t, i in enumerate(g)])
+        except ValueError:  # the models' states differ (`Models.concat`): one problem at a time
             if len(g) == 1:
                 raise
             groups.extend([i] for i in g)

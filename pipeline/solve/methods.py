@@ -261,12 +261,12 @@ def _mle_dispatch(st: Stacked, o: dict):
             return (nan, np.zeros(1, dtype=np.int64), status, np.full(1, np.nan), np.full((1, 3, 3), np.nan),
                     {"variance_factor_pixel": np.ones(1), "variance_factor_range": np.ones(1),
                      "sigma0_sq": np.full(1, np.nan), "vce_rounds": np.zeros(1, dtype=np.int64)})
-        model = _correlated.problem_models(st, x0[0], [sigma])[0]
-        if model.correlated and o.get("terrain") is not None:
+        models = _correlated.problem_models(st, x0[0], [sigma])
+        if models.correlated[0] and o.get("terrain") is not None:
             raise ValueError("mle: the terrain option is not available with time-correlated errors (sigma "
                              "attitude_tau_s / position_tau_s)")
-        if model.correlated:
-            return _correlated.gls([st], x0[:1], [model], robust, vce, tol, itmax)
+        if models.correlated[0]:
+            return _correlated.gls([st], x0[:1], models, robust, vce, tol, itmax)
         sigma = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
     res = _mle.mle(st, x0, sigma, robust, vce, tol, itmax, init_status, bias_deg, size_unknown, o.get("terrain"))
     res = _bias_refit(st, o, x0, init_status, sigma, vce, res, bias_deg, size_unknown)

@@ -17,7 +17,7 @@ from pipeline.solve import mle as _mle
 from pipeline.solve import starts as _starts
 from pipeline.solve.estimate import BatchEstimate, Estimate, Status
 from pipeline.solve.iterate import start_status
-from pipeline.solve.observations import ObservationBatch, Observations, Sigma
+from pipeline.solve.observations import REAL_TIMES_NS, ObservationBatch, Observations, Sigma
 from pipeline.solve.stacked import Stacked, pixel_model, range_model
 from pipeline.solve_options import METHODS, NOT_IN_CONFIG, OPTIONS
 
@@ -418,10 +418,6 @@ def _mle_multistart(st: Stacked, o: dict, first: tuple | None = None, answers: d
     return X, it, status, cond, cov, ex
 
 
-#: timestamps spanning less than this are frame numbers (0..n-1 when unknown), not times: no drift model is learned
-REAL_TIMES_NS = 1_000_000
-
-
 def _learned_answer(res: tuple, got, sigma) -> tuple:
     """One problem's answer from its first answer res (B = 1) and `learned_tau.learn_tau`'s got for it: the drift
     model's where it is kept, else res itself."""
@@ -484,12 +480,10 @@ CHUNK = 2048
 
 def _concatenate(parts: list[BatchEstimate]) -> BatchEstimate:
     first = parts[0]
-    cat = np.concatenate
-    return BatchEstimate(method=first.method, position_m=cat([p.position_m for p in parts]),
-                         iterations=cat([p.iterations for p in parts]), status=cat([p.status for p in parts]),
-                         condition_number=cat([p.condition_number for p in parts]),
-                         covariance_m2=None if first.covariance_m2 is None else cat([p.covariance_m2 for p in parts]),
-                         extras={k: cat([p.extras[k] for p in parts]) for k in first.extras})
+    fields = ("position_m", "iterations", "status", "condition_number", "covariance_m2")
+    return BatchEstimate(first.method, *(None if getattr(first, f) is None else
+                                         np.concatenate([getattr(p, f) for p in parts]) for f in fields),
+                         {k: np.concatenate([p.extras[k] for p in parts]) for k in first.extras})
 
 
 # ---- single problem: clear errors for unusable input --------------------------------------------------------
@@ -515,7 +509,7 @@ def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
     if method == "mle":
         sigma = o.get("sigma") or obs.sigma
         span_ns = int(obs.t_ns.max() - obs.t_ns.min()) if sigma.correlated and obs.n > 1 else None
-        if span_ns is not None and span_ns < 1_000_000:
+        if span_ns is not None and span_ns < REAL_TIMES_NS:
             raise ObservationError(f"mle: the sigma gives correlation times (attitude_tau_s, position_tau_s) but "
                                    f"the frames' t_ns span only {span_ns} ns: they need real timestamps (without "
                                    "t_ns the frames are numbered 0, 1, 2, ... ns)")

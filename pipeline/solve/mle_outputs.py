@@ -3,18 +3,13 @@ in words, the boresight bias and the rejected observations (frame, time, which r
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from pipeline.solve import fit_checks
+from pipeline.solve.estimate import finite_or_none as _f
+from pipeline.solve.observations import REAL_TIMES_NS
 
 _ROWS = ("u", "v", "range")
-
-
-def _f(x) -> float | None:
-    x = float(x)
-    return x if math.isfinite(x) else None
 
 
 def rejected_observations(ex: dict, b: int, t_ns: np.ndarray) -> list[dict]:
@@ -90,7 +85,7 @@ def _where(r: dict, t_ns: np.ndarray | None, video_frames) -> str:
     observation when the frames carry real timestamps (else the raw t_ns)."""
     i = r["frame"]
     where = [f"video frame {int(video_frames[i])}"] if video_frames is not None else []
-    if t_ns is not None and t_ns.size > 1 and int(t_ns.max() - t_ns.min()) >= 1_000_000:
+    if t_ns is not None and t_ns.size > 1 and int(t_ns.max() - t_ns.min()) >= REAL_TIMES_NS:
         where.append(f"t = {(r['t_ns'] - int(t_ns.min())) / 1e9:.2f} s after the first observation")
     else:
         where.append(f"t_ns {r['t_ns']}")

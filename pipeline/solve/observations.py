@@ -17,6 +17,9 @@ import numpy as np
 
 from pipeline.errors import ObservationError
 
+#: timestamps spanning less than this are frame numbers (0..n-1 when unknown), not times
+REAL_TIMES_NS = 1_000_000
+
 
 @dataclass(frozen=True)
 class Sigma:

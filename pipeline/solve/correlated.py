@@ -143,10 +143,10 @@ def rows_in_use(st: Stacked, X: np.ndarray) -> np.ndarray:
 
 
 def quadratic_forms_stacked(sk: Models, A: np.ndarray, w: np.ndarray, vf: np.ndarray) -> list:
-    """Per group (u, v, range) of K models (`Models`) at once: ([J|r]^T C_w^-1 [J|r] (4,4), log det C_w, rows with
-    weight), each at its rows A (K,m,4), robust weights w (K,m) (row variance C_ii / w, the rest of C unchanged) and
-    variance factors vf (K,2): one banded factorization per group for all K (their band matrices side by side
-    are one block-diagonal band matrix). Returns the K lists of these forms."""
+    """Per model of the K `Models` and per group (u, v, range): ([J|r]^T C_w^-1 [J|r] (4,4), log det C_w, rows with
+    weight) at its rows A (K,m,4), robust weights w (K,m) (a row's variance C_ii / w, the rest of C unchanged) and
+    variance factors vf (K,2); one banded factorization per group for all K (side by side, their band matrices are
+    one block-diagonal band matrix)."""
     K = A.shape[0]
     # R_w = C_ii / w - (C_ii - R0): the weight inflates the row's own variance only
     with np.errstate(divide="ignore"):
@@ -222,13 +222,10 @@ def stack_problems(sts: list) -> Stacked:
 
 
 class Correlated(_iterate.Model):
-    """The `mle` model of one problem (B = 1) with time-correlated errors, as `iterate.drive` and `mle.finish`
-    use it: iteratively reweighted generalized least squares, under K models of the residual covariance at once
-    (K independent problems on the same rows; `gls`). Every step takes the robust weights
-    w_i = rho'(z)/z of the rows' marginal standardized residuals z_i = r_i / sqrt(C_ii vf) at the current
-    estimate, applies them as inflated variances of an independent gross error, and takes the Gauss-Newton
-    step of the correlated problem (`quadratic_forms_stacked`, O(n)); no damping. Its residual planes (3,n,K) hold the
-    marginal standardized residuals; the drift is modelled (no autocorrelation inflation in `mle.finish`)."""
+    """The `mle` model (`iterate.drive`, `mle.finish`) of one problem (B = 1) with time-correlated errors under K
+    residual models at once (`gls`): iteratively reweighted generalized least squares, no damping. The robust
+    weights w_i = rho'(z)/z come from the rows' marginal standardized residuals z_i = r_i / sqrt(C_ii vf), which
+    the residual planes (3,n,K) hold; the drift is modelled (no autocorrelation inflation in `mle.finish`)."""
 
     drift_modelled = True
 
@@ -268,8 +265,8 @@ class Correlated(_iterate.Model):
 
     def _forms(self, idx, var_scale=None) -> list:
         """Per model k of idx: (`quadratic_forms_stacked`, their sum) at its current rows, weights and variance factors
-        times var_scale (len(idx),2) (None: 1); the last ones are kept per model (the convergence test and the
-        finish ask again at the same state)."""
+        times var_scale (len(idx),2) (None: 1); the last ones are kept per model (the convergence test and the finish
+        ask again at the same state)."""
         vfs = self.vf[idx] if var_scale is None else self.vf[idx] * var_scale
         out, todo = [None] * len(idx), []
         for j, k in enumerate(idx):
@@ -339,9 +336,8 @@ class Correlated(_iterate.Model):
 
 
 def _vce_factors(q, G):
-    """`mle.helmert` of the pixel (u and v) and range groups from the per-group quadratic forms q
-    (`quadratic_forms_stacked`) and their sum G: a group's r^T C^-1 r over its rows with weight minus
-    trace(N^-1 J_g^T C_g^-1 J_g). Returns factors (2,), usable (2,)."""
+    """`mle.helmert` factors (2,) and usable (2,) of the pixel and range groups from the per-group forms q and their
+    sum G: a group's r^T C^-1 r over its rows with weight minus trace(N^-1 J_g^T C_g^-1 J_g)."""
     Ninv = inverse3(G[None, :3, :3])[0][0]
     Q = [sum(f for f, _, _ in parts) for parts in (q[:2], q[2:])]
     red = [sum(n for _, _, n in parts) - float(np.sum(Ninv * Qg[:3, :3])) for parts, Qg in zip((q[:2], q[2:]), Q,

@@ -142,8 +142,7 @@ def hkb_k(N, g, dd, rows, variant: str = "paper"):
     column-standardized system; k then applies to the standardized normal matrix)."""
     p = N.shape[-1]
     if variant == "textbook":
-        d = np.sqrt(np.einsum("bii->bi", N))
-        d = np.where(d > 0, d, 1.0)
+        d = _column_scales(N)
         N = N / (d[:, :, None] * d[:, None, :])
         g = g / d
     beta, singular = solve_spd(N, g)
@@ -157,6 +156,12 @@ def hkb_k(N, g, dd, rows, variant: str = "paper"):
     with np.errstate(divide="ignore", invalid="ignore"):
         k = p * s2 / denom
     return np.where(np.isfinite(k) & ~singular, k, 0.0)
+
+
+def _column_scales(N):
+    """(B,4) the lengths of T's columns from N = T^T T (1 where zero): the textbook variant's standardization."""
+    d = np.sqrt(np.einsum("bii->bi", N))
+    return np.where(d > 0, d, 1.0)
 
 
 def _solve_augmented(N, g, k):
@@ -176,19 +181,13 @@ def _solve_augmented(N, g, k):
 def _normalized_step(k_fixed: float | None, hkb: str | None):
     def step(sub: Stacked, X: np.ndarray):
         N, g, dd, rows = normalized_normal_equations(sub, X)
-        B = N.shape[0]
         if hkb is None:
-            k = np.zeros(B) if k_fixed is None else np.full(B, float(k_fixed))
-            beta, singular = _solve_augmented(N, g, k)
+            k = np.zeros(N.shape[0]) if k_fixed is None else np.full(N.shape[0], float(k_fixed))
         else:
             k = hkb_k(N, g, dd, rows, hkb)
-            if hkb == "textbook":
-                d = np.sqrt(np.einsum("bii->bi", N))
-                d = np.where(d > 0, d, 1.0)
-                gamma, singular = _solve_augmented(N / (d[:, :, None] * d[:, None, :]), g / d, k)
-                beta = gamma / d
-            else:
-                beta, singular = _solve_augmented(N, g, k)
+        d = _column_scales(N) if hkb == "textbook" else np.ones(g.shape)  # 1: exactly the unscaled system
+        gamma, singular = _solve_augmented(N / (d[:, :, None] * d[:, None, :]), g / d, k)
+        beta = gamma / d
         return beta[:, :3], singular, {"k": k, "augmented": beta[:, 3]}
     return step
 

@@ -46,12 +46,17 @@ def dlt(st: Stacked, with_condition: bool = True):
     return X, status, cond
 
 
+def finite_cameras(st: Stacked) -> np.ndarray:
+    """(B,n) True where P's left 3x3 block M is a finite camera: |det M| against |M|^3 (its rows' lengths)."""
+    g = st._gram()
+    return np.abs(st.det_M()) > 1e-12 * np.sqrt(g[..., 0, 0] * g[..., 1, 1] * g[..., 2, 2])
+
+
 def los_points(st: Stacked):
     """Per-frame line-of-sight points (B,n,3) and where they are valid (B,n) (docs/solvers.md, los): on the ray
     from C = -M^-1 p4 along sign(det M) M^-1 [u, v, 1], at the laser range d from the platform s (a lever arm
     between camera and laser: |C + t a - s| = d, the far root); NaN without the pixel or the range."""
-    g = st._gram()
-    finite_camera = np.abs(st.det_M()) > 1e-12 * np.sqrt(g[..., 0, 0] * g[..., 1, 1] * g[..., 2, 2])
+    finite_camera = finite_cameras(st)
     Minv = np.linalg.inv(np.where(finite_camera[..., None, None], st.M, np.eye(3)))
     C = -np.einsum("bnij,bnj->bni", Minv, st.p4)
     xh = np.concatenate([st.pix, np.ones((*st.pix.shape[:-1], 1))], axis=-1)

@@ -311,8 +311,8 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
     if not need.size:
         return res
     sts = [_learned.without_rejected(st.take(np.array([b])), ex["rejected"][b]) for b in need]
-    learned = _learned.learn_tau(sts, res[0][need], sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce,
-                                      o["tol_m"], o["max_iterations"])
+    learned = _learned.learn_tau(sts, res[0][need], sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"],
+                                 o["max_iterations"])
     for b, got in zip(need, learned, strict=True):
         row = _row(res, b)
         answer = _learned_answer(row, got, sigma)
@@ -495,10 +495,7 @@ def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
     nboth = int(np.count_nonzero(has_pix & has_rng))
     has_init = o.get("initial_m") is not None
     if method != "range" or not has_init:  # range starts from vision, which projects through P
-        # |det M| against |M|^3 (the rows' lengths, from the Gram matrix M M^T)
-        g = st._gram()[0]
-        scale = np.sqrt(g[:, 0, 0] * g[:, 1, 1] * g[:, 2, 2])
-        bad = np.flatnonzero(~(np.abs(st.det_M()[0]) > 1e-12 * scale))
+        bad = np.flatnonzero(~linear.finite_cameras(st)[0])
         if bad.size:
             raise ObservationError(f"frame(s) {bad.tolist()}: the left 3x3 block of P is singular, not a finite "
                                    "camera")

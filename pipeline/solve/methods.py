@@ -607,8 +607,7 @@ def _estimate(method: str, obs: Observations, st: Stacked, o: dict, be: BatchEst
         if "starts" in info:
             extras["starts"] = info["starts"]
         if "rejected" in info:  # the batched kernel's fit checks, bias, rejected rows and learned error model
-            extras.update(mle_outputs.problem_extras({k: v[None] for k, v in info.items() if k != "starts"},
-                                                     obs.t_ns))
+            extras.update(mle_outputs.problem_extras(info, obs.t_ns))
     cov = None if be.covariance_m2 is None else be.covariance_m2[0]
     return Estimate(method=method, position_m=X, iterations=it, status=status,
                     residuals=_residuals(method, st, X), condition_number=cond, covariance_m2=cov, extras=extras)

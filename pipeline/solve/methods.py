@@ -552,14 +552,12 @@ def solve(method: str, obs: Observations, **options) -> Estimate:
     """Solve one problem with one estimator (options: docs/solvers.md). Raises ObservationError for unusable input,
     GeometryError where the geometry does not determine the target, SolverError where the iteration diverged; an
     estimate that reached max_iterations has status MAX_ITERATIONS (converged False)."""
-    o = _check_options(method, options)
     if not isinstance(obs, Observations):
         raise TypeError(f"solve wants an Observations, got {type(obs).__name__}")
-    st = Stacked.from_observations(obs)
-    _check_inputs(method, obs, st, o)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        be = _solve_stacked(method, st, o)
-    return _estimate(method, obs, st, o, be)
+    got = solve_problems([obs], [method], {method: options})[0][method]
+    if isinstance(got, Exception):
+        raise got
+    return got
 
 
 def _estimate(method: str, obs: Observations, st: Stacked, o: dict, be: BatchEstimate) -> Estimate:

@@ -130,8 +130,8 @@ def _range_init(st: Stacked, o: dict):
 
 def _solve_stacked(method: str, st: Stacked, o: dict, first: tuple | None = None,
                    answers: dict | None = None) -> BatchEstimate:
-    """One method's kernel on the batch st; mle: first, its fit from the default start where the caller has it,
-    answers, the start estimators' answers for the multistart (`_mle_multistart`)."""
+    """One method's kernel on the batch st; for mle, first is its fit from the default start where the caller has it
+    and answers the start estimators' answers for the multistart (`_mle_multistart`)."""
     B = st.size
     tol, itmax = o["tol_m"], o["max_iterations"]
     extras: dict = {}

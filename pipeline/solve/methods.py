@@ -324,26 +324,17 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
 def _replace_rows(res: tuple, sub: tuple, idx: np.ndarray) -> tuple:
     """The mle answers res (X, it, status, cond, cov, extras) with problems idx replaced by sub's; an extra only
     one of them has is absent (`_absent`) for the other's problems."""
-    out = []
-    for a, b in zip(res[:5], sub[:5], strict=True):
-        a = a.copy()
+    out = [a.copy() for a in res[:5]]
+    for a, b in zip(out, sub[:5], strict=True):
         a[idx] = b
-        out.append(a)
     ex = {}
-    B = res[0].shape[0]
-    for k in [*res[5], *(k for k in sub[5] if k not in res[5])]:
+    for k in {**res[5], **sub[5]}:  # res's keys, then sub's others
         old, new = res[5].get(k), sub[5].get(k)
-        if old is not None and new is not None:
-            v = np.array(old, dtype=np.result_type(old, new), copy=True)
-            v[idx] = new
-        else:
-            like = old if old is not None else new
-            dtype, fill = _absent(like.dtype)
-            v = np.full((B, *like.shape[1:]), fill, dtype=dtype)
-            if old is not None:
-                v[...] = old
-            v[idx] = new if new is not None else fill
-        ex[k] = v
+        like = old if old is not None else new
+        dtype, fill = _absent(like.dtype) if old is None or new is None else (np.result_type(old, new), None)
+        ex[k] = np.empty((res[0].shape[0], *like.shape[1:]), dtype=dtype)
+        ex[k][...] = old if old is not None else fill
+        ex[k][idx] = new if new is not None else fill
     return (*out, ex)
 
 

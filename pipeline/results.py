@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pipeline import observation_file
 from pipeline.solve.estimate import Estimate
 from pipeline.solve.observations import Observations
 
@@ -94,7 +95,7 @@ def group_files(result: GroupResult | FlightResult) -> dict[str, str]:
     if isinstance(result, FlightResult):
         return flight_files(result)
     return {
-        "observations.json": json.dumps(result.observations.to_dict(), indent=1) + "\n",
+        "observations.json": json.dumps(observation_file.to_dict(result.observations), indent=1) + "\n",
         "estimates.json": json.dumps(estimates_document(result), indent=1, default=_json_default) + "\n",
         "tracking.json": json.dumps(result.tracking, indent=1, default=_json_default) + "\n",
     }

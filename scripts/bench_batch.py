@@ -25,16 +25,16 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # this checkout's pipeline; test support (support.synthetic)
 
+from pipeline import observation_file  # noqa: E402
 from pipeline.batch import Job, discover_flights, run_jobs  # noqa: E402
 from pipeline.geometry.rays import intersection_angle_deg  # noqa: E402
 from pipeline.report.outputs import write_group_outputs  # noqa: E402
 from pipeline.results import GroupResult  # noqa: E402
-from pipeline.solve.observations import Observations  # noqa: E402
 from support.synthetic import DEFAULT_ORIGIN_LLA, solve_all, synthetic_observations  # noqa: E402
 
 
 def standin_job(payload: dict) -> str:
-    obs = Observations.load(payload["observations"])
+    obs = observation_file.load(payload["observations"])
     estimates, t = solve_all(obs)
     r = GroupResult(name=payload["name"], origin_lla=DEFAULT_ORIGIN_LLA, observations=obs, estimates=estimates,
                     truth_m=obs.truth_m, intersection_angle_deg=intersection_angle_deg(obs.platform_m, obs.truth_m),
@@ -73,7 +73,7 @@ def main() -> int:
             obs, _ = synthetic_observations(seed=i, intersection_angle_deg=20 + 2 * i, n_frames=8 + i % 9)
             p = work / "flights" / f"flight{i:02d}.json"
             p.parent.mkdir(parents=True, exist_ok=True)
-            p.write_text(json.dumps(obs.to_dict()))
+            p.write_text(json.dumps(observation_file.to_dict(obs)))
             payloads.append({"name": f"flight{i:02d}", "observations": str(p)})
 
     def jobs(tag):

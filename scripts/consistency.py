@@ -17,6 +17,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's pipeline
 
+from pipeline.observation_file import load
 from pipeline.solve import solve
 from pipeline.solve.observations import Observations
 from pipeline.solve.uncertainty import CHI2_3_95
@@ -40,7 +41,7 @@ def main(argv: list[str] | None = None) -> int:
     print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     rows = []
     for path in sorted(args.outdir.glob("*/observations.json")):
-        obs = Observations.load(path)
+        obs = load(path)
         if obs.truth_m is None:
             continue
         d_m, err_m, sd_m, ex = normalized_errors(obs)

@@ -20,6 +20,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # this checkout's pipeline; test support (support.scenes)
 
+from pipeline.observation_file import to_dict  # noqa: E402
 from support.scenes import PAPER_SIGMA, paper_problem  # noqa: E402
 
 SEED = 2026
@@ -32,7 +33,7 @@ def build() -> dict:
     pixel[3] = np.nan
     rng[7] = np.nan
     obs = dataclasses.replace(obs, pixel=pixel, range_m=rng)
-    doc = obs.to_dict()
+    doc = to_dict(obs)
     doc["meta"] = {
         "generator": "scripts/make_example_observations.py",
         "seed": SEED,

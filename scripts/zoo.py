@@ -60,6 +60,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from pipeline.observation_file import to_dict
 from pipeline.solve import solve
 from pipeline.solve.observations import Observations, Sigma
 from pipeline.solve.uncertainty import CHI2_3_95
@@ -502,7 +503,7 @@ def main(argv: list[str] | None = None) -> int:
         out = Path(args.save)
         out.mkdir(parents=True, exist_ok=True)
         for f in flights:
-            doc = f.obs.to_dict()
+            doc = to_dict(f.obs)
             doc["meta"] = {"family": f.family, "shape": f.shape, **f.meta,
                            "told_sigma": f.told_sigma.to_dict(), "told_options": f.told_options}
             (out / f"{f.name}.json").write_text(json.dumps(doc))

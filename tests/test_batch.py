@@ -11,12 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from pipeline import observation_file
 from pipeline.batch import Job, discover_flights, report_stage, run_jobs, summarize_failures
 from pipeline.errors import ConfigError, InputError
 from pipeline.geometry.rays import intersection_angle_deg
 from pipeline.report import write_run_outputs
 from pipeline.results import GroupResult
-from pipeline.solve.observations import Observations
 from support.synthetic import (
     DEFAULT_ORIGIN_LLA,
     solve_all,
@@ -29,7 +29,7 @@ STAGES = ("load", "solve")
 def solve_flight(path: str) -> GroupResult:
     """A job: load one flight's observations file and run every estimator on it."""
     report_stage("load")
-    obs = Observations.load(path)
+    obs = observation_file.load(path)
     report_stage("solve")
     estimates, t_solve = solve_all(obs)
     return GroupResult(name=Path(path).stem, origin_lla=DEFAULT_ORIGIN_LLA, observations=obs, estimates=estimates,
@@ -45,11 +45,11 @@ def make_flights(folder: Path, n: int, broken=(4, 13)) -> list[Job]:
         path = folder / name / f"{name}.json"
         path.parent.mkdir(parents=True)
         obs, _ = synthetic_observations(seed=100 + i, intersection_angle_deg=20 + 3 * i, n_frames=8 + i % 5)
-        text = json.dumps(obs.to_dict())
+        text = json.dumps(observation_file.to_dict(obs))
         if i == broken[0]:
             text = text[: len(text) // 2]  # truncated mid-write
         elif i == broken[1]:
-            doc = obs.to_dict()
+            doc = observation_file.to_dict(obs)
             doc["observations"][3]["platform_m"] = [1.0, 2.0]  # a corrupt row
             text = json.dumps(doc)
         path.write_text(text)

@@ -24,6 +24,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("config", ("flight_config",)),
     ("geometry", ("geometry",)),
     ("readers and pure stages", ("ingest", "track", "solve")),
+    ("observation file", ("observation_file",)),
     ("synchronisation and results", ("intrinsics", "sync", "results", "simulate", "synth", "terrain")),
     ("flight", ("flight",)),
     ("clock estimate", ("clock_estimate",)),

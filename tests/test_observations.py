@@ -3,6 +3,7 @@ import json
 import numpy as np
 import pytest
 
+from pipeline import observation_file
 from pipeline.errors import ObservationError
 from pipeline.geometry.camera import intrinsics_matrix, look_at_rotation, project, projection_matrix
 from pipeline.solve.observations import ObservationBatch, Observations
@@ -26,12 +27,12 @@ def test_look_at_projects_target_to_principal_point():
 
 def test_json_round_trip(tmp_path):
     obs = _problem()
-    d = obs.to_dict()
+    d = observation_file.to_dict(obs)
     d["observations"][1]["pixel"] = None
     d["observations"][2]["range_m"] = None
     path = tmp_path / "obs.json"
     path.write_text(json.dumps(d))
-    back = Observations.load(path)
+    back = observation_file.load(path)
     assert back.has_pixel.tolist() == [True, False, True, True]
     assert back.has_range.tolist() == [True, True, False, True]
     np.testing.assert_array_equal(back.P, obs.P)
@@ -47,12 +48,12 @@ def test_json_round_trip(tmp_path):
     (lambda d: d.update(observations=[]), "non-empty"),
 ])
 def test_bad_json_gets_clear_error(tmp_path, mutate, match):
-    d = _problem().to_dict()
+    d = observation_file.to_dict(_problem())
     mutate(d)
     path = tmp_path / "bad.json"
     path.write_text(json.dumps(d))
     with pytest.raises(ObservationError, match=match) as info:
-        Observations.load(path)
+        observation_file.load(path)
     assert str(path) in str(info.value)
 
 
@@ -60,9 +61,9 @@ def test_not_json_and_missing_file(tmp_path):
     bad = tmp_path / "x.json"
     bad.write_text("{not json")
     with pytest.raises(ObservationError, match="not valid JSON"):
-        Observations.load(bad)
+        observation_file.load(bad)
     with pytest.raises(ObservationError, match="file not found"):
-        Observations.load(tmp_path / "nope.json")
+        observation_file.load(tmp_path / "nope.json")
 
 
 def test_non_finite_and_mismatched_lengths():

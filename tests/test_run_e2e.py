@@ -19,10 +19,10 @@ import math
 import numpy as np
 import pytest
 
+from pipeline import observation_file
 from pipeline.cli import main as cli_main
 from pipeline.flight_config import load_flight_config
 from pipeline.run import process_group
-from pipeline.solve.observations import Observations
 from pipeline.synth import flight as synth
 from pipeline.synth.config import SynthConfig
 
@@ -104,7 +104,7 @@ def test_run_command_writes_the_report_and_skips_a_bad_group(tiny_flight, capsys
     report = (out / "report.md").read_text()
     assert "Weighted MLE" in report and "broken" in report
     # observations.json is the `ridgeloc solve` input: re-solving it gives estimates.json again
-    obs = Observations.load(out / "tiny" / "observations.json")
+    obs = observation_file.load(out / "tiny" / "observations.json")
     assert obs.n == 6 and obs.truth_m is not None
     doc = json.loads((out / "tiny" / "estimates.json").read_text())
     capsys.readouterr()

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from pipeline.cli import main
+from pipeline.observation_file import to_dict
 from pipeline.solve import METHODS
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -128,7 +129,7 @@ def test_a_gross_pixel_outlier_is_listed_with_its_time_in_the_table_and_json(tmp
     observation, which residual, its time in the flight and its size; --json lists it under `rejected`."""
     from support.scenes import paper_problem
 
-    doc = paper_problem(n=20, gamma_deg=30.0, seed=5).to_dict()  # frames 1 s apart
+    doc = to_dict(paper_problem(n=20, gamma_deg=30.0, seed=5))  # frames 1 s apart
     doc["observations"][6]["pixel"][0] += 60.0
     path = _write(tmp_path, doc)
     assert main(["solve", str(path), "--method", "mle"]) == 0

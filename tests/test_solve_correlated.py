@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
+from pipeline import observation_file
 from pipeline.errors import GeometryError, ObservationError
 from pipeline.geometry.camera import project
 from pipeline.solve import solve, solve_batch
-from pipeline.solve.observations import Observations, Sigma
+from pipeline.solve.observations import Sigma
 from pipeline.solve.uncertainty import CHI2_3_95
 from support.scenes import PAPER_SIGMA, correlated_problems, paper_batch, paper_problem
 
@@ -118,10 +119,10 @@ def test_sigma_keys_round_trip_and_validation(tmp_path):
     obs = correlated_problems(1, seed=1)[0]
     obs = dataclasses.replace(obs, sigma=CORR)
     path = tmp_path / "obs.json"
-    obs.save(path)
+    observation_file.save(obs, path)
     doc = json.loads(path.read_text())
     assert doc["sigma"]["attitude_tau_s"] == 20.0 and doc["sigma"]["position_tau_s"] == 60.0
-    back = Observations.load(path)
+    back = observation_file.load(path)
     assert back.sigma == CORR
     np.testing.assert_array_equal(back.t_ns, obs.t_ns)
     assert solve("mle", back, bias_prior_deg=0.0).position_m == pytest.approx(

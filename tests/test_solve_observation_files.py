@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-import pipeline.solve.observations as observations_mod
+import pipeline.observation_file as observations_mod
 from pipeline.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -59,7 +59,7 @@ def test_null_means_missing(tmp_path, capsys):
     doc["sigma"] = {"pixel_px": None}
     doc["truth_m"] = None
     (tmp_path / "obs.json").write_text(json.dumps(doc))
-    obs = observations_mod.Observations.load(tmp_path / "obs.json")
+    obs = observations_mod.load(tmp_path / "obs.json")
     assert not obs.has_pixel[1] and not obs.has_range[1] and obs.t_ns[1] == 1 and obs.truth_m is None
     row["P"] = None  # a required key given as null is missing, not a crash
     _refused(tmp_path, capsys, json.dumps(doc), "observations[1] lacks required key(s): P")

@@ -65,10 +65,10 @@ def _table(results: dict, failures: dict, truth, t_ns=None) -> str:
 
 
 def main(args) -> int:
+    from pipeline.observation_file import load
     from pipeline.solve import solve, unsolved_status  # the CLI builds every command's parser: solve loads scipy
-    from pipeline.solve.observations import Observations
 
-    obs = Observations.load(args.observations)
+    obs = load(args.observations)
     results: dict = {}
     failures: dict = {}
     every = not args.method or "all" in args.method

@@ -11,11 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline import observation_file
 from pipeline.atomic import atomic_write_text
 from pipeline.errors import InputError
 from pipeline.results import FlightResult, GroupResult, TargetFailure
 from pipeline.solve.estimate import Estimate, Status
-from pipeline.solve.observations import Observations
 
 FORMAT = "ridgeloc-group-result"
 VERSION = 1
@@ -60,7 +60,7 @@ def group_result_to_json(r: GroupResult) -> dict:
         "version": VERSION,
         "name": r.name,
         "origin_lla": [float(v) for v in r.origin_lla],
-        "observations": r.observations.to_dict(),
+        "observations": observation_file.to_dict(r.observations),
         "estimates": {m: estimate_to_json(e) for m, e in r.estimates.items()},
         "truth_m": None if r.truth_m is None else [float(v) for v in r.truth_m],
         "intersection_angle_deg": float(angle) if np.isfinite(angle) else None,
@@ -99,7 +99,7 @@ def group_result_from_json(doc: dict) -> GroupResult | FlightResult:
     return GroupResult(
         name=doc["name"],
         origin_lla=tuple(float(v) for v in doc["origin_lla"]),
-        observations=Observations.from_dict(doc["observations"]),
+        observations=observation_file.from_dict(doc["observations"]),
         estimates={m: estimate_from_json(e) for m, e in doc["estimates"].items()},
         truth_m=None if truth is None else np.asarray(truth, dtype=np.float64),
         intersection_angle_deg=float("nan") if angle is None else float(angle),

@@ -3,14 +3,8 @@
     solve(method, obs, **options) -> Estimate              one problem; raises a clear error when it cannot
     solve_batch(method, batch, **options) -> BatchEstimate  B problems at once; failures are statuses
 
-Methods (docs/solvers.md): dlt, vision, range, los, fusion-raw, fusion, ridge, mle. Each has one
-implementation, a vectorised kernel (linear.py, least_squares.py, mle.py; correlated.py for the mle with
-time-correlated errors, one problem at a time); `solve` runs it on a batch of one (methods.py).
-
-Options: tol_m (1e-4, the paper's threshold on ||dX||), max_iterations (50), initial_m ((3,) or (B,3));
-ridge: hkb ("paper" | "textbook"), k (a fixed ridge parameter; k=0 is `fusion`); mle: robust ("huber" |
-"cauchy" | None), sigma (a `Sigma` or dict overriding the observations' sigmas), estimate_variance_components
-(default: on when the pixel or range sigma is unknown).
+Methods and their options: docs/solvers.md and `pipeline.solve_options.OPTIONS`. Each method has one vectorised
+kernel (linear.py, least_squares.py, mle.py, correlated.py); `solve` runs it on a batch of one (methods.py).
 """
 
 from pipeline.solve.estimate import BatchEstimate, Estimate, Status

@@ -1,26 +1,12 @@
-"""Time-correlated telemetry errors for `mle` (generalized least squares), one problem, in O(n).
+"""Time-correlated telemetry errors for `mle` (generalized least squares) in O(n) (docs/solvers.md, "Time-correlated
+attitude and position errors").
 
-Attitude and platform position errors of real telemetry drift slowly (first-order Gauss-Markov processes:
-an IMU/AHRS attitude error with a correlation time of tens of seconds, a GNSS position error of a minute or
-more). With the correlation times `Sigma.attitude_tau_s` and `Sigma.position_tau_s` the residual covariance,
-per image axis (u, v) over the frames with a pixel and over the frames with a range, is
-
-    C_u[i, j] = pixel_px^2 delta_ij + fx_i fx_j (att^2 exp(-|t_i - t_j| / tau_att)
-                                                 + pos^2 / (D_i D_j) exp(-|t_i - t_j| / tau_pos))
-    C_d[i, j] = range_m^2 delta_ij + pos^2 exp(-|t_i - t_j| / tau_pos)
-
-(likewise C_v with fy; a tau of None or 0 leaves that part on the diagonal, which is then exactly the
-independent model of `mle.base_variances`). u, v and range rows stay mutually uncorrelated.
-
-The factor-graph form: each Gauss-Markov error is one state per frame chained by its transition
-x_(i+1) = a_i x_i + sqrt(1 - a_i^2) w_i, a_i = exp(-dt_i / tau), so its precision K^-1 is tridiagonal, and a
-group's covariance is C = R + G K G^T (R the white variances, G the per-row gains of the states). Eliminating
-the states (Woodbury) gives C^-1 y = R^-1 y - R^-1 G A^-1 G^T R^-1 y with A = K^-1 + G^T R^-1 G banded
-(bandwidth = the number of processes), and log det C = log det R + log det A + log det K: a banded Cholesky
-(LAPACK pbtrf through scipy.linalg.cholesky_banded), O(n) time and memory, no n x n matrix.
-
-With a robust loss a row with weight w carries an extra independent error that makes its variance C_ii / w
-(only R changes), so a gross error in one frame does not leak into the others.
+Per group of rows (u, v over the frames with a pixel, range over the ranged frames) C = R + G K G^T: R the white
+variances, G the rows' gains of the Gauss-Markov states (one per frame and process, chained by their transitions
+a_i = exp(-dt_i / tau), so K^-1 is tridiagonal). The states eliminate by Woodbury with A = K^-1 + G^T R^-1 G
+banded (bandwidth = the number of processes): C^-1 y = R^-1 y - R^-1 G A^-1 G^T R^-1 y and log det C = log det R
++ log det A + log det K, by LAPACK's banded Cholesky; no n x n matrix. A robust weight w makes a row's variance
+C_ii / w (only R changes), so a gross error in one frame does not leak into the others.
 """
 
 from __future__ import annotations
@@ -36,7 +22,6 @@ from pipeline.solve import iterate as _iterate
 from pipeline.solve import mle as _mle
 from pipeline.solve.iterate import start_status
 from pipeline.solve.mle import VCE_MAX_ROUNDS, VCE_TOL
-from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import Stacked, inverse3, pixel_model, range_model, solve_spd
 
 #: 1 - a^2 floor of a transition (frames at equal times): keeps the chain's precision finite
@@ -44,123 +29,100 @@ _MIN_INNOVATION = 1e-10
 
 
 @dataclass
-class Group:
-    """One uncorrelated block of rows (u, v or range) of one problem: rows (k,) into the rows in use (time
-    order), R0 (k,) white variances, gains (k, p) of p unit-variance Gauss-Markov states, a (k-1, p) their
-    transitions (empty p: white), marginal variances C_ii (k,). The parts of the banded matrix A (module
-    docstring) that do not depend on the row weights are built once (`quadratic_forms_stacked` uses them)."""
-    rows: np.ndarray
-    R0: np.ndarray
-    gains: np.ndarray
-    a: np.ndarray
-    Cii: np.ndarray
-
-    def __post_init__(self):
-        k, p = self.gains.shape
-        self._diag, self._ab, self._log_inn = np.zeros((k, p)), np.zeros((p + 1, k * p)), 0.0
-        if p == 0 or k == 0:
-            return
-        inn = np.maximum(1.0 - self.a ** 2, _MIN_INNOVATION)  # (k-1, p)
-        # A = K^-1 + G^T R^-1 G, states ordered frame by frame (index i p + j), lower banded storage ab[d, c]:
-        # K^-1's diagonal here, its transitions (offset p) in the template
-        diag = np.ones((k, p))
-        diag[1:] += 1.0 / inn - 1.0
-        diag[:-1] += self.a ** 2 / inn
-        ab = np.zeros((p + 1, k * p))
-        ab[p, :(k - 1) * p] = (-self.a / inn).ravel()
-        self._diag, self._ab, self._log_inn = diag, ab, float(np.log(inn).sum())
-
-
-@dataclass
-class Model:
-    """The GLS residual model of one problem's rows in use (`rows_in_use`): groups u, v, range; npix pixel
-    rows (u, v interleaved) first. correlated: some process has a nonzero transition (else C is diagonal)."""
+class Models:
+    """K GLS residual models of one problem's rows in use (`rows_in_use`: npix pixel rows, u v interleaved, then
+    the ranges), stacked over K (`problem_models`, `Models.concat`): per group u, v, range (rows (k,), gains
+    (K,k,p) of p unit-variance Gauss-Markov states, the band template of A (K,p+1,kp) and K^-1's diagonal (K,k,p)
+    (the parts of A that do not depend on the row weights), log det K (K,)); the marginal and white variances
+    Cii, R0 (K,m); correlated (K,): some state has a nonzero transition (else C is diagonal)."""
     groups: tuple
+    Cii: np.ndarray
+    R0: np.ndarray
     npix: int
-    m: int
+    correlated: np.ndarray
 
-    @property
-    def correlated(self) -> bool:
-        return any(g.a.size and (g.a > 0).any() and (g.gains != 0).any() for g in self.groups)
+    def take(self, idx: np.ndarray) -> Models:
+        return Models(tuple((r, G[idx], ab[idx], dg[idx], li[idx]) for r, G, ab, dg, li in self.groups),
+                      self.Cii[idx], self.R0[idx], self.npix, self.correlated[idx])
 
-    def __post_init__(self):
-        self._Cii, self._R0 = np.empty(self.m), np.empty(self.m)
-        for g in self.groups:
-            self._Cii[g.rows], self._R0[g.rows] = g.Cii, g.R0
-
-    def Cii(self) -> np.ndarray:
-        return self._Cii.copy()
-
-
-def _chain(t_s: np.ndarray, tau_s: float | None) -> np.ndarray:
-    """(k-1,) transitions exp(-dt / tau) between time-ordered frames; zeros (white) without tau."""
-    if not tau_s:
-        return np.zeros(max(t_s.size - 1, 0))
-    return np.exp(-np.diff(t_s) / tau_s)
+    @staticmethod
+    def concat(parts: list) -> Models:
+        """The models of parts side by side; ValueError where they differ in their rows or states."""
+        groups = []
+        for gs in zip(*(md.groups for md in parts), strict=True):
+            if any(g[1].shape[1:] != gs[0][1].shape[1:] or not np.array_equal(g[0], gs[0][0]) for g in gs):
+                raise ValueError("the models differ in their rows or states")
+            groups.append((gs[0][0], *(np.concatenate([g[j] for g in gs]) for j in range(1, 5))))
+        cat = np.concatenate
+        return Models(tuple(groups), cat([md.Cii for md in parts]), cat([md.R0 for md in parts]), parts[0].npix,
+                      cat([md.correlated for md in parts]))
 
 
-@dataclass(frozen=True)
-class Frames:
-    """What a `Model` takes from one problem at X0, whatever the sigmas: the frames with a pixel in time order
-    (order_p, their times tp (s), focal lengths fx, fy (px) and 1 / distance to X0 inv_d (1/m)), the ranged
-    frames in time order (order_r, times tr (s))."""
-    order_p: np.ndarray
-    tp: np.ndarray
-    fx: np.ndarray
-    fy: np.ndarray
-    inv_d: np.ndarray
-    order_r: np.ndarray
-    tr: np.ndarray
-
-
-def problem_frames(st: Stacked, X0: np.ndarray) -> Frames:
-    """The `Frames` of one problem (B = 1) at X0 (3,)."""
+def problem_models(st: Stacked, X0: np.ndarray, sigmas: list) -> Models:
+    """The `Models` of one problem (B = 1) under the sigmas, with the focal lengths, the distances at X0 (3,) and
+    the frames' times (frames with a pixel, ranged frames, each in time order). Unknown pixel / range sigmas count
+    as 1 px / 1 m (variance components then scale them), like `mle.base_variances`; a part without a correlation
+    time is white (on R). ValueError where the sigmas give different states."""
     t_ns = st.t_ns[0]
     t_s = (t_ns - t_ns.min()).astype(np.float64) * 1e-9  # differences of int64 first: no rounding of epochs
     hp, hr = st.has_pix[0], st.has_range[0]
     fx, fy = st.focal_px()
     D = np.sqrt(((X0 - st.platform_m[0, hp]) ** 2).sum(axis=1))
-    inv_d = np.where(np.isfinite(D) & (D > 0), 1.0 / np.where(D > 0, D, 1.0), 0.0)
     order_p = np.argsort(t_s[hp], kind="stable")
     order_r = np.argsort(t_s[hr], kind="stable")
-    return Frames(order_p, t_s[hp][order_p], fx[0, hp][order_p], fy[0, hp][order_p], inv_d[order_p], order_r,
-                  t_s[hr][order_r])
+    inv_d = np.where(np.isfinite(D) & (D > 0), 1.0 / np.where(D > 0, D, 1.0), 0.0)[order_p]
+    tp, tr = t_s[hp][order_p], t_s[hr][order_r]
+    k = order_p.size
+    m = 2 * k + tr.size
+    out = []
+    for sigma in sigmas:
+        s_px = 1.0 if sigma.pixel_px is None else sigma.pixel_px
+        s_r = 1.0 if sigma.range_m is None else sigma.range_m
+        s_pos = 0.0 if sigma.position_m is None else sigma.position_m
+        s_att = 0.0 if sigma.attitude_deg is None else math.radians(sigma.attitude_deg)
+        built = []
+        for axis, f in ((0, fx[0, hp][order_p]), (1, fy[0, hp][order_p])):
+            parts = [(f * s_att, sigma.attitude_tau_s), (f * s_pos * inv_d, sigma.position_tau_s)]
+            built.append(_group(2 * order_p + axis, np.full(k, s_px ** 2), parts, tp))
+        built.append(_group(2 * k + order_r, np.full(tr.size, s_r ** 2), [(np.full(tr.size, s_pos),
+                                                                            sigma.position_tau_s)], tr))
+        Cii, R0 = np.empty(m), np.empty(m)
+        for g, r0, cii, _ in built:
+            Cii[g[0]], R0[g[0]] = cii, r0
+        out.append(Models(tuple((g[0], *(np.asarray(x)[None] for x in g[1:])) for g, _, _, _ in built), Cii[None],
+                          R0[None], 2 * k, np.array([any(c for _, _, _, c in built)])))
+    return Models.concat(out)
 
 
-def problem_model(st: Stacked, X0: np.ndarray, sigma: Sigma, frames: Frames | None = None) -> Model:
-    """The `Model` of one problem (B = 1) under sigma, with the focal lengths, the distances at X0 (3,) and the
-    frames' times (frames: `problem_frames(st, X0)` where the caller has it). Unknown pixel / range sigmas count
-    as 1 px / 1 m (variance components then scale them), like `mle.base_variances`; a part without a
-    correlation time is white (on R)."""
-    s_px = 1.0 if sigma.pixel_px is None else sigma.pixel_px
-    s_r = 1.0 if sigma.range_m is None else sigma.range_m
-    s_pos = 0.0 if sigma.position_m is None else sigma.position_m
-    s_att = 0.0 if sigma.attitude_deg is None else math.radians(sigma.attitude_deg)
-    fr = problem_frames(st, X0) if frames is None else frames
-    k = fr.order_p.size
-    npix = 2 * k
-    groups = []
-    for axis, f in ((0, fr.fx), (1, fr.fy)):
-        parts = [(f * s_att, sigma.attitude_tau_s), (f * s_pos * fr.inv_d, sigma.position_tau_s)]
-        groups.append(_group(2 * fr.order_p + axis, np.full(k, s_px ** 2), parts, fr.tp))
-    groups.append(_group(npix + fr.order_r, np.full(fr.tr.size, s_r ** 2),
-                         [(np.full(fr.tr.size, s_pos), sigma.position_tau_s)], fr.tr))
-    return Model(tuple(groups), npix, npix + fr.tr.size)
-
-
-def _group(rows, R0, parts, t_s) -> Group:
+def _group(rows, R0, parts, t_s):
+    """One uncorrelated block of rows (u, v or range) in time order: rows (k,), white variances R0 (k,), parts
+    [(gains (k,), tau_s)] (white without a tau, else a unit-variance Gauss-Markov state). Returns (rows, gains
+    (k,p), band template (p+1,kp), K^-1's diagonal (k,p), log det K), R0, marginal variances C_ii (k,) and
+    whether some state has a nonzero transition."""
     gains, chains = [], []
     for g, tau in parts:
         if not (g != 0).any():
             continue
         if tau:
             gains.append(g)
-            chains.append(_chain(t_s, tau))
+            chains.append(np.exp(-np.diff(t_s) / tau))  # the transitions between time-ordered frames
         else:
             R0 = R0 + g * g
     G = np.stack(gains, axis=1) if gains else np.zeros((rows.size, 0))
     a = np.stack(chains, axis=1) if chains else np.zeros((max(rows.size - 1, 0), 0))
-    return Group(rows, R0, G, a, R0 + (G * G).sum(axis=1))
+    k, p = G.shape
+    diag, ab, log_inn = np.zeros((k, p)), np.zeros((p + 1, k * p)), 0.0
+    if p and k:
+        inn = np.maximum(1.0 - a ** 2, _MIN_INNOVATION)  # (k-1, p)
+        # A = K^-1 + G^T R^-1 G, states ordered frame by frame (index i p + j), lower banded storage ab[d, c]:
+        # K^-1's diagonal here, its transitions (offset p) in the template
+        diag = np.ones((k, p))
+        diag[1:] += 1.0 / inn - 1.0
+        diag[:-1] += a ** 2 / inn
+        ab[p, :(k - 1) * p] = (-a / inn).ravel()
+        log_inn = float(np.log(inn).sum())
+    correlated = bool(a.size and (a > 0).any() and (G != 0).any())
+    return (rows, G, ab, diag, log_inn), R0, R0 + (G * G).sum(axis=1), correlated
 
 
 # ---- the estimator (one problem) ----------------------------------------------------------------------------
@@ -180,37 +142,11 @@ def rows_in_use(st: Stacked, X: np.ndarray) -> np.ndarray:
     return out[0] if one else out
 
 
-@dataclass
-class Stack:
-    """K `Model`s of one problem's rows (the same rows and number of states per group; `stack_models`), their
-    arrays stacked over K: per group (rows, gains (K,k,p), band template (K,p+1,kp), K^-1's diagonal (K,k,p),
-    log det K (K,)); Cii, R0 (K,m)."""
-    groups: tuple
-    Cii: np.ndarray
-    R0: np.ndarray
-
-    def take(self, idx: np.ndarray) -> Stack:
-        return Stack(tuple((r, G[idx], ab[idx], dg[idx], li[idx]) for r, G, ab, dg, li in self.groups),
-                     self.Cii[idx], self.R0[idx])
-
-
-def stack_models(models: list) -> Stack:
-    """The `Stack` of K models of the same rows (`problem_model` of one problem under K sigmas with the same
-    parts: the candidates of `learned_tau`)."""
-    groups = []
-    for gs in zip(*(md.groups for md in models), strict=True):
-        if any(g.gains.shape != gs[0].gains.shape or not np.array_equal(g.rows, gs[0].rows) for g in gs):
-            raise ValueError("stack_models: the models differ in their rows or states")
-        groups.append((gs[0].rows, np.stack([g.gains for g in gs]), np.stack([g._ab for g in gs]),
-                       np.stack([g._diag for g in gs]), np.array([g._log_inn for g in gs])))
-    return Stack(tuple(groups), np.stack([md._Cii for md in models]), np.stack([md._R0 for md in models]))
-
-
-def quadratic_forms_stacked(sk: Stack, A: np.ndarray, w: np.ndarray, vf: np.ndarray) -> list:
-    """Per group (u, v, range) of K models (a `Stack`) at once: ([J|r]^T C_w^-1 [J|r] (4,4), log det C_w, rows with
-    weight), each at its rows A (K,m,4), robust weights w (K,m) (row variance C_ii / w, the rest of C unchanged) and
-    variance factors vf (K,2): one banded factorization per group for all K (their band matrices side by side
-    are one block-diagonal band matrix). Returns the K lists of these forms."""
+def quadratic_forms_stacked(sk: Models, A: np.ndarray, w: np.ndarray, vf: np.ndarray) -> list:
+    """Per model of the K `Models` and per group (u, v, range): ([J|r]^T C_w^-1 [J|r] (4,4), log det C_w, rows with
+    weight) at its rows A (K,m,4), robust weights w (K,m) (a row's variance C_ii / w, the rest of C unchanged) and
+    variance factors vf (K,2); one banded factorization per group for all K (side by side, their band matrices are
+    one block-diagonal band matrix)."""
     K = A.shape[0]
     # R_w = C_ii / w - (C_ii - R0): the weight inflates the row's own variance only
     with np.errstate(divide="ignore"):
@@ -225,10 +161,7 @@ def quadratic_forms_stacked(sk: Stack, A: np.ndarray, w: np.ndarray, vf: np.ndar
         Rinv, Y = Rinv_all[:, rows], A[:, rows]
         scale = vf[:, 0] if gi < 2 else vf[:, 1]
         RiY = Rinv[:, :, None] * Y
-        if (Rinv > 0).all():  # one pass; the same sums as row by row
-            logdet = np.log(scale[:, None] / Rinv).sum(axis=1)
-        else:
-            logdet = np.array([np.sum(np.log(scale[j] / Rinv[j][Rinv[j] > 0])) for j in range(K)])
+        logdet = np.log(scale[:, None] / np.where(Rinv > 0, Rinv, scale[:, None])).sum(axis=1)  # rows with weight
         if p == 0:
             CY = RiY / scale[:, None, None]
         else:
@@ -255,38 +188,20 @@ def quadratic_forms_stacked(sk: Stack, A: np.ndarray, w: np.ndarray, vf: np.ndar
     return out
 
 
-def gls(st: Stacked, X0: np.ndarray, model: Model, robust: str | None, vce: bool, tol_m: float,
-        max_iterations: int):
-    """Generalized least squares `mle` of one problem (B = 1) from a usable start X0 (3,) under `model`
-    (`problem_model`): `Correlated` through the one iteration and finish of `mle.run`. Returns `mle.finish`'s
-    tuple for B = 1."""
-    return gls_models(st, X0, [model], robust, vce, tol_m, max_iterations)
-
-
-def gls_models(st: Stacked, X0: np.ndarray, models: list, robust: str | None, vce: bool, tol_m: float,
-               max_iterations: int, rows0: np.ndarray | None = None):
-    """`gls` of one problem (B = 1) under each of several `Model`s of its rows (the candidates of
-    `learned_tau`), iterated side by side as K problems (each exactly as alone: one drive, one finish); rows0:
-    `rows_in_use` at X0 where the caller has it. Returns `mle.finish`'s tuple over the K models."""
-    K = len(models)
-    X = np.repeat(np.array(X0, dtype=np.float64).reshape(1, 3), K, axis=0)
-    status, bad = start_status(X, None)
-    stk = st if K == 1 else st.take(np.zeros(K, dtype=np.intp))
-    return _mle.run(Correlated(stk, models, X, vce, rows0), stk, X, status, bad, X.copy(), robust, tol_m,
-                    max_iterations)
-
-
-def gls_problems(sts: list, X0s: np.ndarray, models: list, robust: str | None, vce: bool, tol_m: float,
-                 max_iterations: int, rows0: list):
-    """`gls_models` of T problems (B = 1 each) with the same rows in use (the same frames with a pixel and with
-    a range, in the same time order: `stack_models` checks), K models each, all T K fits side by side (each
-    exactly as alone); X0s (T,3) the problems' starts, models the T K models (problem by problem), rows0 the
-    problems' `rows_in_use` at their start. Returns `mle.finish`'s tuple over the T K fits."""
+def gls(sts: list, X0s: np.ndarray, models: Models, robust: str | None, vce: bool, tol_m: float,
+        max_iterations: int, rows0: list | None = None):
+    """Generalized least squares `mle` of T problems (B = 1 each) with the same rows in use (the same frames with
+    a pixel and with a range, in the same time order) from usable starts X0s (T,3), each
+    under K models of its rows (models: T K, problem by problem), all T K fits side by side, each exactly as
+    alone: `Correlated` through the one iteration and finish of `mle.run`; rows0: the problems' `rows_in_use` at
+    their starts where the caller has them. Returns `mle.finish`'s tuple over the T K fits."""
     T = len(sts)
-    K = len(models) // T
+    K = models.Cii.shape[0] // T
     X = np.repeat(np.asarray(X0s, dtype=np.float64).reshape(T, 3), K, axis=0)
     status, bad = start_status(X, None)
     stk = stack_problems([st.take(np.zeros(K, dtype=np.intp)) for st in sts])
+    if rows0 is None:
+        rows0 = [rows_in_use(st, X[t * K]) for t, st in enumerate(sts)]
     rows = [r for r in rows0 for _ in range(K)]
     return _mle.run(Correlated(stk, models, X, vce, rows), stk, X, status, bad, X.copy(), robust, tol_m,
                     max_iterations)
@@ -307,35 +222,28 @@ def stack_problems(sts: list) -> Stacked:
 
 
 class Correlated(_iterate.Model):
-    """The `mle` model of one problem (B = 1) with time-correlated errors, as `iterate.drive` and `mle.finish`
-    use it: iteratively reweighted generalized least squares, under K models of the residual covariance at once
-    (K independent problems on the same rows; `gls_models`). Every step takes the robust weights
-    w_i = rho'(z)/z of the rows' marginal standardized residuals z_i = r_i / sqrt(C_ii vf) at the current
-    estimate, applies them as inflated variances of an independent gross error, and takes the Gauss-Newton
-    step of the correlated problem (`quadratic_forms_stacked`, O(n)); no damping. Its residual planes (3,n,K) hold the
-    marginal standardized residuals; the drift is modelled (no autocorrelation inflation in `mle.finish`)."""
+    """The `mle` model (`iterate.drive`, `mle.finish`) of one problem (B = 1) with time-correlated errors under K
+    residual models at once (`gls`): iteratively reweighted generalized least squares, no damping. The robust
+    weights w_i = rho'(z)/z come from the rows' marginal standardized residuals z_i = r_i / sqrt(C_ii vf), which
+    the residual planes (3,n,K) hold; the drift is modelled (no autocorrelation inflation in `mle.finish`)."""
 
     drift_modelled = True
 
-    def __init__(self, st: Stacked, models: list, X: np.ndarray, vce: bool, rows=None):
-        """st: the problem, once per model (K copies); X (K,3) the start of every model, one point; rows: its
-        `rows_in_use` there where the caller has it. Or (`gls_problems`) st several problems with the same rows
-        in use, each once per model, X their starts and rows the list of each model's rows at its start."""
-        K = len(models)
-        m, npix = models[0].m, models[0].npix
-        self.st, self.models, self.X, self.vce = st, models, X, vce
-        self.sd = np.stack([np.sqrt(md.Cii()) for md in models], axis=1)  # (m, K)
-        self.grp = np.r_[np.zeros(npix, dtype=int), np.ones(m - npix, dtype=int)]
+    def __init__(self, st: Stacked, models: Models, X: np.ndarray, vce: bool, rows: list):
+        """st: problems with the same rows in use, each once per model (`gls`); X (K,3) their starts, rows the
+        list of each model's rows at its start (`rows_in_use`)."""
+        K, m = models.Cii.shape
+        self.st, self.models, self.K, self.X, self.vce = st, models, K, X, vce
+        self.sd = np.sqrt(models.Cii).T  # (m, K)
+        self.grp = np.r_[np.zeros(models.npix, dtype=int), np.ones(m - models.npix, dtype=int)]
         self.vf, self.guard = np.ones((K, 2)), np.ones((K, 2))
         self.vce_rounds = np.zeros(K, dtype=np.int64)
         pf, rf = np.flatnonzero(st.has_pix[0]), np.flatnonzero(st.has_range[0])
         # the rows' places in the (3,n,K) residual planes: u, v of the pixel frames (interleaved), the ranged frames
         self._at = np.concatenate([(np.arange(2)[None, :] * st.n + pf[:, None]).ravel(), 2 * st.n + rf])
         self.ok = self._planes(np.ones((m, K)), 0.0) > 0
-        A = rows_in_use(st.take(np.zeros(1, dtype=np.intp)), X[0]) if rows is None else rows
-        self.A = list(A) if isinstance(A, list) else [A] * K  # per model; replaced, never changed in place
+        self.A = list(rows)  # per model; replaced, never changed in place
         self._last_forms = [None] * K
-        self._stack = stack_models(models)
         self._scaled_vf = None  # the variance factors of the row scales self._s and self._isd
 
     def _planes(self, rows: np.ndarray, fill: float) -> np.ndarray:
@@ -357,8 +265,8 @@ class Correlated(_iterate.Model):
 
     def _forms(self, idx, var_scale=None) -> list:
         """Per model k of idx: (`quadratic_forms_stacked`, their sum) at its current rows, weights and variance factors
-        times var_scale (len(idx),2) (None: 1); the last ones are kept per model (the convergence test and the
-        finish ask again at the same state)."""
+        times var_scale (len(idx),2) (None: 1); the last ones are kept per model (the convergence test and the finish
+        ask again at the same state)."""
         vfs = self.vf[idx] if var_scale is None else self.vf[idx] * var_scale
         out, todo = [None] * len(idx), []
         for j, k in enumerate(idx):
@@ -370,7 +278,7 @@ class Correlated(_iterate.Model):
                 todo.append(j)
         if todo:
             ks = np.asarray(idx)[todo]
-            sk = self._stack if len(ks) == len(self.models) else self._stack.take(ks)
+            sk = self.models if len(ks) == self.K else self.models.take(ks)
             qs = quadratic_forms_stacked(sk, np.stack([self.A[k] for k in ks]), self.w[:, ks].T, vfs[todo])
             for j, k, q in zip(todo, ks, qs, strict=True):
                 out[j] = (q, sum(f for f, _, _ in q))
@@ -386,7 +294,7 @@ class Correlated(_iterate.Model):
         return solve_spd(G[:, :3, :3], G[:, :3, 3])
 
     def trial(self, idx, Xn):
-        Xall = np.repeat(Xn[:1], len(self.models), axis=0)  # every model's rows at once (the others discarded)
+        Xall = np.repeat(Xn[:1], self.K, axis=0)  # every model's rows at once (the others discarded)
         Xall[idx] = Xn
         A = rows_in_use(self.st, Xall)
         self._A = [A[k] for k in idx]
@@ -423,14 +331,13 @@ class Correlated(_iterate.Model):
         return self._isd
 
     def information(self, var_scale):
-        G = np.stack([f[1] for f in self._forms(np.arange(len(self.models)), var_scale)])
+        G = np.stack([f[1] for f in self._forms(np.arange(self.K), var_scale)])
         return G[:, :3, :3].copy(), G[:, 3, 3].copy()
 
 
 def _vce_factors(q, G):
-    """`mle.helmert` of the pixel (u and v) and range groups from the per-group quadratic forms q
-    (`quadratic_forms_stacked`) and their sum G: a group's r^T C^-1 r over its rows with weight minus
-    trace(N^-1 J_g^T C_g^-1 J_g). Returns factors (2,), usable (2,)."""
+    """`mle.helmert` factors (2,) and usable (2,) of the pixel and range groups from the per-group forms q and their
+    sum G: a group's r^T C^-1 r over its rows with weight minus trace(N^-1 J_g^T C_g^-1 J_g)."""
     Ninv = inverse3(G[None, :3, :3])[0][0]
     Q = [sum(f for f, _, _ in parts) for parts in (q[:2], q[2:])]
     red = [sum(n for _, _, n in parts) - float(np.sum(Ninv * Qg[:3, :3])) for parts, Qg in zip((q[:2], q[2:]), Q,

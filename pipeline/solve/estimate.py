@@ -58,8 +58,8 @@ class Estimate:
             "iterations": int(self.iterations),
             "converged": bool(self.converged),
             "status": self.status.name.lower(),
-            "condition_number": _finite_or_none(self.condition_number),
-            "rms_residual": _finite_or_none(float(np.sqrt(np.mean(self.residuals ** 2)))
+            "condition_number": finite_or_none(self.condition_number),
+            "rms_residual": finite_or_none(float(np.sqrt(np.mean(self.residuals ** 2)))
                                             if self.residuals.size else float("nan")),
         }
         err = self.error_m(truth_m)
@@ -93,5 +93,5 @@ class BatchEstimate:
         return np.linalg.norm(self.position_m - truth_m, axis=1)
 
 
-def _finite_or_none(x: float):
+def finite_or_none(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None

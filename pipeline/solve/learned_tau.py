@@ -1,19 +1,8 @@
 """The telemetry errors' correlation time (and, where the sigma does not state it, their size) learned from the
-flight by evidence, for `mle` on one problem whose sigma gives no correlation time.
-
-Attitude and GNSS errors drift: first-order Gauss-Markov with a correlation time tau. `mle` first solves the
-independent-error model with a boresight bias (`mle.mle`: redescending loss, fit checks); where it has timestamps
-and its residuals drift from frame to frame (`fit_checks`), it then fits the generalized least squares model
-(`correlated.gls`, O(n)) with one correlation time for the attitude and the position errors, for each tau of
-TAU_GRID_S, and where the attitude sigma is not stated for each attitude sigma of ATTITUDE_GRID_DEG too (without
-a size the drift has no covariance, and every tau would give the same likelihood), without the rows the first
-solve rejected, and keeps the model of the largest restricted (REML) Gaussian likelihood
-
-    log L = -1/2 (r^T C^-1 r / k + m log k + log det C + log det (J^T C^-1 J / k)),  k = max(r^T C^-1 r / m, 1)
-
-(r the m residuals at that model's estimate, the target integrated out with a flat prior; the covariance's size
-charged by log det, its overall scale k at its maximum likelihood but never below the stated sigmas). The chosen
-models' mixture is the answer, with the fit checks of the most likely one (`mle.finish`).
+flight by evidence, for `mle` on one problem whose sigma gives no correlation time (docs/solvers.md, "Correlation
+time learned from the flight"): the GLS fit (`correlated.gls`) under every candidate of `candidates`, without the
+rows the first solve rejected, weighted by its restricted (REML) Gaussian likelihood (`log_likelihoods`); the
+answer is the candidates' posterior mixture, with the fit checks of the most likely one.
 """
 
 from __future__ import annotations
@@ -49,10 +38,11 @@ def log_likelihoods(st: Stacked, Xs: np.ndarray, sigmas: list, vfs: list) -> lis
     model); C's overall scale k = max(chi2 / m, 1) (the stated sigmas a lower bound: with sigmas stated too small,
     a model is not chosen for hiding the misfit in the target)."""
     K = len(sigmas)
-    models = [_correlated.problem_model(st, X, s) for X, s in zip(Xs, sigmas, strict=True)]
+    models = _correlated.Models.concat([_correlated.problem_models(st, X, [s]) for X, s in zip(Xs, sigmas,
+                                                                                              strict=True)])
     A = _correlated.rows_in_use(st.take(np.zeros(K, dtype=np.intp)), Xs)
-    m = models[0].m
-    qs = _correlated.quadratic_forms_stacked(_correlated.stack_models(models), A, np.ones((K, m)),
+    m = models.Cii.shape[1]
+    qs = _correlated.quadratic_forms_stacked(models, A, np.ones((K, m)),
                                              np.asarray(vfs, dtype=np.float64).reshape(K, 2))
     out = []
     for q in qs:
@@ -75,70 +65,41 @@ def candidates(sigma: Sigma):
     return [(tau, att) for att in atts for tau in TAU_GRID_S]
 
 
-def learn_tau(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
-              max_iterations: int):
-    """The GLS `mle` of one problem (B = 1, st without rejected rows) averaged over the models of `candidates`
-    (correlation time, and attitude sigma where unstated), each weighted by its likelihood (equal priors): the
-    posterior mean estimate and the mixture's covariance (the spread between the models included), from X0
-    (3,). Returns (tau_s, attitude_deg of the most likely model, {(tau, att): log L}, the `correlated.gls`
-    result tuple of that model (its fit checks and extras, and error_model_tau_s, error_model_attitude_deg,
-    error_model_log_likelihoods over TAU_GRID_S at its attitude sigma) with the mixture's estimate and
-    covariance), or None when no model gave an answer."""
-    # every candidate's fit starts from X0: the frames' layout and the rows there (no tau in them) are built
-    # once, and the fits iterate side by side (each as alone)
-    sigmas = _sigmas(sigma)
-    models, rows0 = _models(st, X0, sigmas)
-    return _mixture(st, sigmas, _correlated.gls_models(st, X0, models, robust, vce, tol_m, max_iterations, rows0))
-
-
-def learn_tau_many(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
-                   max_iterations: int) -> list:
-    """`learn_tau` of T problems (B = 1 each, without their rejected rows) from their X0s (T,3): [its answer] per
-    problem. Problems with the same rows in use (`correlated.gls_problems`) have all their candidates' fits
-    iterate side by side (each as alone); the others one problem at a time."""
-    sigmas = _sigmas(sigma)
-    out: list = [None] * len(sts)
-    groups: list[list[int]] = []
-    for i, st in enumerate(sts):  # the same frames with a pixel and with a range (`stack_models` checks the rest)
-        for g in groups:
-            j = g[0]
-            if (st.n == sts[j].n and np.array_equal(st.has_pix, sts[j].has_pix)
-                    and np.array_equal(st.has_range, sts[j].has_range)):
-                g.append(i)
-                break
-        else:
-            groups.append([i])
+def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
+              max_iterations: int) -> list:
+    """Per problem of sts (B = 1 each, without their rejected rows), from its start X0s[i] (3,): the GLS `mle`
+    averaged over the models of `candidates` (correlation time, and attitude sigma where unstated), each weighted by
+    its likelihood (equal priors): the posterior mean estimate and the mixture's covariance (the spread between the
+    models included). Each answer is (tau_s, attitude_deg of the most likely model, {(tau, att): log L}, the
+    `correlated.gls` result tuple of that model (its fit checks and extras, and error_model_tau_s,
+    error_model_attitude_deg, error_model_log_likelihoods over TAU_GRID_S at its attitude sigma) with the mixture's
+    estimate and covariance), or None when no model gave an answer. The candidates' fits of problems with the same
+    rows in use iterate side by side (each as alone: `correlated.gls`)."""
+    sigmas = [dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau, attitude_deg=att)
+              for tau, att in candidates(sigma)]
     K = len(sigmas)
-    for g in groups:
-        if len(g) > 1:
-            built = {i: _models(sts[i], X0s[i], sigmas) for i in g}
-            try:
-                fits = _correlated.gls_problems([sts[i] for i in g], np.asarray([X0s[i] for i in g]),
-                                                [md for i in g for md in built[i][0]], robust, vce, tol_m,
-                                                max_iterations, [built[i][1] for i in g])
-            except ValueError:  # the models' states differ (`stack_models`): one problem at a time
-                pass
-            else:
-                for t, i in enumerate(g):
-                    sl = slice(t * K, (t + 1) * K)
-                    out[i] = _mixture(sts[i], sigmas, (*(a[sl] for a in fits[:5]),
-                                                       {k: v[sl] for k, v in fits[5].items()}))
-                continue
-        for i in g:
-            out[i] = learn_tau(sts[i], X0s[i], sigma, robust, vce, tol_m, max_iterations)
+    by_rows: dict[tuple, list[int]] = {}  # the same frames with a pixel and with a range (`Models.concat`: the rest)
+    for i, st in enumerate(sts):
+        by_rows.setdefault((st.n, st.has_pix.tobytes(), st.has_range.tobytes()), []).append(i)
+    groups = list(by_rows.values())
+    out: list = [None] * len(sts)
+    while groups:
+        g = groups.pop()
+        X0 = np.asarray([X0s[i] for i in g])
+        try:
+            models = _correlated.Models.concat([_correlated.problem_models(sts[i], X0[t], sigmas)
+                                                for t, i in enumerate(g)])
+            fits = _correlated.gls([sts[i] for i in g], X0, models, robust, vce, tol_m, max_iterations,
+                                   [_correlated.rows_in_use(sts[i], X0[t]) for t, i in enumerate(g)])
+        except ValueError:  # the models' states differ (`Models.concat`): one problem at a time
+            if len(g) == 1:
+                raise
+            groups.extend([i] for i in g)
+            continue
+        for t, i in enumerate(g):
+            sl = slice(t * K, (t + 1) * K)
+            out[i] = _mixture(sts[i], sigmas, (*(a[sl] for a in fits[:5]), {k: v[sl] for k, v in fits[5].items()}))
     return out
-
-
-def _sigmas(sigma: Sigma) -> list:
-    """The candidate sigmas (`candidates`)."""
-    return [dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau, attitude_deg=att)
-            for tau, att in candidates(sigma)]
-
-
-def _models(st: Stacked, X0: np.ndarray, sigmas: list) -> tuple[list, np.ndarray]:
-    """The candidates' `Model`s of one problem at X0 and its rows in use there."""
-    frames0 = _correlated.problem_frames(st, X0)
-    return [_correlated.problem_model(st, X0, s, frames0) for s in sigmas], _correlated.rows_in_use(st, X0)
 
 
 def _mixture(st: Stacked, sigmas: list, out: tuple):

@@ -1,8 +1,5 @@
-"""The paper's Gauss-Newton estimators: vision (eqs. 9-15), range (16-27), fusion without normalization
-([H; h] stacked), the min-max normalized fusion (36-41) and its ridge variant (43-47).
-
-All are batched: they take a `Stacked` of B problems and (B,3) initial values.
-"""
+"""The paper's Gauss-Newton estimators, batched over a `Stacked` of B problems from (B,3) starts: vision
+(eqs. 9-15), range (16-27), fusion-raw, the min-max normalized fusion (36-41) and ridge (43-47); docs/solvers.md."""
 
 from __future__ import annotations
 
@@ -44,18 +41,15 @@ def _run(st, X0, model, tol_m, max_iterations, init_status):
 
 
 def vision(st: Stacked, X0, tol_m, max_iterations, init_status=None):
-    """Gauss-Newton on reprojection residuals (eqs. 9-15 with the corrected Jacobian of `pixel_model`);
-    cond is that of H (2n x 3)."""
+    """Gauss-Newton on reprojection residuals (the corrected Jacobian of `pixel_model`); cond is that of H (2n x 3)."""
     return _run(st, X0, pixel_model, tol_m, max_iterations, init_status)
 
 
 def collinear_platforms(platform_m: np.ndarray, used: np.ndarray, sigma_position_m: float | None) -> np.ndarray:
     """(B,) True where the used platform positions (B,n,3) lie on one straight line: exactly (second singular
-    value of the centred positions below 1e-9 of the first), or, with a known position sigma, within their
-    noise: the squared distances from the best-fitting line, sum s2^2 + s3^2 of the two smaller singular
-    values, below the 95 % quantile of sigma^2 chi-square with 2(k - 2) degrees of freedom (k positions, a
-    line in 3D has 4 parameters). Ranges from such positions cannot fix the rotation of the target about the
-    line: the answer would be set by the noise."""
+    value of the centred positions below 1e-9 of the first), or, with a known position sigma, within their noise:
+    s2^2 + s3^2 (the squared distances from the best-fitting line) below the 95 % quantile of sigma^2 chi-square
+    with 2(k - 2) degrees of freedom (k positions; a line in 3D has 4 parameters)."""
     from scipy.special import chdtri  # = scipy.stats.chi2.ppf(0.95, dof), bit for bit, without its ~40 us wrapper
 
     w = used.astype(np.float64)
@@ -72,9 +66,8 @@ def collinear_platforms(platform_m: np.ndarray, used: np.ndarray, sigma_position
 
 
 def range_only(st: Stacked, X0, tol_m, max_iterations, init_status=None):
-    """Gauss-Newton on laser ranges (eqs. 16-27); cond is that of h (n x 3). Problems whose ranged platform
-    positions are collinear (`collinear_platforms`, with the batch's position sigma) are DEGENERATE; returns
-    that flag (B,) as well."""
+    """Gauss-Newton on laser ranges; cond is that of h (n x 3). Problems with collinear ranged platforms
+    (`collinear_platforms`) are DEGENERATE; returns that flag (B,) too."""
     X, it, status, cond = _run(st, X0, range_model, tol_m, max_iterations, init_status)
     flat = collinear_platforms(st.platform_m, st.has_range, st.sigma.position_m)
     status[flat] = Status.DEGENERATE
@@ -83,14 +76,13 @@ def range_only(st: Stacked, X0, tol_m, max_iterations, init_status=None):
 
 
 def fusion_raw(st: Stacked, X0, tol_m, max_iterations, init_status=None):
-    """Gauss-Newton on [pixels; ranges] with the stacked design [H; h] and no normalization or weighting:
-    pixels count in px and ranges in m."""
+    """Gauss-Newton on [pixels; ranges] with the design [H; h], unweighted (pixels in px, ranges in m)."""
     return _run(st, X0, _fused_model, tol_m, max_iterations, init_status)
 
 
 def _minmax(r: np.ndarray, ok: np.ndarray):
-    """Per problem Min and the divisor Max - Min over the rows in use; a divisor of 0 (all residuals equal,
-    or a single row) or no rows at all becomes 1 so the block is only shifted, not scaled."""
+    """Per problem Min and the divisor Max - Min over the rows in use; a divisor of 0 or no rows becomes 1 (the
+    block is only shifted, not scaled)."""
     hi = np.max(np.where(ok, r, -np.inf), axis=1)
     lo = np.min(np.where(ok, r, np.inf), axis=1)
     span = hi - lo
@@ -100,12 +92,7 @@ def _minmax(r: np.ndarray, ok: np.ndarray):
 
 
 def normalized_system(st: Stacked, X: np.ndarray):
-    """The paper's eqs. (36)-(38) at X: T (B, 2n+n, 4) and dPhi (B, 3n), with unused rows zero.
-
-    Pixel rows: [H/(Max-Min), -Min/(Max-Min)], (dpsi - Min)/(Max-Min); range rows likewise with max, min of
-    dphi. Max, Min over the pixel residuals dpsi = psi - F(X) of all frames (u and v together), max, min over
-    the range residuals dphi = phi - f(X).
-    """
+    """The paper's eqs. (36)-(38) at X: T (B, 2n+n, 4), dPhi (B, 3n) (unused rows zero) and the rows in use (B,)."""
     Jp, rp, okp = pixel_model(st, X)
     Jr, rr, okr = range_model(st, X)
     Lo, Sp = _minmax(rp, okp)
@@ -123,10 +110,9 @@ def normalized_system(st: Stacked, X: np.ndarray):
 
 
 def normalized_normal_equations(st: Stacked, X: np.ndarray):
-    """N = T^T T (B,4,4), g = T^T dPhi (B,4), dd = dPhi^T dPhi (B,) and the rows in use (B,) of eqs. (36)-(38)
-    at X, without forming T: each block (pixels, ranges) contributes through the Gram matrix of [J | r | 1]
-    over its rows, since its rows of T are [J, -L]/S and of dPhi (r - L)/S (L = Min or min, S = Max - Min or
-    max - min)."""
+    """N = T^T T (B,4,4), g = T^T dPhi (B,4), dd = dPhi^T dPhi (B,) and the rows in use (B,) of eqs. (36)-(38) at X,
+    without forming T: a block's rows of T are [J, -L]/S and of dPhi (r - L)/S, so each block contributes through
+    the Gram matrix of [J | r | 1] over its rows (L = Min or min, S = Max - Min or max - min)."""
     Jp, rp, okp = pixel_model(st, X)
     Jr, rr, okr = range_model(st, X)
     B = X.shape[0]
@@ -151,20 +137,12 @@ def normalized_normal_equations(st: Stacked, X: np.ndarray):
 
 
 def hkb_k(N, g, dd, rows, variant: str = "paper"):
-    """Hoerl-Kennard-Baldwin ridge parameter (B,) for the system T beta = dPhi with N = T^T T, g = T^T dPhi,
-    dd = dPhi^T dPhi.
-
-    paper (eqs. 44-45 as implemented): beta_hat = N^-1 g, the least-squares solution [dX; 1]-vector of the
-    current iteration; t = 4 = rank(T); delta0^2 = dPhi^T (I - T N^-1 T^T) dPhi / (m - t) with Phi read as the
-    normalized shift vector dPhi (the vector the hat matrix of T acts on) and n read as m, the number of rows
-    of T in use (2 per pixel + 1 per range); k = t delta0^2 / (beta_hat^T N beta_hat).
-    textbook: the same on the column-standardized system (columns of T scaled to unit length), k = p s^2 /
-    (gamma_hat^T gamma_hat); the returned k then applies to the standardized normal matrix.
-    """
+    """Hoerl-Kennard-Baldwin ridge parameter (B,) of T beta = dPhi from N = T^T T, g = T^T dPhi, dd = dPhi^T dPhi and
+    the rows in use: variant "paper" (eqs. 44-45 as read in docs/solvers.md, ridge) or "textbook" (on the
+    column-standardized system; k then applies to the standardized normal matrix)."""
     p = N.shape[-1]
     if variant == "textbook":
-        d = np.sqrt(np.einsum("bii->bi", N))
-        d = np.where(d > 0, d, 1.0)
+        d = _column_scales(N)
         N = N / (d[:, :, None] * d[:, None, :])
         g = g / d
     beta, singular = solve_spd(N, g)
@@ -180,10 +158,15 @@ def hkb_k(N, g, dd, rows, variant: str = "paper"):
     return np.where(np.isfinite(k) & ~singular, k, 0.0)
 
 
+def _column_scales(N):
+    """(B,4) the lengths of T's columns from N = T^T T (1 where zero): the textbook variant's standardization."""
+    d = np.sqrt(np.einsum("bii->bi", N))
+    return np.where(d > 0, d, 1.0)
+
+
 def _solve_augmented(N, g, k):
-    """beta = (N + k I)^-1 g for the 4-unknown system [dX; a]. Where that is singular but the 3 dX columns are
-    not (the 4th column of T vanishes when every residual is zero, Max = Min = 0, e.g. at an exact fit), the
-    4th unknown is held at the value 1 the paper writes: dX = (N33 + k I)^-1 (g3 - N[:3, 3])."""
+    """beta = (N + k I)^-1 g for [dX; a]; where that is singular but the 3 dX columns are not (the 4th column of T
+    vanishes at an exact fit, Max = Min = 0), a is held at the paper's 1: dX = (N33 + k I)^-1 (g3 - N[:3, 3])."""
     beta, singular = solve_spd(N + k[:, None, None] * np.eye(4), g, NORMALIZED_SINGULAR_DET)
     if singular.any():
         i = np.flatnonzero(singular)
@@ -198,32 +181,22 @@ def _solve_augmented(N, g, k):
 def _normalized_step(k_fixed: float | None, hkb: str | None):
     def step(sub: Stacked, X: np.ndarray):
         N, g, dd, rows = normalized_normal_equations(sub, X)
-        B = N.shape[0]
         if hkb is None:
-            k = np.zeros(B) if k_fixed is None else np.full(B, float(k_fixed))
-            beta, singular = _solve_augmented(N, g, k)
+            k = np.zeros(N.shape[0]) if k_fixed is None else np.full(N.shape[0], float(k_fixed))
         else:
             k = hkb_k(N, g, dd, rows, hkb)
-            if hkb == "textbook":
-                d = np.sqrt(np.einsum("bii->bi", N))
-                d = np.where(d > 0, d, 1.0)
-                gamma, singular = _solve_augmented(N / (d[:, :, None] * d[:, None, :]), g / d, k)
-                beta = gamma / d
-            else:
-                beta, singular = _solve_augmented(N, g, k)
+        d = _column_scales(N) if hkb == "textbook" else np.ones(g.shape)  # 1: exactly the unscaled system
+        gamma, singular = _solve_augmented(N / (d[:, :, None] * d[:, None, :]), g / d, k)
+        beta = gamma / d
         return beta[:, :3], singular, {"k": k, "augmented": beta[:, 3]}
     return step
 
 
 def normalized_fusion(st: Stacked, X0, tol_m, max_iterations, init_status=None, k: float | None = None,
                       hkb: str | None = None):
-    """The paper's normalized fusion (eqs. 36-41; k = None, hkb = None) or ridge fusion (eqs. 43-47; hkb =
-    'paper' or 'textbook', or a fixed k). Solves T [dX; a] = dPhi (a is the 4th unknown the paper writes as
-    1) and updates X by dX only.
-
-    Returns X, iterations, status, cond (of T at the final iterate), extras {k, augmented} of the last iteration.
-    Degeneracy is judged on the geometry (the unnormalized [H; h]), not on T.
-    """
+    """The paper's normalized fusion (k = None, hkb = None) or ridge fusion (hkb "paper" or "textbook", or a fixed
+    k): T [dX; a] = dPhi, X updated by dX only. Returns X, iterations, status, cond (of T at the final iterate) and
+    the last iteration's extras {k, augmented}; degeneracy is judged on the unnormalized [H; h]."""
     X, it, status, extras = iterate(st, X0, _normalized_step(k, hkb), tol_m, max_iterations, init_status,
                                     extra_names=("k", "augmented"))
     Xf = np.where(np.isfinite(X), X, 0.0)

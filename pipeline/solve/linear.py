@@ -9,18 +9,13 @@ from pipeline.solve.stacked import Stacked
 
 
 def dlt(st: Stacked, with_condition: bool = True):
-    """Homogeneous linear triangulation from every frame with a pixel.
+    """Homogeneous linear triangulation from every frame with a pixel (docs/solvers.md, dlt): the rows u p3 - p1,
+    v p3 - p2 of A [X; 1] = 0 in a frame centred on the platforms and scaled by their spread, each row of unit
+    length; X the eigenvector of A^T A of the smallest eigenvalue. (Inverse iteration instead of eigh was tried: at
+    small intersection angles the two smallest eigenvalues are too close for a few steps to converge.)
 
-    Each pixel gives two rows u p3 - p1, v p3 - p2 (p_k rows of P) of A [X; 1] = 0. The world is first shifted
-    to the platforms' centroid and scaled by their spread, and each row is scaled to unit length, so the
-    algebraic error is well conditioned; the solution is the eigenvector of A^T A with the smallest eigenvalue.
-    (Inverse iteration instead of eigh was tried: at small intersection angles the two smallest eigenvalues are
-    too close for a few steps to converge.)
-
-    Returns X (B,3) (NaN when fewer than two pixels or the rays are parallel: status DEGENERATE),
-    status (B,) int8, and cond (B,) = sigma_1 / sigma_3 of the normalised A (its 4th singular value is the
-    algebraic residual, ~0); NaN unless with_condition.
-    """
+    Returns X (B,3) (NaN, status DEGENERATE with fewer than two pixels or parallel rays), status (B,) int8, cond
+    (B,) sigma_1 / sigma_3 of the normalised A (NaN unless with_condition)."""
     c = st.platform_m.mean(axis=1)  # (B,3)
     spread = np.sqrt(((st.platform_m - c[:, None, :]) ** 2).sum(-1).mean(-1))
     sc = np.where(spread > 1.0, spread, 1.0)
@@ -51,16 +46,17 @@ def dlt(st: Stacked, with_condition: bool = True):
     return X, status, cond
 
 
-def los_points(st: Stacked):
-    """Per-frame line-of-sight points (B,n,3), NaN where a frame lacks the pixel or the range.
-
-    The ray leaves the camera centre C = -M^-1 p4 along sign(det M) M^-1 [u, v, 1] (the sign puts the
-    point in front of the camera). The laser range d is measured from the platform position s (the laser),
-    which may differ from C by a lever arm, so the point is C + t a with |C + t a - s| = d (the far root
-    of the quadratic); with C = s this is simply C + d a.
-    """
+def finite_cameras(st: Stacked) -> np.ndarray:
+    """(B,n) True where P's left 3x3 block M is a finite camera: |det M| against |M|^3 (its rows' lengths)."""
     g = st._gram()
-    finite_camera = np.abs(st.det_M()) > 1e-12 * np.sqrt(g[..., 0, 0] * g[..., 1, 1] * g[..., 2, 2])
+    return np.abs(st.det_M()) > 1e-12 * np.sqrt(g[..., 0, 0] * g[..., 1, 1] * g[..., 2, 2])
+
+
+def los_points(st: Stacked):
+    """Per-frame line-of-sight points (B,n,3) and where they are valid (B,n) (docs/solvers.md, los): on the ray
+    from C = -M^-1 p4 along sign(det M) M^-1 [u, v, 1], at the laser range d from the platform s (a lever arm
+    between camera and laser: |C + t a - s| = d, the far root); NaN without the pixel or the range."""
+    finite_camera = finite_cameras(st)
     Minv = np.linalg.inv(np.where(finite_camera[..., None, None], st.M, np.eye(3)))
     C = -np.einsum("bnij,bnj->bni", Minv, st.p4)
     xh = np.concatenate([st.pix, np.ones((*st.pix.shape[:-1], 1))], axis=-1)
@@ -77,24 +73,16 @@ def los_points(st: Stacked):
 
 
 def los(st: Stacked):
-    """Line-of-sight estimate: per-frame points, their component-wise median, and the oracle error.
-
-    Returns X (B,3) median point, status (B,) (CLOSED_FORM, or DEGENERATE with no usable frame), points
-    (B,n,3), and oracle (B,) = the smallest per-frame error against the truth (NaN without truth): the best
-    single frame's error, which only an oracle knowing the truth could pick (the figure of the paper's
-    Table 4).
-    """
+    """Line-of-sight estimate: X (B,3) the per-frame points' component-wise median, status (B,) (CLOSED_FORM, or
+    DEGENERATE without a usable frame), the points (B,n,3), and oracle (B,): the best single frame's error against
+    the truth (NaN without it), the figure of the paper's Table 4."""
     pts, valid = los_points(st)
     any_valid = valid.any(axis=1)
     X = np.full((st.size, 3), np.nan)
     if any_valid.any():
         X[any_valid] = np.nanmedian(pts[any_valid], axis=1)
     status = np.where(any_valid, Status.CLOSED_FORM, Status.DEGENERATE).astype(np.int8)
-    if st.truth_m is not None:
-        err = np.linalg.norm(pts - st.truth_m[:, None, :], axis=-1)
-        oracle = np.full(st.size, np.nan)
-        if any_valid.any():
-            oracle[any_valid] = np.nanmin(err[any_valid], axis=1)
-    else:
-        oracle = np.full(st.size, np.nan)
+    oracle = np.full(st.size, np.nan)
+    if st.truth_m is not None and any_valid.any():
+        oracle[any_valid] = np.nanmin(np.linalg.norm(pts - st.truth_m[:, None, :], axis=-1)[any_valid], axis=1)
     return X, status, pts, oracle

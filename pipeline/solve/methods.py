@@ -1,9 +1,6 @@
-"""The eight estimators behind `solve` and `solve_batch`: option checks, the dispatch of each method to its
-batched kernel (linear.py, least_squares.py, mle.py; correlated.py for the generalized least squares mle), and
-for one problem the checks of unusable input and the conversion of the batch-of-one answer into an `Estimate`.
-
-One implementation per estimator: `solve(method, obs)` runs the same kernel as `solve_batch` on a batch of one.
-"""
+"""The eight estimators behind `solve`, `solve_batch` and `solve_problems`: option checks, each method's dispatch
+to its batched kernel, and for one problem the checks of unusable input and its `Estimate`. One implementation
+per estimator: `solve(method, obs)` runs the kernel of `solve_batch` on a batch of one."""
 
 from __future__ import annotations
 
@@ -20,7 +17,7 @@ from pipeline.solve import mle as _mle
 from pipeline.solve import starts as _starts
 from pipeline.solve.estimate import BatchEstimate, Estimate, Status
 from pipeline.solve.iterate import start_status
-from pipeline.solve.observations import ObservationBatch, Observations, Sigma
+from pipeline.solve.observations import REAL_TIMES_NS, ObservationBatch, Observations, Sigma
 from pipeline.solve.stacked import Stacked, pixel_model, range_model
 from pipeline.solve_options import METHODS, NOT_IN_CONFIG, OPTIONS
 
@@ -82,28 +79,31 @@ def _initial(options: dict, B: int):
     return x0
 
 
-def _vision_init(st: Stacked, o: dict):
-    x0 = _initial(o, st.size)
-    if x0 is not None:
-        return x0, None
-    X, _, status, _ = _vision_from_dlt(st, o)
-    # a vision result that hit the iteration limit is still a usable initial value
-    return X, status
-
-
-def _vision_from_dlt(st: Stacked, o: dict):
-    """vision from the DLT point: (X (B,3), iterations, status, cond), copies of o["vision_from_dlt"] where the
-    caller has it already (`_mle_multistart`: every start method that begins from vision)."""
+def _vision(st: Stacked, o: dict):
+    """vision's (X (B,3), iterations, status, cond) from initial_m, else from the DLT point: copies of
+    o["vision_from_dlt"] where the caller has it already (`_mle_multistart`: every start method that begins from
+    vision)."""
     if "vision_from_dlt" in o:
         return tuple(np.array(a, copy=True) for a in o["vision_from_dlt"])
-    x0, init_status, _ = linear.dlt(st, with_condition=False)
+    x0, init_status = _initial(o, st.size), None
+    if x0 is None:
+        x0, init_status, _ = linear.dlt(st, with_condition=False)
     return least_squares.vision(st, x0, o["tol_m"], o["max_iterations"], init_status)
 
 
+def _vision_init(st: Stacked, o: dict):
+    """The start of the methods that begin from vision: initial_m (status None), else vision's answer (one that
+    hit the iteration limit is still a usable start) and its status."""
+    x0 = _initial(o, st.size)
+    if x0 is not None:
+        return x0, None
+    X, _, status, _ = _vision(st, o)
+    return X, status
+
+
 def _boresight_start(st: Stacked) -> np.ndarray:
-    """(B,3) a start for range-only without pixels: per ranged frame the point at the laser range along the
-    camera's optical axis (the rangefinder is boresighted with the camera; the axis is M's third row, pointed to
-    the front by the sign of det M), the component-wise median over the frames; NaN without a range."""
+    """(B,3) range-only's start without pixels: the component-wise median over the ranged frames of the point at
+    the laser range along the camera's optical axis (M's third row, to the front); NaN without a range."""
     m3 = st.M[..., 2, :] * st.depth_sign()[..., None]
     axis = m3 / np.linalg.norm(m3, axis=-1, keepdims=True)
     pts = np.where(st.has_range[..., None], st.platform_m + np.where(st.has_range, st.range_m, 0.0)[..., None] * axis,
@@ -115,9 +115,8 @@ def _boresight_start(st: Stacked) -> np.ndarray:
 
 
 def _range_init(st: Stacked, o: dict):
-    """The range-only start: vision's estimate (the paper's), or where fewer than two frames have a pixel (no
-    vision estimate) the boresight start. (Where vision fails on two or more pixels, range keeps its status:
-    the simulation's figures count those trials as flagged.)"""
+    """range's start: vision's estimate (the paper's), or with fewer than two pixels the boresight start. (Where
+    vision fails on two or more pixels, range keeps its status: the simulation counts those trials as flagged.)"""
     x0, init_status = _vision_init(st, o)
     if init_status is None:  # initial_m given
         return x0, init_status
@@ -131,8 +130,8 @@ def _range_init(st: Stacked, o: dict):
 
 def _solve_stacked(method: str, st: Stacked, o: dict, first: tuple | None = None,
                    answers: dict | None = None) -> BatchEstimate:
-    """One method's kernel on the batch st. mle: first, its fit from the default start where the caller has it
-    (`_mle_dispatch`'s tuple); answers, the start estimators' answers for the multistart (`_mle_multistart`)."""
+    """One method's kernel on the batch st; for mle, first is its fit from the default start where the caller has it
+    and answers the start estimators' answers for the multistart (`_mle_multistart`)."""
     B = st.size
     tol, itmax = o["tol_m"], o["max_iterations"]
     extras: dict = {}
@@ -146,11 +145,7 @@ def _solve_stacked(method: str, st: Stacked, o: dict, first: tuple | None = None
         cond = np.full(B, np.nan)
         extras = {"points_m": pts, "oracle_error_m": oracle}
     elif method == "vision":
-        x0 = _initial(o, B)
-        if x0 is None:
-            X, it, status, cond = _vision_from_dlt(st, o)
-        else:
-            X, it, status, cond = least_squares.vision(st, x0, tol, itmax, None)
+        X, it, status, cond = _vision(st, o)
     elif method == "range":
         x0, init_status = _range_init(st, o)
         X, it, status, cond, flat = least_squares.range_only(st, x0, tol, itmax, init_status)
@@ -160,11 +155,8 @@ def _solve_stacked(method: str, st: Stacked, o: dict, first: tuple | None = None
         X, it, status, cond = least_squares.fusion_raw(st, x0, tol, itmax, init_status)
     elif method in ("fusion", "ridge"):
         x0, init_status = _vision_init(st, o)
-        if method == "fusion":
-            k, hkb = None, None
-        else:
-            k = o.get("k")
-            hkb = None if k is not None else o.get("hkb", "paper")
+        k = o.get("k") if method == "ridge" else None
+        hkb = o.get("hkb", "paper") if method == "ridge" and k is None else None
         X, it, status, cond, ex = least_squares.normalized_fusion(st, x0, tol, itmax, init_status, k=k, hkb=hkb)
         extras = {"augmented_component": ex["augmented"]}
         if method == "ridge":
@@ -193,11 +185,9 @@ def _mark_behind(st: Stacked, be: BatchEstimate) -> BatchEstimate:
 
 
 def _mle_start(st: Stacked, o: dict):
-    """Initial values (B,3) and their status, the sigmas and whether to estimate variance components.
-
-    The start is the DLT point; where there are fewer than two pixels, or the DLT point is not in front of
-    every camera with a pixel (no baseline: it is then a camera centre, or behind), the line-of-sight median.
-    """
+    """(B,3) starts and their status, the sigma and whether to estimate variance components: the DLT point; where
+    fewer than two pixels, or it is not in front of every camera with a pixel (no baseline), the line-of-sight
+    median; then, with a terrain prior, the first line of sight met with the terrain."""
     x0 = _initial(o, st.size)
     init_status = None
     if x0 is None:
@@ -228,40 +218,36 @@ def _terrain_start(st: Stacked, fn) -> tuple[np.ndarray, np.ndarray]:
     """(B,3) starts and their status: the first pixel's line of sight met with the terrain fn (Newton on the
     distance t along the ray, from the terrain below the camera); NaN and DEGENERATE where it does not meet it
     in front of the camera."""
-    B = st.size
-    X = np.full((B, 3), np.nan)
-    status = np.full(B, Status.DEGENERATE, dtype=np.int8)
-    for b in range(B):
-        k = np.flatnonzero(st.has_pix[b])
-        if k.size == 0:
-            continue
-        M, p4, uv = st.M[b, k[0]], st.p4[b, k[0]], st.pix[b, k[0]]
-        c = -np.linalg.solve(M, p4)
-        d = np.linalg.solve(M, np.array([uv[0], uv[1], 1.0]))
-        d = d * np.sign(np.linalg.det(M))  # in front of the camera: positive depth
-        d = d / np.linalg.norm(d)
-        t = 0.0
-        for _ in range(50):
-            x = c + t * d
-            up, de, dn = (float(np.asarray(v).reshape(-1)[0]) for v in fn(np.array([x[0]]), np.array([x[1]])))
-            f = x[2] - up
-            df = d[2] - de * d[0] - dn * d[1]
-            if not (np.isfinite(f) and np.isfinite(df)) or df == 0:
-                break
-            dt = -f / df
-            t += dt
-            if abs(dt) < 1e-6 * (1.0 + abs(t)):
-                break
-        x = c + t * d
-        if t > 0 and np.isfinite(x).all():
-            X[b], status[b] = x, Status.CONVERGED
-    return X, status
+    b = np.arange(st.size)
+    k = np.argmax(st.has_pix, axis=1)  # the first frame with a pixel
+    M, uv1 = st.M[b, k], np.concatenate([st.pix[b, k], np.ones((st.size, 1))], axis=1)
+    c = -np.linalg.solve(M, st.p4[b, k][..., None])[..., 0]
+    d = np.linalg.solve(M, uv1[..., None])[..., 0] * np.sign(np.linalg.det(M))[:, None]  # in front: depth > 0
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    t = np.zeros(st.size)
+    todo = np.flatnonzero(st.has_pix.any(axis=1))
+    for _ in range(50):
+        if not todo.size:
+            break
+        x = c[todo] + t[todo, None] * d[todo]
+        up, de, dn = (np.asarray(v, dtype=np.float64).reshape(-1) for v in fn(x[:, 0], x[:, 1]))
+        f = x[:, 2] - up
+        df = d[todo, 2] - de * d[todo, 0] - dn * d[todo, 1]
+        ok = np.isfinite(f) & np.isfinite(df) & (df != 0)
+        dt = -f[ok] / df[ok]
+        t[todo[ok]] += dt
+        more = np.zeros(todo.size, dtype=bool)
+        more[ok] = np.abs(dt) >= 1e-6 * (1.0 + np.abs(t[todo[ok]]))
+        todo = todo[more]
+    X = c + t[:, None] * d
+    good = st.has_pix.any(axis=1) & (t > 0) & np.isfinite(X).all(axis=1)
+    X[~good] = np.nan
+    return X, np.where(good, Status.CONVERGED, Status.DEGENERATE).astype(np.int8)
 
 
 def _mle_dispatch(st: Stacked, o: dict):
-    """`mle.mle` on the batch, or `correlated.gls` for one problem whose sigma has correlation times (and
-    whose residual covariance is not diagonal: with vanishing correlation it is the independent problem); then,
-    for the problems with timestamps whose residuals drift, the learned drift model (`_with_learned_tau`)."""
+    """`mle.mle` on the batch, or for one problem whose sigma has correlation times (a non-diagonal residual
+    covariance) `correlated.gls`; then the learned drift model (`_with_learned_tau`) where the residuals drift."""
     x0, init_status, sigma, vce = _mle_start(st, o)
     robust, tol, itmax = o.get("robust", _mle.DEFAULT_ROBUST), o["tol_m"], o["max_iterations"]
     bias_deg, size_unknown = _mle.bias_prior_deg(sigma, o)  # configured correlation times win, even vanishing ones
@@ -275,12 +261,12 @@ def _mle_dispatch(st: Stacked, o: dict):
             return (nan, np.zeros(1, dtype=np.int64), status, np.full(1, np.nan), np.full((1, 3, 3), np.nan),
                     {"variance_factor_pixel": np.ones(1), "variance_factor_range": np.ones(1),
                      "sigma0_sq": np.full(1, np.nan), "vce_rounds": np.zeros(1, dtype=np.int64)})
-        model = _correlated.problem_model(st, x0[0], sigma)
-        if model.correlated and o.get("terrain") is not None:
+        models = _correlated.problem_models(st, x0[0], [sigma])
+        if models.correlated[0] and o.get("terrain") is not None:
             raise ValueError("mle: the terrain option is not available with time-correlated errors (sigma "
                              "attitude_tau_s / position_tau_s)")
-        if model.correlated:
-            return _correlated.gls(st, x0[0], model, robust, vce, tol, itmax)
+        if models.correlated[0]:
+            return _correlated.gls([st], x0[:1], models, robust, vce, tol, itmax)
         sigma = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
     res = _mle.mle(st, x0, sigma, robust, vce, tol, itmax, init_status, bias_deg, size_unknown, o.get("terrain"))
     res = _bias_refit(st, o, x0, init_status, sigma, vce, res, bias_deg, size_unknown)
@@ -289,8 +275,8 @@ def _mle_dispatch(st: Stacked, o: dict):
 
 def _bias_refit(st: Stacked, o: dict, x0: np.ndarray, init_status, sigma, vce: bool, res: tuple, bias_deg,
                 size_unknown: bool) -> tuple:
-    """The independent-error fit res (`mle.mle` from x0 (B,3) with the bias prior bias_deg, `mle.bias_prior_deg`)
-    refitted without the bias where the bias came out far beyond the stated attitude sigma."""
+    """The independent-error fit res (`mle.mle` from x0 with the bias prior bias_deg) refitted without the bias
+    where the bias came out far beyond the stated attitude sigma."""
     robust, tol, itmax = o.get("robust", _mle.DEFAULT_ROBUST), o["tol_m"], o["max_iterations"]
     if bias_deg and size_unknown:
         # the stated attitude sigma is the largest bias: a bias estimated far beyond it (as the learned drift
@@ -313,11 +299,9 @@ def _bias_refit(st: Stacked, o: dict, x0: np.ndarray, init_status, sigma, vce: b
 
 
 def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_unknown: bool) -> tuple:
-    """The mle answers res (B problems) under the independent-error sigma, each replaced by the learned drift
-    model's (`_learned_answer`) where its residuals drift and the sigma gives no correlation time (the configured
-    sigma's: size_unknown of `mle.bias_prior_deg`); the problems with the same rows in use are fitted side by side
-    (`learned_tau.learn_tau_many`). The learned drift model (generalized least squares) takes no terrain prior:
-    with one, the first answers stand."""
+    """res with each problem's answer replaced by the learned drift model's (`learned_tau.learn_tau`,
+    `_learned_answer`) where its residuals drift, it has real timestamps and the configured sigma gives no
+    correlation time; not with a terrain prior (the drift model takes none)."""
     if st.t_ns is None or not size_unknown or o.get("terrain") is not None:
         return res
     ex, t = res[5], st.t_ns
@@ -327,42 +311,30 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
     if not need.size:
         return res
     sts = [_learned.without_rejected(st.take(np.array([b])), ex["rejected"][b]) for b in need]
-    learned = _learned.learn_tau_many(sts, res[0][need], sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce,
-                                      o["tol_m"], o["max_iterations"])
-    replaced = []
+    learned = _learned.learn_tau(sts, res[0][need], sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"],
+                                 o["max_iterations"])
     for b, got in zip(need, learned, strict=True):
-        row = _res_row(res, b)
+        row = _row(res, b)
         answer = _learned_answer(row, got, sigma)
         if answer is not row:  # the drift model's answer was kept
-            replaced.append((b, answer))
-    for b, answer in replaced:
-        res = _replace_rows(res, answer, np.array([b]))
+            res = _replace_rows(res, answer, np.array([b]))
     return res
 
 
 def _replace_rows(res: tuple, sub: tuple, idx: np.ndarray) -> tuple:
-    """The mle answers res (X, it, status, cond, cov, extras) with problems idx replaced by sub's. An extra only
-    one of them has is absent for the other's problems: NaN (False for a flag, None for an object)."""
-    out = []
-    for a, b in zip(res[:5], sub[:5], strict=True):
-        a = a.copy()
+    """The mle answers res (X, it, status, cond, cov, extras) with problems idx replaced by sub's; an extra only
+    one of them has is absent (`_absent`) for the other's problems."""
+    out = [a.copy() for a in res[:5]]
+    for a, b in zip(out, sub[:5], strict=True):
         a[idx] = b
-        out.append(a)
     ex = {}
-    B = res[0].shape[0]
-    for k in [*res[5], *(k for k in sub[5] if k not in res[5])]:
+    for k in {**res[5], **sub[5]}:  # res's keys, then sub's others
         old, new = res[5].get(k), sub[5].get(k)
-        if old is not None and new is not None:
-            v = np.array(old, dtype=np.result_type(old, new), copy=True)
-            v[idx] = new
-        else:
-            like = old if old is not None else new
-            dtype, fill = _absent(like.dtype)
-            v = np.full((B, *like.shape[1:]), fill, dtype=dtype)
-            if old is not None:
-                v[...] = old
-            v[idx] = new if new is not None else fill
-        ex[k] = v
+        like = old if old is not None else new
+        dtype, fill = _absent(like.dtype) if old is None or new is None else (np.result_type(old, new), None)
+        ex[k] = np.empty((res[0].shape[0], *like.shape[1:]), dtype=dtype)
+        ex[k][...] = old if old is not None else fill
+        ex[k][idx] = new if new is not None else fill
     return (*out, ex)
 
 
@@ -372,15 +344,12 @@ def _absent(dtype: np.dtype) -> tuple:
 
 
 def _mle_multistart(st: Stacked, o: dict, first: tuple | None = None, answers: dict | None = None):
-    """`_mle_dispatch` on one problem, never an answer that explains the pixels away (`starts`): the fit from the
-    default start is kept when it does not; otherwise mle is run again from every other estimator's answer and
-    the fit of the lowest common robust cost among those that do not explain the pixels away is kept; when
-    every fit does, the target is not determined (DEGENERATE, with the reason in `not_determined`). The other
-    estimators' answers outside the kept fit's ellipsoid (chi-square 99.9 %) are listed (`disagree`).
-
-    first: the default start's fit (`_mle_dispatch`'s tuple) where the caller has it; answers: {method: its
-    BatchEstimate (B = 1)} of start estimators the caller has solved with the mle's tol_m and max_iterations and
-    no other option (`solve_problems`), not solved again."""
+    """`_mle_dispatch` on one problem, never an answer that explains the pixels away (`starts`; docs/solvers.md):
+    if the default start's fit does, mle runs again from every other estimator's answer and keeps the fit of the
+    lowest common robust cost among those that do not; when all do, DEGENERATE with the reason in
+    `not_determined`. Other estimators' answers outside the kept fit's 99.9 % ellipsoid are listed (`disagree`).
+    first: the default start's fit where the caller has it; answers: {method: BatchEstimate (B = 1)} of start
+    estimators solved with the mle's tol_m and max_iterations and no other option, not solved again."""
     res = _mle_dispatch(st, o) if first is None else first
     npix = int(st.has_pix[0].sum())
     cands = {}
@@ -389,7 +358,7 @@ def _mle_multistart(st: Stacked, o: dict, first: tuple | None = None, answers: d
         be = (answers or {}).get(name)
         if be is None:
             if name in ("vision", "fusion", "range") and "vision_from_dlt" not in plain:  # each begins from it
-                plain["vision_from_dlt"] = _vision_from_dlt(st, plain)
+                plain["vision_from_dlt"] = _vision(st, plain)
             try:
                 be = _solve_stacked(name, st, plain)
             except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - the kernels report failures as statuses
@@ -440,13 +409,9 @@ def _mle_multistart(st: Stacked, o: dict, first: tuple | None = None, answers: d
     return X, it, status, cond, cov, ex
 
 
-#: timestamps spanning less than this are frame numbers (0..n-1 when unknown), not times: no drift model is learned
-REAL_TIMES_NS = 1_000_000
-
-
 def _learned_answer(res: tuple, got, sigma) -> tuple:
-    """One problem's answer from its first answer res (B = 1) and `learned_tau.learn_tau_many`'s got for it: the
-    drift model's where it is kept, else res itself."""
+    """One problem's answer from its first answer res (B = 1) and `learned_tau.learn_tau`'s got for it: the drift
+    model's where it is kept, else res itself."""
     X, ex = res[0], res[5]
     if got is None:
         return res
@@ -480,8 +445,7 @@ def _behind_camera(st: Stacked, X: np.ndarray) -> np.ndarray:
 
 
 def solve_batch(method: str, batch: ObservationBatch, **options) -> BatchEstimate:
-    """Solve B problems with one estimator. Problems it cannot solve get status DEGENERATE (geometry does not
-    determine the target, too few observations, target behind a camera) or DIVERGED, and NaN positions."""
+    """Solve B problems with one estimator; problems it cannot solve get status DEGENERATE or DIVERGED and NaN."""
     o = _check_options(method, options)
     if o.get("terrain") is not None:
         raise ValueError("solve_batch: the terrain option takes one problem's ENU frame; use solve() per problem")
@@ -490,16 +454,13 @@ def solve_batch(method: str, batch: ObservationBatch, **options) -> BatchEstimat
     x0 = _initial(o, batch.size)  # validated once; chunks get their rows
     # degenerate problems produce inf/NaN on the way to their status: expected, not worth a warning
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        st = Stacked.from_batch(batch)
         if batch.size <= CHUNK:
-            return _solve_stacked(method, Stacked.from_batch(batch), o)
+            return _solve_stacked(method, st, o)
         parts = []
         for lo in range(0, batch.size, CHUNK):
-            sl = slice(lo, lo + CHUNK)
-            sub = ObservationBatch(P=batch.P[sl], pixel=batch.pixel[sl], platform_m=batch.platform_m[sl],
-                                   range_m=batch.range_m[sl], sigma=batch.sigma,
-                                   truth_m=None if batch.truth_m is None else batch.truth_m[sl])
-            oc = o if x0 is None else {**o, "initial_m": x0[sl]}
-            parts.append(_solve_stacked(method, Stacked.from_batch(sub), oc))
+            idx = np.arange(lo, min(lo + CHUNK, batch.size))
+            parts.append(_solve_stacked(method, st.take(idx), o if x0 is None else {**o, "initial_m": x0[idx]}))
         return _concatenate(parts)
 
 
@@ -510,12 +471,10 @@ CHUNK = 2048
 
 def _concatenate(parts: list[BatchEstimate]) -> BatchEstimate:
     first = parts[0]
-    cat = np.concatenate
-    return BatchEstimate(method=first.method, position_m=cat([p.position_m for p in parts]),
-                         iterations=cat([p.iterations for p in parts]), status=cat([p.status for p in parts]),
-                         condition_number=cat([p.condition_number for p in parts]),
-                         covariance_m2=None if first.covariance_m2 is None else cat([p.covariance_m2 for p in parts]),
-                         extras={k: cat([p.extras[k] for p in parts]) for k in first.extras})
+    fields = ("position_m", "iterations", "status", "condition_number", "covariance_m2")
+    return BatchEstimate(first.method, *(None if getattr(first, f) is None else
+                                         np.concatenate([getattr(p, f) for p in parts]) for f in fields),
+                         {k: np.concatenate([p.extras[k] for p in parts]) for k in first.extras})
 
 
 # ---- single problem: clear errors for unusable input --------------------------------------------------------
@@ -527,10 +486,7 @@ def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
     nboth = int(np.count_nonzero(has_pix & has_rng))
     has_init = o.get("initial_m") is not None
     if method != "range" or not has_init:  # range starts from vision, which projects through P
-        # |det M| against |M|^3 (the rows' lengths, from the Gram matrix M M^T)
-        g = st._gram()[0]
-        scale = np.sqrt(g[:, 0, 0] * g[:, 1, 1] * g[:, 2, 2])
-        bad = np.flatnonzero(~(np.abs(st.det_M()[0]) > 1e-12 * scale))
+        bad = np.flatnonzero(~linear.finite_cameras(st)[0])
         if bad.size:
             raise ObservationError(f"frame(s) {bad.tolist()}: the left 3x3 block of P is singular, not a finite "
                                    "camera")
@@ -541,7 +497,7 @@ def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
     if method == "mle":
         sigma = o.get("sigma") or obs.sigma
         span_ns = int(obs.t_ns.max() - obs.t_ns.min()) if sigma.correlated and obs.n > 1 else None
-        if span_ns is not None and span_ns < 1_000_000:
+        if span_ns is not None and span_ns < REAL_TIMES_NS:
             raise ObservationError(f"mle: the sigma gives correlation times (attitude_tau_s, position_tau_s) but "
                                    f"the frames' t_ns span only {span_ns} ns: they need real timestamps (without "
                                    "t_ns the frames are numbered 0, 1, 2, ... ns)")
@@ -584,21 +540,15 @@ def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
 
 
 def solve(method: str, obs: Observations, **options) -> Estimate:
-    """Solve one problem with one estimator (see the module docstring for methods and options).
-
-    Raises ObservationError for unusable input (too few pixels or ranges, a singular P), GeometryError when
-    the geometry does not determine the target (coincident or collinear positions, rank-deficient design,
-    target behind a camera), SolverError when the iteration diverged. An estimate that reached max_iterations
-    is returned with status MAX_ITERATIONS (converged False).
-    """
-    o = _check_options(method, options)
+    """Solve one problem with one estimator (options: docs/solvers.md). Raises ObservationError for unusable input,
+    GeometryError where the geometry does not determine the target, SolverError where the iteration diverged; an
+    estimate that reached max_iterations has status MAX_ITERATIONS (converged False)."""
     if not isinstance(obs, Observations):
         raise TypeError(f"solve wants an Observations, got {type(obs).__name__}")
-    st = Stacked.from_observations(obs)
-    _check_inputs(method, obs, st, o)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        be = _solve_stacked(method, st, o)
-    return _estimate(method, obs, st, o, be)
+    got = solve_problems([obs], [method], {method: options})[0][method]
+    if isinstance(got, Exception):
+        raise got
+    return got
 
 
 def _estimate(method: str, obs: Observations, st: Stacked, o: dict, be: BatchEstimate) -> Estimate:
@@ -646,8 +596,7 @@ def _estimate(method: str, obs: Observations, st: Stacked, o: dict, be: BatchEst
         if "starts" in info:
             extras["starts"] = info["starts"]
         if "rejected" in info:  # the batched kernel's fit checks, bias, rejected rows and learned error model
-            extras.update(mle_outputs.problem_extras({k: v[None] for k, v in info.items() if k != "starts"},
-                                                     obs.t_ns))
+            extras.update(mle_outputs.problem_extras(info, obs.t_ns))
     cov = None if be.covariance_m2 is None else be.covariance_m2[0]
     return Estimate(method=method, position_m=X, iterations=it, status=status,
                     residuals=_residuals(method, st, X), condition_number=cond, covariance_m2=cov, extras=extras)
@@ -659,15 +608,11 @@ SOLVE_ERRORS = (RidgelocError, ValueError, np.linalg.LinAlgError)
 
 def solve_problems(problems: Sequence[Observations], methods: Sequence[str], options: dict | None = None
                    ) -> list[dict]:
-    """Every method of `methods` on each of several problems (a flight's targets), options {method: options}:
-    per problem {method: its `Estimate`, or the error (`SOLVE_ERRORS`) that `solve(method, obs, **options)`
-    raises}, in the order of `methods`. The same answers as `solve` one problem at a time, for less: the checks
-    and arrays of a problem are built once for every method; each kernel runs once for the problems of one
-    number of frames, sigma and truth (`_groups`: problems are independent, so a problem's answer does not depend
-    on the others); `mle`'s first fit too (but with time-correlated errors or a terrain prior, one problem at a
-    time), its learned drift model's fits side by side for the problems with the same rows in use
-    (`learned_tau.learn_tau_many`), its multistart per problem, reusing the start estimators' answers solved here
-    with the mle's tol_m and max_iterations."""
+    """Every method of `methods` on each of several problems (a flight's targets), options {method: options}: per
+    problem {method: its `Estimate`, or the error (`SOLVE_ERRORS`) `solve` raises}, in the order of `methods`.
+    The answers of `solve` one problem at a time, for less: each problem's checks and arrays are built once; each
+    kernel runs once per group of problems that stack (`_groups`), mle's first fit too (one problem at a time with
+    correlated errors, a terrain prior or initial_m); the multistart reuses the start estimators' answers."""
     obs_list = list(problems)
     for obs in obs_list:
         if not isinstance(obs, Observations):
@@ -695,7 +640,7 @@ def solve_problems(problems: Sequence[Observations], methods: Sequence[str], opt
         for m, (o, todo) in ok.items():
             if m == "mle":
                 continue
-            answers[m] = _solve_grouped(m, sts, todo, out, lambda st, m=m, o=o: _solve_stacked(m, st, o), _row)
+            answers[m] = _solve_grouped(m, sts, todo, out, lambda st, m=m, o=o: _solve_stacked(m, st, o))
         if "mle" in ok:
             o, todo = ok["mle"]
             plain = {"tol_m": o["tol_m"], "max_iterations": o["max_iterations"]}
@@ -724,27 +669,29 @@ def _groups(sts: list[Stacked], todo: list[int]) -> list[list[int]]:
     return list(groups.values())
 
 
-def _row(be: BatchEstimate, b: int) -> BatchEstimate:
-    """Problem b of a BatchEstimate, as a BatchEstimate of one (copies)."""
-    sl = slice(b, b + 1)
-    return BatchEstimate(method=be.method, position_m=be.position_m[sl].copy(), iterations=be.iterations[sl].copy(),
-                         status=be.status[sl].copy(), condition_number=be.condition_number[sl].copy(),
-                         covariance_m2=None if be.covariance_m2 is None else be.covariance_m2[sl].copy(),
-                         extras={k: v[sl].copy() for k, v in be.extras.items()})
+def _row(res, b: int):
+    """Problem b of a BatchEstimate or of an mle answer (X, it, status, cond, cov, extras: the fields of a
+    BatchEstimate in their order), as one of one (copies)."""
+    be = isinstance(res, BatchEstimate)
+    parts = (res.position_m, res.iterations, res.status, res.condition_number, res.covariance_m2,
+             res.extras) if be else res
+    row = (*(None if a is None else a[b:b + 1].copy() for a in parts[:5]),
+           {k: v[b:b + 1].copy() for k, v in parts[5].items()})
+    return BatchEstimate(res.method, *row) if be else row
 
 
-def _solve_grouped(name: str, sts: list[Stacked], todo: list[int], out: list[dict], fn, row, batched=None
-                   ) -> dict:
-    """{problem: fn's answer for it (B = 1)} for the problems of todo: fn (a Stacked -> an answer of its problems)
-    once per group (`_groups`) where batched(the group's first Stacked) allows (default: always), row(answer, b)
-    taking problem b out; one problem at a time otherwise, or where a group's call raises (the error then goes to
-    its problem in out under `name`)."""
+def _solve_grouped(name: str, sts: list[Stacked], todo: list[int], out: list[dict], fn, batched=None) -> dict:
+    """{problem: fn's answer for it (B = 1)} for the problems of todo: fn (a Stacked -> an answer of its problems,
+    a BatchEstimate or an mle tuple) once per group (`_groups`) where batched(the group's first Stacked) allows
+    (default: always); one problem at a time otherwise, or where a group's call raises (the error then goes to
+    its problem in out under `name`): the kernels report a problem's failure as its status, but a problem can
+    still raise (a singular matrix LAPACK refuses), and then it alone gets the error."""
     got = {}
     for g in _groups(sts, todo):
         if len(g) > 1 and (batched is None or batched(sts[g[0]])):
             try:
                 res = fn(_correlated.stack_problems([sts[i] for i in g]))
-                got.update({i: row(res, b) for b, i in enumerate(g)})
+                got.update({i: _row(res, b) for b, i in enumerate(g)})
                 continue
             except SOLVE_ERRORS:
                 pass
@@ -757,23 +704,15 @@ def _solve_grouped(name: str, sts: list[Stacked], todo: list[int], out: list[dic
 
 
 def _mle_first_fits(sts: list[Stacked], todo: list[int], o: dict, out: list[dict]) -> dict[int, tuple]:
-    """{problem: its mle fit from the default start (`_mle_dispatch`'s tuple, B = 1)}: one `_mle_dispatch` per
-    group, but one problem at a time with time-correlated errors, a terrain prior or initial_m."""
+    """{problem: its mle fit from the default start (`_mle_dispatch`'s tuple, B = 1)}, by groups where they stack."""
     def batched(st):
         return not (_mle_sigma(st, o)[0].correlated or o.get("terrain") is not None or o.get("initial_m") is not None)
 
-    return _solve_grouped("mle", sts, todo, out, lambda st: _mle_dispatch(st, o), _res_row, batched)
-
-
-def _res_row(res: tuple, b: int) -> tuple:
-    """Problem b of an mle answer (X, it, status, cond, cov, extras) as an answer of one (copies)."""
-    sl = slice(b, b + 1)
-    return (*(a[sl].copy() for a in res[:5]), {k: v[sl].copy() for k, v in res[5].items()})
+    return _solve_grouped("mle", sts, todo, out, lambda st: _mle_dispatch(st, o), batched)
 
 
 def _residuals(method: str, st: Stacked, X: np.ndarray) -> np.ndarray:
-    """Observed minus predicted of the observations the method used: pixels (px, u v interleaved), then
-    ranges (m)."""
+    """Observed minus predicted of the observations the method used: pixels (px, u v interleaved), then ranges (m)."""
     if not np.isfinite(X).all():
         return np.zeros(0)
     parts = []
@@ -787,8 +726,7 @@ def _residuals(method: str, st: Stacked, X: np.ndarray) -> np.ndarray:
 
 
 def unsolved_status(exc: Exception) -> str:
-    """The status of an estimator that did not solve, from its error: degenerate (the geometry does not
-    determine the target), insufficient_data (too few or unusable observations), diverged."""
+    """The status of an estimator that did not solve, from its error: degenerate, insufficient_data or diverged."""
     if isinstance(exc, GeometryError):
         return "degenerate"
     if isinstance(exc, ObservationError):

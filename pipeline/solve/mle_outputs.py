@@ -3,52 +3,35 @@ in words, the boresight bias and the rejected observations (frame, time, which r
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from pipeline.solve import fit_checks
+from pipeline.solve.estimate import finite_or_none as _f
+from pipeline.solve.learned_tau import TAU_GRID_S
+from pipeline.solve.observations import REAL_TIMES_NS
 
 _ROWS = ("u", "v", "range")
 
 
-def _f(x) -> float | None:
-    x = float(x)
-    return x if math.isfinite(x) else None
+def rejected_observations(ex: dict, t_ns: np.ndarray) -> list[dict]:
+    """[{frame, t_ns, residual ("u" | "v" | "range"), value (px or m), sigmas}] of the rows at zero weight."""
+    return [{"frame": int(i), "t_ns": int(t_ns[i]), "residual": _ROWS[k], "value": float(ex["residuals"][i, k]),
+             "sigmas": float(ex["residual_sigmas"][i, k])} for i, k in zip(*np.nonzero(ex["rejected"]), strict=True)]
 
 
-def rejected_observations(ex: dict, b: int, t_ns: np.ndarray) -> list[dict]:
-    """[{frame, t_ns, residual ("u" | "v" | "range"), value (px or m), sigmas}] of problem b's rows that the
-    redescending loss gave zero weight."""
-    rej = ex["rejected"][b]
-    out = []
-    for i, k in zip(*np.nonzero(rej), strict=True):
-        out.append({"frame": int(i), "t_ns": int(t_ns[i]), "residual": _ROWS[k],
-                    "value": float(ex["residuals"][b, i, k]), "sigmas": float(ex["residual_sigmas"][b, i, k])})
-    return out
-
-
-def _block_drift(ex: dict, b: int, group: str) -> float | None:
-    """The batch-means ratio of problem b's group ("pixel", "range") where its block test failed, else None."""
-    flag = ex.get(f"block_drift_{group}")
-    return float(ex[f"batch_means_{group}"][b]) if flag is not None and flag[b] else None
-
-
-def fit_summary(ex: dict, b: int) -> dict:
-    """The fit checks of problem b: chi-square, its degrees of freedom and p-value, the lag-1 autocorrelations,
-    whether the model fits, the covariance inflation and, when it does not fit, a message."""
-    msg = fit_checks.describe(float(ex["chi2"][b]), float(ex["chi2_dof"][b]), float(ex["chi2_p"][b]),
-                              float(ex["autocorrelation_pixel"][b]), float(ex["autocorrelation_range"][b]),
-                              bool(ex["drift_pixel"][b]), bool(ex["drift_range"][b]),
-                              float(ex["covariance_inflation"][b]),
-                              float(np.max(ex["robust_spread"][b])) if "robust_spread" in ex else 1.0,
-                              *(_block_drift(ex, b, g) for g in ("pixel", "range")))
-    return {"consistent": bool(ex["consistent"][b]), "chi2": _f(ex["chi2"][b]), "dof": _f(ex["chi2_dof"][b]),
-            "p_value": _f(ex["chi2_p"][b]), "autocorrelation_pixel": _f(ex["autocorrelation_pixel"][b]),
-            "autocorrelation_range": _f(ex["autocorrelation_range"][b]),
-            "batch_means_pixel": _f(ex["batch_means_pixel"][b]) if "batch_means_pixel" in ex else None,
-            "batch_means_range": _f(ex["batch_means_range"][b]) if "batch_means_range" in ex else None,
-            "covariance_inflation": _f(ex["covariance_inflation"][b]), "message": msg}
+def fit_summary(ex: dict) -> dict:
+    """The fit checks (`fit_checks`) as JSON values, with the message when the model does not fit."""
+    block = [float(ex[f"batch_means_{g}"]) if ex.get(f"block_drift_{g}", False) else None for g in ("pixel", "range")]
+    msg = fit_checks.describe(float(ex["chi2"]), float(ex["chi2_dof"]), float(ex["chi2_p"]),
+                              float(ex["autocorrelation_pixel"]), float(ex["autocorrelation_range"]),
+                              bool(ex["drift_pixel"]), bool(ex["drift_range"]), float(ex["covariance_inflation"]),
+                              float(np.max(ex["robust_spread"])) if "robust_spread" in ex else 1.0, *block)
+    return {"consistent": bool(ex["consistent"]), "chi2": _f(ex["chi2"]), "dof": _f(ex["chi2_dof"]),
+            "p_value": _f(ex["chi2_p"]), "autocorrelation_pixel": _f(ex["autocorrelation_pixel"]),
+            "autocorrelation_range": _f(ex["autocorrelation_range"]),
+            "batch_means_pixel": _f(ex["batch_means_pixel"]) if "batch_means_pixel" in ex else None,
+            "batch_means_range": _f(ex["batch_means_range"]) if "batch_means_range" in ex else None,
+            "covariance_inflation": _f(ex["covariance_inflation"]), "message": msg}
 
 
 #: a bias angle counts as determined by the flight when its posterior sigma is below this fraction of the
@@ -56,20 +39,20 @@ def fit_summary(ex: dict, b: int) -> dict:
 DETERMINED_BELOW = 0.7
 
 
-def boresight_bias(ex: dict, b: int) -> dict | None:
-    """The estimated constant boresight bias of problem b (deg, about the camera's vertical axis: u, and its
-    horizontal axis: v), its posterior sigma, the prior's sigma, whether the flight determined it, its
-    correlation with the target (2, 3) and, when its size was learned, the size the flight supports."""
-    if "bias_deg" not in ex or not np.isfinite(ex["bias_deg"][b]).all():  # no bias state (NaN: refitted without)
+def boresight_bias(ex: dict) -> dict | None:
+    """The estimated constant boresight bias (deg, about the camera's vertical axis: u, and its
+    horizontal axis: v), its posterior and prior sigmas, whether the flight determined it, its correlation with the
+    target (2, 3) and, where its size was learned, that size; None without a bias state."""
+    if "bias_deg" not in ex or not np.isfinite(ex["bias_deg"]).all():  # no bias state (NaN: refitted without)
         return None
-    bias, sd, prior = ex["bias_deg"][b], ex["bias_sigma_deg"][b], ex["bias_prior_deg"][b]
+    bias, sd, prior = ex["bias_deg"], ex["bias_sigma_deg"], ex["bias_prior_deg"]
     out = {"u_deg": float(bias[0]), "v_deg": float(bias[1]), "u_sigma_deg": float(sd[0]),
            "v_sigma_deg": float(sd[1]), "u_prior_deg": float(prior[0]), "v_prior_deg": float(prior[1]),
            "u_determined": bool(sd[0] < DETERMINED_BELOW * prior[0]),
            "v_determined": bool(sd[1] < DETERMINED_BELOW * prior[1]),
-           "correlation_with_target": [[_f(c) for c in row] for row in ex["bias_target_correlation"][b]]}
+           "correlation_with_target": [[_f(c) for c in row] for row in ex["bias_target_correlation"]]}
     if "bias_size_deg" in ex:
-        out["size_deg"] = float(ex["bias_size_deg"][b])
+        out["size_deg"] = float(ex["bias_size_deg"])
     return out
 
 
@@ -92,7 +75,7 @@ def _where(r: dict, t_ns: np.ndarray | None, video_frames) -> str:
     observation when the frames carry real timestamps (else the raw t_ns)."""
     i = r["frame"]
     where = [f"video frame {int(video_frames[i])}"] if video_frames is not None else []
-    if t_ns is not None and t_ns.size > 1 and int(t_ns.max() - t_ns.min()) >= 1_000_000:
+    if t_ns is not None and t_ns.size > 1 and int(t_ns.max() - t_ns.min()) >= REAL_TIMES_NS:
         where.append(f"t = {(r['t_ns'] - int(t_ns.min())) / 1e9:.2f} s after the first observation")
     else:
         where.append(f"t_ns {r['t_ns']}")
@@ -100,9 +83,8 @@ def _where(r: dict, t_ns: np.ndarray | None, video_frames) -> str:
 
 
 def notes(extras: dict, t_ns: np.ndarray | None = None, video_frames=None) -> list[str]:
-    """The mle's fit message, boresight bias and rejected observations in words, from `Estimate.extras` (for
-    the console and the report's notes). t_ns (n,): the observations' times, to say when a rejected one was
-    taken; video_frames (n,): their video frame numbers (a run knows them, an observations file does not)."""
+    """The mle's fit message, boresight bias and rejected observations in words from `Estimate.extras`, for the
+    console and the report; t_ns (n,) and video_frames (n,) (where known) say when a rejected one was taken."""
     if t_ns is not None:
         t_ns = np.asarray(t_ns, dtype=np.int64)
     out = []
@@ -140,16 +122,16 @@ def notes(extras: dict, t_ns: np.ndarray | None = None, video_frames=None) -> li
 
 
 def problem_extras(ex: dict, t_ns: np.ndarray) -> dict:
-    """The JSON-ready extras of a batch of one: fit, rejected, boresight_bias and error_model (when learned)."""
-    out = {"fit": fit_summary(ex, 0), "rejected": rejected_observations(ex, 0, t_ns)}
-    bias = boresight_bias(ex, 0)
+    """The JSON-ready extras of one problem's kernel extras ex: fit, rejected, boresight_bias and error_model (when
+    learned)."""
+    out = {"fit": fit_summary(ex), "rejected": rejected_observations(ex, t_ns)}
+    bias = boresight_bias(ex)
     if bias is not None:
         out["boresight_bias"] = bias
-    if "error_model_tau_s" in ex and np.isfinite(ex["error_model_tau_s"][0]):  # NaN: a problem without one
-        from pipeline.solve.learned_tau import TAU_GRID_S
+    if "error_model_tau_s" in ex and np.isfinite(ex["error_model_tau_s"]):  # NaN: a problem without one
         out["error_model"] = {
-            "attitude_tau_s": float(ex["error_model_tau_s"][0]), "position_tau_s": float(ex["error_model_tau_s"][0]),
-            "attitude_deg": float(ex["error_model_attitude_deg"][0]), "chosen_by": "likelihood",
-            "log_likelihood": {f"{t:g}": _f(v) for t, v in zip(TAU_GRID_S, ex["error_model_log_likelihoods"][0],
+            "attitude_tau_s": float(ex["error_model_tau_s"]), "position_tau_s": float(ex["error_model_tau_s"]),
+            "attitude_deg": float(ex["error_model_attitude_deg"]), "chosen_by": "likelihood",
+            "log_likelihood": {f"{t:g}": _f(v) for t, v in zip(TAU_GRID_S, ex["error_model_log_likelihoods"],
                                                                  strict=True)}}
     return out

@@ -1,13 +1,7 @@
-"""`mle` on one problem never worse than its own starting points: every other estimator's answer (dlt, los,
-vision, fusion, range where it converges) is a candidate start; a fit that explains the pixels away is not an
-answer.
-
-The fits from different starts (and with different learned error models) minimise different objectives, so
-they are compared on one yardstick that does not depend on the model a fit chose: the Huber cost of all pixel
-and range residuals at a common scale per group (the stated white sigma, or larger the robust spread 1.4826
-median |r - median r| at the candidates' consensus, their component-wise median), the pixel residuals taken
-about their per-axis median (a constant boresight offset, which every fit may explain by a bias, costs nothing).
-"""
+"""`mle` on one problem never worse than its own starting points: every other estimator's answer is a candidate
+start, and a fit that explains the pixels away is not an answer (docs/solvers.md, "Never an answer that explains
+the pixels away"). The fits are compared on one yardstick that does not depend on the model a fit chose
+(`yardstick`)."""
 
 from __future__ import annotations
 
@@ -62,7 +56,10 @@ def _residuals(st: Stacked, X: np.ndarray):
 
 
 def yardstick(st: Stacked, sigma: Sigma, points: np.ndarray, consensus: np.ndarray) -> np.ndarray:
-    """(len(points),) the common robust cost (module docstring) of one problem (B = 1) at points (k,3)."""
+    """(len(points),) the common robust cost of one problem (B = 1) at points (k,3): the Huber cost of all pixel and
+    range residuals at one scale per group (the stated white sigma, or larger the robust spread 1.4826 median
+    |r - median r| at the candidates' consensus), the pixel residuals about their per-axis median (a constant
+    boresight offset, which every fit may explain by a bias, costs nothing)."""
     pix0, rng0 = _residuals(st, consensus)
     scales = []
     for r, stated in ((pix0.ravel(), sigma.pixel_px), (rng0, sigma.range_m)):

@@ -19,12 +19,9 @@ _CEP_TABLES: dict[float, np.ndarray] = {}
 
 
 def _prob_within(rho: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """P(|e| <= rho) for e ~ N(0, diag(1, q^2)), elementwise over rho, q (q <= 1).
-
-    Conditioning on the major component z1 = rho sin t: P = int_{-pi/2}^{pi/2} phi(rho sin t)
-    erf(rho cos t / (sqrt(2) q)) rho cos t dt, by 64-point Gauss-Legendre (smooth integrand; the steep erf at
-    the ends is damped by cos t).
-    """
+    """P(|e| <= rho) for e ~ N(0, diag(1, q^2)), elementwise over rho, q (q <= 1): conditioned on the major component
+    z1 = rho sin t, int_{-pi/2}^{pi/2} phi(rho sin t) erf(rho cos t / (sqrt(2) q)) rho cos t dt by 64-point
+    Gauss-Legendre (smooth integrand; the steep erf at the ends is damped by cos t)."""
     t, w = _GL_T, _GL_W
     rho = rho[:, None]
     qq = np.maximum(q, 1e-12)[:, None]
@@ -57,13 +54,10 @@ def _principal_sd(cov_xy: np.ndarray):
 
 
 def cep_m(cov_xy: np.ndarray, p: float) -> np.ndarray:
-    """(...) radius of the circle around the estimate that holds probability p of the horizontal error, for
-    (..., 2, 2) covariances of a zero-mean 2D Gaussian (0 for a zero covariance, NaN for a non-finite one).
-
-    With principal standard deviations s1 >= s2 the radius is s1 rho_p(s2/s1); rho_p is tabulated once per p
-    on 257 ratios (exact integral `_prob_within`, bisection) and interpolated linearly (relative error < 1e-5
-    against a 1025-point table).
-    """
+    """(...) radius of the circle around the estimate holding probability p of the horizontal error, of (..., 2, 2)
+    covariances of a zero-mean 2D Gaussian (0 for a zero covariance, NaN for a non-finite one): s1 rho_p(s2/s1)
+    with principal standard deviations s1 >= s2, rho_p tabulated once per p on 257 ratios and interpolated
+    linearly (relative error < 1e-5 against a 1025-point table)."""
     s1, s2 = _principal_sd(np.asarray(cov_xy, dtype=np.float64))
     ok = np.isfinite(s1) & (s1 > 0)
     q = np.where(ok, s2 / np.where(ok, s1, 1.0), 1.0)

@@ -106,9 +106,9 @@ def _read_run_config(path: Path) -> None:
 
 
 def _read_observations(path: Path) -> None:
-    from pipeline.solve.observations import Observations
+    from pipeline.observation_file import load
 
-    Observations.load(path)
+    load(path)
 
 
 # ---- seeds -------------------------------------------------------------------------------------------------

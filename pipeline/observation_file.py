@@ -128,8 +128,9 @@ def from_dict(doc: dict) -> Observations:
     if truth is not None:
         truth = _numbers(truth, 3, "truth_m", "[x, y, z] or null")
     return Observations(P=np.array(P, dtype=np.float64), pixel=np.array(pixel, dtype=np.float64),
-               platform_m=np.array(platform, dtype=np.float64), range_m=np.array(rng, dtype=np.float64),
-               t_ns=np.array(t, dtype=np.int64), sigma=Sigma.from_dict(doc.get("sigma")), truth_m=truth)
+                        platform_m=np.array(platform, dtype=np.float64), range_m=np.array(rng, dtype=np.float64),
+                        t_ns=np.array(t, dtype=np.int64), sigma=Sigma.from_dict(doc.get("sigma")), truth_m=truth)
+
 
 def load(path: str | PathLike) -> Observations:
     """Reads and validates an observations file. Every problem is one ObservationError naming the file:
@@ -172,7 +173,9 @@ def load(path: str | PathLike) -> Observations:
     except ObservationError as exc:
         raise ObservationError(str(exc), path) from None
 
+
 def to_dict(obs: Observations) -> dict:
+    """The file's JSON document for obs (absent pixels and ranges as null; sigma only where set)."""
     rows = []
     for i in range(obs.n):
         rows.append({
@@ -190,5 +193,7 @@ def to_dict(obs: Observations) -> dict:
         doc["truth_m"] = obs.truth_m.tolist()
     return doc
 
+
 def save(obs: Observations, path: str | PathLike) -> None:
+    """Writes obs as an observations file (to_dict, indented)."""
     Path(path).write_text(json.dumps(to_dict(obs), indent=1))

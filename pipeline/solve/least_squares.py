@@ -185,9 +185,12 @@ def _normalized_step(k_fixed: float | None, hkb: str | None):
             k = np.zeros(N.shape[0]) if k_fixed is None else np.full(N.shape[0], float(k_fixed))
         else:
             k = hkb_k(N, g, dd, rows, hkb)
-        d = _column_scales(N) if hkb == "textbook" else np.ones(g.shape)  # 1: exactly the unscaled system
-        gamma, singular = _solve_augmented(N / (d[:, :, None] * d[:, None, :]), g / d, k)
-        beta = gamma / d
+        if hkb == "textbook":  # solved in standardized columns, as its k was chosen
+            d = _column_scales(N)
+            gamma, singular = _solve_augmented(N / (d[:, :, None] * d[:, None, :]), g / d, k)
+            beta = gamma / d
+        else:
+            beta, singular = _solve_augmented(N, g, k)
         return beta[:, :3], singular, {"k": k, "augmented": beta[:, 3]}
     return step
 

@@ -81,11 +81,11 @@ def _initial(options: dict, B: int):
 
 def _vision(st: Stacked, o: dict):
     """vision's (X (B,3), iterations, status, cond) from initial_m, else from the DLT point: copies of
-    o["vision_from_dlt"] where the caller has it already (`_mle_multistart`: every start method that begins from
-    vision)."""
-    if "vision_from_dlt" in o:
-        return tuple(np.array(a, copy=True) for a in o["vision_from_dlt"])
+    o["vision_from_dlt"] where the caller has that answer (`_mle_multistart`: the start methods that begin
+    from vision)."""
     x0, init_status = _initial(o, st.size), None
+    if x0 is None and "vision_from_dlt" in o:
+        return tuple(np.array(a, copy=True) for a in o["vision_from_dlt"])
     if x0 is None:
         x0, init_status, _ = linear.dlt(st, with_condition=False)
     return least_squares.vision(st, x0, o["tol_m"], o["max_iterations"], init_status)

@@ -51,6 +51,7 @@ class Model:
 
     damped = False
     drift_modelled = False
+    takes_small_steps = False
 
     def trial(self, idx, Xn):
         return np.ones(idx.size, dtype=bool)
@@ -96,13 +97,18 @@ def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iteratio
         finite = np.isfinite(Xn).all(axis=1)
         exploded = ~finite | (np.sqrt(((Xn - centre[idx]) ** 2).sum(axis=1)) > bound[idx])
         step_norm = np.where(singular, np.inf, np.sqrt((dX * dX).sum(axis=1)))
-        # a step the model calls negligible (an undamped one ending a start phase) ends the problem without a
-        # trial: the next phase evaluates there. Every other step is tried, the last one too, so that what a
-        # model reports (residuals, weights, covariance) belongs to the X it returns
-        done = ~singular & ~exploded & model.negligible(idx, dX) & (lam[idx] == 0)
+        # a step the model calls negligible (an undamped one ending a start phase) ends the problem moved by it,
+        # untried: the next phase evaluates there; a step within tol_m ends it untried where it is (the model's
+        # state was evaluated there: what it reports belongs to the X it returns), or moved by it where the
+        # model `takes_small_steps`. Every other step is tried
+        small = (step_norm <= tol_m) & ~singular & ~exploded
+        moved = ~singular & ~exploded & model.negligible(idx, dX) & (lam[idx] == 0)
+        if model.takes_small_steps:
+            moved |= small
+        done = small | moved
         any_done = done.any()
         if any_done:
-            X[idx[done]] = Xn[done]
+            X[idx[moved]] = Xn[moved]
         t = np.flatnonzero(~done) if any_done else slice(None)  # the others: evaluated at their trial point
         it = idx[t]
         accept = np.zeros(idx.size, dtype=bool)
@@ -116,7 +122,6 @@ def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iteratio
             lam[idx[accept]] = np.where(lam[idx[accept]] / 10 < 1e-9, 0.0, lam[idx[accept]] / 10)
             rej = idx[~accept & ~retry]
             lam[rej] = np.where(lam[rej] == 0, 1e-4, lam[rej] * 10)
-        done |= (step_norm <= tol_m) & ~singular & ~exploded
         still = ~singular & ~exploded & ~done
         stuck = still & ~accept & (lam[idx] > 1e12)  # damping that cannot help: the minimum is reached
         done |= stuck
@@ -137,7 +142,10 @@ def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iteratio
 
 
 class _StepModel(Model):
-    """`drive`'s model for a plain Gauss-Newton step function: every step accepted, no damping."""
+    """`drive`'s model for a plain Gauss-Newton step function: every step accepted (the last one too: the
+    step function is the evaluation), no damping."""
+
+    takes_small_steps = True
 
     def __init__(self, st: Stacked, step: StepFn, extras: dict, X: np.ndarray):
         self.st, self.fn, self.extras, self.X = st, step, extras, X

@@ -377,6 +377,7 @@ class White(_iterate.Model):
         self.split_attitude = False
         self.mix = None
         self.start_only = False
+        self._sums = None  # `information`'s group sums at the final state
 
     def _eval(self, pl, a, X, z, robust):
         """J, bias-corrected E, ok, z, cost, IRLS weights at X (the sub-batch of pl, a, z)."""
@@ -432,6 +433,7 @@ class White(_iterate.Model):
 
     def settle(self):
         """Write the active problems' state back to the full arrays."""
+        self._sums = None
         if self._cidx is None:
             return
         if self._cidx.size == self.st.size:
@@ -518,6 +520,7 @@ class White(_iterate.Model):
 
     def rescale(self, idx, g, factor):
         """Multiply the variances of group g (0 pixels, 1 ranges) of problems idx (indices, or a slice) by factor."""
+        self._sums = None
         self.vf[idx, g] *= factor
         s = 1.0 / np.sqrt(factor)
         rows = slice(0, 2) if g == 0 else slice(2, 3)
@@ -536,12 +539,20 @@ class White(_iterate.Model):
         return (1.0 / np.sqrt(var_scale[:, [0, 0, 1]].T))[:, None, :]
 
     def information(self, var_scale):
-        s = self._rows(var_scale)
-        Js, Es, wr = self.J * s, self.E * s, self.wr
-        N6, _ = _normal(Js, Es, wr)
-        chi2 = _dot_rows(Es if wr is None else wr * Es, Es)
-        if self.a is not None:
-            self.hs = _bias_schur(N6, Js, self.a * s, wr)
+        """Each group's sums are formed once at the final state (`settle` and `rescale` drop them) and scaled."""
+        if self._sums is None:
+            J, E, w = self.J, self.E, self.wr
+            WE = E * E if w is None else w * E * E
+            groups = [_normal(J[:, r], E[r], None if w is None else w[r])[0] + [_sum_rows(WE[r])]
+                      for r in (slice(0, 2), slice(2, 3))]
+            self._sums = groups, None if self.a is None else _bias_terms(J, self.a, w)
+        (pix, rng), bias = self._sums
+        vp, vr = var_scale[:, 0], var_scale[:, 1]
+        N6 = [p / vp + r / vr for p, r in zip(pix, rng, strict=True)]
+        chi2 = N6.pop()
+        if bias is not None:  # the bias columns scale with the pixel rows
+            self.hs = [(h / vp[:, None], s / vp) for h, s in bias]
+            _schur(N6, self.hs)
             chi2 = chi2 + (self.z * self.z).sum(axis=0)
         if self.terrain is not None:  # the terrain prior is one more observation
             jt, et, _ = _terrain_rows(self.terrain, self.X)
@@ -682,18 +693,28 @@ def _profile_bias(E, a, robust, z):
     return E - a * z[:, None, :], z
 
 
-def _bias_schur(N, J, a, w):
-    """Eliminate the u and v bias from the six normal-matrix entries N (in place): N -= h h^T / (1 + s) with
-    h = J^T W a, s = a^T W a per group. Returns [(h (b,3), s (b,)) for u, v]."""
+def _bias_terms(J, a, w):
+    """[(h (b,3), s (b,)) for the u and v bias]: h = J^T W a, s = a^T W a over that group's rows."""
     out = []
     for k in (0, 1):
         wa = a[k] if w is None else w[k] * a[k]
-        s = np.einsum("nb,nb->b", wa, a[k])
-        h = np.einsum("cnb,nb->cb", J[:, k], wa)
-        for e, (c, d) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
-            N[e] = N[e] - h[c] * h[d] / (1.0 + s)
-        out.append((h.T, s))
+        out.append((np.einsum("cnb,nb->bc", J[:, k], wa), np.einsum("nb,nb->b", wa, a[k])))
     return out
+
+
+def _schur(N, hs):
+    """Eliminate the u and v bias (`_bias_terms` hs) from the six normal-matrix entries N (in place):
+    N -= h h^T / (1 + s)."""
+    for h, s in hs:
+        for e, (c, d) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
+            N[e] = N[e] - h[:, c] * h[:, d] / (1.0 + s)
+
+
+def _bias_schur(N, J, a, w):
+    """`_schur` of the bias columns a (3,n,b) under weights w; returns their `_bias_terms`."""
+    hs = _bias_terms(J, a, w)
+    _schur(N, hs)
+    return hs
 
 
 def _bias_summary(it: White, cov, hs, vf_chi) -> dict:

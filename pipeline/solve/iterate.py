@@ -51,7 +51,8 @@ class Model:
 
     damped = False
     drift_modelled = False
-    takes_small_steps = False
+    #: a step within tol_m ends the problem where it is, untried (the model's state was evaluated there)
+    skips_last_step = False
 
     def trial(self, idx, Xn):
         return np.ones(idx.size, dtype=bool)
@@ -98,17 +99,16 @@ def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iteratio
         exploded = ~finite | (np.sqrt(((Xn - centre[idx]) ** 2).sum(axis=1)) > bound[idx])
         step_norm = np.where(singular, np.inf, np.sqrt((dX * dX).sum(axis=1)))
         # a step the model calls negligible (an undamped one ending a start phase) ends the problem moved by it,
-        # untried: the next phase evaluates there; a step within tol_m ends it untried where it is (the model's
-        # state was evaluated there: what it reports belongs to the X it returns), or moved by it where the
-        # model `takes_small_steps`. Every other step is tried
+        # untried: the next phase evaluates there; a step within tol_m ends it where it is, untried, where the
+        # model `skips_last_step`. Every other step is tried, the last one too, so that what a model reports
+        # (residuals, weights, covariance) belongs to the X it returns
         small = (step_norm <= tol_m) & ~singular & ~exploded
-        moved = ~singular & ~exploded & model.negligible(idx, dX) & (lam[idx] == 0)
-        if model.takes_small_steps:
-            moved |= small
-        done = small | moved
+        done = ~singular & ~exploded & model.negligible(idx, dX) & (lam[idx] == 0)
+        if done.any():
+            X[idx[done]] = Xn[done]
+        if model.skips_last_step:
+            done |= small
         any_done = done.any()
-        if any_done:
-            X[idx[moved]] = Xn[moved]
         t = np.flatnonzero(~done) if any_done else slice(None)  # the others: evaluated at their trial point
         it = idx[t]
         accept = np.zeros(idx.size, dtype=bool)
@@ -122,6 +122,7 @@ def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iteratio
             lam[idx[accept]] = np.where(lam[idx[accept]] / 10 < 1e-9, 0.0, lam[idx[accept]] / 10)
             rej = idx[~accept & ~retry]
             lam[rej] = np.where(lam[rej] == 0, 1e-4, lam[rej] * 10)
+        done |= small
         still = ~singular & ~exploded & ~done
         stuck = still & ~accept & (lam[idx] > 1e12)  # damping that cannot help: the minimum is reached
         done |= stuck
@@ -142,10 +143,7 @@ def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iteratio
 
 
 class _StepModel(Model):
-    """`drive`'s model for a plain Gauss-Newton step function: every step accepted (the last one too: the
-    step function is the evaluation), no damping."""
-
-    takes_small_steps = True
+    """`drive`'s model for a plain Gauss-Newton step function: every step accepted, no damping."""
 
     def __init__(self, st: Stacked, step: StepFn, extras: dict, X: np.ndarray):
         self.st, self.fn, self.extras, self.X = st, step, extras, X

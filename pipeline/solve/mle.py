@@ -45,6 +45,10 @@ DEFAULT_BIAS_PRIOR_DEG = 0.5
 START_TOL_SIGMA = 0.1
 #: the bias profile's IRLS rounds end once no problem's bias (in prior standard deviations) moves by more
 PROFILE_TOL = 1e-12
+#: the bias mixture's linear step is taken again from where it ends (relinearized) where it is longer than this
+#: many of its standard deviations (on the paper's problems the step is ~0.6 sigma, and the next one ~0.1 %
+#: of a sigma; up to ~2 % of a sigma below this limit, 17 % after a step of 4 sigma)
+MIXTURE_RELINEARIZE_SIGMA = 1.0
 VCE_MAX_ROUNDS = 10
 VCE_TOL = 0.01
 
@@ -363,6 +367,7 @@ class White(_iterate.Model):
     Levenberg-Marquardt / IRLS iteration (all arrays over the B problems)."""
 
     damped = True
+    skips_last_step = True
 
     def __init__(self, st, pl, a, X, vce, terrain):
         B = st.size
@@ -602,36 +607,36 @@ class White(_iterate.Model):
     def _mixture(self, s, s_bias, g, failed, drift_pix):
         """`bias_mixture.mixture` linearized at the solution, with the final IRLS weights, the standardized rows
         scaled by s (3,1,B) (their sigmas divided by s) and the bias columns by s_bias (3,1,B); moves X by the
-        mixture's step (a linear step: relinearized, the next would move it by 0.0003-0.004 sigma on the paper's
-        problems). Returns the mixture (its bias, bias_var, bias_cross in units of the stated prior), its
-        covariance (B,3,3) with the sigmas as stated (rows and bias columns scaled by g: no inflation) and the
-        standardized residuals (3,n,B) at the final X to first order, the posterior mean bias removed (the rows'
-        sigmas as in the iteration). drift_pix (B,): no attitude variance split there (a drift is neither
-        constant nor frame-to-frame)."""
+        mixture's step, and where that step is longer than MIXTURE_RELINEARIZE_SIGMA standard deviations, by the
+        step of the mixture linearized where it ends. Returns the mixture (its bias, bias_var, bias_cross in
+        units of the stated prior), its covariance (B,3,3) with the sigmas as stated (rows and bias columns
+        scaled by g: no inflation) and the standardized residuals (3,n,B) at the final X to first order, the
+        posterior mean bias removed (the rows' sigmas as in the iteration). drift_pix (B,): no attitude variance
+        split there (a drift is neither constant nor frame-to-frame)."""
         J, E, ok = self.J, self.E + self.a * self.z[:, None, :], self.ok
-        a0 = np.zeros_like(self.a)
-        a0[:2] = np.where(ok[:2], self.a[:2], 0.0)
-        w = np.where(ok, 1.0 if self.wr is None else self.wr, 0.0)
-        a_mix = a0 * s_bias
-        # the attitude's share of each row's variance, as the columns passed weigh it (a bias at the largest prior
-        # is the whole attitude error); none where the residuals drift
-        share = np.where(drift_pix, 0.0, np.minimum(a_mix[:2] ** 2, 1.0)) if self.split_attitude else None
-        Jm, Em, am, wm, share = self._with_terrain(J * s, E * s, a_mix, w, share)
-        mix = bias_mixture.mixture(Jm, Em, am, wm, None if share is None else bias_mixture.ratios(share, wm))
+        mix, a0 = self._mix(J, E, ok, s, s_bias, drift_pix, slice(None))
         step = np.where(~failed[:, None] & np.isfinite(mix["step"]), mix["step"], 0.0)
+        cinv = inverse3(mix["covariance"])[0]
+        far = np.flatnonzero(np.einsum("bi,bij,bj->b", step, cinv, step) > MIXTURE_RELINEARIZE_SIGMA ** 2)
         self.X += step
+        if far.size:
+            J, ok, a0 = J.copy(), ok.copy(), a0.copy()
+            J2, E2, ok2 = evaluate(self.pl.take(far), self.X[far])
+            mix2, a02 = self._mix(J2, E2, ok2, take_last(s, far), take_last(s_bias, far), drift_pix[far], far)
+            step[far] = np.where(np.isfinite(mix2["step"]), mix2["step"], 0.0)
+            self.X[far] += step[far]
+            for k, v in mix2.items():
+                mix[k][far] = v
+            for x, v in ((J, J2), (E, E2), (ok, ok2), (a0, a02)):
+                put_last(x, far, v)
         # the same point as stated (rows and bias columns scaled by g): where nothing scaled them (s = g = 1) the
         # mixture just computed, else computed again for those problems
         cov_stated = mix["covariance"].copy()
         restate = np.flatnonzero(~((s == 1).all(axis=(0, 1)) & (g == 1).all(axis=(0, 1))))
         if restate.size:
-            J0, E0, w0, a0g = (take_last(x, restate) for x in (J, E, w, a0 * g))
             g0 = take_last(g, restate)
-            share0 = (np.where(take_last(drift_pix, restate), 0.0, np.minimum(a0g[:2] ** 2, 1.0))
-                      if self.split_attitude else None)
-            Jm, Em, am, wm, share0 = self._with_terrain(J0 * g0, E0 * g0, a0g, w0, share0, restate)
-            cov_stated[restate] = bias_mixture.mixture(Jm, Em, am, wm, None if share0 is None
-                                                       else bias_mixture.ratios(share0, wm))["covariance"]
+            cov_stated[restate] = self._mix(*(take_last(x, restate) for x in (J, E, ok)), g0, g0, drift_pix[restate],
+                                            restate)[0]["covariance"]
         # the bias in units of the stated prior: the columns passed carry the misfit's scaling s_bias / s
         unit = (s_bias / s)[0, 0]
         mix["bias"] = mix["bias"] * unit[:, None]
@@ -642,6 +647,21 @@ class White(_iterate.Model):
         E_report = E - np.einsum("cknb,bc->knb", J, step)
         E_report[:2] -= a0[:2] * mix["bias"].T[:, None, :]
         return mix, cov_stated, E_report
+
+    def _mix(self, J, E, ok, s, s_bias, drift_pix, idx):
+        """`bias_mixture.mixture` of the problems idx (a slice or indices) linearized at J (3,3,n,b), residuals E
+        (3,n,b) (the bias not removed) with the rows in use ok, and s, s_bias, drift_pix as `_mixture`'s for
+        them; returns it and the bias columns a0 (3,n,b) it used."""
+        a = self.a[..., idx]
+        a0 = np.zeros_like(a)
+        a0[:2] = np.where(ok[:2], a[:2], 0.0)
+        w = np.where(ok, 1.0 if self.wr is None else self.wr[..., idx], 0.0)
+        a_mix = a0 * s_bias
+        # the attitude's share of each row's variance, as the columns passed weigh it (a bias at the largest prior
+        # is the whole attitude error); none where the residuals drift
+        share = np.where(drift_pix, 0.0, np.minimum(a_mix[:2] ** 2, 1.0)) if self.split_attitude else None
+        Jm, Em, am, wm, share = self._with_terrain(J * s, E * s, a_mix, w, share, idx)
+        return bias_mixture.mixture(Jm, Em, am, wm, None if share is None else bias_mixture.ratios(share, wm)), a0
 
 
 def _terrain_rows(terrain, X: np.ndarray):

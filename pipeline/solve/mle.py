@@ -383,6 +383,7 @@ class White(_iterate.Model):
         self.mix = None
         self.start_only = False
         self._sums = None  # `information`'s group sums at the final state
+        self.J = None  # `jacobian`
 
     def _eval(self, pl, a, X, z, robust):
         """J, bias-corrected E, ok, z, cost, IRLS weights at X (the sub-batch of pl, a, z)."""
@@ -400,16 +401,29 @@ class White(_iterate.Model):
         """Evaluate every problem at X for this loss; Newton (the loss's curvature in the normal matrix) only
         where it is convex or nearly so."""
         self.robust = robust
-        self.J, self.E, self.ok, self.z, self.cost, self.wr = self._eval(self.pl, self.a, self.X, self.z, robust)
-        self.newton_ok = np.full(self.st.size, robust in ("huber", "cauchy") and self.a is None)
+        self.newton = robust in ("huber", "cauchy") and self.a is None
+        J, self.E, self.ok, self.z, self.cost, self.wr = self._eval(self.pl, self.a, self.X, self.z, robust)
+        self.NG = self._normal_state(J, self.E, self.wr, self.a)
+        self.newton_ok = np.full(self.st.size, self.newton)
         self._cidx = self._c = None
+
+    def _normal_state(self, J, E, w, a):
+        """(9,b) or, with Newton steps, (15,b): the normal matrix's six entries (the bias eliminated) and the
+        gradient's three (`_normal`) at an evaluation, then the six of the Newton normal matrix (the loss's
+        curvature as weights): what `step` needs, kept instead of J (3,3,n,b) while the problems iterate."""
+        N, g = _normal(J, E, w)
+        if a is not None:
+            _bias_schur(N, J, a, w)
+        if self.newton:
+            N += _normal(J, E, w, _curvature(E, self.robust))[0]
+        return np.stack([*N[:6], *g, *N[6:]])
 
     #: the iteration state of each problem (planes over the B problems; a read-only), kept for the active
     #: problems by `_active` while `drive` iterates
-    STATE = ("J", "E", "ok", "wr", "z", "a")
+    STATE = ("NG", "E", "ok", "wr", "z", "a")
 
     def _active(self, idx):
-        """[J, E, ok, wr, z, a] of the problems idx (sorted; None for what the model lacks). The state of the
+        """[NG, E, ok, wr, z, a] of the problems idx (sorted; None for what the model lacks). The state of the
         active problems is kept between iterations (`accept` merges into it) and written back to the full
         arrays as problems leave the active set (`settle` at the end): an iteration moves no data of the
         problems it does not touch."""
@@ -438,7 +452,7 @@ class White(_iterate.Model):
 
     def settle(self):
         """Write the active problems' state back to the full arrays."""
-        self._sums = None
+        self._sums = self.J = None
         if self._cidx is None:
             return
         if self._cidx.size == self.st.size:
@@ -449,14 +463,11 @@ class White(_iterate.Model):
         self._cidx = self._c = None
 
     def step(self, idx, X, lam):
-        Ji, Ei, _, wi, _, ai = self._active(idx)
-        if self.robust is None:
-            N, g = _normal(Ji, Ei, None)
-        else:
+        NG = self._active(idx)[0]
+        N, g = list(NG[:6]), NG[6:9].copy()
+        if self.newton:
             nok = self.newton_ok[idx]
-            N, g = _normal(Ji, Ei, wi, np.where(nok, _curvature(Ei, self.robust), wi) if nok.any() else wi)
-        if ai is not None:
-            _bias_schur(N, Ji, ai, wi)
+            N = [np.where(nok, n, m) for n, m in zip(NG[9:], N, strict=True)]
         if self.terrain is not None:
             _add_terrain(N, g, *_terrain_rows(self.terrain, X))
         dX, singular = _solve3(N, g, lam)
@@ -476,15 +487,16 @@ class White(_iterate.Model):
 
     def trial(self, idx, Xn):
         z, a = self._active(idx)[4:]
-        self._trial = self._eval(self.pl if idx.size == self.st.size else self.pl.take(idx), a, Xn, z, self.robust)
-        return self._trial[4] <= self.cost[idx] * (1 + 1e-12) + 1e-300
+        J, *rest = self._eval(self.pl if idx.size == self.st.size else self.pl.take(idx), a, Xn, z, self.robust)
+        self._trial = (self._normal_state(J, rest[0], rest[4], a), *rest)
+        return rest[3] <= self.cost[idx] * (1 + 1e-12) + 1e-300
 
     def accept(self, idx, accept):
-        Jn, En, okn, zn, cost_n, wr_n = self._trial
+        NGn, En, okn, zn, cost_n, wr_n = self._trial
         a_idx = idx[accept]
         every = a_idx.size == idx.size
         self._c = [new if every or new is None or new is old else np.where(accept, new, old)
-                   for old, new in zip(self._active(idx), (Jn, En, okn, wr_n, zn, self._c[-1]), strict=True)]
+                   for old, new in zip(self._active(idx), (NGn, En, okn, wr_n, zn, self._c[-1]), strict=True)]
         self.cost[a_idx] = cost_n[accept]
         # a rejected Newton step is retried as the IRLS step (a descent step) before damping
         retry = ~accept & self.newton_ok[idx] if self.robust is not None else np.zeros(idx.size, dtype=bool)
@@ -499,8 +511,8 @@ class White(_iterate.Model):
         if not self.vce:
             return np.zeros(d_idx.size, dtype=bool)
         self.settle()  # the variance components rescale the full arrays
-        self._reevaluate(d_idx)
-        factors, usable = _vce_factors(take_last(self.J, d_idx), take_last(self.E, d_idx), take_last(self.ok, d_idx),
+        J = self._reevaluate(d_idx)
+        factors, usable = _vce_factors(J, take_last(self.E, d_idx), take_last(self.ok, d_idx),
                                        self.robust, None if self.a is None else take_last(self.a, d_idx),
                                        None if self.terrain is None else _terrain_rows(self.terrain, self.X[d_idx]))
         more = (np.abs(factors - 1) > VCE_TOL) & usable
@@ -515,23 +527,31 @@ class White(_iterate.Model):
         return again
 
     def _reevaluate(self, idx):
-        """The state (J, E, ok, z, weights, cost) of the problems idx evaluated again at self.X (after `settle`)."""
-        J, E, ok, z, cost, w = self._eval(self.pl.take(idx), None if self.a is None else take_last(self.a, idx),
-                                          self.X[idx], take_last(self.z, idx), self.robust)
+        """The state (normal equations, E, ok, z, weights, cost) of the problems idx evaluated again at self.X
+        (after `settle`); returns their J."""
+        a = None if self.a is None else take_last(self.a, idx)
+        J, E, ok, z, cost, w = self._eval(self.pl.take(idx), a, self.X[idx], take_last(self.z, idx), self.robust)
         self.cost[idx] = cost
-        for old, new in ((self.J, J), (self.E, E), (self.ok, ok), (self.z, z), (self.wr, w)):
+        for old, new in ((self.NG, self._normal_state(J, E, w, a)), (self.E, E), (self.ok, ok), (self.z, z),
+                         (self.wr, w)):
             if old is not None:
                 put_last(old, idx, new)
+        return J
 
     def rescale(self, idx, g, factor):
         """Multiply the variances of group g (0 pixels, 1 ranges) of problems idx (indices, or a slice) by factor."""
-        self._sums = None
+        self._sums = self.J = None  # the normal equations are evaluated again before the next step
         self.vf[idx, g] *= factor
         s = 1.0 / np.sqrt(factor)
         rows = slice(0, 2) if g == 0 else slice(2, 3)
-        for arr in (self.J[:, rows], self.E[rows], self.pl.isd[rows]) + ((self.a[rows],) if self.a is not None
-                                                                          else ()):
+        for arr in (self.E[rows], self.pl.isd[rows]) + ((self.a[rows],) if self.a is not None else ()):
             arr[..., idx] *= s
+
+    def jacobian(self):
+        """J (3,3,n,B) at X, the final state (the iteration keeps the normal equations instead)."""
+        if self.J is None:
+            self.J = evaluate(self.pl, self.X)[0]
+        return self.J
 
     def extra_dof(self):
         return 0 if self.terrain is None else _terrain_rows(self.terrain, self.X)[2]
@@ -546,7 +566,7 @@ class White(_iterate.Model):
     def information(self, var_scale):
         """Each group's sums are formed once at the final state (`settle` and `rescale` drop them) and scaled."""
         if self._sums is None:
-            J, E, w = self.J, self.E, self.wr
+            J, E, w = self.jacobian(), self.E, self.wr
             WE = E * E if w is None else w * E * E
             groups = [_normal(J[:, r], E[r], None if w is None else w[r])[0] + [_sum_rows(WE[r])]
                       for r in (slice(0, 2), slice(2, 3))]
@@ -613,7 +633,7 @@ class White(_iterate.Model):
         scaled by g: no inflation) and the standardized residuals (3,n,B) at the final X to first order, the
         posterior mean bias removed (the rows' sigmas as in the iteration). drift_pix (B,): no attitude variance
         split there (a drift is neither constant nor frame-to-frame)."""
-        J, E, ok = self.J, self.E + self.a * self.z[:, None, :], self.ok
+        J, E, ok = self.jacobian(), self.E + self.a * self.z[:, None, :], self.ok
         mix, a0 = self._mix(J, E, ok, s, s_bias, drift_pix, slice(None))
         step = np.where(~failed[:, None] & np.isfinite(mix["step"]), mix["step"], 0.0)
         cinv = inverse3(mix["covariance"])[0]

@@ -710,14 +710,15 @@ def _profile_bias(E, a, robust, z):
     """The bias-corrected residuals E - a z (3,n,b) and z (3,b): the bias (in prior standard deviations) that
     minimizes sum rho(E - a z) + |z|^2 / 2 for the u and v rows (a few IRLS rounds from the previous z; the
     range rows carry no bias; a problem keeps its bias once it moves by at most PROFILE_TOL, the rounds stop when
-    every problem has)."""
+    every problem has; once fewer than half still move, the rounds go on with those alone)."""
     a2 = a[:2]
     aEa = np.concatenate([a2 * E[:2], a2 * a2])  # (4,n,b): a E of the u and v rows, then a a
     if robust is None:
         z[:2] = aEa[:2].sum(axis=1) / (1.0 + aEa[2:].sum(axis=1))
+    Ew, zw, work = E[:2], z[:2], slice(None)  # the problems still iterated (work) and their E, a, z
     live = np.ones(z.shape[1], dtype=bool)  # the problems whose profile still moves (the others keep theirs)
     for _ in range(0 if robust is None else 4):
-        Euv = E[:2] - a2 * z[:2, None, :]
+        Euv = Ew - a2 * zw[:, None, :]
         if robust == "redescending":  # one weight per frame for both rows
             w = pixel_pair_redescending(Euv[0], Euv[1], rho=False)[1]
             nd = np.einsum("nb,knb->kb", w, aEa)
@@ -725,11 +726,17 @@ def _profile_bias(E, a, robust, z):
             w = _rho_and_weight(Euv, robust, rho=False)[1]
             nd = np.concatenate([np.einsum("knb,knb->kb", w, aEa[:2]), np.einsum("knb,knb->kb", w, aEa[2:])])
         zn = nd[:2] / (1.0 + nd[2:])
-        moved = (np.abs(zn - z[:2]) > PROFILE_TOL).any(axis=0)  # per problem: its weights changed (NaN: no)
-        z[:2] = np.where(live, zn, z[:2])
+        moved = (np.abs(zn - zw) > PROFILE_TOL).any(axis=0)  # per problem: its weights changed (NaN: no)
+        zw = np.where(live, zn, zw)
         live &= moved
+        z[:2, work] = zw
         if not live.any():  # every problem's weights stand: its profile is exact
             break
+        if 2 * np.count_nonzero(live) < live.size:
+            keep = np.flatnonzero(live)
+            work = keep if isinstance(work, slice) else work[keep]
+            Ew, a2, aEa, zw = (take_last(x, keep) for x in (Ew, a2, aEa, zw))
+            live = np.ones(keep.size, dtype=bool)
     return E - a * z[:, None, :], z
 
 

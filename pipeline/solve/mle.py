@@ -45,9 +45,8 @@ DEFAULT_BIAS_PRIOR_DEG = 0.5
 START_TOL_SIGMA = 0.1
 #: the bias profile's IRLS rounds end once no problem's bias (in prior standard deviations) moves by more
 PROFILE_TOL = 1e-12
-#: the bias mixture's linear step is taken again from where it ends (relinearized) where it is longer than this
-#: many of its standard deviations: the next step grows as the square of the first (paper's problems: first
-#: ~0.6 sigma, next ~0.1 % of a sigma; zoo flights: next 0.5 % after 1.1 sigma, 2 % after 2.7, 17 % after 4.1)
+#: the bias mixture's step is relinearized where longer than this many standard deviations (the next step grows
+#: as its square: paper's problems ~0.6 sigma, next ~0.1 %; zoo flights 0.5 % after 1.1 sigma, 17 % after 4.1)
 MIXTURE_RELINEARIZE_SIGMA = 2.0
 VCE_MAX_ROUNDS = 10
 VCE_TOL = 0.01
@@ -155,15 +154,10 @@ def _sum_rows(A: np.ndarray) -> np.ndarray:
     return A.reshape(-1, A.shape[-1]).sum(axis=0)
 
 
-def _dot_rows(A: np.ndarray, Bm: np.ndarray) -> np.ndarray:
-    """(b,) sum over the rows of A * B, (3,n,b) planes."""
-    return np.einsum("ij,ij->j", A.reshape(-1, A.shape[-1]), Bm.reshape(-1, Bm.shape[-1]))
-
-
 def _cost_weights(E: np.ndarray, robust: str | None):
     """sum rho(e) (b,) and the IRLS weights rho'(e)/e (3,n,b) (None for the squared loss) of standardized E."""
     if robust is None:
-        return 0.5 * _dot_rows(E, E), None
+        return 0.5 * _sum_rows(E * E), None
     if robust == "redescending":
         rho_p, w_p = pixel_pair_redescending(E[0], E[1])
         rho_r, w_r = _redescending(E[2])
@@ -202,22 +196,13 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     (bias_deg, bias_sigma_deg, bias_prior_deg, bias_target_correlation; bias_size_deg when its size is
     averaged). The fit checks are taken at the iteration's solution, before the averaging.
 
-    robust "redescending" (the default of `solve`) runs Huber to convergence first (a convex start), then the
-    redescending loss from there (`run`). bias_deg > 0 estimates a constant boresight bias (two camera-frame
-    angles, seen as constant pixel offsets f * angle in u and v) jointly with the target, with a zero-mean
-    Gaussian prior of that standard deviation; it is eliminated from the normal equations (Schur complement), so
-    the target covariance is the marginal one. With bias_size_unknown, bias_deg is the largest bias: the answer
-    is then averaged over the bias's size (`bias_mixture`, the stated attitude variance split between the bias
-    and the frame-to-frame part unless the residuals drift), and position_m^2 I, a GNSS offset shared by the
-    segment, is added to the covariance.
-
-    terrain=(fn, sigma_m): a soft prior on the target's height, fn(e_m, n_m) -> (up_m, dup_de, dup_dn) the
-    terrain in the problems' (shared) ENU frame: one more residual (fn(e, n) - up) / sigma_m per problem, with
-    its row [-dup_de, -dup_dn, 1] / sigma_m, in the normal equations (Gauss-Newton, never robustified), the
-    covariance, the chi-square (one more observation) and the variance components' leverages; none where fn
-    is not finite (off the terrain model).
-
-    Works on planes (`stacked.Planes`): the normal equations as six (B,) entries, the 3x3 steps in closed form.
+    bias_deg > 0: a constant boresight bias (two camera-frame angles, constant pixel offsets f * angle in u and
+    v) with a zero-mean Gaussian prior of that standard deviation, eliminated from the normal equations (Schur
+    complement: the target covariance is the marginal one). With bias_size_unknown it is the largest bias: the
+    answer is averaged over the bias's size (`bias_mixture`) and position_m^2 I, a GNSS offset shared by the
+    segment, is added to the covariance. terrain=(fn, sigma_m): a soft prior on the target's height, fn(e_m, n_m)
+    -> (up_m, dup_de, dup_dn) in the problems' ENU frame, one more (never robustified) residual (fn(e, n) - up) /
+    sigma_m per problem where fn is finite.
     """
     X = np.array(X0, dtype=np.float64, copy=True)
     status, bad = start_status(X, init_status)
@@ -285,20 +270,14 @@ def robust_scale(m) -> None:
 
 
 def finish(m, X: np.ndarray, status: np.ndarray, iterations: np.ndarray):
-    """The one finish of every `mle` model m at its final iterate X (B,3) with its final weights: covariance,
-    condition number, fit checks, rejected rows and extras. Returns X, iterations, status, cond (B,),
-    covariance (B,3,3) and the extras (B, ...) arrays: variance_factor_pixel, variance_factor_range, sigma0_sq,
-    vce_rounds, rejected (B,n,3) bool (u, v, range rows with zero weight), residual_sigmas (B,n,3) (the
-    standardized residuals), residuals (px, m), the fit checks (`fit_checks`: chi2, chi2_dof, chi2_p, the
-    autocorrelations and drift flags, consistent, robust_spread (B,2)) and covariance_inflation: the trace of the
-    covariance reported over that of the model as stated.
-
-    m gives its standardized residual planes m.E (3,n,B), their mask m.ok, the weights m.wr (or None), the
-    scale guard m.guard and variance factors m.vf (B,2), and m.information(var_scale (B,2)) -> (the target's
-    information matrix (B,3,3), chi-square (B,)) with each group's (pixel, range) variances scaled by var_scale.
-    The chi-square is taken against the sigmas as stated (or as variance components estimated them); where
-    the residuals drift (lag-1 autocorrelation, unless m models the drift) the drifting group's variances are
-    inflated by (1 + rho) / (1 - rho), and where the chi-square test fails everything by its variance factor."""
+    """The one finish of every `mle` model m at its final iterate X (B,3) with its final weights. Returns X,
+    iterations, status, cond (B,), covariance (B,3,3) and the extras (B, ...): variance_factor_pixel/_range,
+    sigma0_sq, vce_rounds, rejected (B,n,3) bool (u, v, range rows with zero weight), residual_sigmas (B,n,3)
+    (standardized), residuals (px, m), the fit checks (`fit_checks`), consistent, robust_spread (B,2) and
+    covariance_inflation (trace reported / trace as stated). m gives m.E (3,n,B), m.ok, m.wr (or None), m.guard,
+    m.vf (B,2) and m.information(var_scale (B,2)) -> (information (B,3,3), chi-square (B,)). Where the
+    residuals drift (unless m models it) the group's variances are inflated (`fit_checks`), where the
+    chi-square test fails everything by its variance factor."""
     E, ok, wr, guard = m.E, m.ok, m.wr, m.guard
     B = X.shape[0]
     failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
@@ -382,8 +361,7 @@ class White(_iterate.Model):
         self.split_attitude = False
         self.mix = None
         self.start_only = False
-        self._sums = None  # `information`'s group sums at the final state
-        self.J = None  # `jacobian`
+        self._sums = self.J = None  # `information`'s group sums and `jacobian` at the final state
 
     def _eval(self, pl, a, X, z, robust):
         """J, bias-corrected E, ok, z, cost, IRLS weights at X (the sub-batch of pl, a, z)."""
@@ -408,12 +386,11 @@ class White(_iterate.Model):
         self._cidx = self._c = None
 
     def _normal_state(self, J, E, w, a):
-        """(9,b) or, with Newton steps, (15,b): the normal matrix's six entries (the bias eliminated) and the
-        gradient's three (`_normal`) at an evaluation, then the six of the Newton normal matrix (the loss's
-        curvature as weights): what `step` needs, kept instead of J (3,3,n,b) while the problems iterate."""
+        """(9,b): the normal matrix's six entries (the bias eliminated) and the gradient's three (`_normal`), and
+        with Newton steps the six of the Newton normal matrix: what `step` needs, kept instead of J (3,3,n,b)."""
         N, g = _normal(J, E, w)
         if a is not None:
-            _bias_schur(N, J, a, w)
+            _schur(N, _bias_terms(J, a, w))
         if self.newton:
             N += _normal(J, E, w, _curvature(E, self.robust))[0]
         return np.stack([*N[:6], *g, *N[6:]])
@@ -423,10 +400,8 @@ class White(_iterate.Model):
     STATE = ("NG", "E", "ok", "wr", "z", "a")
 
     def _active(self, idx):
-        """[NG, E, ok, wr, z, a] of the problems idx (sorted; None for what the model lacks). The state of the
-        active problems is kept between iterations (`accept` merges into it) and written back to the full
-        arrays as problems leave the active set (`settle` at the end): an iteration moves no data of the
-        problems it does not touch."""
+        """[NG, E, ok, wr, z, a] of the problems idx (sorted; None for what the model lacks): kept between
+        iterations (`accept` merges into it), written back to the full arrays as problems leave the active set."""
         cidx = self._cidx
         if cidx is not None and not (cidx is idx or np.array_equal(cidx, idx)):
             pos = np.searchsorted(cidx, idx)
@@ -548,7 +523,7 @@ class White(_iterate.Model):
             arr[..., idx] *= s
 
     def jacobian(self):
-        """J (3,3,n,B) at X, the final state (the iteration keeps the normal equations instead)."""
+        """J (3,3,n,B) at the final X."""
         if self.J is None:
             self.J = evaluate(self.pl, self.X)[0]
         return self.J
@@ -625,14 +600,11 @@ class White(_iterate.Model):
                 None if share is None else np.concatenate([share, np.zeros((2, 1, b))], axis=1))
 
     def _mixture(self, s, s_bias, g, failed, drift_pix):
-        """`bias_mixture.mixture` linearized at the solution, with the final IRLS weights, the standardized rows
-        scaled by s (3,1,B) (their sigmas divided by s) and the bias columns by s_bias (3,1,B); moves X by the
-        mixture's step, and where that step is longer than MIXTURE_RELINEARIZE_SIGMA standard deviations, by the
-        step of the mixture linearized where it ends. Returns the mixture (its bias, bias_var, bias_cross in
-        units of the stated prior), its covariance (B,3,3) with the sigmas as stated (rows and bias columns
-        scaled by g: no inflation) and the standardized residuals (3,n,B) at the final X to first order, the
-        posterior mean bias removed (the rows' sigmas as in the iteration). drift_pix (B,): no attitude variance
-        split there (a drift is neither constant nor frame-to-frame)."""
+        """`bias_mixture.mixture` at the solution (`_mix`), the rows scaled by s (3,1,B) and the bias columns by
+        s_bias; moves X by its step (relinearized beyond MIXTURE_RELINEARIZE_SIGMA). Returns the mixture (bias,
+        bias_var, bias_cross in units of the stated prior), its covariance (B,3,3) with the sigmas as stated
+        (scaled by g) and the standardized residuals (3,n,B) at the final X to first order, the mean bias
+        removed."""
         J, E, ok = self.jacobian(), self.E + self.a * self.z[:, None, :], self.ok
         mix, a0 = self._mix(J, E, ok, s, s_bias, drift_pix, slice(None))
         step = np.where(~failed[:, None] & np.isfinite(mix["step"]), mix["step"], 0.0)
@@ -669,9 +641,9 @@ class White(_iterate.Model):
         return mix, cov_stated, E_report
 
     def _mix(self, J, E, ok, s, s_bias, drift_pix, idx):
-        """`bias_mixture.mixture` of the problems idx (a slice or indices) linearized at J (3,3,n,b), residuals E
-        (3,n,b) (the bias not removed) with the rows in use ok, and s, s_bias, drift_pix as `_mixture`'s for
-        them; returns it and the bias columns a0 (3,n,b) it used."""
+        """`bias_mixture.mixture` of the problems idx (a slice or indices) at J (3,3,n,b), E (3,n,b) (the bias not
+        removed), rows in use ok, with the final weights; drift_pix (b,): no attitude variance split there (a
+        drift is neither constant nor frame-to-frame). Returns it and the bias columns a0 (3,n,b) it used."""
         a = self.a[..., idx]
         a0 = np.zeros_like(a)
         a0[:2] = np.where(ok[:2], a[:2], 0.0)
@@ -757,13 +729,6 @@ def _schur(N, hs):
             N[e] = N[e] - h[:, c] * h[:, d] / (1.0 + s)
 
 
-def _bias_schur(N, J, a, w):
-    """`_schur` of the bias columns a (3,n,b) under weights w; returns their `_bias_terms`."""
-    hs = _bias_terms(J, a, w)
-    _schur(N, hs)
-    return hs
-
-
 def _bias_summary(it: White, cov, hs, vf_chi) -> dict:
     """The bias estimate (B,2) deg (u: about the camera's vertical axis, v: about its horizontal axis, as
     pixel offsets / f), its posterior standard deviation and its correlation with the target (B,2,3)."""
@@ -813,7 +778,9 @@ def _vce_factors(J, E, ok, robust, a=None, terrain_rows=None):
     (redundancy of the group >= 0.5)."""
     _, w = _cost_weights(E, robust)
     N, _ = _normal(J, E, w)
-    hs = _bias_schur(N, J, a, w) if a is not None else None
+    hs = _bias_terms(J, a, w) if a is not None else None
+    if hs is not None:
+        _schur(N, hs)
     if terrain_rows is not None:
         _add_terrain(N, None, *terrain_rows)
     inv = cofactors3(N)[0]

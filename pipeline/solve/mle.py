@@ -212,7 +212,7 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     if bias_deg:
         fx, fy = st.focal_px()
         sb = np.deg2rad(bias_deg)
-        a = np.zeros((3, *pl.has_pix.shape))
+        a = np.empty((2, *pl.has_pix.shape))  # the bias columns of the u and v rows
         a[0] = np.where(pl.has_pix, fx.T * sb, 0.0) * pl.isd[0]
         a[1] = np.where(pl.has_pix, fy.T * sb, 0.0) * pl.isd[1]
     m = White(st, pl, a, X, vce, terrain)
@@ -592,7 +592,7 @@ class White(_iterate.Model):
         Jt[:, 2, 0] = jt
         Et = np.zeros((3, 1, b))
         Et[2, 0] = et
-        pad = np.zeros((3, 1, b))
+        pad = np.zeros((2, 1, b))
         wt = np.zeros((3, 1, b))
         wt[2] = 1.0
         return (np.concatenate([J, Jt], axis=2), np.concatenate([E, Et], axis=1), np.concatenate([a, pad], axis=1),
@@ -605,7 +605,8 @@ class White(_iterate.Model):
         bias_var, bias_cross in units of the stated prior), its covariance (B,3,3) with the sigmas as stated
         (scaled by g) and the standardized residuals (3,n,B) at the final X to first order, the mean bias
         removed."""
-        J, E, ok = self.jacobian(), self.E + self.a * self.z[:, None, :], self.ok
+        J, E, ok = self.jacobian(), self.E.copy(), self.ok
+        E[:2] += self.a * self.z[:2, None, :]
         mix, a0 = self._mix(J, E, ok, s, s_bias, drift_pix, slice(None))
         step = np.where(~failed[:, None] & np.isfinite(mix["step"]), mix["step"], 0.0)
         cinv = inverse3(mix["covariance"])[0]
@@ -637,21 +638,19 @@ class White(_iterate.Model):
         mix["prior_scale"] = unit
         # the residuals at the final X, to first order
         E_report = E - np.einsum("cknb,bc->knb", J, step)
-        E_report[:2] -= a0[:2] * mix["bias"].T[:, None, :]
+        E_report[:2] -= a0 * mix["bias"].T[:, None, :]
         return mix, cov_stated, E_report
 
     def _mix(self, J, E, ok, s, s_bias, drift_pix, idx):
         """`bias_mixture.mixture` of the problems idx (a slice or indices) at J (3,3,n,b), E (3,n,b) (the bias not
         removed), rows in use ok, with the final weights; drift_pix (b,): no attitude variance split there (a
-        drift is neither constant nor frame-to-frame). Returns it and the bias columns a0 (3,n,b) it used."""
-        a = self.a[..., idx]
-        a0 = np.zeros_like(a)
-        a0[:2] = np.where(ok[:2], a[:2], 0.0)
+        drift is neither constant nor frame-to-frame). Returns it and the bias columns a0 (2,n,b) it used."""
+        a0 = np.where(ok[:2], self.a[..., idx], 0.0)
         w = np.where(ok, 1.0 if self.wr is None else self.wr[..., idx], 0.0)
-        a_mix = a0 * s_bias
+        a_mix = a0 * s_bias[:2]
         # the attitude's share of each row's variance, as the columns passed weigh it (a bias at the largest prior
         # is the whole attitude error); none where the residuals drift
-        share = np.where(drift_pix, 0.0, np.minimum(a_mix[:2] ** 2, 1.0)) if self.split_attitude else None
+        share = np.where(drift_pix, 0.0, np.minimum(a_mix ** 2, 1.0)) if self.split_attitude else None
         Jm, Em, am, wm, share = self._with_terrain(J * s, E * s, a_mix, w, share, idx)
         return bias_mixture.mixture(Jm, Em, am, wm, None if share is None else bias_mixture.ratios(share, wm)), a0
 
@@ -679,18 +678,17 @@ def _add_terrain(N, g, jt, et, use=None):
 
 
 def _profile_bias(E, a, robust, z):
-    """The bias-corrected residuals E - a z (3,n,b) and z (3,b): the bias (in prior standard deviations) that
-    minimizes sum rho(E - a z) + |z|^2 / 2 for the u and v rows (a few IRLS rounds from the previous z; the
-    range rows carry no bias; a problem keeps its bias once it moves by at most PROFILE_TOL, the rounds stop when
-    every problem has; once fewer than half still move, the rounds go on with those alone)."""
-    a2 = a[:2]
-    aEa = np.concatenate([a2 * E[:2], a2 * a2])  # (4,n,b): a E of the u and v rows, then a a
+    """The bias-corrected residuals E - a z (3,n,b) (E in place; a (2,n,b) the u and v rows' bias columns) and
+    z (3,b): the bias (in prior standard deviations) that minimizes sum rho(E - a z) + |z|^2 / 2 over the u and v
+    rows (a few IRLS rounds from the previous z; a problem keeps its bias once it moves by at most PROFILE_TOL,
+    the rounds stop when every problem has; once fewer than half still move, they go on with those alone)."""
+    aEa = np.concatenate([a * E[:2], a * a])  # (4,n,b): a E of the u and v rows, then a a
     if robust is None:
         z[:2] = aEa[:2].sum(axis=1) / (1.0 + aEa[2:].sum(axis=1))
-    Ew, zw, work = E[:2], z[:2], slice(None)  # the problems still iterated (work) and their E, a, z
+    Ew, aw, zw, work = E[:2], a, z[:2], slice(None)  # the problems still iterated (work) and their E, a, z
     live = np.ones(z.shape[1], dtype=bool)  # the problems whose profile still moves (the others keep theirs)
     for _ in range(0 if robust is None else 4):
-        Euv = Ew - a2 * zw[:, None, :]
+        Euv = Ew - aw * zw[:, None, :]
         if robust == "redescending":  # one weight per frame for both rows
             w = pixel_pair_redescending(Euv[0], Euv[1], rho=False)[1]
             nd = np.einsum("nb,knb->kb", w, aEa)
@@ -707,9 +705,10 @@ def _profile_bias(E, a, robust, z):
         if 2 * np.count_nonzero(live) < live.size:
             keep = np.flatnonzero(live)
             work = keep if isinstance(work, slice) else work[keep]
-            Ew, a2, aEa, zw = (take_last(x, keep) for x in (Ew, a2, aEa, zw))
+            Ew, aw, aEa, zw = (take_last(x, keep) for x in (Ew, aw, aEa, zw))
             live = np.ones(keep.size, dtype=bool)
-    return E - a * z[:, None, :], z
+    E[:2] -= a * z[:2, None, :]
+    return E, z
 
 
 def _bias_terms(J, a, w):

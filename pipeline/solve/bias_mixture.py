@@ -74,16 +74,15 @@ def ratios(share: np.ndarray, w: np.ndarray | None):
         share = np.where(np.asarray(w)[:2] > 0, share, 0.0)
     p = PHI_GRID * PHI_GRID
     ratio = np.maximum(1.0 - p[:, None, None, None] * share, RATIO_FLOOR)
-    # the sum of the logs as the logs of products over blocks of at most 100 rows (a product of 100 ratios of at
-    # least RATIO_FLOOR = 1e-3 stays above 1e-300): one log per block, not per row
+    # the logs summed as the logs of products over blocks of at most 100 rows (100 ratios >= RATIO_FLOOR = 1e-3
+    # multiply to >= 1e-300): one log per block, not per row
     G, b = len(PHI_GRID), share.shape[-1]
     rows = ratio.reshape(G, -1, b)
     m = rows.shape[1]
-    blocks = -(-m // 100)
-    size = -(-m // blocks)
-    if blocks * size > m:
-        rows = np.concatenate([rows, np.ones((G, blocks * size - m, b))], axis=1)
-    return 1.0 / ratio, np.log(rows.reshape(G, blocks, size, b).prod(axis=2)).sum(axis=1)
+    size = -(-m // -(-m // 100))  # ceil(m / ceil(m / 100))
+    if m % size:
+        rows = np.concatenate([rows, np.ones((G, size - m % size, b))], axis=1)
+    return 1.0 / ratio, np.log(rows.reshape(G, -1, size, b).prod(axis=2)).sum(axis=1)
 
 
 def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None, rows=None) -> dict:

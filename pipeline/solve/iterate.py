@@ -63,12 +63,11 @@ class Model:
     def converged(self, idx):
         return np.zeros(idx.size, dtype=bool)
 
-    def negligible(self, idx, dX):
-        """(k,) bool: steps dX (k,3) of the problems idx small enough to end them (besides ||dX|| <= tol_m)."""
+    def negligible(self, idx, dX):  # (k,) bool: steps dX (k,3) that end their problems (besides tol_m)
         return np.zeros(idx.size, dtype=bool)
 
-    def settle(self):
-        """After the iteration: the state of the problems complete (a model keeping the active ones apart)."""
+    def settle(self):  # after the iteration: the state of the problems complete
+        pass
 
     def extra_dof(self):
         return 0
@@ -98,10 +97,9 @@ def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iteratio
         finite = np.isfinite(Xn).all(axis=1)
         exploded = ~finite | (np.sqrt(((Xn - centre[idx]) ** 2).sum(axis=1)) > bound[idx])
         step_norm = np.where(singular, np.inf, np.sqrt((dX * dX).sum(axis=1)))
-        # a step the model calls negligible (an undamped one ending a start phase) ends the problem moved by it,
-        # untried: the next phase evaluates there; a step within tol_m ends it where it is, untried, where the
-        # model `skips_last_step`. Every other step is tried, the last one too, so that what a model reports
-        # (residuals, weights, covariance) belongs to the X it returns
+        # a step the model calls negligible (an undamped one ending a start phase) ends the problem moved, untried
+        # (the next phase evaluates there); a step within tol_m where the model `skips_last_step`, unmoved. Every
+        # other step is tried: what a model reports (residuals, weights, covariance) belongs to the X it returns
         small = (step_norm <= tol_m) & ~singular & ~exploded
         done = ~singular & ~exploded & model.negligible(idx, dX) & (lam[idx] == 0)
         if done.any():

@@ -65,9 +65,8 @@ def _curvature(e: np.ndarray, robust: str) -> np.ndarray:
 
 
 def _rho_and_weight(e: np.ndarray, robust: str | None, rho: bool = True):
-    """Loss rho(e) and IRLS weight rho'(e)/e of standardized residuals e (rho None unless asked for)."""
-    if robust is None:
-        return (0.5 * e * e if rho else None), np.ones_like(e)
+    """Huber's or Cauchy's loss rho(e) and IRLS weight rho'(e)/e of standardized residuals e (rho None unless
+    asked for)."""
     if robust == "huber":
         a = np.abs(e)
         w = np.minimum(1.0, HUBER_C / np.maximum(a, 1e-300))
@@ -75,8 +74,6 @@ def _rho_and_weight(e: np.ndarray, robust: str | None, rho: bool = True):
             return None, w
         t = np.maximum(a - HUBER_C, 0.0)  # rho = e^2/2 inside, c|e| - c^2/2 = e^2/2 - (|e| - c)^2/2 outside
         return 0.5 * (e * e - t * t), w
-    if robust == "redescending":
-        return _redescending(e, rho=rho)
     z = (e / CAUCHY_C) ** 2
     return (0.5 * CAUCHY_C ** 2 * np.log1p(z) if rho else None), 1.0 / (1.0 + z)
 
@@ -507,10 +504,9 @@ class White(_iterate.Model):
         a = None if self.a is None else take_last(self.a, idx)
         J, E, ok, z, cost, w = self._eval(self.pl.take(idx), a, self.X[idx], take_last(self.z, idx), self.robust)
         self.cost[idx] = cost
-        for old, new in ((self.NG, self._normal_state(J, E, w, a)), (self.E, E), (self.ok, ok), (self.z, z),
-                         (self.wr, w)):
-            if old is not None:
-                put_last(old, idx, new)
+        for name, new in zip(("NG", "E", "ok", "z", "wr"), (self._normal_state(J, E, w, a), E, ok, z, w), strict=True):
+            if new is not None:
+                put_last(getattr(self, name), idx, new)
         return J
 
     def rescale(self, idx, g, factor):
@@ -588,16 +584,10 @@ class White(_iterate.Model):
             return J, E, a, w, share
         jt, et, _ = _terrain_rows(self.terrain, self.X[idx])
         b = E.shape[-1]
-        Jt = np.zeros((3, 3, 1, b))
-        Jt[:, 2, 0] = jt
-        Et = np.zeros((3, 1, b))
-        Et[2, 0] = et
-        pad = np.zeros((2, 1, b))
-        wt = np.zeros((3, 1, b))
-        wt[2] = 1.0
+        Jt, Et, wt, pad = np.zeros((3, 3, 1, b)), np.zeros((3, 1, b)), np.zeros((3, 1, b)), np.zeros((2, 1, b))
+        Jt[:, 2, 0], Et[2, 0], wt[2] = jt, et, 1.0
         return (np.concatenate([J, Jt], axis=2), np.concatenate([E, Et], axis=1), np.concatenate([a, pad], axis=1),
-                np.concatenate([w, wt], axis=1),
-                None if share is None else np.concatenate([share, np.zeros((2, 1, b))], axis=1))
+                np.concatenate([w, wt], axis=1), None if share is None else np.concatenate([share, pad], axis=1))
 
     def _mixture(self, s, s_bias, g, failed, drift_pix):
         """`bias_mixture.mixture` at the solution (`_mix`), the rows scaled by s (3,1,B) and the bias columns by

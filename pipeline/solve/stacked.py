@@ -71,12 +71,9 @@ class Stacked:
         """(B,n,3,3) M M^T (the rows' dot products), computed once."""
         g = self.__dict__.get("_gram_cache")
         if g is None:  # entry by entry: a batched matmul of 3x3 matrices costs 2.5x more
-            M, g = self.M, np.empty(self.M.shape)
-            for i in range(3):
-                for j in range(i, 3):
-                    g[..., i, j] = g[..., j, i] = (M[..., i, 0] * M[..., j, 0] + M[..., i, 1] * M[..., j, 1]
-                                                   + M[..., i, 2] * M[..., j, 2])
-            self.__dict__["_gram_cache"] = g
+            M, g = self.M, self.__dict__.setdefault("_gram_cache", np.empty(self.M.shape))
+            for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)):
+                g[..., i, j] = g[..., j, i] = sum(M[..., i, k] * M[..., j, k] for k in range(3))
         return g
 
     def planes(self):

@@ -767,23 +767,20 @@ def _vce_factors(J, E, ok, robust, a=None, terrain_rows=None):
     (redundancy of the group >= 0.5)."""
     _, w = _cost_weights(E, robust)
     N, _ = _normal(J, E, w)
-    hs = _bias_terms(J, a, w) if a is not None else None
-    if hs is not None:
-        _schur(N, hs)
+    hs = _bias_terms(J, a, w) if a is not None else []
+    _schur(N, hs)
     if terrain_rows is not None:
         _add_terrain(N, None, *terrain_rows)
-    inv = cofactors3(N)[0]
+    inv = C00, C01, C02, C11, C12, C22 = cofactors3(N)[0]
     j0, j1, j2 = J
     quad = (inv[0] * j0 * j0 + inv[3] * j1 * j1 + inv[5] * j2 * j2
             + 2.0 * (inv[1] * j0 * j1 + inv[2] * j0 * j2 + inv[4] * j1 * j2))
-    if hs is not None:
-        C00, C01, C02, C11, C12, C22 = inv
-        for k, (h, s) in enumerate(hs):
-            h0, h1, h2 = h[:, 0], h[:, 1], h[:, 2]
-            c = [-(C00 * h0 + C01 * h1 + C02 * h2) / (1 + s), -(C01 * h0 + C11 * h1 + C12 * h2) / (1 + s),
-                 -(C02 * h0 + C12 * h1 + C22 * h2) / (1 + s)]
-            czz = 1.0 / (1 + s) - (c[0] * h0 + c[1] * h1 + c[2] * h2) / (1 + s)
-            quad[k] = quad[k] + 2.0 * a[k] * (J[0, k] * c[0] + J[1, k] * c[1] + J[2, k] * c[2]) + a[k] ** 2 * czz
+    for k, (h, s) in enumerate(hs):
+        h0, h1, h2 = h[:, 0], h[:, 1], h[:, 2]
+        c = [-(C00 * h0 + C01 * h1 + C02 * h2) / (1 + s), -(C01 * h0 + C11 * h1 + C12 * h2) / (1 + s),
+             -(C02 * h0 + C12 * h1 + C22 * h2) / (1 + s)]
+        czz = 1.0 / (1 + s) - (c[0] * h0 + c[1] * h1 + c[2] * h2) / (1 + s)
+        quad[k] = quad[k] + 2.0 * a[k] * (J[0, k] * c[0] + J[1, k] * c[1] + J[2, k] * c[2]) + a[k] ** 2 * czz
     lev = quad if w is None else w * quad
     q = E * E if w is None else w * E * E
     use = ok if w is None else ok & (w > 0)

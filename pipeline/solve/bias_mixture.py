@@ -74,8 +74,7 @@ def ratios(share: np.ndarray, w: np.ndarray | None):
         share = np.where(np.asarray(w)[:2] > 0, share, 0.0)
     p = PHI_GRID * PHI_GRID
     ratio = np.maximum(1.0 - p[:, None, None, None] * share, RATIO_FLOOR)
-    # the logs summed as the logs of products over blocks of at most 100 rows (100 ratios >= RATIO_FLOOR = 1e-3
-    # multiply to >= 1e-300): one log per block, not per row
+    # one log per block of <= 100 rows, not per row (100 ratios >= RATIO_FLOOR = 1e-3 multiply to >= 1e-300)
     G, b = len(PHI_GRID), share.shape[-1]
     rows = ratio.reshape(G, -1, b)
     m = rows.shape[1]

@@ -338,9 +338,8 @@ def finish(m, X: np.ndarray, status: np.ndarray, iterations: np.ndarray):
 
 
 class White(_iterate.Model):
-    """The `mle` model with errors independent from frame to frame (a boresight bias and the terrain prior
-    optional), over B problems, as `iterate.drive` and `finish` use it: the state of the batched
-    Levenberg-Marquardt / IRLS iteration (all arrays over the B problems)."""
+    """The `mle` model of errors independent from frame to frame (a boresight bias and the terrain prior
+    optional): the state of the batched Levenberg-Marquardt / IRLS iteration of B problems (`iterate.Model`)."""
 
     damped = True
     skips_last_step = True
@@ -373,8 +372,7 @@ class White(_iterate.Model):
         return J, E, ok, z, cost, w
 
     def start(self, robust):
-        """Evaluate every problem at X for this loss; Newton (the loss's curvature in the normal matrix) only
-        where it is convex or nearly so."""
+        """Evaluate every problem at X for this loss; Newton steps only where it is convex or nearly so."""
         self.robust = robust
         self.newton = robust in ("huber", "cauchy") and self.a is None
         J, self.E, self.ok, self.z, self.cost, self.wr = self._eval(self.pl, self.a, self.X, self.z, robust)
@@ -392,8 +390,7 @@ class White(_iterate.Model):
             N += _normal(J, E, w, _curvature(E, self.robust))[0]
         return np.stack([*N[:6], *g, *N[6:]])
 
-    #: the iteration state of each problem (planes over the B problems; a read-only), kept for the active
-    #: problems by `_active` while `drive` iterates
+    #: each problem's iteration state (planes over the B problems; a read-only), kept apart for the active ones
     STATE = ("NG", "E", "ok", "wr", "z", "a")
 
     def _active(self, idx):

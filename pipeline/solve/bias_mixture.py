@@ -74,11 +74,17 @@ def ratios(share: np.ndarray, w: np.ndarray | None):
         share = np.where(np.asarray(w)[:2] > 0, share, 0.0)
     p = PHI_GRID * PHI_GRID
     ratio = np.maximum(1.0 - p[:, None, None, None] * share, RATIO_FLOOR)
-    return 1.0 / ratio, np.log(ratio).reshape(len(PHI_GRID), -1, share.shape[-1]).sum(axis=1)
+    # one log per block of <= 100 rows, not per row (100 ratios >= RATIO_FLOOR = 1e-3 multiply to >= 1e-300)
+    G, b = len(PHI_GRID), share.shape[-1]
+    rows = ratio.reshape(G, -1, b)
+    m = rows.shape[1]
+    size = -(-m // -(-m // 100))  # ceil(m / ceil(m / 100))
+    if m % size:
+        rows = np.concatenate([rows, np.ones((G, size - m % size, b))], axis=1)
+    return 1.0 / ratio, np.log(rows.reshape(G, -1, size, b).prod(axis=2)).sum(axis=1)
 
 
-def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None, rows=None,
-            step_only: bool = False) -> dict:
+def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None, rows=None) -> dict:
     """The bias-averaged linear step and covariance of b problems (module docstring).
 
     J (3,3,n,b), r (3,n,b), a (3,n,b) (rows 0 and 1 used), w (3,n,b) or None (unit weights); rows that are not
@@ -86,7 +92,7 @@ def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None, r
     of each u and v row's variance, or None (the frame-to-frame part keeps it all, the bias adds to it).
     Returns step (b,3) m, covariance (b,3,3) m^2, posterior (b,G) over PHI_GRID, bias (b,2) and bias_var (b,2)
     in units of a's prior (u, v), bias_cross (b,2,3) m the covariance of each bias with the target, singular
-    (b,) where no candidate solves; with step_only the step and singular alone.
+    (b,) where no candidate solves.
 
     Only the u and v rows' weights depend on the candidate (through the ratios): the rows' weighted products
     are formed once (`_row_products`) and each candidate sums them over the frames with its ratios; the range
@@ -137,8 +143,6 @@ def mixture(J: np.ndarray, r: np.ndarray, a: np.ndarray, w: np.ndarray | None, r
     if unclean:
         d, C = (np.where(np.isfinite(x), x, 0.0) for x in (d, C))
     step = (pi[:, None] * d).sum(axis=0)  # (3,b)
-    if step_only:
-        return {"step": step.T, "singular": singular_all}
     Ch = np.stack([sum(C0[FULL3[c][e]][:, None] * h[:, e] for e in range(3)) for c in range(3)], axis=1)  # (G,3,2,b)
     bias = f * (t - (h * d0[:, :, None]).sum(axis=1))  # (G,2,b)
     bvar = f + f * f * (h * Ch).sum(axis=1)

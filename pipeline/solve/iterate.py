@@ -51,6 +51,8 @@ class Model:
 
     damped = False
     drift_modelled = False
+    #: a step within tol_m ends the problem where it is, untried (the model's state was evaluated there)
+    skips_last_step = False
 
     def trial(self, idx, Xn):
         return np.ones(idx.size, dtype=bool)
@@ -61,12 +63,11 @@ class Model:
     def converged(self, idx):
         return np.zeros(idx.size, dtype=bool)
 
-    def negligible(self, idx, dX):
-        """(k,) bool: steps dX (k,3) of the problems idx small enough to end them (besides ||dX|| <= tol_m)."""
+    def negligible(self, idx, dX):  # (k,) bool: steps dX (k,3) that end their problems (besides tol_m)
         return np.zeros(idx.size, dtype=bool)
 
-    def settle(self):
-        """After the iteration: the state of the problems complete (a model keeping the active ones apart)."""
+    def settle(self):  # after the iteration: the state of the problems complete
+        pass
 
     def extra_dof(self):
         return 0
@@ -96,13 +97,16 @@ def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iteratio
         finite = np.isfinite(Xn).all(axis=1)
         exploded = ~finite | (np.sqrt(((Xn - centre[idx]) ** 2).sum(axis=1)) > bound[idx])
         step_norm = np.where(singular, np.inf, np.sqrt((dX * dX).sum(axis=1)))
-        # a step the model calls negligible (an undamped one ending a start phase) ends the problem without a
-        # trial: the next phase evaluates there. Every other step is tried, the last one too, so that what a
-        # model reports (residuals, weights, covariance) belongs to the X it returns
+        # a step the model calls negligible (an undamped one ending a start phase) ends the problem moved, untried
+        # (the next phase evaluates there); a step within tol_m where the model `skips_last_step`, unmoved. Every
+        # other step is tried: what a model reports (residuals, weights, covariance) belongs to the X it returns
+        small = (step_norm <= tol_m) & ~singular & ~exploded
         done = ~singular & ~exploded & model.negligible(idx, dX) & (lam[idx] == 0)
-        any_done = done.any()
-        if any_done:
+        if done.any():
             X[idx[done]] = Xn[done]
+        if model.skips_last_step:
+            done |= small
+        any_done = done.any()
         t = np.flatnonzero(~done) if any_done else slice(None)  # the others: evaluated at their trial point
         it = idx[t]
         accept = np.zeros(idx.size, dtype=bool)
@@ -116,7 +120,7 @@ def drive(model, X: np.ndarray, status: np.ndarray, active: np.ndarray, iteratio
             lam[idx[accept]] = np.where(lam[idx[accept]] / 10 < 1e-9, 0.0, lam[idx[accept]] / 10)
             rej = idx[~accept & ~retry]
             lam[rej] = np.where(lam[rej] == 0, 1e-4, lam[rej] * 10)
-        done |= (step_norm <= tol_m) & ~singular & ~exploded
+        done |= small
         still = ~singular & ~exploded & ~done
         stuck = still & ~accept & (lam[idx] > 1e12)  # damping that cannot help: the minimum is reached
         done |= stuck

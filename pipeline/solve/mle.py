@@ -45,6 +45,9 @@ DEFAULT_BIAS_PRIOR_DEG = 0.5
 START_TOL_SIGMA = 0.1
 #: the bias profile's IRLS rounds end once no problem's bias (in prior standard deviations) moves by more
 PROFILE_TOL = 1e-12
+#: the bias mixture's step is relinearized where longer than this many standard deviations (the next step grows
+#: as its square: paper's problems ~0.6 sigma, next ~0.1 %; zoo flights 0.5 % after 1.1 sigma, 17 % after 4.1)
+MIXTURE_RELINEARIZE_SIGMA = 2.0
 VCE_MAX_ROUNDS = 10
 VCE_TOL = 0.01
 
@@ -62,9 +65,8 @@ def _curvature(e: np.ndarray, robust: str) -> np.ndarray:
 
 
 def _rho_and_weight(e: np.ndarray, robust: str | None, rho: bool = True):
-    """Loss rho(e) and IRLS weight rho'(e)/e of standardized residuals e (rho None unless asked for)."""
-    if robust is None:
-        return (0.5 * e * e if rho else None), np.ones_like(e)
+    """Huber's or Cauchy's loss rho(e) and IRLS weight rho'(e)/e of standardized residuals e (rho None unless
+    asked for)."""
     if robust == "huber":
         a = np.abs(e)
         w = np.minimum(1.0, HUBER_C / np.maximum(a, 1e-300))
@@ -72,8 +74,6 @@ def _rho_and_weight(e: np.ndarray, robust: str | None, rho: bool = True):
             return None, w
         t = np.maximum(a - HUBER_C, 0.0)  # rho = e^2/2 inside, c|e| - c^2/2 = e^2/2 - (|e| - c)^2/2 outside
         return 0.5 * (e * e - t * t), w
-    if robust == "redescending":
-        return _redescending(e, rho=rho)
     z = (e / CAUCHY_C) ** 2
     return (0.5 * CAUCHY_C ** 2 * np.log1p(z) if rho else None), 1.0 / (1.0 + z)
 
@@ -151,15 +151,10 @@ def _sum_rows(A: np.ndarray) -> np.ndarray:
     return A.reshape(-1, A.shape[-1]).sum(axis=0)
 
 
-def _dot_rows(A: np.ndarray, Bm: np.ndarray) -> np.ndarray:
-    """(b,) sum over the rows of A * B, (3,n,b) planes."""
-    return np.einsum("ij,ij->j", A.reshape(-1, A.shape[-1]), Bm.reshape(-1, Bm.shape[-1]))
-
-
 def _cost_weights(E: np.ndarray, robust: str | None):
     """sum rho(e) (b,) and the IRLS weights rho'(e)/e (3,n,b) (None for the squared loss) of standardized E."""
     if robust is None:
-        return 0.5 * _dot_rows(E, E), None
+        return 0.5 * _sum_rows(E * E), None
     if robust == "redescending":
         rho_p, w_p = pixel_pair_redescending(E[0], E[1])
         rho_r, w_r = _redescending(E[2])
@@ -198,22 +193,13 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     (bias_deg, bias_sigma_deg, bias_prior_deg, bias_target_correlation; bias_size_deg when its size is
     averaged). The fit checks are taken at the iteration's solution, before the averaging.
 
-    robust "redescending" (the default of `solve`) runs Huber to convergence first (a convex start), then the
-    redescending loss from there (`run`). bias_deg > 0 estimates a constant boresight bias (two camera-frame
-    angles, seen as constant pixel offsets f * angle in u and v) jointly with the target, with a zero-mean
-    Gaussian prior of that standard deviation; it is eliminated from the normal equations (Schur complement), so
-    the target covariance is the marginal one. With bias_size_unknown, bias_deg is the largest bias: the answer
-    is then averaged over the bias's size (`bias_mixture`, the stated attitude variance split between the bias
-    and the frame-to-frame part unless the residuals drift), and position_m^2 I, a GNSS offset shared by the
-    segment, is added to the covariance.
-
-    terrain=(fn, sigma_m): a soft prior on the target's height, fn(e_m, n_m) -> (up_m, dup_de, dup_dn) the
-    terrain in the problems' (shared) ENU frame: one more residual (fn(e, n) - up) / sigma_m per problem, with
-    its row [-dup_de, -dup_dn, 1] / sigma_m, in the normal equations (Gauss-Newton, never robustified), the
-    covariance, the chi-square (one more observation) and the variance components' leverages; none where fn
-    is not finite (off the terrain model).
-
-    Works on planes (`stacked.Planes`): the normal equations as six (B,) entries, the 3x3 steps in closed form.
+    bias_deg > 0: a constant boresight bias (two camera-frame angles, constant pixel offsets f * angle in u and
+    v) with a zero-mean Gaussian prior of that standard deviation, eliminated from the normal equations (Schur
+    complement: the target covariance is the marginal one). With bias_size_unknown it is the largest bias: the
+    answer is averaged over the bias's size (`bias_mixture`) and position_m^2 I, a GNSS offset shared by the
+    segment, is added to the covariance. terrain=(fn, sigma_m): a soft prior on the target's height, fn(e_m, n_m)
+    -> (up_m, dup_de, dup_dn) in the problems' ENU frame, one more (never robustified) residual (fn(e, n) - up) /
+    sigma_m per problem where fn is finite.
     """
     X = np.array(X0, dtype=np.float64, copy=True)
     status, bad = start_status(X, init_status)
@@ -223,7 +209,7 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     if bias_deg:
         fx, fy = st.focal_px()
         sb = np.deg2rad(bias_deg)
-        a = np.zeros((3, *pl.has_pix.shape))
+        a = np.empty((2, *pl.has_pix.shape))  # the bias columns of the u and v rows
         a[0] = np.where(pl.has_pix, fx.T * sb, 0.0) * pl.isd[0]
         a[1] = np.where(pl.has_pix, fy.T * sb, 0.0) * pl.isd[1]
     m = White(st, pl, a, X, vce, terrain)
@@ -281,20 +267,14 @@ def robust_scale(m) -> None:
 
 
 def finish(m, X: np.ndarray, status: np.ndarray, iterations: np.ndarray):
-    """The one finish of every `mle` model m at its final iterate X (B,3) with its final weights: covariance,
-    condition number, fit checks, rejected rows and extras. Returns X, iterations, status, cond (B,),
-    covariance (B,3,3) and the extras (B, ...) arrays: variance_factor_pixel, variance_factor_range, sigma0_sq,
-    vce_rounds, rejected (B,n,3) bool (u, v, range rows with zero weight), residual_sigmas (B,n,3) (the
-    standardized residuals), residuals (px, m), the fit checks (`fit_checks`: chi2, chi2_dof, chi2_p, the
-    autocorrelations and drift flags, consistent, robust_spread (B,2)) and covariance_inflation: the trace of the
-    covariance reported over that of the model as stated.
-
-    m gives its standardized residual planes m.E (3,n,B), their mask m.ok, the weights m.wr (or None), the
-    scale guard m.guard and variance factors m.vf (B,2), and m.information(var_scale (B,2)) -> (the target's
-    information matrix (B,3,3), chi-square (B,)) with each group's (pixel, range) variances scaled by var_scale.
-    The chi-square is taken against the sigmas as stated (or as variance components estimated them); where
-    the residuals drift (lag-1 autocorrelation, unless m models the drift) the drifting group's variances are
-    inflated by (1 + rho) / (1 - rho), and where the chi-square test fails everything by its variance factor."""
+    """The one finish of every `mle` model m at its final iterate X (B,3) with its final weights. Returns X,
+    iterations, status, cond (B,), covariance (B,3,3) and the extras (B, ...): variance_factor_pixel/_range,
+    sigma0_sq, vce_rounds, rejected (B,n,3) bool (u, v, range rows with zero weight), residual_sigmas (B,n,3)
+    (standardized), residuals (px, m), the fit checks (`fit_checks`), consistent, robust_spread (B,2) and
+    covariance_inflation (trace reported / trace as stated). m gives m.E (3,n,B), m.ok, m.wr (or None), m.guard,
+    m.vf (B,2) and m.information(var_scale (B,2)) -> (information (B,3,3), chi-square (B,)). Where the
+    residuals drift (unless m models it) the group's variances are inflated (`fit_checks`), where the
+    chi-square test fails everything by its variance factor."""
     E, ok, wr, guard = m.E, m.ok, m.wr, m.guard
     B = X.shape[0]
     failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
@@ -358,11 +338,11 @@ def finish(m, X: np.ndarray, status: np.ndarray, iterations: np.ndarray):
 
 
 class White(_iterate.Model):
-    """The `mle` model with errors independent from frame to frame (a boresight bias and the terrain prior
-    optional), over B problems, as `iterate.drive` and `finish` use it: the state of the batched
-    Levenberg-Marquardt / IRLS iteration (all arrays over the B problems)."""
+    """The `mle` model of errors independent from frame to frame (a boresight bias and the terrain prior
+    optional): the state of the batched Levenberg-Marquardt / IRLS iteration of B problems (`iterate.Model`)."""
 
     damped = True
+    skips_last_step = True
 
     def __init__(self, st, pl, a, X, vce, terrain):
         B = st.size
@@ -377,6 +357,7 @@ class White(_iterate.Model):
         self.split_attitude = False
         self.mix = None
         self.start_only = False
+        self._sums = self.J = None  # `information`'s group sums and `jacobian` at the final state
 
     def _eval(self, pl, a, X, z, robust):
         """J, bias-corrected E, ok, z, cost, IRLS weights at X (the sub-batch of pl, a, z)."""
@@ -391,22 +372,30 @@ class White(_iterate.Model):
         return J, E, ok, z, cost, w
 
     def start(self, robust):
-        """Evaluate every problem at X for this loss; Newton (the loss's curvature in the normal matrix) only
-        where it is convex or nearly so."""
+        """Evaluate every problem at X for this loss; Newton steps only where it is convex or nearly so."""
         self.robust = robust
-        self.J, self.E, self.ok, self.z, self.cost, self.wr = self._eval(self.pl, self.a, self.X, self.z, robust)
-        self.newton_ok = np.full(self.st.size, robust in ("huber", "cauchy") and self.a is None)
+        self.newton = robust in ("huber", "cauchy") and self.a is None
+        J, self.E, self.ok, self.z, self.cost, self.wr = self._eval(self.pl, self.a, self.X, self.z, robust)
+        self.NG = self._normal_state(J, self.E, self.wr, self.a)
+        self.newton_ok = np.full(self.st.size, self.newton)
         self._cidx = self._c = None
 
-    #: the iteration state of each problem (planes over the B problems; a read-only), kept for the active
-    #: problems by `_active` while `drive` iterates
-    STATE = ("J", "E", "ok", "wr", "z", "a")
+    def _normal_state(self, J, E, w, a):
+        """(9,b): the normal matrix's six entries (the bias eliminated) and the gradient's three (`_normal`), and
+        with Newton steps the six of the Newton normal matrix: what `step` needs, kept instead of J (3,3,n,b)."""
+        N, g = _normal(J, E, w)
+        if a is not None:
+            _schur(N, _bias_terms(J, a, w))
+        if self.newton:
+            N += _normal(J, E, w, _curvature(E, self.robust))[0]
+        return np.stack([*N[:6], *g, *N[6:]])
+
+    #: each problem's iteration state (planes over the B problems; a read-only), kept apart for the active ones
+    STATE = ("NG", "E", "ok", "wr", "z", "a")
 
     def _active(self, idx):
-        """[J, E, ok, wr, z, a] of the problems idx (sorted; None for what the model lacks). The state of the
-        active problems is kept between iterations (`accept` merges into it) and written back to the full
-        arrays as problems leave the active set (`settle` at the end): an iteration moves no data of the
-        problems it does not touch."""
+        """[NG, E, ok, wr, z, a] of the problems idx (sorted; None for what the model lacks): kept between
+        iterations (`accept` merges into it), written back to the full arrays as problems leave the active set."""
         cidx = self._cidx
         if cidx is not None and not (cidx is idx or np.array_equal(cidx, idx)):
             pos = np.searchsorted(cidx, idx)
@@ -432,6 +421,7 @@ class White(_iterate.Model):
 
     def settle(self):
         """Write the active problems' state back to the full arrays."""
+        self._sums = self.J = None
         if self._cidx is None:
             return
         if self._cidx.size == self.st.size:
@@ -442,14 +432,11 @@ class White(_iterate.Model):
         self._cidx = self._c = None
 
     def step(self, idx, X, lam):
-        Ji, Ei, _, wi, _, ai = self._active(idx)
-        if self.robust is None:
-            N, g = _normal(Ji, Ei, None)
-        else:
+        NG = self._active(idx)[0]
+        N, g = list(NG[:6]), NG[6:9].copy()
+        if self.newton:
             nok = self.newton_ok[idx]
-            N, g = _normal(Ji, Ei, wi, np.where(nok, _curvature(Ei, self.robust), wi) if nok.any() else wi)
-        if ai is not None:
-            _bias_schur(N, Ji, ai, wi)
+            N = [np.where(nok, n, m) for n, m in zip(NG[9:], N, strict=True)]
         if self.terrain is not None:
             _add_terrain(N, g, *_terrain_rows(self.terrain, X))
         dX, singular = _solve3(N, g, lam)
@@ -469,15 +456,16 @@ class White(_iterate.Model):
 
     def trial(self, idx, Xn):
         z, a = self._active(idx)[4:]
-        self._trial = self._eval(self.pl if idx.size == self.st.size else self.pl.take(idx), a, Xn, z, self.robust)
-        return self._trial[4] <= self.cost[idx] * (1 + 1e-12) + 1e-300
+        J, *rest = self._eval(self.pl if idx.size == self.st.size else self.pl.take(idx), a, Xn, z, self.robust)
+        self._trial = (self._normal_state(J, rest[0], rest[4], a), *rest)
+        return rest[3] <= self.cost[idx] * (1 + 1e-12) + 1e-300
 
     def accept(self, idx, accept):
-        Jn, En, okn, zn, cost_n, wr_n = self._trial
+        NGn, En, okn, zn, cost_n, wr_n = self._trial
         a_idx = idx[accept]
         every = a_idx.size == idx.size
         self._c = [new if every or new is None or new is old else np.where(accept, new, old)
-                   for old, new in zip(self._active(idx), (Jn, En, okn, wr_n, zn, self._c[-1]), strict=True)]
+                   for old, new in zip(self._active(idx), (NGn, En, okn, wr_n, zn, self._c[-1]), strict=True)]
         self.cost[a_idx] = cost_n[accept]
         # a rejected Newton step is retried as the IRLS step (a descent step) before damping
         retry = ~accept & self.newton_ok[idx] if self.robust is not None else np.zeros(idx.size, dtype=bool)
@@ -492,8 +480,8 @@ class White(_iterate.Model):
         if not self.vce:
             return np.zeros(d_idx.size, dtype=bool)
         self.settle()  # the variance components rescale the full arrays
-        self._reevaluate(d_idx)
-        factors, usable = _vce_factors(take_last(self.J, d_idx), take_last(self.E, d_idx), take_last(self.ok, d_idx),
+        J = self._reevaluate(d_idx)
+        factors, usable = _vce_factors(J, take_last(self.E, d_idx), take_last(self.ok, d_idx),
                                        self.robust, None if self.a is None else take_last(self.a, d_idx),
                                        None if self.terrain is None else _terrain_rows(self.terrain, self.X[d_idx]))
         more = (np.abs(factors - 1) > VCE_TOL) & usable
@@ -508,22 +496,30 @@ class White(_iterate.Model):
         return again
 
     def _reevaluate(self, idx):
-        """The state (J, E, ok, z, weights, cost) of the problems idx evaluated again at self.X (after `settle`)."""
-        J, E, ok, z, cost, w = self._eval(self.pl.take(idx), None if self.a is None else take_last(self.a, idx),
-                                          self.X[idx], take_last(self.z, idx), self.robust)
+        """The state (normal equations, E, ok, z, weights, cost) of the problems idx evaluated again at self.X
+        (after `settle`); returns their J."""
+        a = None if self.a is None else take_last(self.a, idx)
+        J, E, ok, z, cost, w = self._eval(self.pl.take(idx), a, self.X[idx], take_last(self.z, idx), self.robust)
         self.cost[idx] = cost
-        for old, new in ((self.J, J), (self.E, E), (self.ok, ok), (self.z, z), (self.wr, w)):
-            if old is not None:
-                put_last(old, idx, new)
+        for name, new in zip(("NG", "E", "ok", "z", "wr"), (self._normal_state(J, E, w, a), E, ok, z, w), strict=True):
+            if new is not None:
+                put_last(getattr(self, name), idx, new)
+        return J
 
     def rescale(self, idx, g, factor):
         """Multiply the variances of group g (0 pixels, 1 ranges) of problems idx (indices, or a slice) by factor."""
+        self._sums = self.J = None  # the normal equations are evaluated again before the next step
         self.vf[idx, g] *= factor
         s = 1.0 / np.sqrt(factor)
         rows = slice(0, 2) if g == 0 else slice(2, 3)
-        for arr in (self.J[:, rows], self.E[rows], self.pl.isd[rows]) + ((self.a[rows],) if self.a is not None
-                                                                          else ()):
+        for arr in (self.E[rows], self.pl.isd[rows]) + ((self.a[rows],) if self.a is not None else ()):
             arr[..., idx] *= s
+
+    def jacobian(self):
+        """J (3,3,n,B) at the final X."""
+        if self.J is None:
+            self.J = evaluate(self.pl, self.X)[0]
+        return self.J
 
     def extra_dof(self):
         return 0 if self.terrain is None else _terrain_rows(self.terrain, self.X)[2]
@@ -536,12 +532,20 @@ class White(_iterate.Model):
         return (1.0 / np.sqrt(var_scale[:, [0, 0, 1]].T))[:, None, :]
 
     def information(self, var_scale):
-        s = self._rows(var_scale)
-        Js, Es, wr = self.J * s, self.E * s, self.wr
-        N6, _ = _normal(Js, Es, wr)
-        chi2 = _dot_rows(Es if wr is None else wr * Es, Es)
-        if self.a is not None:
-            self.hs = _bias_schur(N6, Js, self.a * s, wr)
+        """Each group's sums are formed once at the final state (`settle` and `rescale` drop them) and scaled."""
+        if self._sums is None:
+            J, E, w = self.jacobian(), self.E, self.wr
+            WE = E * E if w is None else w * E * E
+            groups = [_normal(J[:, r], E[r], None if w is None else w[r])[0] + [_sum_rows(WE[r])]
+                      for r in (slice(0, 2), slice(2, 3))]
+            self._sums = groups, None if self.a is None else _bias_terms(J, self.a, w)
+        (pix, rng), bias = self._sums
+        vp, vr = var_scale[:, 0], var_scale[:, 1]
+        N6 = [p / vp + r / vr for p, r in zip(pix, rng, strict=True)]
+        chi2 = N6.pop()
+        if bias is not None:  # the bias columns scale with the pixel rows
+            self.hs = [(h / vp[:, None], s / vp) for h, s in bias]
+            _schur(N6, self.hs)
             chi2 = chi2 + (self.z * self.z).sum(axis=0)
         if self.terrain is not None:  # the terrain prior is one more observation
             jt, et, _ = _terrain_rows(self.terrain, self.X)
@@ -577,67 +581,65 @@ class White(_iterate.Model):
             return J, E, a, w, share
         jt, et, _ = _terrain_rows(self.terrain, self.X[idx])
         b = E.shape[-1]
-        Jt = np.zeros((3, 3, 1, b))
-        Jt[:, 2, 0] = jt
-        Et = np.zeros((3, 1, b))
-        Et[2, 0] = et
-        pad = np.zeros((3, 1, b))
-        wt = np.zeros((3, 1, b))
-        wt[2] = 1.0
+        Jt, Et, wt, pad = np.zeros((3, 3, 1, b)), np.zeros((3, 1, b)), np.zeros((3, 1, b)), np.zeros((2, 1, b))
+        Jt[:, 2, 0], Et[2, 0], wt[2] = jt, et, 1.0
         return (np.concatenate([J, Jt], axis=2), np.concatenate([E, Et], axis=1), np.concatenate([a, pad], axis=1),
-                np.concatenate([w, wt], axis=1),
-                None if share is None else np.concatenate([share, np.zeros((2, 1, b))], axis=1))
+                np.concatenate([w, wt], axis=1), None if share is None else np.concatenate([share, pad], axis=1))
 
     def _mixture(self, s, s_bias, g, failed, drift_pix):
-        """`bias_mixture.mixture` at the solution, twice (the second at the first's step), with the final IRLS
-        weights, the standardized rows scaled by s (3,1,B) (their sigmas divided by s) and the bias columns by
-        s_bias (3,1,B); moves X to the mixture's estimate. Returns the mixture (its bias, bias_var, bias_cross
-        in units of the stated prior), its covariance (B,3,3) with the sigmas as stated (rows and bias columns
-        scaled by g: no inflation) and the standardized residuals (3,n,B) at the final X, the posterior mean
-        bias removed (the rows' sigmas as in the iteration). drift_pix (B,): no attitude variance split there (a
-        drift is neither constant nor frame-to-frame)."""
-        keep = ~failed
-        a0 = np.zeros_like(self.a)
-        J, E, ok = self.J, self.E + self.a * self.z[:, None, :], self.ok
-        rows = None
-        for rnd in range(2):
-            if rnd:
-                ok_first = ok
-                J, E, ok = evaluate(self.pl, self.X)
-            a0[:2] = np.where(ok[:2], self.a[:2], 0.0)
-            w = np.where(ok, 1.0 if self.wr is None else self.wr, 0.0)
-            a_mix = a0 * s_bias
-            # the attitude's share of each row's variance, as the columns passed weigh it (a bias at the
-            # largest prior is the whole attitude error); none where the residuals drift
-            share = np.where(drift_pix, 0.0, np.minimum(a_mix[:2] ** 2, 1.0)) if self.split_attitude else None
-            Jm, Em, am, wm, share = self._with_terrain(J * s, E * s, a_mix, w, share)
-            if share is not None and (rows is None or not np.array_equal(ok, ok_first)):  # else the same rows
-                rows = bias_mixture.ratios(share, wm)
-            mix = bias_mixture.mixture(Jm, Em, am, wm, rows, step_only=rnd == 0)
-            step = np.where(keep[:, None] & np.isfinite(mix["step"]), mix["step"], 0.0)
-            self.X += step
+        """`bias_mixture.mixture` at the solution (`_mix`), the rows scaled by s (3,1,B) and the bias columns by
+        s_bias; moves X by its step (relinearized beyond MIXTURE_RELINEARIZE_SIGMA). Returns the mixture (bias,
+        bias_var, bias_cross in units of the stated prior), its covariance (B,3,3) with the sigmas as stated
+        (scaled by g) and the standardized residuals (3,n,B) at the final X to first order, the mean bias
+        removed."""
+        J, E, ok = self.jacobian(), self.E.copy(), self.ok
+        E[:2] += self.a * self.z[:2, None, :]
+        mix, a0 = self._mix(J, E, ok, s, s_bias, drift_pix, slice(None))
+        step = np.where(~failed[:, None] & np.isfinite(mix["step"]), mix["step"], 0.0)
+        cinv = inverse3(mix["covariance"])[0]
+        far = np.flatnonzero(np.einsum("bi,bij,bj->b", step, cinv, step) > MIXTURE_RELINEARIZE_SIGMA ** 2)
+        self.X += step
+        if far.size:
+            J, ok, a0 = J.copy(), ok.copy(), a0.copy()
+            J2, E2, ok2 = evaluate(self.pl.take(far), self.X[far])
+            mix2, a02 = self._mix(J2, E2, ok2, take_last(s, far), take_last(s_bias, far), drift_pix[far], far)
+            step[far] = np.where(np.isfinite(mix2["step"]), mix2["step"], 0.0)
+            self.X[far] += step[far]
+            for k, v in mix2.items():
+                mix[k][far] = v
+            for x, v in ((J, J2), (E, E2), (ok, ok2), (a0, a02)):
+                put_last(x, far, v)
         # the same point as stated (rows and bias columns scaled by g): where nothing scaled them (s = g = 1) the
         # mixture just computed, else computed again for those problems
         cov_stated = mix["covariance"].copy()
         restate = np.flatnonzero(~((s == 1).all(axis=(0, 1)) & (g == 1).all(axis=(0, 1))))
         if restate.size:
-            J0, E0, w0, a0g = (take_last(x, restate) for x in (J, E, w, a0 * g))
             g0 = take_last(g, restate)
-            share0 = (np.where(take_last(drift_pix, restate), 0.0, np.minimum(a0g[:2] ** 2, 1.0))
-                      if self.split_attitude else None)
-            Jm, Em, am, wm, share0 = self._with_terrain(J0 * g0, E0 * g0, a0g, w0, share0, restate)
-            cov_stated[restate] = bias_mixture.mixture(Jm, Em, am, wm, None if share0 is None
-                                                       else bias_mixture.ratios(share0, wm))["covariance"]
+            cov_stated[restate] = self._mix(*(take_last(x, restate) for x in (J, E, ok)), g0, g0, drift_pix[restate],
+                                            restate)[0]["covariance"]
         # the bias in units of the stated prior: the columns passed carry the misfit's scaling s_bias / s
         unit = (s_bias / s)[0, 0]
         mix["bias"] = mix["bias"] * unit[:, None]
         mix["bias_var"] = mix["bias_var"] * (unit * unit)[:, None]
         mix["bias_cross"] = mix["bias_cross"] * unit[:, None, None]
         mix["prior_scale"] = unit
-        # the residuals at the final X: the second round's, moved by its (millimetre) step to first order
+        # the residuals at the final X, to first order
         E_report = E - np.einsum("cknb,bc->knb", J, step)
-        E_report[:2] -= a0[:2] * mix["bias"].T[:, None, :]
+        E_report[:2] -= a0 * mix["bias"].T[:, None, :]
         return mix, cov_stated, E_report
+
+    def _mix(self, J, E, ok, s, s_bias, drift_pix, idx):
+        """`bias_mixture.mixture` of the problems idx (a slice or indices) at J (3,3,n,b), E (3,n,b) (the bias not
+        removed), rows in use ok, with the final weights; drift_pix (b,): no attitude variance split there (a
+        drift is neither constant nor frame-to-frame). Returns it and the bias columns a0 (2,n,b) it used."""
+        a0 = np.where(ok[:2], self.a[..., idx], 0.0)
+        w = np.where(ok, 1.0 if self.wr is None else self.wr[..., idx], 0.0)
+        a_mix = a0 * s_bias[:2]
+        # the attitude's share of each row's variance, as the columns passed weigh it (a bias at the largest prior
+        # is the whole attitude error); none where the residuals drift
+        share = np.where(drift_pix, 0.0, np.minimum(a_mix ** 2, 1.0)) if self.split_attitude else None
+        Jm, Em, am, wm, share = self._with_terrain(J * s, E * s, a_mix, w, share, idx)
+        return bias_mixture.mixture(Jm, Em, am, wm, None if share is None else bias_mixture.ratios(share, wm)), a0
 
 
 def _terrain_rows(terrain, X: np.ndarray):
@@ -663,44 +665,54 @@ def _add_terrain(N, g, jt, et, use=None):
 
 
 def _profile_bias(E, a, robust, z):
-    """The bias-corrected residuals E - a z (3,n,b) and z (3,b): the bias (in prior standard deviations) that
-    minimizes sum rho(E - a z) + |z|^2 / 2 for the u and v rows (a few IRLS rounds from the previous z; the
-    range rows carry no bias; a problem keeps its bias once it moves by at most PROFILE_TOL, the rounds stop when
-    every problem has)."""
-    a2 = a[:2]
-    aE, aa = a2 * E[:2], a2 * a2  # (2,n,b)
+    """The bias-corrected residuals E - a z (3,n,b) (E in place; a (2,n,b) the u and v rows' bias columns) and
+    z (3,b): the bias (in prior standard deviations) that minimizes sum rho(E - a z) + |z|^2 / 2 over the u and v
+    rows (a few IRLS rounds from the previous z; a problem keeps its bias once it moves by at most PROFILE_TOL,
+    the rounds stop when every problem has; once fewer than half still move, they go on with those alone)."""
+    aEa = np.concatenate([a * E[:2], a * a])  # (4,n,b): a E of the u and v rows, then a a
     if robust is None:
-        z[:2] = aE.sum(axis=1) / (1.0 + aa.sum(axis=1))
+        z[:2] = aEa[:2].sum(axis=1) / (1.0 + aEa[2:].sum(axis=1))
+    Ew, aw, zw, work = E[:2], a, z[:2], slice(None)  # the problems still iterated (work) and their E, a, z
     live = np.ones(z.shape[1], dtype=bool)  # the problems whose profile still moves (the others keep theirs)
     for _ in range(0 if robust is None else 4):
-        Euv = E[:2] - a2 * z[:2, None, :]
+        Euv = Ew - aw * zw[:, None, :]
         if robust == "redescending":  # one weight per frame for both rows
             w = pixel_pair_redescending(Euv[0], Euv[1], rho=False)[1]
-            num, den = np.einsum("nb,knb->kb", w, aE), np.einsum("nb,knb->kb", w, aa)
+            nd = np.einsum("nb,knb->kb", w, aEa)
         else:
             w = _rho_and_weight(Euv, robust, rho=False)[1]
-            num, den = np.einsum("knb,knb->kb", w, aE), np.einsum("knb,knb->kb", w, aa)
-        zn = num / (1.0 + den)
-        moved = (np.abs(zn - z[:2]) > PROFILE_TOL).any(axis=0)  # per problem: its weights changed (NaN: no)
-        z[:2] = np.where(live, zn, z[:2])
+            nd = np.concatenate([np.einsum("knb,knb->kb", w, aEa[:2]), np.einsum("knb,knb->kb", w, aEa[2:])])
+        zn = nd[:2] / (1.0 + nd[2:])
+        moved = (np.abs(zn - zw) > PROFILE_TOL).any(axis=0)  # per problem: its weights changed (NaN: no)
+        zw = np.where(live, zn, zw)
         live &= moved
+        z[:2, work] = zw
         if not live.any():  # every problem's weights stand: its profile is exact
             break
-    return E - a * z[:, None, :], z
+        if 2 * np.count_nonzero(live) < live.size:
+            keep = np.flatnonzero(live)
+            work = keep if isinstance(work, slice) else work[keep]
+            Ew, aw, aEa, zw = (take_last(x, keep) for x in (Ew, aw, aEa, zw))
+            live = np.ones(keep.size, dtype=bool)
+    E[:2] -= a * z[:2, None, :]
+    return E, z
 
 
-def _bias_schur(N, J, a, w):
-    """Eliminate the u and v bias from the six normal-matrix entries N (in place): N -= h h^T / (1 + s) with
-    h = J^T W a, s = a^T W a per group. Returns [(h (b,3), s (b,)) for u, v]."""
+def _bias_terms(J, a, w):
+    """[(h (b,3), s (b,)) for the u and v bias]: h = J^T W a, s = a^T W a over that group's rows."""
     out = []
     for k in (0, 1):
         wa = a[k] if w is None else w[k] * a[k]
-        s = np.einsum("nb,nb->b", wa, a[k])
-        h = np.einsum("cnb,nb->cb", J[:, k], wa)
-        for e, (c, d) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
-            N[e] = N[e] - h[c] * h[d] / (1.0 + s)
-        out.append((h.T, s))
+        out.append((np.einsum("cnb,nb->bc", J[:, k], wa), np.einsum("nb,nb->b", wa, a[k])))
     return out
+
+
+def _schur(N, hs):
+    """Eliminate the u and v bias (`_bias_terms` hs) from the six normal-matrix entries N (in place):
+    N -= h h^T / (1 + s)."""
+    for h, s in hs:
+        for e, (c, d) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
+            N[e] = N[e] - h[:, c] * h[:, d] / (1.0 + s)
 
 
 def _bias_summary(it: White, cov, hs, vf_chi) -> dict:
@@ -752,21 +764,20 @@ def _vce_factors(J, E, ok, robust, a=None, terrain_rows=None):
     (redundancy of the group >= 0.5)."""
     _, w = _cost_weights(E, robust)
     N, _ = _normal(J, E, w)
-    hs = _bias_schur(N, J, a, w) if a is not None else None
+    hs = _bias_terms(J, a, w) if a is not None else []
+    _schur(N, hs)
     if terrain_rows is not None:
         _add_terrain(N, None, *terrain_rows)
-    inv = cofactors3(N)[0]
+    inv = C00, C01, C02, C11, C12, C22 = cofactors3(N)[0]
     j0, j1, j2 = J
     quad = (inv[0] * j0 * j0 + inv[3] * j1 * j1 + inv[5] * j2 * j2
             + 2.0 * (inv[1] * j0 * j1 + inv[2] * j0 * j2 + inv[4] * j1 * j2))
-    if hs is not None:
-        C00, C01, C02, C11, C12, C22 = inv
-        for k, (h, s) in enumerate(hs):
-            h0, h1, h2 = h[:, 0], h[:, 1], h[:, 2]
-            c = [-(C00 * h0 + C01 * h1 + C02 * h2) / (1 + s), -(C01 * h0 + C11 * h1 + C12 * h2) / (1 + s),
-                 -(C02 * h0 + C12 * h1 + C22 * h2) / (1 + s)]
-            czz = 1.0 / (1 + s) - (c[0] * h0 + c[1] * h1 + c[2] * h2) / (1 + s)
-            quad[k] = quad[k] + 2.0 * a[k] * (J[0, k] * c[0] + J[1, k] * c[1] + J[2, k] * c[2]) + a[k] ** 2 * czz
+    for k, (h, s) in enumerate(hs):
+        h0, h1, h2 = h[:, 0], h[:, 1], h[:, 2]
+        c = [-(C00 * h0 + C01 * h1 + C02 * h2) / (1 + s), -(C01 * h0 + C11 * h1 + C12 * h2) / (1 + s),
+             -(C02 * h0 + C12 * h1 + C22 * h2) / (1 + s)]
+        czz = 1.0 / (1 + s) - (c[0] * h0 + c[1] * h1 + c[2] * h2) / (1 + s)
+        quad[k] = quad[k] + 2.0 * a[k] * (J[0, k] * c[0] + J[1, k] * c[1] + J[2, k] * c[2]) + a[k] ** 2 * czz
     lev = quad if w is None else w * quad
     q = E * E if w is None else w * E * E
     use = ok if w is None else ok & (w > 0)

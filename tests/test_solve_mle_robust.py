@@ -225,3 +225,21 @@ def test_what_mle_reports_belongs_to_the_position_it_returns(robust):
     _, r, ok = pixel_model(Stacked.from_batch(b), be.position_m)
     reported = be.extras["residuals"][:, :, :2].reshape(200, -1)
     assert np.abs(np.where(ok, reported - r, 0.0)).max() < 1e-9
+
+
+def test_the_bias_averaged_answer_is_converged_and_its_residuals_are_at_it():
+    """The default mle (bias size averaged by the flight's evidence, after the iteration): its answer is the
+    mixture's solution to tol_m, and the residuals it reports are those at the returned position with the
+    reported mean bias (f * angle in u and v) removed."""
+    from pipeline.solve.stacked import pixel_model
+
+    b = paper_batch(200, seed=5)
+    coarse, fine = (solve_batch("mle", b, tol_m=tol) for tol in (1e-4, 1e-7))
+    assert np.abs(coarse.position_m - fine.position_m).max() < 1e-3  # a few tol_m: both converged
+    st = Stacked.from_batch(b)
+    _, r, ok = pixel_model(st, coarse.position_m)
+    fx, fy = st.focal_px()
+    bias_rad = np.deg2rad(coarse.extras["bias_deg"])
+    offset_px = np.stack([fx * bias_rad[:, :1], fy * bias_rad[:, 1:]], axis=-1).reshape(200, -1)
+    reported = coarse.extras["residuals"][:, :, :2].reshape(200, -1)
+    assert np.abs(np.where(ok, reported - (r - offset_px), 0.0)).max() < 1e-4  # px; pixel sigma ~3 px

@@ -45,9 +45,11 @@ DEFAULT_BIAS_PRIOR_DEG = 0.5
 START_TOL_SIGMA = 0.1
 #: the bias profile's IRLS rounds end once no problem's bias (in prior standard deviations) moves by more
 PROFILE_TOL = 1e-12
-#: the bias mixture's step is relinearized where longer than this many standard deviations (the next step grows
-#: as its square: paper's problems ~0.6 sigma, next ~0.1 %; zoo flights 0.5 % after 1.1 sigma, 17 % after 4.1)
-MIXTURE_RELINEARIZE_SIGMA = 2.0
+#: the bias mixture's step is relinearized (the model evaluated where it leads and the mixture taken again) while
+#: longer than this many standard deviations of the target; the steps shrink quadratically (paper's problems:
+#: ~0.6 sigma, then ~0.1 %), so the step left untried is ~1e-4 of a sigma or less
+MIXTURE_RELINEARIZE_SIGMA = 0.1
+MIXTURE_MAX_ROUNDS = 5
 VCE_MAX_ROUNDS = 10
 VCE_TOL = 0.01
 
@@ -67,6 +69,7 @@ def _curvature(e: np.ndarray, robust: str) -> np.ndarray:
 def _rho_and_weight(e: np.ndarray, robust: str | None, rho: bool = True):
     """Huber's or Cauchy's loss rho(e) and IRLS weight rho'(e)/e of standardized residuals e (rho None unless
     asked for)."""
+    assert robust in ("huber", "cauchy"), robust  # the callers handle None and "redescending" themselves
     if robust == "huber":
         a = np.abs(e)
         w = np.minimum(1.0, HUBER_C / np.maximum(a, 1e-300))
@@ -386,9 +389,8 @@ class White(_iterate.Model):
         N, g = _normal(J, E, w)
         if a is not None:
             _schur(N, _bias_terms(J, a, w))
-        if self.newton:
-            N += _normal(J, E, w, _curvature(E, self.robust))[0]
-        return np.stack([*N[:6], *g, *N[6:]])
+        newton = _normal(J, E, w, _curvature(E, self.robust))[0] if self.newton else []
+        return np.stack([*N, *g, *newton])
 
     #: each problem's iteration state (planes over the B problems; a read-only), kept apart for the active ones
     STATE = ("NG", "E", "ok", "wr", "z", "a")
@@ -596,11 +598,14 @@ class White(_iterate.Model):
         E[:2] += self.a * self.z[:2, None, :]
         mix, a0 = self._mix(J, E, ok, s, s_bias, drift_pix, slice(None))
         step = np.where(~failed[:, None] & np.isfinite(mix["step"]), mix["step"], 0.0)
+        self.X += step
         cinv = inverse3(mix["covariance"])[0]
         far = np.flatnonzero(np.einsum("bi,bij,bj->b", step, cinv, step) > MIXTURE_RELINEARIZE_SIGMA ** 2)
-        self.X += step
         if far.size:
             J, ok, a0 = J.copy(), ok.copy(), a0.copy()
+        for _ in range(MIXTURE_MAX_ROUNDS - 1):
+            if not far.size:
+                break
             J2, E2, ok2 = evaluate(self.pl.take(far), self.X[far])
             mix2, a02 = self._mix(J2, E2, ok2, take_last(s, far), take_last(s_bias, far), drift_pix[far], far)
             step[far] = np.where(np.isfinite(mix2["step"]), mix2["step"], 0.0)
@@ -609,6 +614,8 @@ class White(_iterate.Model):
                 mix[k][far] = v
             for x, v in ((J, J2), (E, E2), (ok, ok2), (a0, a02)):
                 put_last(x, far, v)
+            far = far[np.einsum("bi,bij,bj->b", step[far], inverse3(mix2["covariance"])[0], step[far])
+                      > MIXTURE_RELINEARIZE_SIGMA ** 2]
         # the same point as stated (rows and bias columns scaled by g): where nothing scaled them (s = g = 1) the
         # mixture just computed, else computed again for those problems
         cov_stated = mix["covariance"].copy()

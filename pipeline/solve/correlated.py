@@ -227,6 +227,7 @@ class Correlated(_iterate.Model):
     weights w_i = rho'(z)/z come from the rows' marginal standardized residuals z_i = r_i / sqrt(C_ii vf), which
     the residual planes (3,n,K) hold; the drift is modelled (no autocorrelation inflation in `mle.finish`)."""
 
+    damped = True
     drift_modelled = True
 
     def __init__(self, st: Stacked, models: Models, X: np.ndarray, vce: bool, rows: list):
@@ -291,14 +292,29 @@ class Correlated(_iterate.Model):
 
     def step(self, idx, X, lam):
         G = np.stack([f[1] for f in self._forms(idx)])
-        return solve_spd(G[:, :3, :3], G[:, :3, 3])
+        N = G[:, :3, :3]
+        if lam is not None:  # Levenberg-Marquardt: N + lam diag(N)
+            N = N + lam[:, None, None] * (N * np.eye(3))
+        return solve_spd(N, G[:, :3, 3])
 
     def trial(self, idx, Xn):
+        """The rows at Xn; accepted where the GLS objective r^T C_w^-1 r (at the current weights and variance
+        factors) did not rise: the trial's forms are kept, so an accepted step's next step reuses them."""
         Xall = np.repeat(Xn[:1], self.K, axis=0)  # every model's rows at once (the others discarded)
         Xall[idx] = Xn
         A = rows_in_use(self.st, Xall)
         self._A = [A[k] for k in idx]
-        return super().trial(idx, Xn)
+        cost0 = np.array([f[1][3, 3] for f in self._forms(idx)])
+        ks = np.asarray(idx)
+        sk = self.models if len(ks) == self.K else self.models.take(ks)
+        vfs = self.vf[ks]
+        qs = quadratic_forms_stacked(sk, np.stack(self._A), self.w[:, ks].T, vfs)
+        cost = np.empty(len(ks))
+        for j, (k, q) in enumerate(zip(ks, qs, strict=True)):
+            out = (q, sum(f for f, _, _ in q))
+            self._last_forms[k] = (self._A[j], self.w[:, k], vfs[j], out)
+            cost[j] = out[1][3, 3]
+        return cost <= cost0 * (1 + 1e-12) + 1e-300
 
     def accept(self, idx, accepted):
         if accepted.any():

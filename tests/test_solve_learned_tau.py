@@ -26,7 +26,7 @@ def test_likelihood_changes_with_tau_and_the_true_tau_wins(told):
         got = learned_tau.learn_tau([st], obs.truth_m[None] + 1.0, told, told.pixel_px is None, 1e-4, 50)[0]
         assert got is not None
         _, att, lls, _ = got
-        ll = np.array([lls[(t, att)] for t in learned_tau.TAU_GRID_S])
+        ll = np.array([lls[(t, att, t)] for t in learned_tau.TAU_GRID_S])  # the position error drifting too
         assert np.ptp(ll) > 1.0
         total += ll
     assert learned_tau.TAU_GRID_S[int(np.argmax(total))] == TRUE_TAU_S
@@ -87,3 +87,19 @@ def test_the_learned_answer_does_not_jump_when_its_start_moves_by_a_micrometre(n
     sd = float(np.sqrt(np.linalg.eigvalsh(answers[0][1]).max()))
     for X, _ in answers[1:]:
         assert np.linalg.norm(X - answers[0][0]) < min(0.01 * sd, 0.01)
+
+
+@pytest.mark.parametrize("position_tau_s", [TRUE_TAU_S, None], ids=["drifting", "white"])
+def test_the_evidence_tells_a_drifting_position_error_from_a_white_one(position_tau_s):
+    """Attitude errors Gauss-Markov with tau 20 s, position errors (5 m) drifting with them or white: the position
+    family the data were drawn with has the larger summed likelihood (each problem's over the taus, then summed)."""
+    told = PAPER_SIGMA
+    total = np.zeros(2)
+    for obs in correlated_problems(20, n=60, sigma=told, attitude_tau_s=TRUE_TAU_S, position_tau_s=position_tau_s,
+                                   seed=7):
+        st = Stacked.from_observations(obs)
+        _, att, lls, _ = learned_tau.learn_tau([st], obs.truth_m[None], told, False, 1e-4, 50)[0]
+        for j, white in enumerate((False, True)):
+            ll = np.array([lls[(t, att, None if white else t)] for t in learned_tau.TAU_GRID_S])
+            total[j] += ll.max() + np.log(np.exp(ll - ll.max()).sum())
+    assert int(np.argmax(total)) == (1 if position_tau_s is None else 0)

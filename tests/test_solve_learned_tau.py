@@ -23,7 +23,7 @@ def test_likelihood_changes_with_tau_and_the_true_tau_wins(told):
     total = np.zeros(len(learned_tau.TAU_GRID_S))
     for obs in correlated_problems(20, n=60, attitude_tau_s=TRUE_TAU_S, position_tau_s=TRUE_TAU_S, seed=5):
         st = Stacked.from_observations(dataclasses.replace(obs, sigma=told))
-        got = learned_tau.learn_tau([st], obs.truth_m[None] + 1.0, told, told.pixel_px is None, 1e-4, 50)[0]
+        got = learned_tau.learn_tau([st], obs.truth_m[None] + 1.0, told, None, told.pixel_px is None, 1e-4, 50)[0]
         assert got is not None
         _, att, lls, _ = got
         ll = np.array([lls[(t, att, t)] for t in learned_tau.TAU_GRID_S])  # the position error drifting too
@@ -40,7 +40,7 @@ def test_the_attitude_size_is_learned_where_unstated():
     chosen = []
     for obs in correlated_problems(12, n=60, attitude_tau_s=TRUE_TAU_S, position_tau_s=TRUE_TAU_S, seed=6):
         st = Stacked.from_observations(dataclasses.replace(obs, sigma=told))
-        _, att, _, res = learned_tau.learn_tau([st], obs.truth_m[None], told, True, 1e-4, 50)[0]
+        _, att, _, res = learned_tau.learn_tau([st], obs.truth_m[None], told, None, True, 1e-4, 50)[0]
         chosen.append(att * np.sqrt(res[5]["variance_factor_pixel"][0]))
     assert np.mean((np.array(chosen) > 0.1) & (np.array(chosen) < 0.4)) >= 0.75
 
@@ -98,7 +98,7 @@ def test_the_evidence_tells_a_drifting_position_error_from_a_white_one(position_
     for obs in correlated_problems(20, n=60, sigma=told, attitude_tau_s=TRUE_TAU_S, position_tau_s=position_tau_s,
                                    seed=7):
         st = Stacked.from_observations(obs)
-        _, att, lls, _ = learned_tau.learn_tau([st], obs.truth_m[None], told, False, 1e-4, 50)[0]
+        _, att, lls, _ = learned_tau.learn_tau([st], obs.truth_m[None], told, None, False, 1e-4, 50)[0]
         for j, white in enumerate((False, True)):
             ll = np.array([lls[(t, att, None if white else t)] for t in learned_tau.TAU_GRID_S])
             total[j] += ll.max() + np.log(np.exp(ll - ll.max()).sum())

@@ -1,10 +1,10 @@
 """The telemetry errors' correlation time (and, where the sigma does not state it, their size) learned from the
 flight by evidence, for `mle` on one problem whose sigma gives no correlation time (docs/solvers.md, "Correlation
 time learned from the flight"): the GLS fit (`correlated.gls`) under every candidate of `candidates`, without the
-rows the first solve rejected and without a robust loss (the first solve's loss did that job; an iteratively
-reweighted GLS fit has no objective it descends and wandered, docs/solvers.md), weighted by its restricted (REML)
-Gaussian likelihood (`log_likelihoods`), the same Gaussian objective at the same rows as the fit; the answer is the
-candidates' posterior mixture, with the fit checks of the most likely one.
+rows the first solve rejected and without robust weights (the first solve's loss did that job; an iteratively
+reweighted GLS fit descends no objective and wandered, docs/solvers.md), weighted by its restricted (REML)
+Gaussian likelihood (`log_likelihoods`); the answer is the candidates' posterior mixture, with the fit checks of
+the most likely one.
 """
 
 from __future__ import annotations
@@ -80,7 +80,8 @@ def _families(sigmas: list) -> list:
     return [f for f in (np.flatnonzero(~white), np.flatnonzero(white)) if f.size]
 
 
-def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, vce: bool, tol_m: float, max_iterations: int) -> list:
+def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
+              max_iterations: int) -> list:
     """Per problem of sts (B = 1 each, without their rejected rows), from its start X0s[i] (3,): the GLS `mle`
     averaged over the models of `candidates` (correlation time, position error drifting or white, and
     attitude sigma where unstated), each weighted by
@@ -90,9 +91,10 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, vce: bool, tol_m: float,
     error_model_attitude_deg, error_model_position_tau_s (NaN: white), error_model_log_likelihoods over TAU_GRID_S
     at its attitude sigma and position family) with the mixture's
     estimate and covariance), or None when no model gave an answer. The candidates' fits of problems with the same
-    rows in use iterate side by side (each as alone: `correlated.gls`). The fits are plain (damped) GLS on the
-    rows the first solve kept: the robust loss's weights on the rows' marginal residuals under a correlated C are a
-    fixed-point map with no objective, which from starts 1e-6 m apart ended metres to kilometres apart."""
+    rows in use iterate side by side (each as alone: `correlated.gls`). The fits are damped GLS on the rows the
+    first solve kept, every row at weight 1 (the robust loss's phases and scale guard kept: `correlated.gls`'s
+    reweight False): the robust weights on the rows' marginal residuals under a correlated C are a fixed-point map
+    with no objective, which from starts 1e-6 m apart ended metres to kilometres apart."""
     sigmas = [dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=ptau, attitude_deg=att)
               for tau, att, ptau in candidates(sigma)]
     K = len(sigmas)
@@ -110,8 +112,8 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, vce: bool, tol_m: float,
             for fam in _families(sigmas):
                 models = _correlated.Models.concat([_correlated.problem_models(sts[i], X0[t], [sigmas[k] for k in fam])
                                                     for t, i in enumerate(g)])
-                per_family.append((fam, _correlated.gls([sts[i] for i in g], X0, models, None, vce, tol_m,
-                                                        max_iterations, rows0)))
+                per_family.append((fam, _correlated.gls([sts[i] for i in g], X0, models, robust, vce, tol_m,
+                                                        max_iterations, rows0, reweight=False)))
         except ValueError:  # the models' states differ (`Models.concat`): one problem at a time
             if len(g) == 1:
                 raise

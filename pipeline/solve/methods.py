@@ -311,7 +311,8 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
     if not need.size:
         return res
     sts = [_learned.without_rejected(st.take(np.array([b])), ex["rejected"][b]) for b in need]
-    learned = _learned.learn_tau(sts, res[0][need], sigma, vce, o["tol_m"], o["max_iterations"])
+    learned = _learned.learn_tau(sts, res[0][need], sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"],
+                                 o["max_iterations"])
     for b, got in zip(need, learned, strict=True):
         row = _row(res, b)
         answer = _learned_answer(row, got, sigma)

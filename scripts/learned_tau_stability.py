@@ -4,6 +4,7 @@ independent-error fit's answer) moves by 1e-6 m (docs/solvers.md, "The learned m
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py z029 z073 z087
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py z029 --candidates
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py --zoo 210
 
 A name is a zoo flight (`scripts/zoo.py`: arc, straight, obsfile, z000, ...) or an observations file. Per flight:
 the mle error, the start's error, the learned answer's error, its largest standard deviation and the largest move
@@ -47,12 +48,18 @@ def _starts(X0: np.ndarray, count: int) -> list:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("flights", nargs="+")
+    ap.add_argument("flights", nargs="*")
+    ap.add_argument("--zoo", type=int, metavar="N", help="every flight of `zoo.py --flights N --seed 0` as well")
     ap.add_argument("--starts", type=int, default=7, help="starts 1e-6 m away (default 7)")
     ap.add_argument("--candidates", action="store_true", help="every candidate model's fit, reweighted and not")
     args = ap.parse_args(argv)
+    if args.zoo:
+        import zoo
+
+        args.flights += [f.name for f in zoo.zoo(args.zoo, 0)]
     real = learned_tau.learn_tau
     calls = []
+    largest = (0.0, None)
 
     def spy(*a):
         calls.append(a)
@@ -74,6 +81,7 @@ def main(argv: list[str] | None = None) -> int:
         X = np.array([a[3][0][0] for a in answers])
         sd = float(np.sqrt(np.linalg.eigvalsh(answers[0][3][4][0]).max()))
         move = float(np.linalg.norm(X[1:] - X[0], axis=1).max())
+        largest = max(largest, (move, name), key=lambda m: m[0])
         print(f"{name}: mle {err:.2f} m; start {np.linalg.norm(starts[0][0] - truth):.2f} m; learned "
               f"{np.linalg.norm(X[0] - truth):.2f} m (tau {answers[0][0]:g} s, largest sd {sd:.1f} m); largest move "
               f"from {args.starts} starts 1e-6 m away {move:.1e} m")
@@ -100,6 +108,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"    tau {s.attitude_tau_s:5g} s, attitude {s.attitude_deg:.3g} deg, position {pos:8s}: "
                       f"{np.linalg.norm(Xk[0] - truth):8.2f} m, largest move {mv:.1e} m, iterations "
                       f"{sorted({fit[k][1] for fit in fits})}, status {sorted({fit[k][2] for fit in fits})}")
+    print(f"largest move: {largest[0]:.1e} m ({largest[1]})")
     return 0
 
 

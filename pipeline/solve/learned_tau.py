@@ -85,14 +85,15 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
     """Per problem of sts (B = 1 each, without their rejected rows), from its start X0s[i] (3,): the GLS `mle`
     averaged over the models of `candidates` (correlation time, position error drifting or white, and attitude
     sigma where unstated), each weighted by its likelihood (equal priors): the posterior mean estimate and the
-    mixture's covariance (the spread between the models included). Each answer is (tau_s, attitude_deg of the most likely model, {(tau, att, position tau or
-    None): log L}, the `correlated.gls` result tuple of that model (its fit checks and extras, and error_model_tau_s,
-    error_model_attitude_deg, error_model_position_tau_s (NaN: white), error_model_log_likelihoods over TAU_GRID_S
-    at its attitude sigma and position family) with the mixture's estimate and covariance), or None when no model gave an answer. The candidates' fits of problems with the same
-    rows in use iterate side by side (each as alone: `correlated.gls`). The fits are damped GLS on the rows the
-    first solve kept, every row at weight 1 (the robust loss's phases and scale guard kept: `correlated.gls`'s
-    reweight False): the robust weights on the rows' marginal residuals under a correlated C are a fixed-point map
-    with no objective, which from starts 1e-6 m apart ended metres to kilometres apart."""
+    mixture's covariance (the spread between the models included). Each answer is (tau_s, attitude_deg of the most
+    likely model, {(tau, att, position tau or None): log L}, the `correlated.gls` result tuple of that model (its
+    fit checks and extras, and error_model_tau_s, error_model_attitude_deg, error_model_position_tau_s (NaN:
+    white), error_model_log_likelihoods over TAU_GRID_S at its attitude sigma and position family) with the
+    mixture's estimate and covariance), or None when no model gave an answer. The candidates' fits of problems with
+    the same rows in use iterate side by side (each as alone: `correlated.gls`). The fits are damped GLS on the
+    rows the first solve kept, every row at weight 1 (the robust loss's phases and scale guard kept:
+    `correlated.gls`'s reweight False): the robust weights on the rows' marginal residuals under a correlated C are
+    a fixed-point map with no objective, which from starts 1e-6 m apart ended metres to kilometres apart."""
     sigmas = [dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=ptau, attitude_deg=att)
               for tau, att, ptau in candidates(sigma)]
     K = len(sigmas)

@@ -5,6 +5,7 @@ independent-error fit's answer) moves by 1e-6 m (docs/solvers.md, "The learned m
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py z029 z073 z087
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py z029 --candidates
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py --zoo 210
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py --told z001 z004 z029 z073
 
 A name is a zoo flight (`scripts/zoo.py`: arc, straight, obsfile, z000, ...) or an observations file. Per flight:
 the mle error, the start's error, the learned answer's error, its largest standard deviation and the largest move
@@ -52,6 +53,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--zoo", type=int, metavar="N", help="every flight of `zoo.py --flights N --seed 0` as well")
     ap.add_argument("--starts", type=int, default=7, help="starts 1e-6 m away (default 7)")
     ap.add_argument("--candidates", action="store_true", help="every candidate model's fit, reweighted and not")
+    ap.add_argument("--told", action="store_true",
+                    help="zoo flights only: instead, mle told the flight's true correlation times (`zoo.py`'s told "
+                         "sigma) with the default (reweighted) loss, from the los answer and starts 1e-6 m away")
     args = ap.parse_args(argv)
     if args.zoo:
         import zoo
@@ -66,6 +70,8 @@ def main(argv: list[str] | None = None) -> int:
         return real(*a)
 
     methods._learned.learn_tau = spy
+    if args.told:
+        return _told(args.flights, args.starts)
     for name in args.flights:
         obs = _observations(name)
         truth = obs.truth_m
@@ -109,6 +115,22 @@ def main(argv: list[str] | None = None) -> int:
                       f"{np.linalg.norm(Xk[0] - truth):8.2f} m, largest move {mv:.1e} m, iterations "
                       f"{sorted({fit[k][1] for fit in fits})}, status {sorted({fit[k][2] for fit in fits})}")
     print(f"largest move: {largest[0]:.1e} m ({largest[1]})")
+    return 0
+
+
+def _told(names: list, count: int) -> int:
+    """The configured-correlation-time path's answers from starts 1e-6 m apart (`--told`)."""
+    import zoo
+
+    for name in names:
+        f = zoo.flight(name)
+        obs = dataclasses.replace(f.obs, sigma=f.told_sigma)
+        x0 = solve("los", obs).position_m
+        X = np.array([solve("mle", obs, initial_m=x).position_m for x in _starts(x0[None], count)]).reshape(-1, 3)
+        s = f.told_sigma
+        print(f"{name} ({f.family}; told tau attitude {s.attitude_tau_s} s, position {s.position_tau_s} s): mle "
+              f"{np.linalg.norm(X[0] - obs.truth_m):.2f} m, largest move from {count} starts 1e-6 m away "
+              f"{np.linalg.norm(X[1:] - X[0], axis=1).max():.1e} m")
     return 0
 
 

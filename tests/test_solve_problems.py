@@ -86,7 +86,7 @@ def test_solve_problems_equals_solve_one_at_a_time(options, monkeypatch):
     expected = _one_by_one(problems, METHODS, options)
     batched = []  # the learned drift models fitted side by side (problems with the same rows)
     gls = correlated.gls
-    monkeypatch.setattr(correlated, "gls", lambda sts, *a: batched.append(len(sts)) or gls(sts, *a))
+    monkeypatch.setattr(correlated, "gls", lambda sts, *a, **k: batched.append(len(sts)) or gls(sts, *a, **k))
     got = solve_problems(problems, METHODS, options)
     assert len(got) == len(problems)
     for a, b in zip(expected, got, strict=True):
@@ -96,7 +96,7 @@ def test_solve_problems_equals_solve_one_at_a_time(options, monkeypatch):
     if not options:
         assert all("error_model" in g["mle"].extras for g in got[7:10])
         assert not any("error_model" in g["mle"].extras for g in got[10:])  # white errors in the same batch
-        assert [n for n in batched if n > 1] == [3]
+        assert [n for n in batched if n > 1] == [3, 3]  # one call per position family (drifting, white)
 
 
 def test_solve_problems_reports_a_bad_option_for_every_problem():

@@ -189,12 +189,13 @@ def quadratic_forms_stacked(sk: Models, A: np.ndarray, w: np.ndarray, vf: np.nda
 
 
 def gls(sts: list, X0s: np.ndarray, models: Models, robust: str | None, vce: bool, tol_m: float,
-        max_iterations: int, rows0: list | None = None):
+        max_iterations: int, rows0: list | None = None, reweight: bool = True):
     """Generalized least squares `mle` of T problems (B = 1 each) with the same rows in use (the same frames with
     a pixel and with a range, in the same time order) from usable starts X0s (T,3), each
     under K models of its rows (models: T K, problem by problem), all T K fits side by side, each exactly as
     alone: `Correlated` through the one iteration and finish of `mle.run`; rows0: the problems' `rows_in_use` at
-    their starts where the caller has them. Returns `mle.finish`'s tuple over the T K fits."""
+    their starts where the caller has them; reweight False: the loss's phases and scale guard, no robust weights
+    (`Correlated`). Returns `mle.finish`'s tuple over the T K fits."""
     T = len(sts)
     K = models.Cii.shape[0] // T
     X = np.repeat(np.asarray(X0s, dtype=np.float64).reshape(T, 3), K, axis=0)
@@ -203,7 +204,7 @@ def gls(sts: list, X0s: np.ndarray, models: Models, robust: str | None, vce: boo
     if rows0 is None:
         rows0 = [rows_in_use(st, X[t * K]) for t, st in enumerate(sts)]
     rows = [r for r in rows0 for _ in range(K)]
-    return _mle.run(Correlated(stk, models, X, vce, rows), stk, X, status, bad, X.copy(), robust, tol_m,
+    return _mle.run(Correlated(stk, models, X, vce, rows, reweight), stk, X, status, bad, X.copy(), robust, tol_m,
                     max_iterations)
 
 
@@ -223,17 +224,22 @@ def stack_problems(sts: list) -> Stacked:
 
 class Correlated(_iterate.Model):
     """The `mle` model (`iterate.drive`, `mle.finish`) of one problem (B = 1) with time-correlated errors under K
-    residual models at once (`gls`): iteratively reweighted generalized least squares, no damping. The robust
-    weights w_i = rho'(z)/z come from the rows' marginal standardized residuals z_i = r_i / sqrt(C_ii vf), which
-    the residual planes (3,n,K) hold; the drift is modelled (no autocorrelation inflation in `mle.finish`)."""
+    residual models at once (`gls`): iteratively reweighted generalized least squares, damped (Levenberg-Marquardt
+    in `iterate.drive`: a step must not raise r^T C_w^-1 r at the current weights). The robust weights
+    w_i = rho'(z)/z come from the rows' marginal standardized residuals z_i = r_i / sqrt(C_ii vf), which the
+    residual planes (3,n,K) hold; the drift is modelled (no autocorrelation inflation in `mle.finish`). With
+    reweight False every row keeps weight 1 (the loss's phases and `mle.robust_scale` still apply): the weights'
+    update under a non-diagonal C descends no objective, and where many rows sit near the loss's corners it
+    wanders without converging (docs/solvers.md, "learned correlation time")."""
 
+    damped = True
     drift_modelled = True
 
-    def __init__(self, st: Stacked, models: Models, X: np.ndarray, vce: bool, rows: list):
+    def __init__(self, st: Stacked, models: Models, X: np.ndarray, vce: bool, rows: list, reweight: bool = True):
         """st: problems with the same rows in use, each once per model (`gls`); X (K,3) their starts, rows the
         list of each model's rows at its start (`rows_in_use`)."""
         K, m = models.Cii.shape
-        self.st, self.models, self.K, self.X, self.vce = st, models, K, X, vce
+        self.st, self.models, self.K, self.X, self.vce, self.reweight = st, models, K, X, vce, reweight
         self.sd = np.sqrt(models.Cii).T  # (m, K)
         self.grp = np.r_[np.zeros(models.npix, dtype=int), np.ones(m - models.npix, dtype=int)]
         self.vf, self.guard = np.ones((K, 2)), np.ones((K, 2))
@@ -260,7 +266,7 @@ class Correlated(_iterate.Model):
             self._isd, self._scaled_vf = self._planes(1.0 / self._s, 1.0), self.vf.copy()
         r = np.stack([A[:, 3] for A in self.A], axis=1)
         self.E = self._planes(r / self._s, 0.0)
-        self.wr = _mle._cost_weights(self.E, self.robust)[1]
+        self.wr = _mle._cost_weights(self.E, self.robust)[1] if self.reweight else None
         self.w = np.ones(self._s.shape) if self.wr is None else self.wr.reshape(-1, self.wr.shape[-1])[self._at]
 
     def _forms(self, idx, var_scale=None) -> list:
@@ -291,14 +297,29 @@ class Correlated(_iterate.Model):
 
     def step(self, idx, X, lam):
         G = np.stack([f[1] for f in self._forms(idx)])
-        return solve_spd(G[:, :3, :3], G[:, :3, 3])
+        N = G[:, :3, :3]
+        if lam is not None:  # Levenberg-Marquardt: N + lam diag(N)
+            N = N + lam[:, None, None] * (N * np.eye(3))
+        return solve_spd(N, G[:, :3, 3])
 
     def trial(self, idx, Xn):
+        """The rows at Xn; accepted where the GLS objective r^T C_w^-1 r (at the current weights and variance
+        factors) did not rise: the trial's forms are kept, so an accepted step's next step reuses them."""
         Xall = np.repeat(Xn[:1], self.K, axis=0)  # every model's rows at once (the others discarded)
         Xall[idx] = Xn
         A = rows_in_use(self.st, Xall)
         self._A = [A[k] for k in idx]
-        return super().trial(idx, Xn)
+        cost0 = np.array([f[1][3, 3] for f in self._forms(idx)])
+        ks = np.asarray(idx)
+        sk = self.models if len(ks) == self.K else self.models.take(ks)
+        vfs = self.vf[ks]
+        qs = quadratic_forms_stacked(sk, np.stack(self._A), self.w[:, ks].T, vfs)
+        cost = np.empty(len(ks))
+        for j, (k, q) in enumerate(zip(ks, qs, strict=True)):
+            out = (q, sum(f for f, _, _ in q))
+            self._last_forms[k] = (self._A[j], self.w[:, k], vfs[j], out)
+            cost[j] = out[1][3, 3]
+        return cost <= cost0 * (1 + 1e-12) + 1e-300
 
     def accept(self, idx, accepted):
         if accepted.any():

@@ -1,8 +1,10 @@
 """The telemetry errors' correlation time (and, where the sigma does not state it, their size) learned from the
 flight by evidence, for `mle` on one problem whose sigma gives no correlation time (docs/solvers.md, "Correlation
 time learned from the flight"): the GLS fit (`correlated.gls`) under every candidate of `candidates`, without the
-rows the first solve rejected, weighted by its restricted (REML) Gaussian likelihood (`log_likelihoods`); the
-answer is the candidates' posterior mixture, with the fit checks of the most likely one.
+rows the first solve rejected and without robust weights (the first solve's loss did that job; an iteratively
+reweighted GLS fit descends no objective and wandered, docs/solvers.md), weighted by its restricted (REML)
+Gaussian likelihood (`log_likelihoods`); the answer is the candidates' posterior mixture, with the fit checks of
+the most likely one.
 """
 
 from __future__ import annotations
@@ -37,13 +39,15 @@ def log_likelihoods(st: Stacked, Xs: np.ndarray, sigmas: list, vfs: list) -> lis
     candidates), in one `correlated.quadratic_forms_stacked`; every row at full weight (the same data under every
     model); C's overall scale k = max(chi2 / m, 1) (the stated sigmas a lower bound: with sigmas stated too small,
     a model is not chosen for hiding the misfit in the target)."""
-    K = len(sigmas)
-    models = _correlated.Models.concat([_correlated.problem_models(st, X, [s]) for X, s in zip(Xs, sigmas,
-                                                                                              strict=True)])
-    A = _correlated.rows_in_use(st.take(np.zeros(K, dtype=np.intp)), Xs)
-    m = models.Cii.shape[1]
-    qs = _correlated.quadratic_forms_stacked(models, A, np.ones((K, m)),
-                                             np.asarray(vfs, dtype=np.float64).reshape(K, 2))
+    vfs = np.asarray(vfs, dtype=np.float64).reshape(-1, 2)
+    qs: list = [None] * len(sigmas)
+    for fam in _families(sigmas):  # one `quadratic_forms_stacked` per family of models with the same states
+        K = len(fam)
+        models = _correlated.Models.concat([_correlated.problem_models(st, Xs[k], [sigmas[k]]) for k in fam])
+        A = _correlated.rows_in_use(st.take(np.zeros(K, dtype=np.intp)), Xs[fam])
+        m = models.Cii.shape[1]
+        for k, q in zip(fam, _correlated.quadratic_forms_stacked(models, A, np.ones((K, m)), vfs[fam]), strict=True):
+            qs[k] = q
     out = []
     for q in qs:
         G = sum(f for f, _, _ in q)
@@ -60,23 +64,38 @@ def log_likelihoods(st: Stacked, Xs: np.ndarray, sigmas: list, vfs: list) -> lis
 
 
 def candidates(sigma: Sigma):
-    """The (tau_s, attitude_deg) grid: the stated attitude sigma, or ATTITUDE_GRID_DEG where none is stated."""
+    """The (tau_s, attitude_deg, position_tau_s) grid: the stated attitude sigma, or ATTITUDE_GRID_DEG where none is
+    stated; the position error drifting with the attitude's tau, or (where the sigma states a position accuracy)
+    white: a GNSS error that wanders with the attitude's tau moves the target as a shared offset, one that does not
+    must not be modelled so (zoo flight z024: 22.5 m tied, 5.2 m white, the white family 4.6 log units likelier)."""
     atts = (sigma.attitude_deg,) if sigma.attitude_deg else ATTITUDE_GRID_DEG
-    return [(tau, att) for att in atts for tau in TAU_GRID_S]
+    positions = (True, False) if sigma.position_m else (True,)
+    return [(tau, att, tau if tied else None) for tied in positions for att in atts for tau in TAU_GRID_S]
+
+
+def _families(sigmas: list) -> list:
+    """Index arrays of the sigmas whose models have the same states (`correlated.Models.concat`): the position
+    error correlated or white."""
+    white = np.array([s.position_tau_s is None for s in sigmas])
+    return [f for f in (np.flatnonzero(~white), np.flatnonzero(white)) if f.size]
 
 
 def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
               max_iterations: int) -> list:
     """Per problem of sts (B = 1 each, without their rejected rows), from its start X0s[i] (3,): the GLS `mle`
-    averaged over the models of `candidates` (correlation time, and attitude sigma where unstated), each weighted by
-    its likelihood (equal priors): the posterior mean estimate and the mixture's covariance (the spread between the
-    models included). Each answer is (tau_s, attitude_deg of the most likely model, {(tau, att): log L}, the
-    `correlated.gls` result tuple of that model (its fit checks and extras, and error_model_tau_s,
-    error_model_attitude_deg, error_model_log_likelihoods over TAU_GRID_S at its attitude sigma) with the mixture's
-    estimate and covariance), or None when no model gave an answer. The candidates' fits of problems with the same
-    rows in use iterate side by side (each as alone: `correlated.gls`)."""
-    sigmas = [dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau, attitude_deg=att)
-              for tau, att in candidates(sigma)]
+    averaged over the models of `candidates` (correlation time, position error drifting or white, and attitude
+    sigma where unstated), each weighted by its likelihood (equal priors): the posterior mean estimate and the
+    mixture's covariance (the spread between the models included). Each answer is (tau_s, attitude_deg of the most
+    likely model, {(tau, att, position tau or None): log L}, the `correlated.gls` result tuple of that model (its
+    fit checks and extras, and error_model_tau_s, error_model_attitude_deg, error_model_position_tau_s (NaN:
+    white), error_model_log_likelihoods over TAU_GRID_S at its attitude sigma and position family) with the
+    mixture's estimate and covariance), or None when no model gave an answer. The candidates' fits of problems with
+    the same rows in use iterate side by side (each as alone: `correlated.gls`). The fits are damped GLS on the
+    rows the first solve kept, every row at weight 1 (the robust loss's phases and scale guard kept:
+    `correlated.gls`'s reweight False): the robust weights on the rows' marginal residuals under a correlated C are
+    a fixed-point map with no objective, which from starts 1e-6 m apart ended metres to kilometres apart."""
+    sigmas = [dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=ptau, attitude_deg=att)
+              for tau, att, ptau in candidates(sigma)]
     K = len(sigmas)
     by_rows: dict[tuple, list[int]] = {}  # the same frames with a pixel and with a range (`Models.concat`: the rest)
     for i, st in enumerate(sts):
@@ -86,19 +105,32 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
     while groups:
         g = groups.pop()
         X0 = np.asarray([X0s[i] for i in g])
+        rows0 = [_correlated.rows_in_use(sts[i], X0[t]) for t, i in enumerate(g)]
         try:
-            models = _correlated.Models.concat([_correlated.problem_models(sts[i], X0[t], sigmas)
-                                                for t, i in enumerate(g)])
-            fits = _correlated.gls([sts[i] for i in g], X0, models, robust, vce, tol_m, max_iterations,
-                                   [_correlated.rows_in_use(sts[i], X0[t]) for t, i in enumerate(g)])
+            per_family = []
+            for fam in _families(sigmas):
+                models = _correlated.Models.concat([_correlated.problem_models(sts[i], X0[t], [sigmas[k] for k in fam])
+                                                    for t, i in enumerate(g)])
+                per_family.append((fam, _correlated.gls([sts[i] for i in g], X0, models, robust, vce, tol_m,
+                                                        max_iterations, rows0, reweight=False)))
         except ValueError:  # the models' states differ (`Models.concat`): one problem at a time
             if len(g) == 1:
                 raise
             groups.extend([i] for i in g)
             continue
         for t, i in enumerate(g):
-            sl = slice(t * K, (t + 1) * K)
-            out[i] = _mixture(sts[i], sigmas, (*(a[sl] for a in fits[:5]), {k: v[sl] for k, v in fits[5].items()}))
+            fits = [None] * 6
+            for fam, f in per_family:  # the problem's K fits in the order of sigmas
+                sl = slice(t * fam.size, (t + 1) * fam.size)
+                for j in range(5):
+                    if fits[j] is None:
+                        fits[j] = np.empty((K, *f[j].shape[1:]), dtype=f[j].dtype)
+                    fits[j][fam] = f[j][sl]
+                if fits[5] is None:
+                    fits[5] = {key: np.empty((K, *v.shape[1:]), dtype=v.dtype) for key, v in f[5].items()}
+                for key, v in f[5].items():
+                    fits[5][key][fam] = v[sl]
+            out[i] = _mixture(sts[i], sigmas, tuple(fits))
     return out
 
 
@@ -116,9 +148,9 @@ def _mixture(st: Stacked, sigmas: list, out: tuple):
             continue
         res = (out[0][k:k + 1], out[1][k:k + 1], out[2][k:k + 1], out[3][k:k + 1], out[4][k:k + 1],
                {key: v[k:k + 1] for key, v in out[5].items()})
-        tau, att = sigmas[k].attitude_tau_s, sigmas[k].attitude_deg
-        lls[(tau, att)] = ll
-        fits.append((ll, tau, att, res))
+        key = (sigmas[k].attitude_tau_s, sigmas[k].attitude_deg, sigmas[k].position_tau_s)
+        lls[key] = ll
+        fits.append((ll, *key, res))
     if not fits:
         return None
     ll = np.array([f[0] for f in fits])
@@ -126,12 +158,15 @@ def _mixture(st: Stacked, sigmas: list, out: tuple):
     post /= post.sum()
     best = fits[int(np.argmax(ll))]
     # the posterior mixture over the models: the mean, and the covariance with the spread between them
-    Xs = np.array([f[3][0][0] for f in fits])
-    covs = np.array([f[3][4][0] for f in fits])
+    Xs = np.array([f[4][0][0] for f in fits])
+    covs = np.array([f[4][4][0] for f in fits])
     Xm = post @ Xs
     d = Xs - Xm
     cov = np.einsum("k,kij->ij", post, covs + d[:, :, None] * d[:, None, :])
-    _, it, status, cond, _, ex = best[3]
-    ex = {**ex, "error_model_tau_s": np.array([best[1]]), "error_model_attitude_deg": np.array([best[2]]),
-          "error_model_log_likelihoods": np.array([[lls.get((t, best[2]), np.nan) for t in TAU_GRID_S]])}
-    return best[1], best[2], lls, (Xm[None], it, status, cond, cov[None], ex)
+    _, tau, att, ptau, (_, it, status, cond, _, ex) = best
+    tied = ptau is not None
+    ex = {**ex, "error_model_tau_s": np.array([tau]), "error_model_attitude_deg": np.array([att]),
+          "error_model_position_tau_s": np.array([tau if tied else np.nan]),
+          "error_model_log_likelihoods": np.array([[lls.get((t, att, t if tied else None), np.nan)
+                                                    for t in TAU_GRID_S]])}
+    return tau, att, lls, (Xm[None], it, status, cond, cov[None], ex)

@@ -130,7 +130,7 @@ def problem_extras(ex: dict, t_ns: np.ndarray) -> dict:
         out["boresight_bias"] = bias
     if "error_model_tau_s" in ex and np.isfinite(ex["error_model_tau_s"]):  # NaN: a problem without one
         out["error_model"] = {
-            "attitude_tau_s": float(ex["error_model_tau_s"]), "position_tau_s": float(ex["error_model_tau_s"]),
+            "attitude_tau_s": float(ex["error_model_tau_s"]), "position_tau_s": _f(ex["error_model_position_tau_s"]),
             "attitude_deg": float(ex["error_model_attitude_deg"]), "chosen_by": "likelihood",
             "log_likelihood": {f"{t:g}": _f(v) for t, v in zip(TAU_GRID_S, ex["error_model_log_likelihoods"],
                                                                  strict=True)}}

@@ -1,0 +1,138 @@
+#!/usr/bin/env python
+"""How far the learned correlation time's answer (`learned_tau.learn_tau`) moves when its start (the first,
+independent-error fit's answer) moves by 1e-6 m (docs/solvers.md, "The learned model's fit was chaotic").
+
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py z029 z073 z087
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py z029 --candidates
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py --zoo 210
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py --told z001 z004 z029 z073
+
+A name is a zoo flight (`scripts/zoo.py`: arc, straight, obsfile, z000, ...) or an observations file. Per flight:
+the mle error, the start's error, the learned answer's error, its largest standard deviation and the largest move
+of the answer over --starts starts 1e-6 m from the first (random directions, seed 1). --candidates: per candidate
+model (tau, attitude sigma, position error drifting or white), its `correlated.gls` fit from those starts with the
+robust weights updated every iteration (reweight, the fit before 2026-11-24) and with every row at weight 1 (the
+fit `learn_tau` uses): error, largest move, iterations and status (0 converged, 1 iteration limit).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from pipeline.observation_file import load
+from pipeline.solve import correlated, learned_tau, methods, solve
+
+
+def _observations(name: str):
+    if name.endswith(".json"):
+        return load(name)
+    import zoo
+
+    return zoo.flight(name).obs
+
+
+def _starts(X0: np.ndarray, count: int) -> list:
+    rng = np.random.default_rng(1)
+    out = [X0]
+    for _ in range(count):
+        d = rng.normal(size=3)
+        out.append(X0 + 1e-6 * d / np.linalg.norm(d))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("flights", nargs="*")
+    ap.add_argument("--zoo", type=int, metavar="N", help="every flight of `zoo.py --flights N --seed 0` as well")
+    ap.add_argument("--starts", type=int, default=7, help="starts 1e-6 m away (default 7)")
+    ap.add_argument("--candidates", action="store_true", help="every candidate model's fit, reweighted and not")
+    ap.add_argument("--told", action="store_true",
+                    help="zoo flights only: instead, mle told the flight's true correlation times (`zoo.py`'s told "
+                         "sigma) with the default (reweighted) loss, from the los answer and starts 1e-6 m away")
+    args = ap.parse_args(argv)
+    if args.zoo:
+        import zoo
+
+        args.flights += [f.name for f in zoo.zoo(args.zoo, 0)]
+    real = learned_tau.learn_tau
+    calls = []
+    largest = (0.0, None)
+
+    def spy(*a):
+        calls.append(a)
+        return real(*a)
+
+    methods._learned.learn_tau = spy
+    if args.told:
+        return _told(args.flights, args.starts)
+    for name in args.flights:
+        obs = _observations(name)
+        truth = obs.truth_m
+        calls.clear()
+        est = solve("mle", obs)
+        err = float(np.linalg.norm(est.position_m - truth))
+        if not calls:
+            print(f"{name}: mle {err:.2f} m, no learned model (the residuals do not drift)")
+            continue
+        sts, X0s, sigma, robust, vce, tol_m, itmax = calls[0]
+        starts = _starts(np.asarray(X0s, dtype=np.float64), args.starts)
+        answers = [real(sts, X, sigma, robust, vce, tol_m, itmax)[0] for X in starts]
+        X = np.array([a[3][0][0] for a in answers])
+        sd = float(np.sqrt(np.linalg.eigvalsh(answers[0][3][4][0]).max()))
+        move = float(np.linalg.norm(X[1:] - X[0], axis=1).max())
+        largest = max(largest, (move, name), key=lambda m: m[0])
+        print(f"{name}: mle {err:.2f} m; start {np.linalg.norm(starts[0][0] - truth):.2f} m; learned "
+              f"{np.linalg.norm(X[0] - truth):.2f} m (tau {answers[0][0]:g} s, largest sd {sd:.1f} m); largest move "
+              f"from {args.starts} starts 1e-6 m away {move:.1e} m")
+        if not args.candidates:
+            continue
+        sigmas = [dataclasses.replace(sigma, attitude_tau_s=t, position_tau_s=p, attitude_deg=a)
+                  for t, a, p in learned_tau.candidates(sigma)]
+        for reweight in (True, False):
+            fits = []
+            for X0 in starts:
+                out = [None] * len(sigmas)
+                for fam in learned_tau._families(sigmas):
+                    sub = [sigmas[k] for k in fam]
+                    f = correlated.gls(sts, X0, correlated.problem_models(sts[0], X0[0], sub), robust, vce, tol_m,
+                                       itmax, reweight=reweight)
+                    for j, k in enumerate(fam):
+                        out[k] = (f[0][j], int(f[1][j]), int(f[2][j]))
+                fits.append(out)
+            print(f"  reweight={reweight}:")
+            for k, s in enumerate(sigmas):
+                Xk = np.array([fit[k][0] for fit in fits])
+                mv = float(np.linalg.norm(Xk[1:] - Xk[0], axis=1).max())
+                pos = "drifting" if s.position_tau_s else "white"
+                print(f"    tau {s.attitude_tau_s:5g} s, attitude {s.attitude_deg:.3g} deg, position {pos:8s}: "
+                      f"{np.linalg.norm(Xk[0] - truth):8.2f} m, largest move {mv:.1e} m, iterations "
+                      f"{sorted({fit[k][1] for fit in fits})}, status {sorted({fit[k][2] for fit in fits})}")
+    print(f"largest move: {largest[0]:.1e} m ({largest[1]})")
+    return 0
+
+
+def _told(names: list, count: int) -> int:
+    """The configured-correlation-time path's answers from starts 1e-6 m apart (`--told`)."""
+    import zoo
+
+    for name in names:
+        f = zoo.flight(name)
+        obs = dataclasses.replace(f.obs, sigma=f.told_sigma)
+        x0 = solve("los", obs).position_m
+        X = np.array([solve("mle", obs, initial_m=x).position_m for x in _starts(x0[None], count)]).reshape(-1, 3)
+        s = f.told_sigma
+        print(f"{name} ({f.family}; told tau attitude {s.attitude_tau_s} s, position {s.position_tau_s} s): mle "
+              f"{np.linalg.norm(X[0] - obs.truth_m):.2f} m, largest move from {count} starts 1e-6 m away "
+              f"{np.linalg.norm(X[1:] - X[0], axis=1).max():.1e} m")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -224,15 +224,14 @@ def stack_problems(sts: list) -> Stacked:
 
 class Correlated(_iterate.Model):
     """The `mle` model (`iterate.drive`, `mle.finish`) of one problem (B = 1) with time-correlated errors under K
-    residual models at once (`gls`): iteratively reweighted generalized least squares, damped (Levenberg-Marquardt
-    in `iterate.drive`: a step must not raise r^T C_w^-1 r at the current weights). The robust weights
+    residual models at once (`gls`): iteratively reweighted generalized least squares; with fixed weights damped
+    (Levenberg-Marquardt in `iterate.drive`: a step must not raise r^T C_w^-1 r). The robust weights
     w_i = rho'(z)/z come from the rows' marginal standardized residuals z_i = r_i / sqrt(C_ii vf), which the
     residual planes (3,n,K) hold; the drift is modelled (no autocorrelation inflation in `mle.finish`). With
     reweight False every row keeps weight 1 (the loss's phases and `mle.robust_scale` still apply): the weights'
     update under a non-diagonal C descends no objective, and where many rows sit near the loss's corners it
     wanders without converging (docs/solvers.md, "learned correlation time")."""
 
-    damped = True
     drift_modelled = True
 
     def __init__(self, st: Stacked, models: Models, X: np.ndarray, vce: bool, rows: list, reweight: bool = True):
@@ -240,6 +239,7 @@ class Correlated(_iterate.Model):
         list of each model's rows at its start (`rows_in_use`)."""
         K, m = models.Cii.shape
         self.st, self.models, self.K, self.X, self.vce, self.reweight = st, models, K, X, vce, reweight
+        self.damped = not reweight  # Levenberg-Marquardt needs one objective: fixed weights
         self.sd = np.sqrt(models.Cii).T  # (m, K)
         self.grp = np.r_[np.zeros(models.npix, dtype=int), np.ones(m - models.npix, dtype=int)]
         self.vf, self.guard = np.ones((K, 2)), np.ones((K, 2))
@@ -269,15 +269,16 @@ class Correlated(_iterate.Model):
         self.wr = _mle._cost_weights(self.E, self.robust)[1] if self.reweight else None
         self.w = np.ones(self._s.shape) if self.wr is None else self.wr.reshape(-1, self.wr.shape[-1])[self._at]
 
-    def _forms(self, idx, var_scale=None) -> list:
-        """Per model k of idx: (`quadratic_forms_stacked`, their sum) at its current rows, weights and variance factors
-        times var_scale (len(idx),2) (None: 1); the last ones are kept per model (the convergence test and the finish
-        ask again at the same state)."""
+    def _forms(self, idx, var_scale=None, rows=None) -> list:
+        """Per model k of idx: (`quadratic_forms_stacked`, their sum) at its current rows (or rows, a list over
+        idx: a trial's), weights and variance factors times var_scale (len(idx),2) (None: 1); the last ones are
+        kept per model (the convergence test and the finish ask again at the same state)."""
         vfs = self.vf[idx] if var_scale is None else self.vf[idx] * var_scale
+        rows = [self.A[k] for k in idx] if rows is None else rows
         out, todo = [None] * len(idx), []
         for j, k in enumerate(idx):
             last = self._last_forms[k]
-            if (last is not None and last[0] is self.A[k] and np.array_equal(last[1], self.w[:, k])
+            if (last is not None and last[0] is rows[j] and np.array_equal(last[1], self.w[:, k])
                     and np.array_equal(last[2], vfs[j])):
                 out[j] = last[3]
             else:
@@ -285,10 +286,10 @@ class Correlated(_iterate.Model):
         if todo:
             ks = np.asarray(idx)[todo]
             sk = self.models if len(ks) == self.K else self.models.take(ks)
-            qs = quadratic_forms_stacked(sk, np.stack([self.A[k] for k in ks]), self.w[:, ks].T, vfs[todo])
+            qs = quadratic_forms_stacked(sk, np.stack([rows[j] for j in todo]), self.w[:, ks].T, vfs[todo])
             for j, k, q in zip(todo, ks, qs, strict=True):
                 out[j] = (q, sum(f for f, _, _ in q))
-                self._last_forms[k] = (self.A[k], self.w[:, k], vfs[j], out[j])
+                self._last_forms[k] = (rows[j], self.w[:, k], vfs[j], out[j])
         return out
 
     def start(self, robust):
@@ -309,16 +310,10 @@ class Correlated(_iterate.Model):
         Xall[idx] = Xn
         A = rows_in_use(self.st, Xall)
         self._A = [A[k] for k in idx]
+        if not self.damped:  # reweighted: the weights change after every step, no objective to test
+            return super().trial(idx, Xn)
         cost0 = np.array([f[1][3, 3] for f in self._forms(idx)])
-        ks = np.asarray(idx)
-        sk = self.models if len(ks) == self.K else self.models.take(ks)
-        vfs = self.vf[ks]
-        qs = quadratic_forms_stacked(sk, np.stack(self._A), self.w[:, ks].T, vfs)
-        cost = np.empty(len(ks))
-        for j, (k, q) in enumerate(zip(ks, qs, strict=True)):
-            out = (q, sum(f for f, _, _ in q))
-            self._last_forms[k] = (self._A[j], self.w[:, k], vfs[j], out)
-            cost[j] = out[1][3, 3]
+        cost = np.array([f[1][3, 3] for f in self._forms(idx, rows=self._A)])
         return cost <= cost0 * (1 + 1e-12) + 1e-300
 
     def accept(self, idx, accepted):

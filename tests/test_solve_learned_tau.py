@@ -103,3 +103,15 @@ def test_the_evidence_tells_a_drifting_position_error_from_a_white_one(position_
             ll = np.array([lls[(t, att, None if white else t)] for t in learned_tau.TAU_GRID_S])
             total[j] += ll.max() + np.log(np.exp(ll - ll.max()).sum())
     assert int(np.argmax(total)) == (1 if position_tau_s is None else 0)
+
+
+@pytest.mark.parametrize("position_tau_s", [TRUE_TAU_S, None], ids=["drifting", "white"])
+def test_the_answer_says_which_position_model_it_learned(position_tau_s):
+    """`solve("mle")` on drifting problems reports in its `error_model` extra whether the position error drifts
+    (position_tau_s, s: the learned attitude tau, tied) or is white (None), as the data were drawn."""
+    from pipeline.solve import solve
+
+    for obs in correlated_problems(4, n=60, sigma=PAPER_SIGMA, attitude_tau_s=TRUE_TAU_S,
+                                   position_tau_s=position_tau_s, seed=7):
+        model = solve("mle", obs).extras["error_model"]
+        assert (model["position_tau_s"] is None) == (position_tau_s is None)  # its tau is the attitude's, learned

@@ -1,16 +1,7 @@
 """Does the error model fit the flight? Tests on the standardized residuals of a solve, batched over problems.
 
-- chi-square: sum of the squared standardized residuals (robust weights applied) against its degrees of
-  freedom; too large means the stated sigmas are too small, or errors the model does not have.
-- lag-1 autocorrelation of the residuals from frame to frame, per sensor group (pixels u and v pooled, ranges):
-  slowly varying errors (attitude drift, GNSS wander) make neighbouring residuals alike, and an estimator that
-  assumes independent errors then counts one error many times. For a first-order autoregressive error with
-  lag-1 correlation rho, the variance of an average grows by (1 + rho) / (1 - rho) over the independent case:
-  that factor inflates the group's variances (`acf_inflation`).
-- batch means: the same factor measured without the AR(1) form, from the means over blocks of sqrt(count)
-  consecutive frames (`batch_means_ratio`). A slow drift under a larger white noise (many video frames a
-  fraction of a second apart) has a small lag-1 autocorrelation, yet its block means vary far more than white
-  errors' would, and the variance of the target's average with them.
+chi-square, lag-1 autocorrelation and batch means per sensor group (u and v pooled, ranges); why each:
+docs/solvers.md, "Error models nobody stated".
 
 Residual planes are (3, n, b): rows u, v, range of the n frames of b problems, zero where unused.
 """

@@ -14,6 +14,7 @@ from pipeline.solve.iterate import problem_scale_m, start_status
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import (
     FULL3,
+    PAIRS,
     Planes,
     Stacked,
     cofactors3,
@@ -664,7 +665,7 @@ def _terrain_rows(terrain, X: np.ndarray):
 
 def _add_terrain(N, g, jt, et, use=None):
     """Add the terrain row jt (3,b), residual et (b,) to the six normal-matrix entries N and g (in place)."""
-    for e, (c, d) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
+    for e, (c, d) in enumerate(PAIRS):
         N[e] = N[e] + jt[c] * jt[d]
     if g is not None:
         for c in range(3):
@@ -718,7 +719,7 @@ def _schur(N, hs):
     """Eliminate the u and v bias (`_bias_terms` hs) from the six normal-matrix entries N (in place):
     N -= h h^T / (1 + s)."""
     for h, s in hs:
-        for e, (c, d) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
+        for e, (c, d) in enumerate(PAIRS):
             N[e] = N[e] - h[:, c] * h[:, d] / (1.0 + s)
 
 

@@ -72,7 +72,7 @@ class Stacked:
         g = self.__dict__.get("_gram_cache")
         if g is None:  # entry by entry: a batched matmul of 3x3 matrices costs 2.5x more
             M, g = self.M, self.__dict__.setdefault("_gram_cache", np.empty(self.M.shape))
-            for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)):
+            for i, j in PAIRS:
                 g[..., i, j] = g[..., j, i] = sum(M[..., i, k] * M[..., j, k] for k in range(3))
         return g
 
@@ -327,6 +327,8 @@ def cofactors3(N6, singular_below: float = SINGULAR_DET):
 
 #: the entry of the six (N00 N01 N02 N11 N12 N22) holding (row, column) of a symmetric 3x3 matrix
 FULL3 = ((0, 1, 2), (1, 3, 4), (2, 4, 5))
+#: the six unique entries (c, d) of a symmetric 3x3 matrix, in the order N00 N01 N02 N11 N12 N22
+PAIRS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
 def full3(N6) -> np.ndarray:
@@ -337,8 +339,7 @@ def full3(N6) -> np.ndarray:
 def inverse3(N: np.ndarray, singular_below: float = SINGULAR_DET):
     """Inverses (B,3,3) of symmetric 3x3 N (`cofactors3`), and the `solve_spd` singular flag (B,). Singular
     ones are NaN."""
-    inv, _, singular = cofactors3([N[:, r, c] for r, c in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))],
-                                  singular_below)
+    inv, _, singular = cofactors3([N[:, r, c] for r, c in PAIRS], singular_below)
     return full3(inv), singular
 
 

@@ -20,10 +20,13 @@ DIVERGENCE_FACTOR = 1e3
 StepFn = Callable[[Stacked, np.ndarray], tuple[np.ndarray, np.ndarray, dict]]
 
 
-def problem_scale_m(st: Stacked, X0: np.ndarray) -> np.ndarray:
-    """(B,) a length scale: the largest platform-to-initial-estimate distance (>= 1 m)."""
+def divergence_bound(st: Stacked, X0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(centre (B,3), bound (B,)): the platforms' mean and DIVERGENCE_FACTOR times the largest platform-to-start
+    distance (>= 1 m; from the centre where the start is not finite)."""
+    centre = st.platform_m.mean(axis=1)
+    X0 = np.where(np.isfinite(X0).all(axis=1)[:, None], X0, centre)
     d = np.linalg.norm(X0[:, None, :] - st.platform_m, axis=-1).max(axis=1)
-    return np.where(np.isfinite(d), np.maximum(d, 1.0), 1.0)
+    return centre, DIVERGENCE_FACTOR * np.where(np.isfinite(d), np.maximum(d, 1.0), 1.0)
 
 
 def start_status(X0: np.ndarray, init_status: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
@@ -169,8 +172,7 @@ def iterate(st: Stacked, X0: np.ndarray, step: StepFn, tol_m: float, max_iterati
     X = np.array(X0, dtype=np.float64, copy=True)
     iterations = np.zeros(B, dtype=np.int64)
     status, bad_init = start_status(X, init_status)
-    centre = st.platform_m.mean(axis=1)
-    bound = DIVERGENCE_FACTOR * problem_scale_m(st, np.where(np.isfinite(X).all(axis=1)[:, None], X, centre))
+    centre, bound = divergence_bound(st, X)
     extras = {name: np.full(B, np.nan) for name in extra_names}
     drive(_StepModel(st, step, extras, X), X, status, ~bad_init, iterations, bound, centre, tol_m, max_iterations)
     return X, iterations, status, extras

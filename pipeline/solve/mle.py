@@ -10,7 +10,7 @@ import numpy as np
 from pipeline.solve import bias_mixture, fit_checks
 from pipeline.solve import iterate as _iterate
 from pipeline.solve.estimate import Status
-from pipeline.solve.iterate import problem_scale_m, start_status
+from pipeline.solve.iterate import divergence_bound, start_status
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import (
     FULL3,
@@ -118,16 +118,9 @@ def bias_prior_deg(sigma: Sigma, options: dict) -> tuple[float | None, bool]:
 
 
 def base_variances(st: Stacked, X0: np.ndarray, sigma: Sigma):
-    """A priori variances (B, 2n+n) of the residual rows [u_1, v_1, ..., d_1, ...], from the sensor sigmas.
-
-    pixel: sigma_px^2 + (f sigma_att)^2 + (f sigma_pos / D)^2, f the focal length of that axis (`focal_px`),
-    D the platform-to-target distance at the initial estimate (the camera's lever arm is negligible at this
-    scale): an attitude error turns the line of sight by
-    sigma_att (f sigma_att px), a platform position error moves it sideways by sigma_pos/D radians.
-    range: sigma_range^2 + sigma_pos^2, the position error's component along the line of sight.
-    Unknown sigmas: pixel 1 px, range 1 m, position and attitude 0 (variance component estimation then
-    scales the pixel and range groups).
-    """
+    """A priori variances (B, 2n+n) of the residual rows [u_1, v_1, ..., d_1, ...], from the sensor sigmas:
+    pixel sigma_px^2 + f^2 (sigma_att^2 + (sigma_pos / D)^2) (f `focal_px` of that axis, D the platform-to-target
+    distance at X0), range sigma_range^2 + sigma_pos^2; unknown sigmas: 1 px, 1 m, 0 (docs/solvers.md, mle)."""
     s_px = 1.0 if sigma.pixel_px is None else sigma.pixel_px
     s_r = 1.0 if sigma.range_m is None else sigma.range_m
     s_pos = 0.0 if sigma.position_m is None else sigma.position_m
@@ -193,17 +186,12 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
         max_iterations: int, init_status: np.ndarray | None = None, bias_deg: float | None = None,
         bias_size_unknown: bool = True, terrain=None):
     """Returns X (B,3), iterations (B,), status (B,) int8, cond (B,) of the weighted design W^1/2 J,
-    covariance (B,3,3) m^2, and extras (B, ...) arrays (`finish`) and, with bias_deg, the boresight bias
-    (bias_deg, bias_sigma_deg, bias_prior_deg, bias_target_correlation; bias_size_deg when its size is
-    averaged). The fit checks are taken at the iteration's solution, before the averaging.
+    covariance (B,3,3) m^2 and `finish`'s extras (B, ...), with bias_deg the boresight bias's too.
 
-    bias_deg > 0: a constant boresight bias (two camera-frame angles, constant pixel offsets f * angle in u and
-    v) with a zero-mean Gaussian prior of that standard deviation, eliminated from the normal equations (Schur
-    complement: the target covariance is the marginal one). With bias_size_unknown it is the largest bias: the
-    answer is averaged over the bias's size (`bias_mixture`) and position_m^2 I, a GNSS offset shared by the
-    segment, is added to the covariance. terrain=(fn, sigma_m): a soft prior on the target's height, fn(e_m, n_m)
-    -> (up_m, dup_de, dup_dn) in the problems' ENU frame, one more (never robustified) residual (fn(e, n) - up) /
-    sigma_m per problem where fn is finite.
+    bias_deg > 0: a constant boresight bias (pixel offsets f * angle in u and v) with a zero-mean prior of that
+    sigma, eliminated by Schur complement; with bias_size_unknown the largest bias, its size averaged over
+    (`bias_mixture`). terrain=(fn, sigma_m): a soft prior on the target's height, fn(e_m, n_m) -> (up_m, dup_de,
+    dup_dn) in the problems' ENU frame. The model: docs/solvers.md, mle.
     """
     X = np.array(X0, dtype=np.float64, copy=True)
     status, bad = start_status(X, init_status)
@@ -225,18 +213,16 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
         # moves the target exactly as the platforms and shows in no residual; the covariance carries all of the
         # stated position variance as that offset (the rows keep it too, as frame-to-frame: the safe side)
         m.position_m = sigma.position_m
-    return run(m, st, X, status, bad, X0, robust, tol_m, max_iterations)
+    return run(m, st, X, status, bad, robust, tol_m, max_iterations)
 
 
-def run(m, st: Stacked, X: np.ndarray, status: np.ndarray, bad: np.ndarray, X0: np.ndarray, robust: str | None,
-        tol_m: float, max_iterations: int):
+def run(m, st: Stacked, X: np.ndarray, status: np.ndarray, bad: np.ndarray, robust: str | None, tol_m: float,
+        max_iterations: int):
     """The one `mle` iteration and finish of a model m (`White`, or `correlated.Correlated`): Levenberg-Marquardt
     / IRLS by `iterate.drive` with m's loss; with the redescending loss Huber first, then the scale guard
     (`robust_scale`), then the redescending loss from there. Returns `finish`'s tuple."""
     iterations = np.zeros(st.size, dtype=np.int64)
-    centre = st.platform_m.mean(axis=1)
-    finite0 = np.isfinite(X0).all(axis=1)
-    bound = _iterate.DIVERGENCE_FACTOR * problem_scale_m(st, np.where(finite0[:, None], X0, centre))
+    centre, bound = divergence_bound(st, X)  # the bad starts' bound is never used: they do not iterate
     active = ~bad
     for phase in (("huber", "redescending") if robust == "redescending" else (robust,)):
         if phase == "redescending":
@@ -271,14 +257,10 @@ def robust_scale(m) -> None:
 
 
 def finish(m, X: np.ndarray, status: np.ndarray, iterations: np.ndarray):
-    """The one finish of every `mle` model m at its final iterate X (B,3) with its final weights. Returns X,
-    iterations, status, cond (B,), covariance (B,3,3) and the extras (B, ...): variance_factor_pixel/_range,
-    sigma0_sq, vce_rounds, rejected (B,n,3) bool (u, v, range rows with zero weight), residual_sigmas (B,n,3)
-    (standardized), residuals (px, m), the fit checks (`fit_checks`), consistent, robust_spread (B,2) and
-    covariance_inflation (trace reported / trace as stated). m gives m.E (3,n,B), m.ok, m.wr (or None), m.guard,
-    m.vf (B,2) and m.information(var_scale (B,2)) -> (information (B,3,3), chi-square (B,)). Where the
-    residuals drift (unless m models it) the group's variances are inflated (`fit_checks`), where the
-    chi-square test fails everything by its variance factor."""
+    """The one finish of every `mle` model m at its final iterate X (B,3) with its final weights: X, iterations,
+    status, cond (B,), covariance (B,3,3) and the extras (B, ...) (rejected and residuals (B,n,3), the fit checks).
+    m gives E (3,n,B), ok, wr (or None), guard, vf (B,2) and information(var_scale (B,2)) -> (information
+    (B,3,3), chi-square (B,)). Drift (unless m models it) and a failed chi-square inflate (docs/solvers.md)."""
     E, ok, wr, guard = m.E, m.ok, m.wr, m.guard
     B = X.shape[0]
     failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
@@ -325,8 +307,7 @@ def finish(m, X: np.ndarray, status: np.ndarray, iterations: np.ndarray):
         inflation = np.trace(cov, axis1=1, axis2=2) / np.trace(cov0, axis1=1, axis2=2)
     extras = {"variance_factor_pixel": m.vf[:, 0], "variance_factor_range": m.vf[:, 1],
               "sigma0_sq": sigma0_sq, "vce_rounds": m.vce_rounds,
-              "rejected": (ok & (wr == 0)).transpose(2, 1, 0) if wr is not None else np.zeros((B, ok.shape[1], 3),
-                                                                                                dtype=bool),
+              "rejected": (np.zeros_like(ok) if wr is None else ok & (wr == 0)).transpose(2, 1, 0),
               "residual_sigmas": E_report.transpose(2, 1, 0).copy(),
               "residuals": (E_report / m.isd()).transpose(2, 1, 0),
               "chi2": chi2, "chi2_dof": dof.astype(np.float64), "chi2_p": p,

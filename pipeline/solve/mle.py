@@ -199,11 +199,8 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     pl = Planes.from_stacked(st, base_variances(st, X, sigma))
     a = None
     if bias_deg:
-        fx, fy = st.focal_px()
-        sb = np.deg2rad(bias_deg)
-        a = np.empty((2, *pl.has_pix.shape))  # the bias columns of the u and v rows
-        a[0] = np.where(pl.has_pix, fx.T * sb, 0.0) * pl.isd[0]
-        a[1] = np.where(pl.has_pix, fy.T * sb, 0.0) * pl.isd[1]
+        fx, fy = st.focal_px()  # the bias columns (2,n,B) of the u and v rows
+        a = np.where(pl.has_pix, np.stack([fx.T, fy.T]) * np.deg2rad(bias_deg), 0.0) * pl.isd[:2]
     m = White(st, pl, a, X, vce, terrain)
     m.bias_sigma_deg, m.bias_size_unknown = bias_deg, bias_size_unknown
     # the stated attitude sigma is split between the bias and the frame-to-frame error (it is the largest bias)
@@ -422,7 +419,7 @@ class White(_iterate.Model):
             nok = self.newton_ok[idx]
             N = [np.where(nok, n, m) for n, m in zip(NG[9:], N, strict=True)]
         if self.terrain is not None:
-            _add_terrain(N, g, *_terrain_rows(self.terrain, X))
+            _add_terrain(N, g, *_terrain_rows(self.terrain, X)[:2])
         dX, singular = _solve3(N, g, lam)
         self._N = N
         return dX, singular
@@ -644,7 +641,7 @@ def _terrain_rows(terrain, X: np.ndarray):
     return jt, et, use.astype(np.int64)
 
 
-def _add_terrain(N, g, jt, et, use=None):
+def _add_terrain(N, g, jt, et):
     """Add the terrain row jt (3,b), residual et (b,) to the six normal-matrix entries N and g (in place)."""
     for e, (c, d) in enumerate(PAIRS):
         N[e] = N[e] + jt[c] * jt[d]
@@ -756,7 +753,7 @@ def _vce_factors(J, E, ok, robust, a=None, terrain_rows=None):
     hs = _bias_terms(J, a, w) if a is not None else []
     _schur(N, hs)
     if terrain_rows is not None:
-        _add_terrain(N, None, *terrain_rows)
+        _add_terrain(N, None, *terrain_rows[:2])
     inv = C00, C01, C02, C11, C12, C22 = cofactors3(N)[0]
     j0, j1, j2 = J
     quad = (inv[0] * j0 * j0 + inv[3] * j1 * j1 + inv[5] * j2 * j2

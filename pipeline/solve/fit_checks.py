@@ -115,10 +115,9 @@ def describe(chi2: float, dof: float, p: float, rho_pix: float, rho_rng: float, 
     if np.isfinite(p) and p < CHI2_ALPHA:
         parts.append(f"the residuals are {np.sqrt(chi2 / dof):.1f} times larger than the error model says "
                      f"(chi-square {chi2:.0f} on {dof:.0f} degrees of freedom, p = {p:.1g})")
-    if acf_pix:
-        parts.append(f"the pixel residuals drift slowly from frame to frame (lag-1 autocorrelation {rho_pix:.2f})")
-    if acf_rng:
-        parts.append(f"the range residuals drift slowly from frame to frame (lag-1 autocorrelation {rho_rng:.2f})")
+    for name, rho, drift in (("pixel", rho_pix, acf_pix), ("range", rho_rng, acf_rng)):
+        if drift:
+            parts.append(f"the {name} residuals drift slowly from frame to frame (lag-1 autocorrelation {rho:.2f})")
     for name, r in (("pixel", blocks_pix), ("range", blocks_rng)):
         if r is not None:
             parts.append(f"the {name} residuals' means over blocks of consecutive frames vary {r:.1f} times more than "

@@ -233,11 +233,9 @@ def run(m, st: Stacked, X: np.ndarray, status: np.ndarray, bad: np.ndarray, robu
 
 
 def robust_scale(m) -> None:
-    """The scale guard before the redescending phase: where the Huber fit's standardized residuals of a group
-    are more spread than its sigma says (1.4826 x median |e| beyond the MAD's own noise, ~1.17 / sqrt(count)),
-    that group's variances (the rejection thresholds and the covariance) scale with them (`m.rescale`), so that
-    a misfit model does not reject good data; the factors are kept in m.guard (a misfit, unlike variance
-    components)."""
+    """The scale guard before the redescending phase (docs/solvers.md): a group whose Huber-fit residuals spread
+    wider than its sigma (1.4826 median |e| beyond the MAD's own noise, ~1.17 / sqrt(count)) has its variances
+    scaled by that (`m.rescale`), so that a misfit model rejects no good data; the factors go to m.guard."""
     E, ok = m.E, m.ok
     for g, rows in ((0, slice(0, 2)), (1, slice(2, 3))):
         # the median of each problem's usable |e| (NaN where none): sorted, the unusable ones (inf) last
@@ -746,24 +744,21 @@ def _vce_factors(J, E, ok, robust, a=None, terrain_rows=None):
     r_g = sum_g (1 - w_i h_i) over the usable rows of each group (pixels: the u and v rows, ranges; rows a
     redescending loss rejected do not count), h_i the leverage of row i in the joint problem (target, and the
     bias columns a when given, the terrain prior's `_terrain_rows` when given), from the standardized J (3,3,n,b),
-    E (3,n,b); and a (b, 2) flag 'usable'
-    (redundancy of the group >= 0.5)."""
+    E (3,n,b); and a (b, 2) flag 'usable' (redundancy of the group >= 0.5)."""
     _, w = _cost_weights(E, robust)
     N, _ = _normal(J, E, w)
     hs = _bias_terms(J, a, w) if a is not None else []
     _schur(N, hs)
     if terrain_rows is not None:
         _add_terrain(N, None, *terrain_rows[:2])
-    inv = C00, C01, C02, C11, C12, C22 = cofactors3(N)[0]
+    inv = cofactors3(N)[0]
     j0, j1, j2 = J
     quad = (inv[0] * j0 * j0 + inv[3] * j1 * j1 + inv[5] * j2 * j2
             + 2.0 * (inv[1] * j0 * j1 + inv[2] * j0 * j2 + inv[4] * j1 * j2))
     for k, (h, s) in enumerate(hs):
-        h0, h1, h2 = h[:, 0], h[:, 1], h[:, 2]
-        c = [-(C00 * h0 + C01 * h1 + C02 * h2) / (1 + s), -(C01 * h0 + C11 * h1 + C12 * h2) / (1 + s),
-             -(C02 * h0 + C12 * h1 + C22 * h2) / (1 + s)]
-        czz = 1.0 / (1 + s) - (c[0] * h0 + c[1] * h1 + c[2] * h2) / (1 + s)
-        quad[k] = quad[k] + 2.0 * a[k] * (J[0, k] * c[0] + J[1, k] * c[1] + J[2, k] * c[2]) + a[k] ** 2 * czz
+        c = [-sum(inv[FULL3[r][e]] * h[:, e] for e in range(3)) / (1 + s) for r in range(3)]
+        czz = 1.0 / (1 + s) - sum(c[e] * h[:, e] for e in range(3)) / (1 + s)
+        quad[k] = quad[k] + 2.0 * a[k] * sum(J[e, k] * c[e] for e in range(3)) + a[k] ** 2 * czz
     lev = quad if w is None else w * quad
     q = E * E if w is None else w * E * E
     use = ok if w is None else ok & (w > 0)

@@ -199,13 +199,9 @@ def evaluate(pl: Planes, X: np.ndarray):
 
 
 def pixel_model(st: Stacked, X: np.ndarray):
-    """Reprojection residuals and Jacobian at X (B,3).
-
-    Returns J (B,2n,3) d(u,v)/dX, r (B,2n) observed - predicted (px), mask (B,2n) bool. Rows are u_1, v_1,
-    u_2, ... With q = M X + p4: u = q1/q3, du/dX = (m1 - u m3)/q3 and dv/dX = (m2 - v m3)/q3 (m_k rows of M).
-    Rows with a missing pixel or a camera with q3 = 0 are masked (zero Jacobian and residual).
-    Computed on (B,n) planes of each matrix entry (`Stacked.planes`): numpy is slow on tiny trailing axes.
-    """
+    """Reprojection Jacobian J (B,2n,3) d(u,v)/dX, residuals r (B,2n) observed - predicted (px) and mask (B,2n)
+    at X (B,3), rows u_1, v_1, u_2, ...: with q = M X + p4, u = q1/q3, du/dX = (m1 - u m3)/q3; a missing pixel
+    or q3 = 0 is masked (zero). On (B,n) planes (`Stacked.planes`): numpy is slow on tiny trailing axes."""
     B, n = st.has_pix.shape
     Mc, p4c, pixc = st.planes()
     x0, x1, x2 = X[:, 0, None], X[:, 1, None], X[:, 2, None]

@@ -32,14 +32,10 @@ def divergence_bound(st: Stacked, X0: np.ndarray) -> tuple[np.ndarray, np.ndarra
 def start_status(X0: np.ndarray, init_status: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """(status (B,) int8 all MAX_ITERATIONS but where the start is unusable, bad (B,) bool): a start that is not
     finite, or that comes from a DIVERGED / DEGENERATE initial solve, keeps that status (DEGENERATE if none)."""
-    finite0 = np.isfinite(X0).all(axis=1)
+    diverged = np.zeros(X0.shape[0], dtype=bool) if init_status is None else init_status == Status.DIVERGED
+    bad = ~np.isfinite(X0).all(axis=1) | diverged | (init_status is not None and init_status == Status.DEGENERATE)
     status = np.full(X0.shape[0], Status.MAX_ITERATIONS, dtype=np.int8)
-    if init_status is not None:
-        bad = (init_status == Status.DIVERGED) | (init_status == Status.DEGENERATE) | ~finite0
-        status[bad] = np.where(init_status[bad] == Status.DIVERGED, Status.DIVERGED, Status.DEGENERATE)
-    else:
-        bad = ~finite0
-        status[bad] = Status.DEGENERATE
+    status[bad] = np.where(diverged[bad], Status.DIVERGED, Status.DEGENERATE)
     return status, bad
 
 

@@ -196,21 +196,8 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
     X = np.array(X0, dtype=np.float64, copy=True)
     status, bad = start_status(X, init_status)
     X[bad] = 0.0
-    pl = Planes.from_stacked(st, base_variances(st, X, sigma))
-    a = None
-    if bias_deg:
-        fx, fy = st.focal_px()  # the bias columns (2,n,B) of the u and v rows
-        a = np.where(pl.has_pix, np.stack([fx.T, fy.T]) * np.deg2rad(bias_deg), 0.0) * pl.isd[:2]
-    m = White(st, pl, a, X, vce, terrain)
-    m.bias_sigma_deg, m.bias_size_unknown = bias_deg, bias_size_unknown
-    # the stated attitude sigma is split between the bias and the frame-to-frame error (it is the largest bias)
-    m.split_attitude = bool(a is not None and bias_size_unknown and sigma.attitude_deg)
-    if bias_deg and bias_size_unknown and sigma.position_m:
-        # GNSS errors wander over minutes: over a segment much of them is an offset shared by every frame, which
-        # moves the target exactly as the platforms and shows in no residual; the covariance carries all of the
-        # stated position variance as that offset (the rows keep it too, as frame-to-frame: the safe side)
-        m.position_m = sigma.position_m
-    return run(m, st, X, status, bad, robust, tol_m, max_iterations)
+    return run(White(st, X, sigma, vce, terrain, bias_deg, bias_size_unknown), st, X, status, bad, robust, tol_m,
+               max_iterations)
 
 
 def run(m, st: Stacked, X: np.ndarray, status: np.ndarray, bad: np.ndarray, robust: str | None, tol_m: float,
@@ -324,17 +311,25 @@ class White(_iterate.Model):
     damped = True
     skips_last_step = True
 
-    def __init__(self, st, pl, a, X, vce, terrain):
+    def __init__(self, st, X, sigma, vce, terrain, bias_deg, bias_size_unknown):
         B = st.size
-        self.st, self.pl, self.a, self.X, self.vce, self.terrain = st, pl, a, X, vce, terrain
+        self.st, self.X, self.vce, self.terrain = st, X, vce, terrain
+        self.pl = pl = Planes.from_stacked(st, base_variances(st, X, sigma))
+        self.a = None
+        if bias_deg:
+            fx, fy = st.focal_px()  # the bias columns (2,n,B) of the u and v rows
+            self.a = np.where(pl.has_pix, np.stack([fx.T, fy.T]) * np.deg2rad(bias_deg), 0.0) * pl.isd[:2]
+        self.bias_sigma_deg, self.bias_size_unknown = bias_deg, bias_size_unknown
+        # the stated attitude sigma is split between the bias and the frame-to-frame error (it is the largest bias)
+        self.split_attitude = bool(self.a is not None and bias_size_unknown and sigma.attitude_deg)
+        # GNSS errors wander over minutes: over a segment much of them is an offset shared by every frame, which
+        # moves the target exactly as the platforms and shows in no residual; the covariance carries all of the
+        # stated position variance as that offset (the rows keep it too, as frame-to-frame: the safe side)
+        self.position_m = sigma.position_m if bias_deg and bias_size_unknown and sigma.position_m else 0.0
         self.vf = np.ones((B, 2))  # variance factors of the pixel and range groups
         self.vce_rounds = np.zeros(B, dtype=np.int64)
         self.z = np.zeros((3, B))  # the bias in prior standard deviations (u, v; the range row stays 0)
         self.guard = np.ones((B, 2))  # `robust_scale`'s factors: a misfit, unlike variance components
-        self.bias_sigma_deg = None
-        self.position_m = 0.0  # the stated position sigma, when the GNSS error is taken as a shared offset
-        self.bias_size_unknown = False
-        self.split_attitude = False
         self.mix = None
         self.start_only = False
         self._sums = self.J = None  # `information`'s group sums and `jacobian` at the final state

@@ -135,13 +135,11 @@ def _solve_stacked(method: str, st: Stacked, o: dict, first: tuple | None = None
     B = st.size
     tol, itmax = o["tol_m"], o["max_iterations"]
     extras: dict = {}
-    cov = None
+    cov, it = None, np.zeros(B, dtype=np.int64)  # the closed-form methods' iterations
     if method == "dlt":
         X, status, cond = linear.dlt(st)
-        it = np.zeros(B, dtype=np.int64)
     elif method == "los":
         X, status, pts, oracle = linear.los(st)
-        it = np.zeros(B, dtype=np.int64)
         cond = np.full(B, np.nan)
         extras = {"points_m": pts, "oracle_error_m": oracle}
     elif method == "vision":

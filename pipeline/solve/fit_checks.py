@@ -44,13 +44,10 @@ def outlying_runs(off: np.ndarray) -> np.ndarray:
 
 
 def batch_means_ratio(E: np.ndarray, use: np.ndarray, rows: slice) -> tuple[np.ndarray, np.ndarray]:
-    """(ratio (b,), blocks (b,)): the batch-means variance ratio of the residuals E (3,n,b) over the frames, per
-    row of `rows` (u and v apart) pooled: the used frames (`use` (3,n,b) bool) in order, cut into blocks of
-    k = floor(sqrt(count)) consecutive ones (the classical batch size), ratio = mean over the blocks of
-    k * (block mean)^2 over the mean square of the residuals. It estimates the factor by which correlated errors
-    inflate the variance of an average over the independent case (1 for white residuals, (1 + rho)/(1 - rho) for
-    a long AR(1) error, larger for a slow drift under white noise, whose lag-1 autocorrelation is small); for
-    white residuals blocks * ratio is about chi-square with `blocks` degrees of freedom. NaN where no block."""
+    """(ratio (b,), blocks (b,)): the batch-means variance ratio of the residuals E (3,n,b), per row of `rows`
+    (u and v apart) pooled: the used frames (`use` (3,n,b) bool) in blocks of k = floor(sqrt(count)), ratio =
+    mean of k (block mean)^2 over the residuals' mean square: the variance inflation of an average (1 for white
+    residuals, blocks * ratio then ~ chi-square with `blocks` dof; docs/solvers.md). NaN where no block."""
     u = use[rows]
     e = np.where(u, E[rows], 0.0)
     R, n, b = e.shape

@@ -12,7 +12,7 @@ from collections.abc import Callable
 import numpy as np
 
 from pipeline.solve.estimate import Status
-from pipeline.solve.stacked import Stacked, condition_numbers, is_singular
+from pipeline.solve.stacked import Stacked, condition_numbers, inverse3
 
 #: an estimate further than this many times the problem's size from the platforms has diverged
 DIVERGENCE_FACTOR = 1e3
@@ -175,13 +175,13 @@ def iterate(st: Stacked, X0: np.ndarray, step: StepFn, tol_m: float, max_iterati
 
 
 def finish(X: np.ndarray, status: np.ndarray, N: np.ndarray, N_geometry: np.ndarray | None = None) -> np.ndarray:
-    """In place: problems whose final normal matrix N = A^T A (B,k,k) is singular (`is_singular`: the geometry
+    """In place: problems whose final normal matrix N = A^T A (B,k,k) is singular (`inverse3`'s flag: the geometry
     does not determine the target) become DEGENERATE; DIVERGED and DEGENERATE positions become NaN. Returns
     the (B,) condition numbers of the design matrices A. N_geometry: the block judged for singularity, when
     not all of N."""
     cond = condition_numbers(N)
     finite = np.isfinite(X).all(axis=1)
-    status[is_singular(N if N_geometry is None else N_geometry) & finite] = Status.DEGENERATE
+    status[inverse3(N if N_geometry is None else N_geometry)[1] & finite] = Status.DEGENERATE
     cond[~finite] = np.nan
     X[(status == Status.DIVERGED) | (status == Status.DEGENERATE)] = np.nan
     return cond

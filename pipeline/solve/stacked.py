@@ -330,15 +330,10 @@ def inverse3(N: np.ndarray, singular_below: float = SINGULAR_DET):
     return full3(inv), singular
 
 
-def is_singular(N: np.ndarray) -> np.ndarray:
-    """(B,) the `solve_spd` criterion alone, for 3x3 normal matrices N (B,3,3)."""
-    return inverse3(N)[1]
-
-
 def condition_numbers(N: np.ndarray) -> np.ndarray:
     """(B,) 2-norm condition numbers of design matrices A from their normal matrices N = A^T A (B,k,k):
     sqrt(largest / smallest eigenvalue); inf when singular. Through N, values beyond ~1e7 are only indicative
-    (rounding); degeneracy is decided by `is_singular`, not by this number."""
+    (rounding); degeneracy is decided by `solve_spd`'s criterion, not by this number."""
     good = np.isfinite(N).all(axis=(1, 2))
     ev = np.linalg.eigvalsh(np.where(good[:, None, None], N, 0.0))
     with np.errstate(divide="ignore", invalid="ignore"):

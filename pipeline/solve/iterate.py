@@ -1,8 +1,5 @@
-"""The batched iteration driver shared by the Gauss-Newton style estimators.
-
-Every problem iterates X <- X + dX until ||dX|| <= tol_m (CONVERGED), max_iterations (MAX_ITERATIONS), a
-singular normal matrix (DEGENERATE) or a non-finite / exploding estimate (DIVERGED). Converged problems are
-frozen: each iteration only computes the still active ones.
+"""The batched iteration driver (`drive`) shared by the Gauss-Newton style estimators: finished problems are
+frozen, each iteration computes only the still active ones (docs/solvers.md, "Stopping, divergence, degeneracy").
 """
 
 from __future__ import annotations

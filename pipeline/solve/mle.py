@@ -713,10 +713,8 @@ def _bias_summary(it: White, cov, hs, vf_chi) -> dict:
 
 
 def _mixture_summary(it: White, mix: dict, cov) -> dict:
-    """`_bias_summary` from the bias mixture: the posterior mean bias (B,2) deg, its standard deviation, its
-    correlation with the target (B,2,3), the prior's standard deviation (B,2) (the mixture's: the largest bias,
-    scaled by a misfit, times the rms of PHI_GRID) and the bias size the flight supports (B,) (the posterior
-    rms of the prior's scale, deg)."""
+    """`_bias_summary` from the bias mixture, with the prior's sigma (B,2) (the largest bias, scaled by a misfit,
+    times the rms of PHI_GRID) and the bias size the flight supports (B,) deg (the prior scale's posterior rms)."""
     sb = it.bias_sigma_deg
     sd = np.sqrt(mix["bias_var"]) * sb
     sx = np.sqrt(np.einsum("bii->bi", cov))

@@ -119,12 +119,9 @@ class Stacked:
 
 
 class Planes:
-    """B problems as contiguous (n,b) planes for the batched kernels: M entries Mc (3,3,n,b), p4c (3,n,b), the
-    pixel planes (2,n,b), platform planes sc (3,n,b), ranges (n,b), the masks, and the inverse standard
-    deviations isd (3,n,b) of the u, v and range rows (1/sqrt of `mle.base_variances` times the variance
-    factors; 1 for the unweighted models). Numpy is slow on tiny trailing axes; with the problems on the last
-    axis every operation, per-problem values (b,) broadcast included, is one contiguous pass over n x b
-    numbers."""
+    """B problems as contiguous (n,b) planes: M entries Mc (3,3,n,b), p4c (3,n,b), pixels (2,n,b), platforms sc
+    (3,n,b), ranges (n,b), the masks, and the rows' inverse standard deviations isd (3,n,b) (`mle.base_variances`).
+    Numpy is slow on tiny trailing axes; with the problems last every operation is one contiguous pass."""
 
     __slots__ = ("Mc", "has_pix", "has_range", "isd", "p4c", "pixc", "rng", "sc")
 

@@ -1,18 +1,8 @@
 """How large is the constant part of the attitude error? Bayesian averaging over the boresight bias's prior
 scale, for `mle` when nobody states the error model.
 
-Told only "attitude 0.2 deg", nothing says how much of that error is constant over the flight (a boresight
-bias: shared by every frame) and how much changes from frame to frame. The two call for different estimates:
-a bias makes the frames' common pixel offset worthless for the target, white errors make it the best
-information there is. So `mle` does not pick one; it averages over the bias's prior standard deviation
-phi * sigma_att, phi on PHI_GRID (0: no bias, 1: a bias as large as the whole stated attitude error), equally
-likely a priori, weighted by the evidence of the flight (the restricted likelihood: the target integrated out
-with a flat prior). The stated attitude variance is the total: for each phi the frame-to-frame part keeps
-(1 - phi^2) of it (`share`), so the residuals' scatter from frame to frame tells how much can be constant even
-where the bias itself cannot be told from a target offset. Where the bias is observable the evidence also sees
-the bias; where it is not, the estimate does not depend on phi (the bias and the target move the frames alike)
-and the covariance carries the posterior's mean bias variance (the prior's: mean(PHI_GRID^2) = 0.35 of
-sigma_att^2, when the flight tells nothing).
+Why, and what the flight can tell: docs/solvers.md, "Boresight bias from the flight, its size by evidence".
+PHI_GRID: the candidates phi (0: no bias, 1: a bias as large as the whole stated attitude error).
 
 The model is linear at the solve's solution: standardized residual rows r (3,n,b) (u, v, range of n frames of
 b problems), Jacobian J (3,3,n,b) of the rows in the target, bias columns a (3,n,b) (the u and v rows' pixel
@@ -33,16 +23,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.solve.stacked import FULL3, cofactors3
+from pipeline.solve.stacked import FULL3, PAIRS, cofactors3
 
 #: the bias's prior standard deviation over the stated attitude sigma: the candidates, equally likely a priori
 PHI_GRID = np.linspace(0.0, 1.0, 9)
 #: the smallest share of a pixel row's variance left when the bias takes the whole attitude error
 RATIO_FLOOR = 1e-3
 
-
-#: the six unique entries (c, d) of a symmetric 3x3 matrix, in the order N00 N01 N02 N11 N12 N22
-PAIRS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 #: the per-row products summed for each candidate (planes of `_row_products`): J_c J_d (6), J_c r (3), r r,
 #: a J_c (3), a a, a r
 _JJ, _JR, _RR, _AJ, _AA, _AR = slice(0, 6), slice(6, 9), 9, slice(10, 13), 13, 14

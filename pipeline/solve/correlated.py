@@ -204,8 +204,7 @@ def gls(sts: list, X0s: np.ndarray, models: Models, robust: str | None, vce: boo
     if rows0 is None:
         rows0 = [rows_in_use(st, X[t * K]) for t, st in enumerate(sts)]
     rows = [r for r in rows0 for _ in range(K)]
-    return _mle.run(Correlated(stk, models, X, vce, rows, reweight), stk, X, status, bad, X.copy(), robust, tol_m,
-                    max_iterations)
+    return _mle.run(Correlated(stk, models, X, vce, rows, reweight), stk, X, status, bad, robust, tol_m, max_iterations)
 
 
 def stack_problems(sts: list) -> Stacked:

@@ -1,16 +1,7 @@
 """Does the error model fit the flight? Tests on the standardized residuals of a solve, batched over problems.
 
-- chi-square: sum of the squared standardized residuals (robust weights applied) against its degrees of
-  freedom; too large means the stated sigmas are too small, or errors the model does not have.
-- lag-1 autocorrelation of the residuals from frame to frame, per sensor group (pixels u and v pooled, ranges):
-  slowly varying errors (attitude drift, GNSS wander) make neighbouring residuals alike, and an estimator that
-  assumes independent errors then counts one error many times. For a first-order autoregressive error with
-  lag-1 correlation rho, the variance of an average grows by (1 + rho) / (1 - rho) over the independent case:
-  that factor inflates the group's variances (`acf_inflation`).
-- batch means: the same factor measured without the AR(1) form, from the means over blocks of sqrt(count)
-  consecutive frames (`batch_means_ratio`). A slow drift under a larger white noise (many video frames a
-  fraction of a second apart) has a small lag-1 autocorrelation, yet its block means vary far more than white
-  errors' would, and the variance of the target's average with them.
+chi-square, lag-1 autocorrelation and batch means per sensor group (u and v pooled, ranges); why each:
+docs/solvers.md, "Error models nobody stated".
 
 Residual planes are (3, n, b): rows u, v, range of the n frames of b problems, zero where unused.
 """
@@ -53,13 +44,10 @@ def outlying_runs(off: np.ndarray) -> np.ndarray:
 
 
 def batch_means_ratio(E: np.ndarray, use: np.ndarray, rows: slice) -> tuple[np.ndarray, np.ndarray]:
-    """(ratio (b,), blocks (b,)): the batch-means variance ratio of the residuals E (3,n,b) over the frames, per
-    row of `rows` (u and v apart) pooled: the used frames (`use` (3,n,b) bool) in order, cut into blocks of
-    k = floor(sqrt(count)) consecutive ones (the classical batch size), ratio = mean over the blocks of
-    k * (block mean)^2 over the mean square of the residuals. It estimates the factor by which correlated errors
-    inflate the variance of an average over the independent case (1 for white residuals, (1 + rho)/(1 - rho) for
-    a long AR(1) error, larger for a slow drift under white noise, whose lag-1 autocorrelation is small); for
-    white residuals blocks * ratio is about chi-square with `blocks` degrees of freedom. NaN where no block."""
+    """(ratio (b,), blocks (b,)): the batch-means variance ratio of the residuals E (3,n,b), per row of `rows`
+    (u and v apart) pooled: the used frames (`use` (3,n,b) bool) in blocks of k = floor(sqrt(count)), ratio =
+    mean of k (block mean)^2 over the residuals' mean square: the variance inflation of an average (1 for white
+    residuals, blocks * ratio then ~ chi-square with `blocks` dof; docs/solvers.md). NaN where no block."""
     u = use[rows]
     e = np.where(u, E[rows], 0.0)
     R, n, b = e.shape
@@ -124,10 +112,9 @@ def describe(chi2: float, dof: float, p: float, rho_pix: float, rho_rng: float, 
     if np.isfinite(p) and p < CHI2_ALPHA:
         parts.append(f"the residuals are {np.sqrt(chi2 / dof):.1f} times larger than the error model says "
                      f"(chi-square {chi2:.0f} on {dof:.0f} degrees of freedom, p = {p:.1g})")
-    if acf_pix:
-        parts.append(f"the pixel residuals drift slowly from frame to frame (lag-1 autocorrelation {rho_pix:.2f})")
-    if acf_rng:
-        parts.append(f"the range residuals drift slowly from frame to frame (lag-1 autocorrelation {rho_rng:.2f})")
+    for name, rho, drift in (("pixel", rho_pix, acf_pix), ("range", rho_rng, acf_rng)):
+        if drift:
+            parts.append(f"the {name} residuals drift slowly from frame to frame (lag-1 autocorrelation {rho:.2f})")
     for name, r in (("pixel", blocks_pix), ("range", blocks_rng)):
         if r is not None:
             parts.append(f"the {name} residuals' means over blocks of consecutive frames vary {r:.1f} times more than "

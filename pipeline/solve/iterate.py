@@ -1,8 +1,5 @@
-"""The batched iteration driver shared by the Gauss-Newton style estimators.
-
-Every problem iterates X <- X + dX until ||dX|| <= tol_m (CONVERGED), max_iterations (MAX_ITERATIONS), a
-singular normal matrix (DEGENERATE) or a non-finite / exploding estimate (DIVERGED). Converged problems are
-frozen: each iteration only computes the still active ones.
+"""The batched iteration driver (`drive`) shared by the Gauss-Newton style estimators: finished problems are
+frozen, each iteration computes only the still active ones (docs/solvers.md, "Stopping, divergence, degeneracy").
 """
 
 from __future__ import annotations
@@ -12,7 +9,7 @@ from collections.abc import Callable
 import numpy as np
 
 from pipeline.solve.estimate import Status
-from pipeline.solve.stacked import Stacked, condition_numbers, is_singular
+from pipeline.solve.stacked import Stacked, condition_numbers, inverse3
 
 #: an estimate further than this many times the problem's size from the platforms has diverged
 DIVERGENCE_FACTOR = 1e3
@@ -20,23 +17,22 @@ DIVERGENCE_FACTOR = 1e3
 StepFn = Callable[[Stacked, np.ndarray], tuple[np.ndarray, np.ndarray, dict]]
 
 
-def problem_scale_m(st: Stacked, X0: np.ndarray) -> np.ndarray:
-    """(B,) a length scale: the largest platform-to-initial-estimate distance (>= 1 m)."""
+def divergence_bound(st: Stacked, X0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(centre (B,3), bound (B,)): the platforms' mean and DIVERGENCE_FACTOR times the largest platform-to-start
+    distance (>= 1 m; from the centre where the start is not finite)."""
+    centre = st.platform_m.mean(axis=1)
+    X0 = np.where(np.isfinite(X0).all(axis=1)[:, None], X0, centre)
     d = np.linalg.norm(X0[:, None, :] - st.platform_m, axis=-1).max(axis=1)
-    return np.where(np.isfinite(d), np.maximum(d, 1.0), 1.0)
+    return centre, DIVERGENCE_FACTOR * np.where(np.isfinite(d), np.maximum(d, 1.0), 1.0)
 
 
 def start_status(X0: np.ndarray, init_status: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """(status (B,) int8 all MAX_ITERATIONS but where the start is unusable, bad (B,) bool): a start that is not
     finite, or that comes from a DIVERGED / DEGENERATE initial solve, keeps that status (DEGENERATE if none)."""
-    finite0 = np.isfinite(X0).all(axis=1)
+    diverged = np.zeros(X0.shape[0], dtype=bool) if init_status is None else init_status == Status.DIVERGED
+    bad = ~np.isfinite(X0).all(axis=1) | diverged | (init_status is not None and init_status == Status.DEGENERATE)
     status = np.full(X0.shape[0], Status.MAX_ITERATIONS, dtype=np.int8)
-    if init_status is not None:
-        bad = (init_status == Status.DIVERGED) | (init_status == Status.DEGENERATE) | ~finite0
-        status[bad] = np.where(init_status[bad] == Status.DIVERGED, Status.DIVERGED, Status.DEGENERATE)
-    else:
-        bad = ~finite0
-        status[bad] = Status.DEGENERATE
+    status[bad] = np.where(diverged[bad], Status.DIVERGED, Status.DEGENERATE)
     return status, bad
 
 
@@ -169,21 +165,20 @@ def iterate(st: Stacked, X0: np.ndarray, step: StepFn, tol_m: float, max_iterati
     X = np.array(X0, dtype=np.float64, copy=True)
     iterations = np.zeros(B, dtype=np.int64)
     status, bad_init = start_status(X, init_status)
-    centre = st.platform_m.mean(axis=1)
-    bound = DIVERGENCE_FACTOR * problem_scale_m(st, np.where(np.isfinite(X).all(axis=1)[:, None], X, centre))
+    centre, bound = divergence_bound(st, X)
     extras = {name: np.full(B, np.nan) for name in extra_names}
     drive(_StepModel(st, step, extras, X), X, status, ~bad_init, iterations, bound, centre, tol_m, max_iterations)
     return X, iterations, status, extras
 
 
 def finish(X: np.ndarray, status: np.ndarray, N: np.ndarray, N_geometry: np.ndarray | None = None) -> np.ndarray:
-    """In place: problems whose final normal matrix N = A^T A (B,k,k) is singular (`is_singular`: the geometry
+    """In place: problems whose final normal matrix N = A^T A (B,k,k) is singular (`inverse3`'s flag: the geometry
     does not determine the target) become DEGENERATE; DIVERGED and DEGENERATE positions become NaN. Returns
     the (B,) condition numbers of the design matrices A. N_geometry: the block judged for singularity, when
     not all of N."""
     cond = condition_numbers(N)
     finite = np.isfinite(X).all(axis=1)
-    status[is_singular(N if N_geometry is None else N_geometry) & finite] = Status.DEGENERATE
+    status[inverse3(N if N_geometry is None else N_geometry)[1] & finite] = Status.DEGENERATE
     cond[~finite] = np.nan
     X[(status == Status.DIVERGED) | (status == Status.DEGENERATE)] = np.nan
     return cond

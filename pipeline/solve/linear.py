@@ -48,8 +48,8 @@ def dlt(st: Stacked, with_condition: bool = True):
 
 def finite_cameras(st: Stacked) -> np.ndarray:
     """(B,n) True where P's left 3x3 block M is a finite camera: |det M| against |M|^3 (its rows' lengths)."""
-    g = st._gram()
-    return np.abs(st.det_M()) > 1e-12 * np.sqrt(g[..., 0, 0] * g[..., 1, 1] * g[..., 2, 2])
+    g = st.gram
+    return np.abs(st.det_M) > 1e-12 * np.sqrt(g[..., 0, 0] * g[..., 1, 1] * g[..., 2, 2])
 
 
 def los_points(st: Stacked):

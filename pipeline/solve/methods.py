@@ -135,13 +135,11 @@ def _solve_stacked(method: str, st: Stacked, o: dict, first: tuple | None = None
     B = st.size
     tol, itmax = o["tol_m"], o["max_iterations"]
     extras: dict = {}
-    cov = None
+    cov, it = None, np.zeros(B, dtype=np.int64)  # the closed-form methods' iterations
     if method == "dlt":
         X, status, cond = linear.dlt(st)
-        it = np.zeros(B, dtype=np.int64)
     elif method == "los":
         X, status, pts, oracle = linear.los(st)
-        it = np.zeros(B, dtype=np.int64)
         cond = np.full(B, np.nan)
         extras = {"points_m": pts, "oracle_error_m": oracle}
     elif method == "vision":
@@ -609,10 +607,8 @@ SOLVE_ERRORS = (RidgelocError, ValueError, np.linalg.LinAlgError)
 def solve_problems(problems: Sequence[Observations], methods: Sequence[str], options: dict | None = None
                    ) -> list[dict]:
     """Every method of `methods` on each of several problems (a flight's targets), options {method: options}: per
-    problem {method: its `Estimate`, or the error (`SOLVE_ERRORS`) `solve` raises}, in the order of `methods`.
-    The answers of `solve` one problem at a time, for less: each problem's checks and arrays are built once; each
-    kernel runs once per group of problems that stack (`_groups`), mle's first fit too (one problem at a time with
-    correlated errors, a terrain prior or initial_m); the multistart reuses the start estimators' answers."""
+    problem {method: its `Estimate`, or the error (`SOLVE_ERRORS`) `solve` raises}, in the order of `methods`:
+    `solve`'s answers, each kernel run once per group of problems that stack (`_groups`), mle's first fit too."""
     obs_list = list(problems)
     for obs in obs_list:
         if not isinstance(obs, Observations):

@@ -10,10 +10,11 @@ import numpy as np
 from pipeline.solve import bias_mixture, fit_checks
 from pipeline.solve import iterate as _iterate
 from pipeline.solve.estimate import Status
-from pipeline.solve.iterate import problem_scale_m, start_status
+from pipeline.solve.iterate import divergence_bound, start_status
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import (
     FULL3,
+    PAIRS,
     Planes,
     Stacked,
     cofactors3,
@@ -117,16 +118,9 @@ def bias_prior_deg(sigma: Sigma, options: dict) -> tuple[float | None, bool]:
 
 
 def base_variances(st: Stacked, X0: np.ndarray, sigma: Sigma):
-    """A priori variances (B, 2n+n) of the residual rows [u_1, v_1, ..., d_1, ...], from the sensor sigmas.
-
-    pixel: sigma_px^2 + (f sigma_att)^2 + (f sigma_pos / D)^2, f the focal length of that axis (`focal_px`),
-    D the platform-to-target distance at the initial estimate (the camera's lever arm is negligible at this
-    scale): an attitude error turns the line of sight by
-    sigma_att (f sigma_att px), a platform position error moves it sideways by sigma_pos/D radians.
-    range: sigma_range^2 + sigma_pos^2, the position error's component along the line of sight.
-    Unknown sigmas: pixel 1 px, range 1 m, position and attitude 0 (variance component estimation then
-    scales the pixel and range groups).
-    """
+    """A priori variances (B, 2n+n) of the residual rows [u_1, v_1, ..., d_1, ...], from the sensor sigmas:
+    pixel sigma_px^2 + f^2 (sigma_att^2 + (sigma_pos / D)^2) (f `focal_px` of that axis, D the platform-to-target
+    distance at X0), range sigma_range^2 + sigma_pos^2; unknown sigmas: 1 px, 1 m, 0 (docs/solvers.md, mle)."""
     s_px = 1.0 if sigma.pixel_px is None else sigma.pixel_px
     s_r = 1.0 if sigma.range_m is None else sigma.range_m
     s_pos = 0.0 if sigma.position_m is None else sigma.position_m
@@ -192,50 +186,27 @@ def mle(st: Stacked, X0: np.ndarray, sigma: Sigma, robust: str | None, vce: bool
         max_iterations: int, init_status: np.ndarray | None = None, bias_deg: float | None = None,
         bias_size_unknown: bool = True, terrain=None):
     """Returns X (B,3), iterations (B,), status (B,) int8, cond (B,) of the weighted design W^1/2 J,
-    covariance (B,3,3) m^2, and extras (B, ...) arrays (`finish`) and, with bias_deg, the boresight bias
-    (bias_deg, bias_sigma_deg, bias_prior_deg, bias_target_correlation; bias_size_deg when its size is
-    averaged). The fit checks are taken at the iteration's solution, before the averaging.
+    covariance (B,3,3) m^2 and `finish`'s extras (B, ...), with bias_deg the boresight bias's too.
 
-    bias_deg > 0: a constant boresight bias (two camera-frame angles, constant pixel offsets f * angle in u and
-    v) with a zero-mean Gaussian prior of that standard deviation, eliminated from the normal equations (Schur
-    complement: the target covariance is the marginal one). With bias_size_unknown it is the largest bias: the
-    answer is averaged over the bias's size (`bias_mixture`) and position_m^2 I, a GNSS offset shared by the
-    segment, is added to the covariance. terrain=(fn, sigma_m): a soft prior on the target's height, fn(e_m, n_m)
-    -> (up_m, dup_de, dup_dn) in the problems' ENU frame, one more (never robustified) residual (fn(e, n) - up) /
-    sigma_m per problem where fn is finite.
+    bias_deg > 0: a constant boresight bias (pixel offsets f * angle in u and v) with a zero-mean prior of that
+    sigma, eliminated by Schur complement; with bias_size_unknown the largest bias, its size averaged over
+    (`bias_mixture`). terrain=(fn, sigma_m): a soft prior on the target's height, fn(e_m, n_m) -> (up_m, dup_de,
+    dup_dn) in the problems' ENU frame. The model: docs/solvers.md, mle.
     """
     X = np.array(X0, dtype=np.float64, copy=True)
     status, bad = start_status(X, init_status)
     X[bad] = 0.0
-    pl = Planes.from_stacked(st, base_variances(st, X, sigma))
-    a = None
-    if bias_deg:
-        fx, fy = st.focal_px()
-        sb = np.deg2rad(bias_deg)
-        a = np.empty((2, *pl.has_pix.shape))  # the bias columns of the u and v rows
-        a[0] = np.where(pl.has_pix, fx.T * sb, 0.0) * pl.isd[0]
-        a[1] = np.where(pl.has_pix, fy.T * sb, 0.0) * pl.isd[1]
-    m = White(st, pl, a, X, vce, terrain)
-    m.bias_sigma_deg, m.bias_size_unknown = bias_deg, bias_size_unknown
-    # the stated attitude sigma is split between the bias and the frame-to-frame error (it is the largest bias)
-    m.split_attitude = bool(a is not None and bias_size_unknown and sigma.attitude_deg)
-    if bias_deg and bias_size_unknown and sigma.position_m:
-        # GNSS errors wander over minutes: over a segment much of them is an offset shared by every frame, which
-        # moves the target exactly as the platforms and shows in no residual; the covariance carries all of the
-        # stated position variance as that offset (the rows keep it too, as frame-to-frame: the safe side)
-        m.position_m = sigma.position_m
-    return run(m, st, X, status, bad, X0, robust, tol_m, max_iterations)
+    return run(White(st, X, sigma, vce, terrain, bias_deg, bias_size_unknown), st, X, status, bad, robust, tol_m,
+               max_iterations)
 
 
-def run(m, st: Stacked, X: np.ndarray, status: np.ndarray, bad: np.ndarray, X0: np.ndarray, robust: str | None,
-        tol_m: float, max_iterations: int):
+def run(m, st: Stacked, X: np.ndarray, status: np.ndarray, bad: np.ndarray, robust: str | None, tol_m: float,
+        max_iterations: int):
     """The one `mle` iteration and finish of a model m (`White`, or `correlated.Correlated`): Levenberg-Marquardt
     / IRLS by `iterate.drive` with m's loss; with the redescending loss Huber first, then the scale guard
     (`robust_scale`), then the redescending loss from there. Returns `finish`'s tuple."""
     iterations = np.zeros(st.size, dtype=np.int64)
-    centre = st.platform_m.mean(axis=1)
-    finite0 = np.isfinite(X0).all(axis=1)
-    bound = _iterate.DIVERGENCE_FACTOR * problem_scale_m(st, np.where(finite0[:, None], X0, centre))
+    centre, bound = divergence_bound(st, X)  # the bad starts' bound is never used: they do not iterate
     active = ~bad
     for phase in (("huber", "redescending") if robust == "redescending" else (robust,)):
         if phase == "redescending":
@@ -249,11 +220,9 @@ def run(m, st: Stacked, X: np.ndarray, status: np.ndarray, bad: np.ndarray, X0: 
 
 
 def robust_scale(m) -> None:
-    """The scale guard before the redescending phase: where the Huber fit's standardized residuals of a group
-    are more spread than its sigma says (1.4826 x median |e| beyond the MAD's own noise, ~1.17 / sqrt(count)),
-    that group's variances (the rejection thresholds and the covariance) scale with them (`m.rescale`), so that
-    a misfit model does not reject good data; the factors are kept in m.guard (a misfit, unlike variance
-    components)."""
+    """The scale guard before the redescending phase (docs/solvers.md): a group whose Huber-fit residuals spread
+    wider than its sigma (1.4826 median |e| beyond the MAD's own noise, ~1.17 / sqrt(count)) has its variances
+    scaled by that (`m.rescale`), so that a misfit model rejects no good data; the factors go to m.guard."""
     E, ok = m.E, m.ok
     for g, rows in ((0, slice(0, 2)), (1, slice(2, 3))):
         # the median of each problem's usable |e| (NaN where none): sorted, the unusable ones (inf) last
@@ -270,14 +239,10 @@ def robust_scale(m) -> None:
 
 
 def finish(m, X: np.ndarray, status: np.ndarray, iterations: np.ndarray):
-    """The one finish of every `mle` model m at its final iterate X (B,3) with its final weights. Returns X,
-    iterations, status, cond (B,), covariance (B,3,3) and the extras (B, ...): variance_factor_pixel/_range,
-    sigma0_sq, vce_rounds, rejected (B,n,3) bool (u, v, range rows with zero weight), residual_sigmas (B,n,3)
-    (standardized), residuals (px, m), the fit checks (`fit_checks`), consistent, robust_spread (B,2) and
-    covariance_inflation (trace reported / trace as stated). m gives m.E (3,n,B), m.ok, m.wr (or None), m.guard,
-    m.vf (B,2) and m.information(var_scale (B,2)) -> (information (B,3,3), chi-square (B,)). Where the
-    residuals drift (unless m models it) the group's variances are inflated (`fit_checks`), where the
-    chi-square test fails everything by its variance factor."""
+    """The one finish of every `mle` model m at its final iterate X (B,3) with its final weights: X, iterations,
+    status, cond (B,), covariance (B,3,3) and the extras (B, ...) (rejected and residuals (B,n,3), the fit checks).
+    m gives E (3,n,B), ok, wr (or None), guard, vf (B,2) and information(var_scale (B,2)) -> (information
+    (B,3,3), chi-square (B,)). Drift (unless m models it) and a failed chi-square inflate (docs/solvers.md)."""
     E, ok, wr, guard = m.E, m.ok, m.wr, m.guard
     B = X.shape[0]
     failed = (status == Status.DIVERGED) | (status == Status.DEGENERATE)
@@ -324,8 +289,7 @@ def finish(m, X: np.ndarray, status: np.ndarray, iterations: np.ndarray):
         inflation = np.trace(cov, axis1=1, axis2=2) / np.trace(cov0, axis1=1, axis2=2)
     extras = {"variance_factor_pixel": m.vf[:, 0], "variance_factor_range": m.vf[:, 1],
               "sigma0_sq": sigma0_sq, "vce_rounds": m.vce_rounds,
-              "rejected": (ok & (wr == 0)).transpose(2, 1, 0) if wr is not None else np.zeros((B, ok.shape[1], 3),
-                                                                                                dtype=bool),
+              "rejected": (np.zeros_like(ok) if wr is None else ok & (wr == 0)).transpose(2, 1, 0),
               "residual_sigmas": E_report.transpose(2, 1, 0).copy(),
               "residuals": (E_report / m.isd()).transpose(2, 1, 0),
               "chi2": chi2, "chi2_dof": dof.astype(np.float64), "chi2_p": p,
@@ -347,17 +311,25 @@ class White(_iterate.Model):
     damped = True
     skips_last_step = True
 
-    def __init__(self, st, pl, a, X, vce, terrain):
+    def __init__(self, st, X, sigma, vce, terrain, bias_deg, bias_size_unknown):
         B = st.size
-        self.st, self.pl, self.a, self.X, self.vce, self.terrain = st, pl, a, X, vce, terrain
+        self.st, self.X, self.vce, self.terrain = st, X, vce, terrain
+        self.pl = pl = Planes.from_stacked(st, base_variances(st, X, sigma))
+        self.a = None
+        if bias_deg:
+            fx, fy = st.focal_px()  # the bias columns (2,n,B) of the u and v rows
+            self.a = np.where(pl.has_pix, np.stack([fx.T, fy.T]) * np.deg2rad(bias_deg), 0.0) * pl.isd[:2]
+        self.bias_sigma_deg, self.bias_size_unknown = bias_deg, bias_size_unknown
+        # the stated attitude sigma is split between the bias and the frame-to-frame error (it is the largest bias)
+        self.split_attitude = bool(self.a is not None and bias_size_unknown and sigma.attitude_deg)
+        # GNSS errors wander over minutes: over a segment much of them is an offset shared by every frame, which
+        # moves the target exactly as the platforms and shows in no residual; the covariance carries all of the
+        # stated position variance as that offset (the rows keep it too, as frame-to-frame: the safe side)
+        self.position_m = sigma.position_m if bias_deg and bias_size_unknown and sigma.position_m else 0.0
         self.vf = np.ones((B, 2))  # variance factors of the pixel and range groups
         self.vce_rounds = np.zeros(B, dtype=np.int64)
         self.z = np.zeros((3, B))  # the bias in prior standard deviations (u, v; the range row stays 0)
         self.guard = np.ones((B, 2))  # `robust_scale`'s factors: a misfit, unlike variance components
-        self.bias_sigma_deg = None
-        self.position_m = 0.0  # the stated position sigma, when the GNSS error is taken as a shared offset
-        self.bias_size_unknown = False
-        self.split_attitude = False
         self.mix = None
         self.start_only = False
         self._sums = self.J = None  # `information`'s group sums and `jacobian` at the final state
@@ -440,7 +412,7 @@ class White(_iterate.Model):
             nok = self.newton_ok[idx]
             N = [np.where(nok, n, m) for n, m in zip(NG[9:], N, strict=True)]
         if self.terrain is not None:
-            _add_terrain(N, g, *_terrain_rows(self.terrain, X))
+            _add_terrain(N, g, *_terrain_rows(self.terrain, X)[:2])
         dX, singular = _solve3(N, g, lam)
         self._N = N
         return dX, singular
@@ -662,9 +634,9 @@ def _terrain_rows(terrain, X: np.ndarray):
     return jt, et, use.astype(np.int64)
 
 
-def _add_terrain(N, g, jt, et, use=None):
+def _add_terrain(N, g, jt, et):
     """Add the terrain row jt (3,b), residual et (b,) to the six normal-matrix entries N and g (in place)."""
-    for e, (c, d) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
+    for e, (c, d) in enumerate(PAIRS):
         N[e] = N[e] + jt[c] * jt[d]
     if g is not None:
         for c in range(3):
@@ -718,7 +690,7 @@ def _schur(N, hs):
     """Eliminate the u and v bias (`_bias_terms` hs) from the six normal-matrix entries N (in place):
     N -= h h^T / (1 + s)."""
     for h, s in hs:
-        for e, (c, d) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
+        for e, (c, d) in enumerate(PAIRS):
             N[e] = N[e] - h[:, c] * h[:, d] / (1.0 + s)
 
 
@@ -741,10 +713,8 @@ def _bias_summary(it: White, cov, hs, vf_chi) -> dict:
 
 
 def _mixture_summary(it: White, mix: dict, cov) -> dict:
-    """`_bias_summary` from the bias mixture: the posterior mean bias (B,2) deg, its standard deviation, its
-    correlation with the target (B,2,3), the prior's standard deviation (B,2) (the mixture's: the largest bias,
-    scaled by a misfit, times the rms of PHI_GRID) and the bias size the flight supports (B,) (the posterior
-    rms of the prior's scale, deg)."""
+    """`_bias_summary` from the bias mixture, with the prior's sigma (B,2) (the largest bias, scaled by a misfit,
+    times the rms of PHI_GRID) and the bias size the flight supports (B,) deg (the prior scale's posterior rms)."""
     sb = it.bias_sigma_deg
     sd = np.sqrt(mix["bias_var"]) * sb
     sx = np.sqrt(np.einsum("bii->bi", cov))
@@ -767,24 +737,21 @@ def _vce_factors(J, E, ok, robust, a=None, terrain_rows=None):
     r_g = sum_g (1 - w_i h_i) over the usable rows of each group (pixels: the u and v rows, ranges; rows a
     redescending loss rejected do not count), h_i the leverage of row i in the joint problem (target, and the
     bias columns a when given, the terrain prior's `_terrain_rows` when given), from the standardized J (3,3,n,b),
-    E (3,n,b); and a (b, 2) flag 'usable'
-    (redundancy of the group >= 0.5)."""
+    E (3,n,b); and a (b, 2) flag 'usable' (redundancy of the group >= 0.5)."""
     _, w = _cost_weights(E, robust)
     N, _ = _normal(J, E, w)
     hs = _bias_terms(J, a, w) if a is not None else []
     _schur(N, hs)
     if terrain_rows is not None:
-        _add_terrain(N, None, *terrain_rows)
-    inv = C00, C01, C02, C11, C12, C22 = cofactors3(N)[0]
+        _add_terrain(N, None, *terrain_rows[:2])
+    inv = cofactors3(N)[0]
     j0, j1, j2 = J
     quad = (inv[0] * j0 * j0 + inv[3] * j1 * j1 + inv[5] * j2 * j2
             + 2.0 * (inv[1] * j0 * j1 + inv[2] * j0 * j2 + inv[4] * j1 * j2))
     for k, (h, s) in enumerate(hs):
-        h0, h1, h2 = h[:, 0], h[:, 1], h[:, 2]
-        c = [-(C00 * h0 + C01 * h1 + C02 * h2) / (1 + s), -(C01 * h0 + C11 * h1 + C12 * h2) / (1 + s),
-             -(C02 * h0 + C12 * h1 + C22 * h2) / (1 + s)]
-        czz = 1.0 / (1 + s) - (c[0] * h0 + c[1] * h1 + c[2] * h2) / (1 + s)
-        quad[k] = quad[k] + 2.0 * a[k] * (J[0, k] * c[0] + J[1, k] * c[1] + J[2, k] * c[2]) + a[k] ** 2 * czz
+        c = [-sum(inv[FULL3[r][e]] * h[:, e] for e in range(3)) / (1 + s) for r in range(3)]
+        czz = 1.0 / (1 + s) - sum(c[e] * h[:, e] for e in range(3)) / (1 + s)
+        quad[k] = quad[k] + 2.0 * a[k] * sum(J[e, k] * c[e] for e in range(3)) + a[k] ** 2 * czz
     lev = quad if w is None else w * quad
     q = E * E if w is None else w * E * E
     use = ok if w is None else ok & (w > 0)

@@ -29,8 +29,7 @@ def fit_summary(ex: dict) -> dict:
     return {"consistent": bool(ex["consistent"]), "chi2": _f(ex["chi2"]), "dof": _f(ex["chi2_dof"]),
             "p_value": _f(ex["chi2_p"]), "autocorrelation_pixel": _f(ex["autocorrelation_pixel"]),
             "autocorrelation_range": _f(ex["autocorrelation_range"]),
-            "batch_means_pixel": _f(ex["batch_means_pixel"]) if "batch_means_pixel" in ex else None,
-            "batch_means_range": _f(ex["batch_means_range"]) if "batch_means_range" in ex else None,
+            **{k: _f(ex[k]) if k in ex else None for k in ("batch_means_pixel", "batch_means_range")},
             "covariance_inflation": _f(ex["covariance_inflation"]), "message": msg}
 
 

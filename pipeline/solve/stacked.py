@@ -7,6 +7,7 @@ by zeros and described by boolean masks, so that the batched kernels can weight 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -67,52 +68,42 @@ class Stacked:
 
     # ---- derived camera quantities ---------------------------------------------------------------------
 
-    def _gram(self) -> np.ndarray:
-        """(B,n,3,3) M M^T (the rows' dot products), computed once."""
-        g = self.__dict__.get("_gram_cache")
-        if g is None:  # entry by entry: a batched matmul of 3x3 matrices costs 2.5x more
-            M, g = self.M, self.__dict__.setdefault("_gram_cache", np.empty(self.M.shape))
-            for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)):
-                g[..., i, j] = g[..., j, i] = sum(M[..., i, k] * M[..., j, k] for k in range(3))
+    @cached_property
+    def gram(self) -> np.ndarray:
+        """(B,n,3,3) M M^T (the rows' dot products)."""
+        M, g = self.M, np.empty(self.M.shape)
+        for i, j in PAIRS:  # entry by entry: a batched matmul of 3x3 matrices costs 2.5x more
+            g[..., i, j] = g[..., j, i] = sum(M[..., i, k] * M[..., j, k] for k in range(3))
         return g
 
+    @cached_property
     def planes(self):
-        """Mc (3,3,B,n), p4c (3,B,n), pixc (2,B,n): every entry of M, p4 and the pixels as a contiguous
-        (B,n) plane, computed once."""
-        cache = self.__dict__.get("_planes_cache")
-        if cache is None:
-            cache = self.__dict__["_planes_cache"] = (np.ascontiguousarray(self.M.transpose(2, 3, 0, 1)),
-                                                      np.ascontiguousarray(self.p4.transpose(2, 0, 1)),
-                                                      np.ascontiguousarray(self.pix.transpose(2, 0, 1)))
-        return cache
+        """Mc (3,3,B,n), p4c (3,B,n), pixc (2,B,n): every entry of M, p4 and the pixels as a contiguous (B,n) plane."""
+        c = np.ascontiguousarray
+        return c(self.M.transpose(2, 3, 0, 1)), c(self.p4.transpose(2, 0, 1)), c(self.pix.transpose(2, 0, 1))
 
+    @cached_property
     def planes_platform(self) -> np.ndarray:
-        """(3,B,n) platform coordinates as contiguous planes, computed once."""
-        cache = self.__dict__.get("_platform_planes")
-        if cache is None:
-            cache = self.__dict__["_platform_planes"] = np.ascontiguousarray(self.platform_m.transpose(2, 0, 1))
-        return cache
+        """(3,B,n) platform coordinates as contiguous planes."""
+        return np.ascontiguousarray(self.platform_m.transpose(2, 0, 1))
 
+    @cached_property
     def det_M(self) -> np.ndarray:
-        """(B,n) det of the left 3x3 block of each P, computed once."""
-        det = self.__dict__.get("_det_cache")
-        if det is None:
-            a, b, c = self.M[..., 0, :], self.M[..., 1, :], self.M[..., 2, :]
-            det = self.__dict__["_det_cache"] = (
-                a[..., 0] * (b[..., 1] * c[..., 2] - b[..., 2] * c[..., 1])
+        """(B,n) det of the left 3x3 block of each P."""
+        a, b, c = self.M[..., 0, :], self.M[..., 1, :], self.M[..., 2, :]
+        return (a[..., 0] * (b[..., 1] * c[..., 2] - b[..., 2] * c[..., 1])
                 - a[..., 1] * (b[..., 0] * c[..., 2] - b[..., 2] * c[..., 0])
                 + a[..., 2] * (b[..., 0] * c[..., 1] - b[..., 1] * c[..., 0]))
-        return det
 
     def depth_sign(self) -> np.ndarray:
         """(B,n) sign of det(M): P and -P project alike, the sign says which side of the camera is 'front'."""
-        return np.where(self.det_M() < 0, -1.0, 1.0)
+        return np.where(self.det_M < 0, -1.0, 1.0)
 
     def focal_px(self) -> tuple[np.ndarray, np.ndarray]:
         """(B,n) focal lengths fx, fy in px from the rows m1, m2, m3 of M = lambda K R (zero skew assumed):
         m1 x m3 = lambda^2 fx r1 x r3, so fx = |m1 x m3| / |m3|^2 = sqrt(|m1|^2 |m3|^2 - (m1.m3)^2) / |m3|^2,
         and likewise fy with m2."""
-        g = self._gram()
+        g = self.gram
         g33 = g[..., 2, 2]
         fx = np.sqrt(np.maximum(g[..., 0, 0] * g33 - g[..., 0, 2] ** 2, 0.0)) / g33
         fy = np.sqrt(np.maximum(g[..., 1, 1] * g33 - g[..., 1, 2] ** 2, 0.0)) / g33
@@ -123,17 +114,14 @@ class Stacked:
         q3 / |m3| with q = M X + p4, since m3 = lambda r3 for P = lambda K [R | t]."""
         m3 = self.M[..., 2, :]
         q2 = (m3 @ X[:, :, None])[..., 0] + self.p4[..., 2]
-        n3 = np.sqrt(self._gram()[..., 2, 2])
+        n3 = np.sqrt(self.gram[..., 2, 2])
         return q2 * self.depth_sign() / np.where(n3 > 0, n3, np.inf)
 
 
 class Planes:
-    """B problems as contiguous (n,b) planes for the batched kernels: M entries Mc (3,3,n,b), p4c (3,n,b), the
-    pixel planes (2,n,b), platform planes sc (3,n,b), ranges (n,b), the masks, and the inverse standard
-    deviations isd (3,n,b) of the u, v and range rows (1/sqrt of `mle.base_variances` times the variance
-    factors; 1 for the unweighted models). Numpy is slow on tiny trailing axes; with the problems on the last
-    axis every operation, per-problem values (b,) broadcast included, is one contiguous pass over n x b
-    numbers."""
+    """B problems as contiguous (n,b) planes: M entries Mc (3,3,n,b), p4c (3,n,b), pixels (2,n,b), platforms sc
+    (3,n,b), ranges (n,b), the masks, and the rows' inverse standard deviations isd (3,n,b) (`mle.base_variances`).
+    Numpy is slow on tiny trailing axes; with the problems last every operation is one contiguous pass."""
 
     __slots__ = ("Mc", "has_pix", "has_range", "isd", "p4c", "pixc", "rng", "sc")
 
@@ -199,15 +187,11 @@ def evaluate(pl: Planes, X: np.ndarray):
 
 
 def pixel_model(st: Stacked, X: np.ndarray):
-    """Reprojection residuals and Jacobian at X (B,3).
-
-    Returns J (B,2n,3) d(u,v)/dX, r (B,2n) observed - predicted (px), mask (B,2n) bool. Rows are u_1, v_1,
-    u_2, ... With q = M X + p4: u = q1/q3, du/dX = (m1 - u m3)/q3 and dv/dX = (m2 - v m3)/q3 (m_k rows of M).
-    Rows with a missing pixel or a camera with q3 = 0 are masked (zero Jacobian and residual).
-    Computed on (B,n) planes of each matrix entry (`Stacked.planes`): numpy is slow on tiny trailing axes.
-    """
+    """Reprojection Jacobian J (B,2n,3) d(u,v)/dX, residuals r (B,2n) observed - predicted (px) and mask (B,2n)
+    at X (B,3), rows u_1, v_1, u_2, ...: with q = M X + p4, u = q1/q3, du/dX = (m1 - u m3)/q3; a missing pixel
+    or q3 = 0 is masked (zero). On (B,n) planes (`Stacked.planes`): numpy is slow on tiny trailing axes."""
     B, n = st.has_pix.shape
-    Mc, p4c, pixc = st.planes()
+    Mc, p4c, pixc = st.planes
     x0, x1, x2 = X[:, 0, None], X[:, 1, None], X[:, 2, None]
     q0 = Mc[0, 0] * x0 + Mc[0, 1] * x1 + Mc[0, 2] * x2 + p4c[0]
     q1 = Mc[1, 0] * x0 + Mc[1, 1] * x1 + Mc[1, 2] * x2 + p4c[1]
@@ -229,7 +213,7 @@ def range_model(st: Stacked, X: np.ndarray):
     """Range residuals and Jacobian at X (B,3): J (B,n,3) = (X - s_i)/|X - s_i|, r (B,n) = d_i - |X - s_i| (m),
     mask (B,n) bool (a missing range, or X on a platform position, is masked)."""
     B, n = st.has_range.shape
-    sc = st.planes_platform()
+    sc = st.planes_platform
     d = [X[:, c, None] - sc[c] for c in range(3)]
     dist = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
     ok = st.has_range & (dist > 0)
@@ -327,6 +311,8 @@ def cofactors3(N6, singular_below: float = SINGULAR_DET):
 
 #: the entry of the six (N00 N01 N02 N11 N12 N22) holding (row, column) of a symmetric 3x3 matrix
 FULL3 = ((0, 1, 2), (1, 3, 4), (2, 4, 5))
+#: the six unique entries (c, d) of a symmetric 3x3 matrix, in the order N00 N01 N02 N11 N12 N22
+PAIRS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
 def full3(N6) -> np.ndarray:
@@ -337,20 +323,14 @@ def full3(N6) -> np.ndarray:
 def inverse3(N: np.ndarray, singular_below: float = SINGULAR_DET):
     """Inverses (B,3,3) of symmetric 3x3 N (`cofactors3`), and the `solve_spd` singular flag (B,). Singular
     ones are NaN."""
-    inv, _, singular = cofactors3([N[:, r, c] for r, c in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))],
-                                  singular_below)
+    inv, _, singular = cofactors3([N[:, r, c] for r, c in PAIRS], singular_below)
     return full3(inv), singular
-
-
-def is_singular(N: np.ndarray) -> np.ndarray:
-    """(B,) the `solve_spd` criterion alone, for 3x3 normal matrices N (B,3,3)."""
-    return inverse3(N)[1]
 
 
 def condition_numbers(N: np.ndarray) -> np.ndarray:
     """(B,) 2-norm condition numbers of design matrices A from their normal matrices N = A^T A (B,k,k):
     sqrt(largest / smallest eigenvalue); inf when singular. Through N, values beyond ~1e7 are only indicative
-    (rounding); degeneracy is decided by `is_singular`, not by this number."""
+    (rounding); degeneracy is decided by `solve_spd`'s criterion, not by this number."""
     good = np.isfinite(N).all(axis=(1, 2))
     ev = np.linalg.eigvalsh(np.where(good[:, None, None], N, 0.0))
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -93,8 +93,7 @@ def main(argv: list[str] | None = None) -> int:
               f"from {args.starts} starts 1e-6 m away {move:.1e} m")
         if not args.candidates:
             continue
-        sigmas = [dataclasses.replace(sigma, attitude_tau_s=t, position_tau_s=p, attitude_deg=a)
-                  for t, a, p in learned_tau.candidates(sigma)]
+        sigmas = learned_tau.candidates(sigma)
         for reweight in (True, False):
             fits = []
             for X0 in starts:

@@ -63,14 +63,16 @@ def log_likelihoods(st: Stacked, Xs: np.ndarray, sigmas: list, vfs: list) -> lis
     return out
 
 
-def candidates(sigma: Sigma):
-    """The (tau_s, attitude_deg, position_tau_s) grid: the stated attitude sigma, or ATTITUDE_GRID_DEG where none is
-    stated; the position error drifting with the attitude's tau, or (where the sigma states a position accuracy)
-    white: a GNSS error that wanders with the attitude's tau moves the target as a shared offset, one that does not
-    must not be modelled so (zoo flight z024: 22.5 m tied, 5.2 m white, the white family 4.6 log units likelier)."""
+def candidates(sigma: Sigma) -> list[Sigma]:
+    """sigma under each model of the (attitude_tau_s, attitude_deg, position_tau_s) grid: the stated attitude
+    sigma, or ATTITUDE_GRID_DEG where none is stated; the position error drifting with the attitude's tau, or
+    (where the sigma states a position accuracy) white: a GNSS error that wanders with the attitude's tau moves
+    the target as a shared offset, one that does not must not be modelled so (zoo flight z024: 22.5 m tied,
+    5.2 m white, the white family 4.6 log units likelier)."""
     atts = (sigma.attitude_deg,) if sigma.attitude_deg else ATTITUDE_GRID_DEG
     positions = (True, False) if sigma.position_m else (True,)
-    return [(tau, att, tau if tied else None) for tied in positions for att in atts for tau in TAU_GRID_S]
+    return [dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau if tied else None, attitude_deg=att)
+            for tied in positions for att in atts for tau in TAU_GRID_S]
 
 
 def _families(sigmas: list) -> list:
@@ -94,8 +96,7 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
     rows the first solve kept, every row at weight 1 (the robust loss's phases and scale guard kept:
     `correlated.gls`'s reweight False): the robust weights on the rows' marginal residuals under a correlated C are
     a fixed-point map with no objective, which from starts 1e-6 m apart ended metres to kilometres apart."""
-    sigmas = [dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=ptau, attitude_deg=att)
-              for tau, att, ptau in candidates(sigma)]
+    sigmas = candidates(sigma)
     K = len(sigmas)
     by_rows: dict[tuple, list[int]] = {}  # the same frames with a pixel and with a range (`Models.concat`: the rest)
     for i, st in enumerate(sts):

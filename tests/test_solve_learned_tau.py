@@ -10,6 +10,7 @@ from pipeline.solve import learned_tau
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import Stacked
 from support.scenes import PAPER_SIGMA, correlated_problems
+from support.zoo import zoo as _zoo
 
 TRUE_TAU_S = 20.0
 
@@ -43,20 +44,6 @@ def test_the_attitude_size_is_learned_where_unstated():
         _, att, _, res = learned_tau.learn_tau([st], obs.truth_m[None], told, None, True, 1e-4, 50)[0]
         chosen.append(att * np.sqrt(res[5]["variance_factor_pixel"][0]))
     assert np.mean((np.array(chosen) > 0.1) & (np.array(chosen) < 0.4)) >= 0.75
-
-
-def _zoo():
-    import importlib.util
-    import sys
-    from pathlib import Path
-
-    if "zoo" not in sys.modules:
-        path = Path(__file__).resolve().parents[1] / "scripts" / "zoo.py"
-        spec = importlib.util.spec_from_file_location("zoo", path)
-        module = importlib.util.module_from_spec(spec)
-        sys.modules["zoo"] = module  # registered before running it: its dataclasses look their module up
-        spec.loader.exec_module(module)
-    return sys.modules["zoo"]
 
 
 @pytest.mark.parametrize("name", ["z029", "z087"])

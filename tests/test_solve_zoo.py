@@ -10,28 +10,14 @@ z104, z132: 1.6-1.7 x the bound; docs/zoo.md)."""
 
 from __future__ import annotations
 
-import importlib.util
 import statistics
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from pipeline.errors import RidgelocError
 from pipeline.solve import solve
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def _zoo():
-    if "zoo" not in sys.modules:
-        spec = importlib.util.spec_from_file_location("zoo", ROOT / "scripts" / "zoo.py")
-        module = importlib.util.module_from_spec(spec)
-        sys.modules["zoo"] = module  # registered before running it: its dataclasses look their module up
-        spec.loader.exec_module(module)
-    return sys.modules["zoo"]
-
+from support.zoo import zoo as _zoo
 
 FLIGHTS = ["arc", "straight", "obsfile",  # the issue's named shapes
            "z001", "z002", "z004", "z005", "z010",  # gauss_markov, bias, gnss_drift, range_outliers, random_walk

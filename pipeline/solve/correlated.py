@@ -223,8 +223,9 @@ def stack_problems(sts: list) -> Stacked:
 
 class Correlated(_iterate.Model):
     """The `mle` model (`iterate.drive`, `mle.finish`) of one problem (B = 1) with time-correlated errors under K
-    residual models at once (`gls`): iteratively reweighted generalized least squares; with fixed weights damped
-    (Levenberg-Marquardt in `iterate.drive`: a step must not raise r^T C_w^-1 r). The robust weights
+    residual models at once (`gls`): iteratively reweighted generalized least squares; with reweight False damped
+    (Levenberg-Marquardt in `iterate.drive`: a step must not raise r^T C_w^-1 r; the reweighted fit is iterated
+    undamped, as before 2026-11-24, also where robust is None). The robust weights
     w_i = rho'(z)/z come from the rows' marginal standardized residuals z_i = r_i / sqrt(C_ii vf), which the
     residual planes (3,n,K) hold; the drift is modelled (no autocorrelation inflation in `mle.finish`). With
     reweight False every row keeps weight 1 (the loss's phases and `mle.robust_scale` still apply): the weights'
@@ -238,7 +239,7 @@ class Correlated(_iterate.Model):
         list of each model's rows at its start (`rows_in_use`)."""
         K, m = models.Cii.shape
         self.st, self.models, self.K, self.X, self.vce, self.reweight = st, models, K, X, vce, reweight
-        self.damped = not reweight  # Levenberg-Marquardt needs one objective: fixed weights
+        self.damped = not reweight  # Levenberg-Marquardt needs one objective: the learned model's fixed weights
         self.sd = np.sqrt(models.Cii).T  # (m, K)
         self.grp = np.r_[np.zeros(models.npix, dtype=int), np.ones(m - models.npix, dtype=int)]
         self.vf, self.guard = np.ones((K, 2)), np.ones((K, 2))

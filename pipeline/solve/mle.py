@@ -50,6 +50,7 @@ PROFILE_TOL = 1e-12
 #: longer than this many standard deviations of the target; the steps shrink quadratically (paper's problems:
 #: ~0.6 sigma, then ~0.1 %), so the step left untried is ~1e-4 of a sigma or less
 MIXTURE_RELINEARIZE_SIGMA = 0.1
+#: rounds of the mixture at most (a problem still beyond after them keeps its last step, residuals moved with it)
 MIXTURE_MAX_ROUNDS = 5
 VCE_MAX_ROUNDS = 10
 VCE_TOL = 0.01
@@ -67,7 +68,7 @@ def _curvature(e: np.ndarray, robust: str) -> np.ndarray:
     return np.maximum((1.0 - z) * w * w, 0.001 * w)
 
 
-def _rho_and_weight(e: np.ndarray, robust: str | None, rho: bool = True):
+def _rho_and_weight(e: np.ndarray, robust: str, rho: bool = True):
     """Huber's or Cauchy's loss rho(e) and IRLS weight rho'(e)/e of standardized residuals e (rho None unless
     asked for)."""
     assert robust in ("huber", "cauchy"), robust  # the callers handle None and "redescending" themselves
@@ -562,8 +563,8 @@ class White(_iterate.Model):
 
     def _mixture(self, s, s_bias, g, failed, drift_pix):
         """`bias_mixture.mixture` at the solution (`_mix`), the rows scaled by s (3,1,B) and the bias columns by
-        s_bias; moves X by its step (relinearized beyond MIXTURE_RELINEARIZE_SIGMA). Returns the mixture (bias,
-        bias_var, bias_cross in units of the stated prior), its covariance (B,3,3) with the sigmas as stated
+        s_bias; moves X by its step (relinearized beyond MIXTURE_RELINEARIZE_SIGMA, at most MIXTURE_MAX_ROUNDS).
+        Returns the mixture (bias, bias_var, bias_cross in units of the stated prior), its covariance (B,3,3) with the sigmas as stated
         (scaled by g) and the standardized residuals (3,n,B) at the final X to first order, the mean bias
         removed."""
         J, E, ok = self.jacobian(), self.E.copy(), self.ok

@@ -564,9 +564,9 @@ class White(_iterate.Model):
     def _mixture(self, s, s_bias, g, failed, drift_pix):
         """`bias_mixture.mixture` at the solution (`_mix`), the rows scaled by s (3,1,B) and the bias columns by
         s_bias; moves X by its step (relinearized beyond MIXTURE_RELINEARIZE_SIGMA, at most MIXTURE_MAX_ROUNDS).
-        Returns the mixture (bias, bias_var, bias_cross in units of the stated prior), its covariance (B,3,3) with the sigmas as stated
-        (scaled by g) and the standardized residuals (3,n,B) at the final X to first order, the mean bias
-        removed."""
+        Returns the mixture (bias, bias_var, bias_cross in units of the stated prior), its covariance (B,3,3)
+        with the sigmas as stated (scaled by g) and the standardized residuals (3,n,B) at the final X to first
+        order, the mean bias removed."""
         J, E, ok = self.jacobian(), self.E.copy(), self.ok
         E[:2] += self.a * self.z[:2, None, :]
         mix, a0 = self._mix(J, E, ok, s, s_bias, drift_pix, slice(None))

@@ -10,9 +10,11 @@ independent-error fit's answer) moves by 1e-6 m (docs/solvers.md, "The learned m
 A name is a zoo flight (`scripts/zoo.py`: arc, straight, obsfile, z000, ...) or an observations file. Per flight:
 the mle error, the start's error, the learned answer's error, its largest standard deviation and the largest move
 of the answer over --starts starts 1e-6 m from the first (random directions, seed 1). --candidates: per candidate
-model (tau, attitude sigma, position error drifting or white), its `correlated.gls` fit from those starts with the
-robust weights updated every iteration (reweight, the fit before 2026-11-24) and with every row at weight 1 (the
-fit `learn_tau` uses): error, largest move, iterations and status (0 converged, 1 iteration limit).
+model (tau, attitude sigma, position error drifting or white), its `correlated.gls` fit from those starts (every
+row at weight 1, the fit `learn_tau` uses): error, largest move, iterations and status (0 converged, 1 iteration
+limit). --told: the configured-correlation-time path (the white fit, then the one-model `learn_tau` with the
+white fit's robust weights held, `methods._configured_tau`) told each zoo flight's true correlation times, from
+the los answer and starts 1e-6 m from it: error, largest move, rows the white fit rejected, iterations.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from pipeline.errors import RidgelocError
 from pipeline.observation_file import load
 from pipeline.solve import correlated, learned_tau, methods, solve
 
@@ -52,10 +55,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("flights", nargs="*")
     ap.add_argument("--zoo", type=int, metavar="N", help="every flight of `zoo.py --flights N --seed 0` as well")
     ap.add_argument("--starts", type=int, default=7, help="starts 1e-6 m away (default 7)")
-    ap.add_argument("--candidates", action="store_true", help="every candidate model's fit, reweighted and not")
+    ap.add_argument("--candidates", action="store_true", help="every candidate model's fit")
     ap.add_argument("--told", action="store_true",
                     help="zoo flights only: instead, mle told the flight's true correlation times (`zoo.py`'s told "
-                         "sigma) with the default (reweighted) loss, from the los answer and starts 1e-6 m away")
+                         "sigma) with the default loss, from the los answer (else dlt's) and starts 1e-6 m away")
     args = ap.parse_args(argv)
     if args.zoo:
         import zoo
@@ -65,9 +68,10 @@ def main(argv: list[str] | None = None) -> int:
     calls = []
     largest = (0.0, None)
 
-    def spy(*a):
-        calls.append(a)
-        return real(*a)
+    def spy(*a, **k):
+        if not k:  # the learned model's call (the configured path's passes its one model)
+            calls.append(a)
+        return real(*a, **k)
 
     methods._learned.learn_tau = spy
     if args.told:
@@ -94,25 +98,22 @@ def main(argv: list[str] | None = None) -> int:
         if not args.candidates:
             continue
         sigmas = learned_tau.candidates(sigma)
-        for reweight in (True, False):
-            fits = []
-            for X0 in starts:
-                out = [None] * len(sigmas)
-                for fam in learned_tau._families(sigmas):
-                    sub = [sigmas[k] for k in fam]
-                    f = correlated.gls(sts, X0, correlated.problem_models(sts[0], X0[0], sub), robust, vce, tol_m,
-                                       itmax, reweight=reweight)
-                    for j, k in enumerate(fam):
-                        out[k] = (f[0][j], int(f[1][j]), int(f[2][j]))
-                fits.append(out)
-            print(f"  reweight={reweight}:")
-            for k, s in enumerate(sigmas):
-                Xk = np.array([fit[k][0] for fit in fits])
-                mv = float(np.linalg.norm(Xk[1:] - Xk[0], axis=1).max())
-                pos = "drifting" if s.position_tau_s else "white"
-                print(f"    tau {s.attitude_tau_s:5g} s, attitude {s.attitude_deg:.3g} deg, position {pos:8s}: "
-                      f"{np.linalg.norm(Xk[0] - truth):8.2f} m, largest move {mv:.1e} m, iterations "
-                      f"{sorted({fit[k][1] for fit in fits})}, status {sorted({fit[k][2] for fit in fits})}")
+        fits = []
+        for X0 in starts:
+            out = [None] * len(sigmas)
+            for fam in learned_tau._families(sigmas):
+                sub = [sigmas[k] for k in fam]
+                f = correlated.gls(sts, X0, correlated.problem_models(sts[0], X0[0], sub), robust, vce, tol_m, itmax)
+                for j, k in enumerate(fam):
+                    out[k] = (f[0][j], int(f[1][j]), int(f[2][j]))
+            fits.append(out)
+        for k, s in enumerate(sigmas):
+            Xk = np.array([fit[k][0] for fit in fits])
+            mv = float(np.linalg.norm(Xk[1:] - Xk[0], axis=1).max())
+            pos = "drifting" if s.position_tau_s else "white"
+            print(f"    tau {s.attitude_tau_s:5g} s, attitude {s.attitude_deg:.3g} deg, position {pos:8s}: "
+                  f"{np.linalg.norm(Xk[0] - truth):8.2f} m, largest move {mv:.1e} m, iterations "
+                  f"{sorted({fit[k][1] for fit in fits})}, status {sorted({fit[k][2] for fit in fits})}")
     print(f"largest move: {largest[0]:.1e} m ({largest[1]})")
     return 0
 
@@ -121,15 +122,23 @@ def _told(names: list, count: int) -> int:
     """The configured-correlation-time path's answers from starts 1e-6 m apart (`--told`)."""
     import zoo
 
+    largest = (0.0, None)
     for name in names:
         f = zoo.flight(name)
         obs = dataclasses.replace(f.obs, sigma=f.told_sigma)
-        x0 = solve("los", obs).position_m
-        X = np.array([solve("mle", obs, initial_m=x).position_m for x in _starts(x0[None], count)]).reshape(-1, 3)
+        try:
+            x0 = solve("los", obs).position_m
+        except RidgelocError:  # no frame with both a pixel and a range: the dlt point
+            x0 = solve("dlt", obs).position_m
+        ests = [solve("mle", obs, initial_m=x) for x in _starts(x0[None], count)]
+        X = np.array([e.position_m for e in ests]).reshape(-1, 3)
+        move = float(np.linalg.norm(X[1:] - X[0], axis=1).max())
+        largest = max(largest, (move, name), key=lambda m: m[0])
         s = f.told_sigma
         print(f"{name} ({f.family}; told tau attitude {s.attitude_tau_s} s, position {s.position_tau_s} s): mle "
               f"{np.linalg.norm(X[0] - obs.truth_m):.2f} m, largest move from {count} starts 1e-6 m away "
-              f"{np.linalg.norm(X[1:] - X[0], axis=1).max():.1e} m")
+              f"{move:.1e} m, rejected {len(ests[0].extras.get('rejected', []))}, iterations {ests[0].iterations}")
+    print(f"largest move: {largest[0]:.1e} m ({largest[1]})")
     return 0
 
 

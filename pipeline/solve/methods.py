@@ -445,10 +445,10 @@ def _mle_multistart(st: Stacked, o: dict, first: tuple | None = None, answers: d
 def _learned_answer(res: tuple, got, sigma) -> tuple:
     """One problem's answer from its first answer res (B = 1) and `learned_tau.learn_tau`'s got for it: the drift
     model's where it is kept, else res itself."""
-    X, ex = res[0], res[5]
+    X = res[0]
     if got is None:
         return res
-    _, att, _, (Xg, it, status, cond, cov, exg) = got
+    _, att, _, (Xg, _, _, _, _, exg) = got
     if np.isfinite(Xg[0]).all():
         # a drift model may trade the target against the drift where the flight cannot tell them apart (a short
         # burst, a run of mistracked frames): kept only when its estimate lies within the first answer's

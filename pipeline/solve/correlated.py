@@ -189,15 +189,13 @@ def quadratic_forms_stacked(sk: Models, A: np.ndarray, w: np.ndarray, vf: np.nda
 
 
 def gls(sts: list, X0s: np.ndarray, models: Models, robust: str | None, vce: bool, tol_m: float,
-        max_iterations: int, rows0: list | None = None, fixed: tuple | None = None):
+        max_iterations: int, rows0: list | None = None, weights: np.ndarray | None = None):
     """Generalized least squares `mle` of T problems (B = 1 each) with the same rows in use (the same frames with
     a pixel and with a range, in the same time order) from usable starts X0s (T,3), each under K models of its
     rows (models: T K, problem by problem), all T K fits side by side, each exactly as alone: `Correlated` through
-    the one iteration and finish of `mle.run`, damped, with fixed robust weights; rows0: the problems' `rows_in_use`
-    at their starts where the caller has them. fixed None: every row at weight 1, the loss's phases and scale guard
-    run; else (weights (T,m), variance factors (T,2), guard (T,2)): the rows' weights and the group scales of a
-    first fit, held (no phases, no guard of its own; variance components, when estimated, go on from the factors).
-    Returns `mle.finish`'s tuple over the T K fits."""
+    the one iteration and finish of `mle.run` (the loss's phases and scale guard), damped, with fixed robust
+    weights (T,m) of the rows (None: 1); rows0: the problems' `rows_in_use` at their starts where the caller has
+    them. Returns `mle.finish`'s tuple over the T K fits."""
     T = len(sts)
     K = models.Cii.shape[0] // T
     X = np.repeat(np.asarray(X0s, dtype=np.float64).reshape(T, 3), K, axis=0)
@@ -206,10 +204,8 @@ def gls(sts: list, X0s: np.ndarray, models: Models, robust: str | None, vce: boo
     if rows0 is None:
         rows0 = [rows_in_use(st, X[t * K]) for t, st in enumerate(sts)]
     rows = [r for r in rows0 for _ in range(K)]
-    if fixed is not None:
-        fixed = tuple(np.repeat(np.asarray(a, dtype=np.float64), K, axis=0) for a in fixed)
-        robust = None  # the weights are the first fit's: its loss and guard have done their work
-    return _mle.run(Correlated(stk, models, X, vce, rows, fixed), stk, X, status, bad, robust, tol_m, max_iterations)
+    w = None if weights is None else np.repeat(np.asarray(weights, dtype=np.float64), K, axis=0)
+    return _mle.run(Correlated(stk, models, X, vce, rows, w), stk, X, status, bad, robust, tol_m, max_iterations)
 
 
 def stack_problems(sts: list) -> Stacked:
@@ -238,10 +234,10 @@ class Correlated(_iterate.Model):
     drift_modelled = True
     damped = True
 
-    def __init__(self, st: Stacked, models: Models, X: np.ndarray, vce: bool, rows: list, fixed: tuple | None = None):
+    def __init__(self, st: Stacked, models: Models, X: np.ndarray, vce: bool, rows: list,
+                 weights: np.ndarray | None = None):
         """st: problems with the same rows in use, each once per model (`gls`); X (K,3) their starts, rows the
-        list of each model's rows at its start (`rows_in_use`); fixed: None or (weights (K,m), variance factors
-        (K,2), guard (K,2)) (`gls`)."""
+        list of each model's rows at its start (`rows_in_use`), weights (K,m) theirs (None: 1)."""
         K, m = models.Cii.shape
         self.st, self.models, self.K, self.X, self.vce = st, models, K, X, vce
         self.sd = np.sqrt(models.Cii).T  # (m, K)
@@ -253,9 +249,8 @@ class Correlated(_iterate.Model):
         self._at = np.concatenate([(np.arange(2)[None, :] * st.n + pf[:, None]).ravel(), 2 * st.n + rf])
         self.ok = self._planes(np.ones((m, K)), 0.0) > 0
         self.w, self.wr = np.ones((m, K)), None
-        if fixed is not None:
-            w, vf, guard = fixed
-            self.w, self.vf, self.guard = np.array(w, dtype=np.float64).T, np.array(vf), np.array(guard)
+        if weights is not None:
+            self.w = np.array(weights, dtype=np.float64).T
             self.wr = self._planes(self.w, 1.0)
         self.A = list(rows)  # per model; replaced, never changed in place
         self._last_forms = [None] * K

@@ -83,7 +83,7 @@ def _families(sigmas: list) -> list:
 
 
 def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
-              max_iterations: int, sigmas: list | None = None, fixed: list | None = None) -> list:
+              max_iterations: int, sigmas: list | None = None, weights: list | None = None) -> list:
     """Per problem of sts (B = 1 each, without their rejected rows), from its start X0s[i] (3,): the GLS `mle`
     averaged over the models sigmas (default `candidates(sigma)`: correlation time, position error drifting or
     white, and attitude sigma where unstated), each weighted by its likelihood (equal priors): the posterior mean
@@ -94,11 +94,10 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
     and position family) with the mixture's estimate and covariance), or None when no model gave an answer. One
     model (the configured correlation times, `methods._configured_tau`) is that model's fit. The models' fits of
     problems with the same rows in use iterate side by side (each as alone: `correlated.gls`). The fits are
-    damped GLS with fixed weights on the rows the first solve kept: fixed None, every row at weight 1 (the robust
-    loss's phases and scale guard kept), else per problem (weights (m,), variance factors (2,), guard (2,)) of
-    the first solve held (`correlated.gls`): robust weights updated on the rows' marginal residuals under a
-    correlated C are a fixed-point map with no objective, which from starts 1e-6 m apart ended metres to
-    kilometres apart."""
+    damped GLS with fixed robust weights on the rows the first solve kept (the robust loss's phases and scale guard
+    kept, `correlated.gls`): weights None, every row at weight 1, else per problem the rows' weights (m,) (the
+    first solve's, `methods._held`); robust weights updated on the rows' marginal residuals under a correlated C
+    are a fixed-point map with no objective, which from starts 1e-6 m apart ended metres to kilometres apart."""
     sigmas = candidates(sigma) if sigmas is None else sigmas
     K = len(sigmas)
     by_rows: dict[tuple, list[int]] = {}  # the same frames with a pixel and with a range (`Models.concat`: the rest)
@@ -110,7 +109,7 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
         g = groups.pop()
         X0 = np.asarray([X0s[i] for i in g])
         rows0 = [_correlated.rows_in_use(sts[i], X0[t]) for t, i in enumerate(g)]
-        held = None if fixed is None else tuple(np.stack([fixed[i][j] for i in g]) for j in range(3))
+        held = None if weights is None else np.stack([weights[i] for i in g])
         try:
             per_family = []
             for fam in _families(sigmas):

@@ -278,14 +278,14 @@ def _mle_dispatch(st: Stacked, o: dict):
 def _configured_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool) -> tuple:
     """One problem's answer under the configured correlation times from its white fit res (`mle.mle` with the
     marginal variances, B = 1): the one-model `learned_tau.learn_tau` (damped GLS from the white answer on the rows
-    it kept, with its robust weights and group scales held) and `_drift_answer`; res where the white fit has no
-    answer or the GLS none."""
+    it kept, with its robust weights held) and `_drift_answer`; res where the white fit has no answer or the GLS
+    none."""
     if not np.isfinite(res[0]).all():
         return res
     ex = res[5]
     sub = _learned.without_rejected(st, ex["rejected"][0])
     got = _learned.learn_tau([sub], res[0], sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"],
-                             o["max_iterations"], sigmas=[sigma], fixed=[_held(sub, ex, o)])[0]
+                             o["max_iterations"], sigmas=[sigma], weights=[_held(sub, ex, o)])[0]
     if got is None:
         return res
     _, _, _, (X, it, status, cond, cov, exg) = got
@@ -293,17 +293,14 @@ def _configured_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool) -> tuple
     return _drift_answer(res, (X, it, status, cond, cov, exg))
 
 
-def _held(st: Stacked, ex: dict, o: dict) -> tuple:
-    """The white fit's (extras ex, B = 1) final robust weights of st's rows in use (`correlated.rows_in_use`
-    order), its variance factors (2,) and scale guard (2,): (weights (m,), vf, guard)."""
-    robust = o.get("robust", _mle.DEFAULT_ROBUST)
+def _held(st: Stacked, ex: dict, o: dict) -> np.ndarray:
+    """The white fit's (extras ex, B = 1) final robust weights (m,) of st's rows in use (`correlated.rows_in_use`
+    order: u, v of the frames with a pixel, then the ranges)."""
     E = ex["residual_sigmas"][0].T[..., None]  # (3,n,1) standardized as the fit weighed them
-    w = _mle._cost_weights(np.where(np.isfinite(E), E, 0.0), robust)[1]
+    w = _mle._cost_weights(np.where(np.isfinite(E), E, 0.0), o.get("robust", _mle.DEFAULT_ROBUST))[1]
     w = np.ones(E.shape) if w is None else w
     pf, rf = np.flatnonzero(st.has_pix[0]), np.flatnonzero(st.has_range[0])
-    rows = np.concatenate([w[:2, pf, 0].T.ravel(), w[2, rf, 0]])
-    vf = np.array([ex["variance_factor_pixel"][0], ex["variance_factor_range"][0]])
-    return rows, vf, np.asarray(ex["robust_spread"][0]) ** 2
+    return np.concatenate([w[:2, pf, 0].T.ravel(), w[2, rf, 0]])
 
 
 def _bias_refit(st: Stacked, o: dict, x0: np.ndarray, init_status, sigma, vce: bool, res: tuple, bias_deg,

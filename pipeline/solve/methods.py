@@ -255,19 +255,12 @@ def _mle_dispatch(st: Stacked, o: dict):
         if st.t_ns is None:
             raise ValueError("mle with time-correlated errors (sigma attitude_tau_s / position_tau_s) needs the "
                              "frames' timestamps: use solve() per problem; solve_batch() has no t_ns")
-        status, bad = start_status(x0, init_status)
-        if bad[0]:
-            nan = np.full((1, 3), np.nan)
-            return (nan, np.zeros(1, dtype=np.int64), status, np.full(1, np.nan), np.full((1, 3, 3), np.nan),
-                    {"variance_factor_pixel": np.ones(1), "variance_factor_range": np.ones(1),
-                     "sigma0_sq": np.full(1, np.nan), "vce_rounds": np.zeros(1, dtype=np.int64)})
-        configured = bool(_correlated.problem_models(st, x0[0], [sigma]).correlated[0])
+        if not start_status(x0, init_status)[1][0]:  # an unusable start: the white fit reports it
+            configured = bool(_correlated.problem_models(st, x0[0], [sigma]).correlated[0])
         if configured and o.get("terrain") is not None:
             raise ValueError("mle: the terrain option is not available with time-correlated errors (sigma "
                              "attitude_tau_s / position_tau_s)")
-        white = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
-    else:
-        white = sigma
+    white = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
     res = _mle.mle(st, x0, white, robust, vce, tol, itmax, init_status, bias_deg, size_unknown, o.get("terrain"))
     if configured:
         return _configured_tau(st, o, res, sigma, vce)

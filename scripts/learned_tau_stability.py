@@ -6,6 +6,8 @@ independent-error fit's answer) moves by 1e-6 m (docs/solvers.md, "The learned m
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py z029 --candidates
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py --zoo 210
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py --told z001 z004 z029 z073
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py --told-zoo 210
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py --scenes
 
 A name is a zoo flight (`scripts/zoo.py`: arc, straight, obsfile, z000, ...) or an observations file. Per flight:
 the mle error, the start's error, the learned answer's error, its largest standard deviation and the largest move
@@ -14,7 +16,12 @@ model (tau, attitude sigma, position error drifting or white), its `correlated.g
 row at weight 1, the fit `learn_tau` uses): error, largest move, iterations and status (0 converged, 1 iteration
 limit). --told: the configured-correlation-time path (the white fit, then the one-model `learn_tau` with the
 white fit's robust weights held, `methods._configured_tau`) told each zoo flight's true correlation times, from
-the los answer and starts 1e-6 m from it: error, largest move, rows the white fit rejected, iterations.
+the los answer and starts 1e-6 m from it: error, largest move, rows the white fit rejected, iterations;
+--told-zoo N: that on every flight of `zoo.py --flights N --seed 0` whose told sigma has a correlation time.
+--scenes: the configured path's coverage of the 95 % ellipsoid and median error on the test scenes
+(tests/support/scenes.py, docs/solvers.md "Time-correlated attitude and position errors"): Gauss-Markov attitude
+and position (400 problems, squared, Huber and default loss), attitude only (300, default loss), and one range
+3 km too long (40, default loss).
 """
 
 from __future__ import annotations
@@ -59,7 +66,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--told", action="store_true",
                     help="zoo flights only: instead, mle told the flight's true correlation times (`zoo.py`'s told "
                          "sigma) with the default loss, from the los answer (else dlt's) and starts 1e-6 m away")
+    ap.add_argument("--told-zoo", type=int, metavar="N", help="--told on every zoo flight told a correlation time")
+    ap.add_argument("--scenes", action="store_true", help="the configured path on the test scenes (coverage)")
     args = ap.parse_args(argv)
+    if args.scenes:
+        return _scenes()
+    if args.told_zoo:
+        import zoo
+
+        told = [f.name for f in zoo.zoo(args.told_zoo, 0) if f.told_sigma.correlated]
+        return _told(told + args.flights, args.starts)
     if args.zoo:
         import zoo
 
@@ -139,6 +155,40 @@ def _told(names: list, count: int) -> int:
               f"{np.linalg.norm(X[0] - obs.truth_m):.2f} m, largest move from {count} starts 1e-6 m away "
               f"{move:.1e} m, rejected {len(ests[0].extras.get('rejected', []))}, iterations {ests[0].iterations}")
     print(f"largest move: {largest[0]:.1e} m ({largest[1]})")
+    return 0
+
+
+def _scenes() -> int:
+    """`--scenes`."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from pipeline.solve.uncertainty import CHI2_3_95
+    from support.scenes import PAPER_SIGMA, correlated_problems
+
+    corr = dataclasses.replace(PAPER_SIGMA, attitude_tau_s=20.0, position_tau_s=60.0)
+
+    def run(probs, sigma, **kw):
+        d2, err, conv = [], [], 0
+        for obs in probs:
+            est = solve("mle", obs, sigma=sigma, **kw)
+            e = est.position_m - obs.truth_m
+            d2.append(e @ np.linalg.solve(est.covariance_m2, e))
+            err.append(np.linalg.norm(e))
+            conv += est.converged
+        return (f"coverage {100 * np.mean(np.array(d2) <= CHI2_3_95):.1f} %, median error {np.median(err):.2f} m, "
+                f"converged {conv} of {len(probs)}")
+
+    gm = correlated_problems(400, seed=11)
+    for label, kw in (("squared", {"robust": None}), ("huber", {"robust": "huber"}), ("default loss", {})):
+        print(f"Gauss-Markov attitude and position, 400 problems, {label}: {run(gm, corr, **kw)}")
+    att = correlated_problems(300, seed=12, position_tau_s=None)
+    print(f"attitude only, 300 problems, default loss: "
+          f"{run(att, dataclasses.replace(PAPER_SIGMA, attitude_tau_s=20.0))}")
+    gross = []
+    for obs in correlated_problems(40, seed=21):
+        rng = obs.range_m.copy()
+        rng[4] += 3000.0
+        gross.append(dataclasses.replace(obs, range_m=rng))
+    print(f"one range 3 km too long, 40 problems, default loss: {run(gross, corr)}")
     return 0
 
 

@@ -4,7 +4,8 @@ time learned from the flight"): the GLS fit (`correlated.gls`) under every candi
 rows the first solve rejected and without robust weights (the first solve's loss did that job; an iteratively
 reweighted GLS fit descends no objective and wandered, docs/solvers.md), weighted by its restricted (REML)
 Gaussian likelihood (`log_likelihoods`); the answer is the candidates' posterior mixture, with the fit checks of
-the most likely one.
+the most likely one. A configured correlation time is the same fit with one model, the first solve's robust
+weights held (`methods._configured_tau`).
 """
 
 from __future__ import annotations

@@ -6,13 +6,22 @@ independent-error fit's answer) moves by 1e-6 m (docs/solvers.md, "The learned m
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py z029 --candidates
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py --zoo 210
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py --told z001 z004 z029 z073
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py --told-zoo 210
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py --scenes
 
 A name is a zoo flight (`scripts/zoo.py`: arc, straight, obsfile, z000, ...) or an observations file. Per flight:
 the mle error, the start's error, the learned answer's error, its largest standard deviation and the largest move
 of the answer over --starts starts 1e-6 m from the first (random directions, seed 1). --candidates: per candidate
-model (tau, attitude sigma, position error drifting or white), its `correlated.gls` fit from those starts with the
-robust weights updated every iteration (reweight, the fit before 2026-11-24) and with every row at weight 1 (the
-fit `learn_tau` uses): error, largest move, iterations and status (0 converged, 1 iteration limit).
+model (tau, attitude sigma, position error drifting or white), its `correlated.gls` fit from those starts (every
+row at weight 1, the fit `learn_tau` uses): error, largest move, iterations and status (0 converged, 1 iteration
+limit). --told: the configured-correlation-time path (the white fit, then the one-model `learn_tau` with the
+white fit's robust weights held, `methods._configured_tau`) told each zoo flight's true correlation times, from
+the los answer and starts 1e-6 m from it: error, largest move, rows the white fit rejected, iterations;
+--told-zoo N: that on every flight of `zoo.py --flights N --seed 0` whose told sigma has a correlation time.
+--scenes: the configured path's coverage of the 95 % ellipsoid and median error on the test scenes
+(tests/support/scenes.py, docs/solvers.md "Time-correlated attitude and position errors"): Gauss-Markov attitude
+and position (400 problems, squared, Huber and default loss), attitude only (300, default loss), and one range
+3 km too long (40, default loss).
 """
 
 from __future__ import annotations
@@ -26,6 +35,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from pipeline.errors import RidgelocError
 from pipeline.observation_file import load
 from pipeline.solve import correlated, learned_tau, methods, solve
 
@@ -52,11 +62,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("flights", nargs="*")
     ap.add_argument("--zoo", type=int, metavar="N", help="every flight of `zoo.py --flights N --seed 0` as well")
     ap.add_argument("--starts", type=int, default=7, help="starts 1e-6 m away (default 7)")
-    ap.add_argument("--candidates", action="store_true", help="every candidate model's fit, reweighted and not")
+    ap.add_argument("--candidates", action="store_true", help="every candidate model's fit")
     ap.add_argument("--told", action="store_true",
                     help="zoo flights only: instead, mle told the flight's true correlation times (`zoo.py`'s told "
-                         "sigma) with the default (reweighted) loss, from the los answer and starts 1e-6 m away")
+                         "sigma) with the default loss, from the los answer (else dlt's) and starts 1e-6 m away")
+    ap.add_argument("--told-zoo", type=int, metavar="N", help="--told on every zoo flight told a correlation time")
+    ap.add_argument("--scenes", action="store_true", help="the configured path on the test scenes (coverage)")
+    ap.add_argument("--tau", type=float, metavar="S", help="--told: tell attitude and position correlation time S "
+                    "(on the flight's stated sigma) instead of the true model")
     args = ap.parse_args(argv)
+    if args.scenes:
+        return _scenes()
+    if args.told_zoo:
+        import zoo
+
+        told = [f.name for f in zoo.zoo(args.told_zoo, 0) if f.told_sigma.correlated]
+        return _told(told + args.flights, args.starts, args.tau)
     if args.zoo:
         import zoo
 
@@ -65,13 +86,14 @@ def main(argv: list[str] | None = None) -> int:
     calls = []
     largest = (0.0, None)
 
-    def spy(*a):
-        calls.append(a)
-        return real(*a)
+    def spy(*a, **k):
+        if not k:  # the learned model's call (the configured path's passes its one model)
+            calls.append(a)
+        return real(*a, **k)
 
     methods._learned.learn_tau = spy
     if args.told:
-        return _told(args.flights, args.starts)
+        return _told(args.flights, args.starts, args.tau)
     for name in args.flights:
         obs = _observations(name)
         truth = obs.truth_m
@@ -94,42 +116,86 @@ def main(argv: list[str] | None = None) -> int:
         if not args.candidates:
             continue
         sigmas = learned_tau.candidates(sigma)
-        for reweight in (True, False):
-            fits = []
-            for X0 in starts:
-                out = [None] * len(sigmas)
-                for fam in learned_tau._families(sigmas):
-                    sub = [sigmas[k] for k in fam]
-                    f = correlated.gls(sts, X0, correlated.problem_models(sts[0], X0[0], sub), robust, vce, tol_m,
-                                       itmax, reweight=reweight)
-                    for j, k in enumerate(fam):
-                        out[k] = (f[0][j], int(f[1][j]), int(f[2][j]))
-                fits.append(out)
-            print(f"  reweight={reweight}:")
-            for k, s in enumerate(sigmas):
-                Xk = np.array([fit[k][0] for fit in fits])
-                mv = float(np.linalg.norm(Xk[1:] - Xk[0], axis=1).max())
-                pos = "drifting" if s.position_tau_s else "white"
-                print(f"    tau {s.attitude_tau_s:5g} s, attitude {s.attitude_deg:.3g} deg, position {pos:8s}: "
-                      f"{np.linalg.norm(Xk[0] - truth):8.2f} m, largest move {mv:.1e} m, iterations "
-                      f"{sorted({fit[k][1] for fit in fits})}, status {sorted({fit[k][2] for fit in fits})}")
+        fits = []
+        for X0 in starts:
+            out = [None] * len(sigmas)
+            for fam in learned_tau._families(sigmas):
+                sub = [sigmas[k] for k in fam]
+                f = correlated.gls(sts, X0, correlated.problem_models(sts[0], X0[0], sub), robust, vce, tol_m, itmax)
+                for j, k in enumerate(fam):
+                    out[k] = (f[0][j], int(f[1][j]), int(f[2][j]))
+            fits.append(out)
+        for k, s in enumerate(sigmas):
+            Xk = np.array([fit[k][0] for fit in fits])
+            mv = float(np.linalg.norm(Xk[1:] - Xk[0], axis=1).max())
+            pos = "drifting" if s.position_tau_s else "white"
+            print(f"    tau {s.attitude_tau_s:5g} s, attitude {s.attitude_deg:.3g} deg, position {pos:8s}: "
+                  f"{np.linalg.norm(Xk[0] - truth):8.2f} m, largest move {mv:.1e} m, iterations "
+                  f"{sorted({fit[k][1] for fit in fits})}, status {sorted({fit[k][2] for fit in fits})}")
     print(f"largest move: {largest[0]:.1e} m ({largest[1]})")
     return 0
 
 
-def _told(names: list, count: int) -> int:
+def _told(names: list, count: int, tau: float | None = None) -> int:
     """The configured-correlation-time path's answers from starts 1e-6 m apart (`--told`)."""
     import zoo
 
+    largest = (0.0, None)
     for name in names:
         f = zoo.flight(name)
-        obs = dataclasses.replace(f.obs, sigma=f.told_sigma)
-        x0 = solve("los", obs).position_m
-        X = np.array([solve("mle", obs, initial_m=x).position_m for x in _starts(x0[None], count)]).reshape(-1, 3)
-        s = f.told_sigma
+        told = f.told_sigma if tau is None else dataclasses.replace(f.obs.sigma, attitude_tau_s=tau, position_tau_s=tau)
+        obs = dataclasses.replace(f.obs, sigma=told)
+        try:
+            x0 = solve("los", obs).position_m
+        except RidgelocError:  # no frame with both a pixel and a range: the dlt point
+            x0 = solve("dlt", obs).position_m
+        try:
+            ests = [solve("mle", obs, initial_m=x) for x in _starts(x0[None], count)]
+        except RidgelocError as e:
+            print(f"{name} ({f.family}): no answer from some start: {e}")
+            continue
+        X = np.array([e.position_m for e in ests]).reshape(-1, 3)
+        move = float(np.linalg.norm(X[1:] - X[0], axis=1).max())
+        largest = max(largest, (move, name), key=lambda m: m[0])
+        s = told
         print(f"{name} ({f.family}; told tau attitude {s.attitude_tau_s} s, position {s.position_tau_s} s): mle "
               f"{np.linalg.norm(X[0] - obs.truth_m):.2f} m, largest move from {count} starts 1e-6 m away "
-              f"{np.linalg.norm(X[1:] - X[0], axis=1).max():.1e} m")
+              f"{move:.1e} m, rejected {len(ests[0].extras.get('rejected', []))}, iterations {ests[0].iterations}")
+    print(f"largest move: {largest[0]:.1e} m ({largest[1]})")
+    return 0
+
+
+def _scenes() -> int:
+    """`--scenes`."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from pipeline.solve.uncertainty import CHI2_3_95
+    from support.scenes import PAPER_SIGMA, correlated_problems
+
+    corr = dataclasses.replace(PAPER_SIGMA, attitude_tau_s=20.0, position_tau_s=60.0)
+
+    def run(probs, sigma, **kw):
+        d2, err, conv = [], [], 0
+        for obs in probs:
+            est = solve("mle", obs, sigma=sigma, **kw)
+            e = est.position_m - obs.truth_m
+            d2.append(e @ np.linalg.solve(est.covariance_m2, e))
+            err.append(np.linalg.norm(e))
+            conv += est.converged
+        return (f"coverage {100 * np.mean(np.array(d2) <= CHI2_3_95):.1f} %, median error {np.median(err):.2f} m, "
+                f"converged {conv} of {len(probs)}")
+
+    gm = correlated_problems(400, seed=11)
+    for label, kw in (("squared", {"robust": None}), ("huber", {"robust": "huber"}), ("default loss", {})):
+        print(f"Gauss-Markov attitude and position, 400 problems, {label}: {run(gm, corr, **kw)}")
+    att = correlated_problems(300, seed=12, position_tau_s=None)
+    print(f"attitude only, 300 problems, default loss: "
+          f"{run(att, dataclasses.replace(PAPER_SIGMA, attitude_tau_s=20.0))}")
+    gross = []
+    for obs in correlated_problems(40, seed=21):
+        rng = obs.range_m.copy()
+        rng[4] += 3000.0
+        gross.append(dataclasses.replace(obs, range_m=rng))
+    print(f"one range 3 km too long, 40 problems, default loss: {run(gross, corr)}")
     return 0
 
 

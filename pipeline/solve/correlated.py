@@ -189,13 +189,13 @@ def quadratic_forms_stacked(sk: Models, A: np.ndarray, w: np.ndarray, vf: np.nda
 
 
 def gls(sts: list, X0s: np.ndarray, models: Models, robust: str | None, vce: bool, tol_m: float,
-        max_iterations: int, rows0: list | None = None, reweight: bool = True):
+        max_iterations: int, rows0: list | None = None, weights: np.ndarray | None = None):
     """Generalized least squares `mle` of T problems (B = 1 each) with the same rows in use (the same frames with
-    a pixel and with a range, in the same time order) from usable starts X0s (T,3), each
-    under K models of its rows (models: T K, problem by problem), all T K fits side by side, each exactly as
-    alone: `Correlated` through the one iteration and finish of `mle.run`; rows0: the problems' `rows_in_use` at
-    their starts where the caller has them; reweight False: the loss's phases and scale guard, no robust weights
-    (`Correlated`). Returns `mle.finish`'s tuple over the T K fits."""
+    a pixel and with a range, in the same time order) from usable starts X0s (T,3), each under K models of its
+    rows (models: T K, problem by problem), all T K fits side by side, each exactly as alone: `Correlated` through
+    the one iteration and finish of `mle.run` (the loss's phases and scale guard), damped, with fixed robust
+    weights (T,m) of the rows (None: 1); rows0: the problems' `rows_in_use` at their starts where the caller has
+    them. Returns `mle.finish`'s tuple over the T K fits."""
     T = len(sts)
     K = models.Cii.shape[0] // T
     X = np.repeat(np.asarray(X0s, dtype=np.float64).reshape(T, 3), K, axis=0)
@@ -204,7 +204,8 @@ def gls(sts: list, X0s: np.ndarray, models: Models, robust: str | None, vce: boo
     if rows0 is None:
         rows0 = [rows_in_use(st, X[t * K]) for t, st in enumerate(sts)]
     rows = [r for r in rows0 for _ in range(K)]
-    return _mle.run(Correlated(stk, models, X, vce, rows, reweight), stk, X, status, bad, robust, tol_m, max_iterations)
+    w = None if weights is None else np.repeat(np.asarray(weights, dtype=np.float64), K, axis=0)
+    return _mle.run(Correlated(stk, models, X, vce, rows, w), stk, X, status, bad, robust, tol_m, max_iterations)
 
 
 def stack_problems(sts: list) -> Stacked:
@@ -223,23 +224,22 @@ def stack_problems(sts: list) -> Stacked:
 
 class Correlated(_iterate.Model):
     """The `mle` model (`iterate.drive`, `mle.finish`) of one problem (B = 1) with time-correlated errors under K
-    residual models at once (`gls`): iteratively reweighted generalized least squares; with reweight False damped
-    (Levenberg-Marquardt in `iterate.drive`: a step must not raise r^T C_w^-1 r; the reweighted fit is iterated
-    undamped, as before 2026-11-24, also where robust is None). The robust weights
-    w_i = rho'(z)/z come from the rows' marginal standardized residuals z_i = r_i / sqrt(C_ii vf), which the
-    residual planes (3,n,K) hold; the drift is modelled (no autocorrelation inflation in `mle.finish`). With
-    reweight False every row keeps weight 1 (the loss's phases and `mle.robust_scale` still apply): the weights'
-    update under a non-diagonal C descends no objective, and where many rows sit near the loss's corners it
-    wanders without converging (docs/solvers.md, "learned correlation time")."""
+    residual models at once (`gls`): damped generalized least squares (Levenberg-Marquardt in `iterate.drive`: a
+    step must not raise r^T C_w^-1 r) with fixed robust weights w (a row's variance C_ii / w, the rest of C
+    unchanged): every row at weight 1, or a first fit's weights. The weights are never updated from the rows'
+    marginal residuals under the correlated C: that update descends no objective and, where many rows sit near
+    the loss's corners, wanders without converging (docs/solvers.md, "The learned model's fit was chaotic"). The
+    drift is modelled (no autocorrelation inflation in `mle.finish`)."""
 
     drift_modelled = True
+    damped = True
 
-    def __init__(self, st: Stacked, models: Models, X: np.ndarray, vce: bool, rows: list, reweight: bool = True):
+    def __init__(self, st: Stacked, models: Models, X: np.ndarray, vce: bool, rows: list,
+                 weights: np.ndarray | None = None):
         """st: problems with the same rows in use, each once per model (`gls`); X (K,3) their starts, rows the
-        list of each model's rows at its start (`rows_in_use`)."""
+        list of each model's rows at its start (`rows_in_use`), weights (K,m) theirs (None: 1)."""
         K, m = models.Cii.shape
-        self.st, self.models, self.K, self.X, self.vce, self.reweight = st, models, K, X, vce, reweight
-        self.damped = not reweight  # Levenberg-Marquardt needs one objective: the learned model's fixed weights
+        self.st, self.models, self.K, self.X, self.vce = st, models, K, X, vce
         self.sd = np.sqrt(models.Cii).T  # (m, K)
         self.grp = np.r_[np.zeros(models.npix, dtype=int), np.ones(m - models.npix, dtype=int)]
         self.vf, self.guard = np.ones((K, 2)), np.ones((K, 2))
@@ -248,6 +248,10 @@ class Correlated(_iterate.Model):
         # the rows' places in the (3,n,K) residual planes: u, v of the pixel frames (interleaved), the ranged frames
         self._at = np.concatenate([(np.arange(2)[None, :] * st.n + pf[:, None]).ravel(), 2 * st.n + rf])
         self.ok = self._planes(np.ones((m, K)), 0.0) > 0
+        self.w, self.wr = np.ones((m, K)), None
+        if weights is not None:
+            self.w = np.array(weights, dtype=np.float64).T
+            self.wr = self._planes(self.w, 1.0)
         self.A = list(rows)  # per model; replaced, never changed in place
         self._last_forms = [None] * K
         self._scaled_vf = None  # the variance factors of the row scales self._s and self._isd
@@ -259,15 +263,12 @@ class Correlated(_iterate.Model):
         return out
 
     def _refresh(self):
-        """The weights (`mle._cost_weights`) and residual planes at the current rows A, loss and variance
-        factors."""
+        """The residual planes at the current rows A and variance factors."""
         if self._scaled_vf is None or not np.array_equal(self.vf, self._scaled_vf):
             self._s = self.sd * np.sqrt(self.vf[:, self.grp].T)
             self._isd, self._scaled_vf = self._planes(1.0 / self._s, 1.0), self.vf.copy()
         r = np.stack([A[:, 3] for A in self.A], axis=1)
         self.E = self._planes(r / self._s, 0.0)
-        self.wr = _mle._cost_weights(self.E, self.robust)[1] if self.reweight else None
-        self.w = np.ones(self._s.shape) if self.wr is None else self.wr.reshape(-1, self.wr.shape[-1])[self._at]
 
     def _forms(self, idx, var_scale=None, rows=None) -> list:
         """Per model k of idx: (`quadratic_forms_stacked`, their sum) at its current rows (or rows, a list over
@@ -292,8 +293,7 @@ class Correlated(_iterate.Model):
                 self._last_forms[k] = (rows[j], self.w[:, k], vfs[j], out[j])
         return out
 
-    def start(self, robust):
-        self.robust = robust
+    def start(self, robust):  # the weights are fixed: the loss's phases change nothing but the guard's scales
         self._refresh()
 
     def step(self, idx, X, lam):
@@ -304,14 +304,12 @@ class Correlated(_iterate.Model):
         return solve_spd(N, G[:, :3, 3])
 
     def trial(self, idx, Xn):
-        """The rows at Xn; accepted where the GLS objective r^T C_w^-1 r (at the current weights and variance
-        factors) did not rise: the trial's forms are kept, so an accepted step's next step reuses them."""
+        """The rows at Xn; accepted where the GLS objective r^T C_w^-1 r (at the weights and variance factors) did
+        not rise: the trial's forms are kept, so an accepted step's next step reuses them."""
         Xall = np.repeat(Xn[:1], self.K, axis=0)  # every model's rows at once (the others discarded)
         Xall[idx] = Xn
         A = rows_in_use(self.st, Xall)
         self._A = [A[k] for k in idx]
-        if not self.damped:  # reweighted: the weights change after every step, no objective to test
-            return super().trial(idx, Xn)
         cost0 = np.array([f[1][3, 3] for f in self._forms(idx)])
         cost = np.array([f[1][3, 3] for f in self._forms(idx, rows=self._A)])
         return cost <= cost0 * (1 + 1e-12) + 1e-300

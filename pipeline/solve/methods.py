@@ -244,31 +244,56 @@ def _terrain_start(st: Stacked, fn) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _mle_dispatch(st: Stacked, o: dict):
-    """`mle.mle` on the batch, or for one problem whose sigma has correlation times (a non-diagonal residual
-    covariance) `correlated.gls`; then the learned drift model (`_with_learned_tau`) where the residuals drift."""
+    """`mle.mle` on the batch; for one problem whose sigma has correlation times (a non-diagonal residual
+    covariance) that white fit, then the GLS fit of the configured model from it (`_configured_tau`); else the
+    learned drift model (`_with_learned_tau`) where the residuals drift."""
     x0, init_status, sigma, vce = _mle_start(st, o)
     robust, tol, itmax = o.get("robust", _mle.DEFAULT_ROBUST), o["tol_m"], o["max_iterations"]
     bias_deg, size_unknown = _mle.bias_prior_deg(sigma, o)  # configured correlation times win, even vanishing ones
+    configured = False
     if sigma.correlated:
         if st.t_ns is None:
             raise ValueError("mle with time-correlated errors (sigma attitude_tau_s / position_tau_s) needs the "
                              "frames' timestamps: use solve() per problem; solve_batch() has no t_ns")
-        status, bad = start_status(x0, init_status)
-        if bad[0]:
-            nan = np.full((1, 3), np.nan)
-            return (nan, np.zeros(1, dtype=np.int64), status, np.full(1, np.nan), np.full((1, 3, 3), np.nan),
-                    {"variance_factor_pixel": np.ones(1), "variance_factor_range": np.ones(1),
-                     "sigma0_sq": np.full(1, np.nan), "vce_rounds": np.zeros(1, dtype=np.int64)})
-        models = _correlated.problem_models(st, x0[0], [sigma])
-        if models.correlated[0] and o.get("terrain") is not None:
+        if not start_status(x0, init_status)[1][0]:  # an unusable start: the white fit reports it
+            configured = bool(_correlated.problem_models(st, x0[0], [sigma]).correlated[0])
+        if configured and o.get("terrain") is not None:
             raise ValueError("mle: the terrain option is not available with time-correlated errors (sigma "
                              "attitude_tau_s / position_tau_s)")
-        if models.correlated[0]:
-            return _correlated.gls([st], x0[:1], models, robust, vce, tol, itmax)
-        sigma = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
-    res = _mle.mle(st, x0, sigma, robust, vce, tol, itmax, init_status, bias_deg, size_unknown, o.get("terrain"))
-    res = _bias_refit(st, o, x0, init_status, sigma, vce, res, bias_deg, size_unknown)
-    return _with_learned_tau(st, o, res, sigma, vce, size_unknown)
+    white = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
+    res = _mle.mle(st, x0, white, robust, vce, tol, itmax, init_status, bias_deg, size_unknown, o.get("terrain"))
+    if configured:
+        return _configured_tau(st, o, res, sigma, vce)
+    res = _bias_refit(st, o, x0, init_status, white, vce, res, bias_deg, size_unknown)
+    return _with_learned_tau(st, o, res, white, vce, size_unknown)
+
+
+def _configured_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool) -> tuple:
+    """One problem's answer under the configured correlation times from its white fit res (`mle.mle` with the
+    marginal variances, B = 1): the one-model `learned_tau.learn_tau` (damped GLS from the white answer on the rows
+    it kept, with its robust weights held) and `_drift_answer`; res where the white fit has no answer or the GLS
+    none."""
+    if not np.isfinite(res[0]).all():
+        return res
+    ex = res[5]
+    sub = _learned.without_rejected(st, ex["rejected"][0])
+    got = _learned.learn_tau([sub], res[0], sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"],
+                             o["max_iterations"], sigmas=[sigma], weights=[_held(sub, ex, o)])[0]
+    if got is None:
+        return res
+    _, _, _, (X, it, status, cond, cov, exg) = got
+    exg = {k: v for k, v in exg.items() if not k.startswith("error_model")}  # configured, not chosen by evidence
+    return _drift_answer(res, (X, it, status, cond, cov, exg))
+
+
+def _held(st: Stacked, ex: dict, o: dict) -> np.ndarray:
+    """The white fit's (extras ex, B = 1) final robust weights (m,) of st's rows in use (`correlated.rows_in_use`
+    order: u, v of the frames with a pixel, then the ranges)."""
+    E = ex["residual_sigmas"][0].T[..., None]  # (3,n,1) standardized as the fit weighed them
+    w = _mle._cost_weights(np.where(np.isfinite(E), E, 0.0), o.get("robust", _mle.DEFAULT_ROBUST))[1]
+    w = np.ones(E.shape) if w is None else w
+    pf, rf = np.flatnonzero(st.has_pix[0]), np.flatnonzero(st.has_range[0])
+    return np.concatenate([w[:2, pf, 0].T.ravel(), w[2, rf, 0]])
 
 
 def _bias_refit(st: Stacked, o: dict, x0: np.ndarray, init_status, sigma, vce: bool, res: tuple, bias_deg,
@@ -410,10 +435,10 @@ def _mle_multistart(st: Stacked, o: dict, first: tuple | None = None, answers: d
 def _learned_answer(res: tuple, got, sigma) -> tuple:
     """One problem's answer from its first answer res (B = 1) and `learned_tau.learn_tau`'s got for it: the drift
     model's where it is kept, else res itself."""
-    X, ex = res[0], res[5]
+    X = res[0]
     if got is None:
         return res
-    _, att, _, (Xg, it, status, cond, cov, exg) = got
+    _, att, _, (Xg, _, _, _, _, exg) = got
     if np.isfinite(Xg[0]).all():
         # a drift model may trade the target against the drift where the flight cannot tell them apart (a short
         # burst, a run of mistracked frames): kept only when its estimate lies within the first answer's
@@ -425,14 +450,23 @@ def _learned_answer(res: tuple, got, sigma) -> tuple:
         att_eff = att * float(np.sqrt(exg["variance_factor_pixel"][0]))
         if sigma.attitude_deg and att_eff > _starts.MAX_ATTITUDE_OVER_STATED * sigma.attitude_deg:
             return res
+    return _drift_answer(res, got[3], scale_attitude=True)
+
+
+def _drift_answer(res: tuple, fit: tuple, scale_attitude: bool = False) -> tuple:
+    """One problem's answer (B = 1) from the GLS fit fit of a drift model (learned or configured) on the rows its
+    white fit res kept: fit's, with the rows res rejected (left out of the fit's data) rejected, with their
+    residuals, and the iterations of both; scale_attitude: the learned attitude sigma times the pixel group's
+    variance factor (variance components scale the whole pixel covariance)."""
+    Xg, it, status, cond, cov, exg = fit
+    ex = res[5]
     out = dict(exg)
-    # the rows the first solve rejected (left out of the drift model's data) stay rejected, with their residuals
     rej = ex["rejected"]
     out["rejected"] = rej | exg["rejected"]
     for k in ("residuals", "residual_sigmas"):
         out[k] = np.where(rej, ex[k], exg[k])
-    # the attitude sigma the chosen model carries (variance components scale the whole pixel covariance)
-    out["error_model_attitude_deg"] = out["error_model_attitude_deg"] * np.sqrt(exg["variance_factor_pixel"])
+    if scale_attitude:
+        out["error_model_attitude_deg"] = out["error_model_attitude_deg"] * np.sqrt(exg["variance_factor_pixel"])
     return Xg, it + res[1], status, cond, cov, out
 
 

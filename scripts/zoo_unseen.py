@@ -65,7 +65,7 @@ from pipeline.solve_options import METHODS
 ERROR_FAMILIES = ("lag", "pixel_walk", "pixel_offset", "pixel_understated", "laser_sigma", "gnss_step",
                   "attitude_spike", "lever_arm", "range_quantised", "laser_rate", "few_pixels")
 GEOMETRY_FAMILIES = ("hover", "long_lens", "oblique", "nadir")
-FAMILIES = (*ERROR_FAMILIES, *GEOMETRY_FAMILIES, "mix")
+FAMILIES = ("control", *ERROR_FAMILIES, *GEOMETRY_FAMILIES, "mix")
 IMAGES = ((640, 480), (1280, 720), (1920, 1080))
 UP = np.array([0.0, 0.0, 1.0])
 
@@ -112,7 +112,7 @@ class _Trajectory:
     pass abeam, or a slow loiter (a small circle offset from the target); and the gimbal's slew about the target
     as a sum of sinusoids (rad in the camera's x and y)."""
 
-    def __init__(self, rng, kind, target, el_deg, slant_m, gamma_deg, speed_mps, slew_rad):
+    def __init__(self, rng, kind, target, el_deg, slant_m, gamma_deg, speed_mps, slew_rad, slew_period_s):
         self.kind, self.target, self.speed = kind, target, speed_mps
         el = math.radians(el_deg)
         self.h, self.r = slant_m * math.sin(el), slant_m * math.cos(el)
@@ -129,7 +129,7 @@ class _Trajectory:
             self.length = 2 * self.half
         self.duration = self.length / speed_mps
         self.slew_amp = slew_rad * rng.uniform(0.5, 1.0, (2, 3))
-        self.slew_w = 2 * math.pi / rng.uniform(2.0, 12.0, (2, 3))
+        self.slew_w = 2 * math.pi / rng.uniform(*slew_period_s, (2, 3))
         self.slew_ph = rng.uniform(0, 2 * math.pi, (2, 3))
 
     def position(self, t_s):
@@ -166,10 +166,12 @@ def _intersection_deg(pos_m, target_m):
 # ---- one flight ---------------------------------------------------------------------------------------------
 
 def _effects(rng, family: str) -> tuple[str, ...]:
-    if family == "mix":
-        a, b = rng.choice(len(ERROR_FAMILIES), 2, replace=False)
-        return (ERROR_FAMILIES[a], ERROR_FAMILIES[b])
-    return (family,)
+    if family == "mix":  # two error families, or one error family and one geometry
+        if rng.random() < 0.5:
+            a, b = rng.choice(len(ERROR_FAMILIES), 2, replace=False)
+            return (ERROR_FAMILIES[a], ERROR_FAMILIES[b])
+        return (str(rng.choice(ERROR_FAMILIES)), str(rng.choice(GEOMETRY_FAMILIES)))
+    return () if family == "control" else (family,)
 
 
 def make_flight(seed: int, i: int) -> UnseenFlight:
@@ -201,7 +203,10 @@ def make_flight(seed: int, i: int) -> UnseenFlight:
     K = np.array([[fx, 0.0, W / 2 + rng.uniform(-8, 8)], [0.0, fx, H / 2 + rng.uniform(-8, 8)], [0.0, 0.0, 1.0]])
     target = np.array([rng.uniform(-500, 500), rng.uniform(-500, 500), rng.uniform(0.0, 300.0)])
     slew_rad = rng.uniform(0.02, 0.08) * min(W, H) / fx
-    traj = _Trajectory(rng, kind, target, el_deg, slant_m, gamma_deg, speed, slew_rad)
+    slew_period_s = (2.0, 12.0)
+    if "lag" in eff:  # the gimbal slews: the target wanders 15-35 % of the image's short side, periods 3-8 s
+        slew_rad, slew_period_s = rng.uniform(0.15, 0.35) * min(W, H) / fx, (3.0, 8.0)
+    traj = _Trajectory(rng, kind, target, el_deg, slant_m, gamma_deg, speed, slew_rad, slew_period_s)
 
     # timing: frames at fps, every k-th observed
     n_obs = round(math.exp(rng.uniform(math.log(30.0), math.log(250.0))))

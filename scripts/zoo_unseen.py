@@ -41,7 +41,7 @@ outside its 99.9 % ellipsoid, the fit message); `-v` prints every flight; `--sav
 (or with `--only`, the named flights) as observation files (`ridgeloc solve`) with the truth and the family in
 "meta". `control` is the base flight without any effect (the generator's check: mle's own error model).
 
-    PYTHONPATH=. python scripts/zoo_unseen.py [--flights 170] [--seed 0] [--timeout 20] [--only u017,u042]
+    PYTHONPATH=. python scripts/zoo_unseen.py [--flights 170] [--seed 0[,1,2]] [--timeout 20] [--only u017,u042]
                                               [--family lag,hover] [--save DIR] [--json OUT] [-v]
 """
 
@@ -440,13 +440,13 @@ def _save(f: UnseenFlight, out: Path) -> None:
     doc = to_dict(f.obs)
     doc["meta"] = {"generator": "scripts/zoo_unseen.py", "family": f.family, "effects": list(f.effects), **f.meta}
     out.mkdir(parents=True, exist_ok=True)
-    (out / f"{f.name}.json").write_text(json.dumps(doc))
+    (out / f"{f.name.replace('/', '_')}.json").write_text(json.dumps(doc))
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--flights", type=int, default=170, help="flights (default 170: 10 per family)")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", default="0", help="a seed, or several comma-separated (flights named s1/u018)")
     ap.add_argument("--timeout", type=float, default=20.0, help="seconds per solve (an unsolved mle counts as a "
                     "catastrophe)")
     ap.add_argument("--only", help="comma-separated flight names (u000, u017, ...)")
@@ -457,8 +457,15 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     names = set(args.only.split(",")) if args.only else None
     fams = set(args.family.split(",")) if args.family else None
-    flights = [make_flight(args.seed, i) for i in range(args.flights)
-               if (names is None or f"u{i:03d}" in names) and (fams is None or FAMILIES[i % len(FAMILIES)] in fams)]
+    seeds = [int(x) for x in args.seed.split(",")]
+    flights = []
+    for seed in seeds:
+        for i in range(args.flights):
+            if (names is None or f"u{i:03d}" in names) and (fams is None or FAMILIES[i % len(FAMILIES)] in fams):
+                f = make_flight(seed, i)
+                if len(seeds) > 1:
+                    f.name = f"s{seed}/{f.name}"
+                flights.append(f)
     t0 = time.perf_counter()
     rows = []
     for f in flights:

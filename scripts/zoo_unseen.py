@@ -39,10 +39,12 @@ every method is wrong is no mle failure); each catastrophe and each flight outsi
 with mle's extras (status, chosen start, variance factors, rejected rows, boresight bias, the other estimators
 outside its 99.9 % ellipsoid, the fit message); `-v` prints every flight; `--save DIR` writes the catastrophes
 (or with `--only`, the named flights) as observation files (`ridgeloc solve`) with the truth and the family in
-"meta". `control` is the base flight without any effect (the generator's check: mle's own error model).
+"meta"; `--diagnose` solves each of those flights again with the boresight bias prior fixed at the stated
+attitude sigma and with no bias. `control` is the base flight without any effect (mle's own error model).
 
     PYTHONPATH=. python scripts/zoo_unseen.py [--flights 170] [--seed 0[,1,2]] [--timeout 20] [--only u017,u042]
                                               [--family lag,hover] [--save DIR] [--json OUT] [-v]
+                                              [--diagnose]
 """
 
 from __future__ import annotations
@@ -436,6 +438,24 @@ def _fmt_row(r: dict) -> str:
             + (f" (failed {fail})" if fail else ""))
 
 
+def diagnose(f: UnseenFlight, row: dict, timeout_s: float) -> None:
+    """mle again with the boresight bias prior fixed at the stated attitude sigma (no size learned, no learned
+    drift model) and with no bias (`bias_prior_deg` 0): row["diagnosis"] = {variant: [error m, NEES]}."""
+    out = {}
+    for label, b in (("bias_at_stated", f.obs.sigma.attitude_deg), ("no_bias", 0.0)):
+        signal.signal(signal.SIGALRM, _alarm)
+        signal.setitimer(signal.ITIMER_REAL, timeout_s)
+        try:
+            est = solve("mle", f.obs, bias_prior_deg=b)
+            e = est.position_m - f.obs.truth_m
+            out[label] = [float(np.linalg.norm(e)), float(e @ np.linalg.solve(est.covariance_m2, e))]
+        except Exception:  # a diagnosis that fails is reported as missing
+            out[label] = None
+        finally:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+    row["diagnosis"] = out
+
+
 def _save(f: UnseenFlight, out: Path) -> None:
     doc = to_dict(f.obs)
     doc["meta"] = {"generator": "scripts/zoo_unseen.py", "family": f.family, "effects": list(f.effects), **f.meta}
@@ -454,6 +474,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--save", metavar="DIR", help="write catastrophes (or every --only flight) as observation files")
     ap.add_argument("--json", metavar="OUT", help="every flight's figures and the summaries as JSON")
     ap.add_argument("--verbose", "-v", action="store_true", help="one line per flight")
+    ap.add_argument("--diagnose", action="store_true", help="on each catastrophe and flight outside its ellipsoid, "
+                    "mle again with the bias prior fixed at the stated attitude sigma and with no bias")
     args = ap.parse_args(argv)
     names = set(args.only.split(",")) if args.only else None
     fams = set(args.family.split(",")) if args.family else None
@@ -471,9 +493,13 @@ def main(argv: list[str] | None = None) -> int:
     for f in flights:
         r = evaluate(f, args.timeout)
         rows.append(r)
+        if args.diagnose and (r["catastrophe"] or not r["inside"]):
+            diagnose(f, r, args.timeout)
         if args.verbose or r["catastrophe"] or not r["inside"]:
             flag = "CATASTROPHE " if r["catastrophe"] else ("" if r["inside"] else "OUTSIDE ")
-            print(flag + _fmt_row(r), flush=True)
+            dg = "".join(f" {k}: " + ("failed" if v is None else f"{v[0]:.1f} m (nees {v[1]:.1f})")
+                         for k, v in r.get("diagnosis", {}).items())
+            print(flag + _fmt_row(r) + (f" | mle again:{dg}" if dg else ""), flush=True)
         if args.save and (r["catastrophe"] or names):
             _save(f, Path(args.save))
     groups = [summarize([r for r in rows if r["family"] == fam], fam) for fam in FAMILIES

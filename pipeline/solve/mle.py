@@ -532,11 +532,14 @@ class White(_iterate.Model):
         """The bias averaged over its size (`_mixture`) where it is unknown: (cov, cov0, E_report, singular)."""
         if self.a is None or not self.bias_size_unknown:
             return cov, cov0, self.E, np.zeros(cov.shape[0], dtype=bool)
-        # a misfit (the robust scale guard, the chi-square's variance factor) scales every stated sigma: the bias
-        # prior's and the shared GNSS offset's too (told wrong by that factor, they are likely all wrong alike);
-        # the shared offset takes the larger of the two groups' factors
+        # a misfit (the robust scale guard, the chi-square's variance factor) scales every stated sigma: the shared
+        # GNSS offset's too (told wrong by that factor, they are likely all wrong alike; the larger of the two
+        # groups' factors). Not the bias prior by the guard: the guard measures the frame-to-frame spread (a late
+        # pose under a slewing gimbal: 5-17 x), which says nothing of the constant part of the attitude error, and
+        # a prior grown with it lets the bias turn every line of sight to where the ranges pull (docs/zoo.md,
+        # "Unseen families")
         s, g = self._rows(infl), self._rows(1.0 / self.guard)
-        mix, cov_stated, E_report = self._mixture(s / np.sqrt(vf_chi), s * g, g, failed, drift_pix)
+        mix, cov_stated, E_report = self._mixture(s / np.sqrt(vf_chi), s, g, failed, drift_pix)
         self.mix = mix
         misfit = vf_chi * self.guard.max(axis=1)
         eye = self.position_m ** 2 * np.eye(3)

@@ -14,8 +14,8 @@ the mle error, the start's error, the learned answer's error, its largest standa
 of the answer over --starts starts 1e-6 m from the first (random directions, seed 1). --candidates: per candidate
 model (tau, attitude sigma, position error drifting or white), its `correlated.gls` fit from those starts (every
 row at weight 1, the fit `learn_tau` uses): error, largest move, iterations and status (0 converged, 1 iteration
-limit). --told: the configured-correlation-time path (the white fit, then the one-model `learn_tau` with the
-white fit's robust weights held, `methods._configured_tau`) told each zoo flight's true correlation times, from
+limit). --told: the configured-correlation-time path (the white fit, then the damped GLS fit `correlated.gls` with
+the white fit's robust weights held, `methods._configured_tau`) told each zoo flight's true correlation times, from
 the los answer and starts 1e-6 m from it: error, largest move, rows the white fit rejected, iterations;
 --told-zoo N: that on every flight of `zoo.py --flights N --seed 0` whose told sigma has a correlation time.
 --scenes: the configured path's coverage of the 95 % ellipsoid and median error on the test scenes
@@ -86,10 +86,9 @@ def main(argv: list[str] | None = None) -> int:
     calls = []
     largest = (0.0, None)
 
-    def spy(*a, **k):
-        if not k:  # the learned model's call (the configured path's passes its one model)
-            calls.append(a)
-        return real(*a, **k)
+    def spy(*a):
+        calls.append(a)
+        return real(*a)
 
     methods._learned.learn_tau = spy
     if args.told:

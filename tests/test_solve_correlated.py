@@ -11,7 +11,8 @@ from scipy.optimize import least_squares
 from pipeline import observation_file
 from pipeline.errors import GeometryError, ObservationError
 from pipeline.geometry.camera import project
-from pipeline.solve import solve, solve_batch
+from pipeline.solve import correlated, solve, solve_batch
+from pipeline.solve.estimate import Status
 from pipeline.solve.observations import Sigma
 from pipeline.solve.uncertainty import CHI2_3_95
 from support.scenes import PAPER_SIGMA, correlated_problems, paper_batch, paper_problem
@@ -112,7 +113,7 @@ def test_attitude_only_correlation_coverage():
     sigma = dataclasses.replace(PAPER_SIGMA, attitude_tau_s=20.0)
     d2 = []
     for obs in probs:
-        est = solve("mle", obs, sigma=sigma)  # Huber: weights on the whitened residuals
+        est = solve("mle", obs, sigma=sigma)  # the default loss: the white fit's weights held in the GLS
         e = est.position_m - obs.truth_m
         d2.append(e @ np.linalg.solve(est.covariance_m2, e))
     assert 0.90 <= np.mean(np.array(d2) <= CHI2_3_95) <= 0.99
@@ -167,9 +168,9 @@ def test_robust_gls_is_continuous_at_vanishing_correlation():
 
 
 def test_robust_gls_resists_a_gross_range_error():
-    """One laser range 3 km long, correlated attitude and position errors: the reweighted GLS (weights from each
-    row's own standardized residual, applied as an inflated independent variance) keeps the estimate near the
-    truth and its covariance honest; without a robust loss the range drags it hundreds of metres."""
+    """One laser range 3 km long, correlated attitude and position errors: the white fit rejects it and the GLS
+    fits the rows it kept at its weights, keeping the estimate near the truth and its covariance honest; without a
+    robust loss the range drags it hundreds of metres."""
     errs, d2s = [], []
     for obs in correlated_problems(40, seed=21):
         rng = obs.range_m.copy()
@@ -212,3 +213,33 @@ def test_the_configured_fit_does_not_jump_when_its_start_moves_by_a_micrometre(n
     X = np.array([e.position_m for e in ests])
     assert all(e.converged for e in ests)
     assert np.linalg.norm(X[1:] - X[0], axis=1).max() < 1e-6
+
+
+def test_a_rejected_row_is_reported_at_the_returned_position():
+    """The configured path fits the rows its white fit kept; the range that fit rejected is reported with its
+    residual at the GLS answer (the position returned), not at the white fit's."""
+    obs = correlated_problems(1, seed=21)[0]
+    rng = obs.range_m.copy()
+    rng[4] += 3000.0
+    obs = dataclasses.replace(obs, range_m=rng)
+    est = solve("mle", obs, sigma=CORR)
+    (rej,) = [r for r in est.extras["rejected"] if r["residual"] == "range"]
+    assert rej["frame"] == 4
+    expected = rng[4] - np.linalg.norm(est.position_m - obs.platform_m[4])
+    assert abs(rej["value"] - expected) < 1e-6, (rej["value"], expected)
+
+
+def test_a_failed_configured_fit_is_no_white_answer(monkeypatch):
+    """Where the configured model's GLS fit is degenerate, mle says so: it does not fall back to the white fit's
+    answer as if it were the configured model's."""
+    real = correlated.gls
+
+    def degenerate(*a, **k):
+        X, it, status, cond, cov, ex = real(*a, **k)
+        return np.full_like(X, np.nan), it, np.full_like(status, Status.DEGENERATE), cond, cov, ex
+
+    obs = paper_problem(seed=1)
+    assert solve("mle", obs, sigma=CORR).converged
+    monkeypatch.setattr(correlated, "gls", degenerate)
+    with pytest.raises(GeometryError):
+        solve("mle", obs, sigma=CORR)

@@ -194,8 +194,8 @@ def gls(sts: list, X0s: np.ndarray, models: Models, robust: str | None, vce: boo
     a pixel and with a range, in the same time order) from usable starts X0s (T,3), each under K models of its
     rows (models: T K, problem by problem), all T K fits side by side, each exactly as alone: `Correlated` through
     the one iteration and finish of `mle.run` (the loss's phases and scale guard), damped, with fixed robust
-    weights (T,m) of the rows (None: 1); rows0: the problems' `rows_in_use` at their starts where the caller has
-    them. Returns `mle.finish`'s tuple over the T K fits."""
+    weights (T,3,n) of the u, v and range rows (None: 1); rows0: the problems' `rows_in_use` at their starts
+    where the caller has them. Returns `mle.finish`'s tuple over the T K fits."""
     T = len(sts)
     K = models.Cii.shape[0] // T
     X = np.repeat(np.asarray(X0s, dtype=np.float64).reshape(T, 3), K, axis=0)
@@ -237,7 +237,8 @@ class Correlated(_iterate.Model):
     def __init__(self, st: Stacked, models: Models, X: np.ndarray, vce: bool, rows: list,
                  weights: np.ndarray | None = None):
         """st: problems with the same rows in use, each once per model (`gls`); X (K,3) their starts, rows the
-        list of each model's rows at its start (`rows_in_use`), weights (K,m) theirs (None: 1)."""
+        list of each model's rows at its start (`rows_in_use`), weights (K,3,n) of their u, v and range rows
+        (None: 1)."""
         K, m = models.Cii.shape
         self.st, self.models, self.K, self.X, self.vce = st, models, K, X, vce
         self.sd = np.sqrt(models.Cii).T  # (m, K)
@@ -250,7 +251,7 @@ class Correlated(_iterate.Model):
         self.ok = self._planes(np.ones((m, K)), 0.0) > 0
         self.w, self.wr = np.ones((m, K)), None
         if weights is not None:
-            self.w = np.array(weights, dtype=np.float64).T
+            self.w = np.moveaxis(np.asarray(weights, dtype=np.float64), 0, -1).reshape(3 * st.n, K)[self._at]
             self.wr = self._planes(self.w, 1.0)
         self.A = list(rows)  # per model; replaced, never changed in place
         self._last_forms = [None] * K
@@ -279,9 +280,8 @@ class Correlated(_iterate.Model):
         out, todo = [None] * len(idx), []
         for j, k in enumerate(idx):
             last = self._last_forms[k]
-            if (last is not None and last[0] is rows[j] and np.array_equal(last[1], self.w[:, k])
-                    and np.array_equal(last[2], vfs[j])):
-                out[j] = last[3]
+            if last is not None and last[0] is rows[j] and np.array_equal(last[1], vfs[j]):  # the weights are fixed
+                out[j] = last[2]
             else:
                 todo.append(j)
         if todo:
@@ -290,7 +290,7 @@ class Correlated(_iterate.Model):
             qs = quadratic_forms_stacked(sk, np.stack([rows[j] for j in todo]), self.w[:, ks].T, vfs[todo])
             for j, k, q in zip(todo, ks, qs, strict=True):
                 out[j] = (q, sum(f for f, _, _ in q))
-                self._last_forms[k] = (rows[j], self.w[:, k], vfs[j], out[j])
+                self._last_forms[k] = (rows[j], vfs[j], out[j])
         return out
 
     def start(self, robust):  # the weights are fixed: the loss's phases change nothing but the guard's scales

@@ -84,22 +84,20 @@ def _families(sigmas: list) -> list:
 
 
 def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
-              max_iterations: int, sigmas: list | None = None, weights: list | None = None) -> list:
+              max_iterations: int) -> list:
     """Per problem of sts (B = 1 each, without their rejected rows), from its start X0s[i] (3,): the GLS `mle`
-    averaged over the models sigmas (default `candidates(sigma)`: correlation time, position error drifting or
-    white, and attitude sigma where unstated), each weighted by its likelihood (equal priors): the posterior mean
+    averaged over the models of `candidates(sigma)` (correlation time, position error drifting or white, and
+    attitude sigma where unstated), each weighted by its likelihood (equal priors): the posterior mean
     estimate and the mixture's covariance (the spread between the models included). Each answer is (tau_s,
     attitude_deg of the most likely model, {(tau, att, position tau or None): log L}, the `correlated.gls` result
     tuple of that model (its fit checks and extras, and error_model_tau_s, error_model_attitude_deg,
     error_model_position_tau_s (NaN: white), error_model_log_likelihoods over TAU_GRID_S at its attitude sigma
-    and position family) with the mixture's estimate and covariance), or None when no model gave an answer. One
-    model (the configured correlation times, `methods._configured_tau`) is that model's fit. The models' fits of
-    problems with the same rows in use iterate side by side (each as alone: `correlated.gls`). The fits are
-    damped GLS with fixed robust weights on the rows the first solve kept (the robust loss's phases and scale guard
-    kept, `correlated.gls`): weights None, every row at weight 1, else per problem the rows' weights (m,) (the
-    first solve's, `methods._held`); robust weights updated on the rows' marginal residuals under a correlated C
-    are a fixed-point map with no objective, which from starts 1e-6 m apart ended metres to kilometres apart."""
-    sigmas = candidates(sigma) if sigmas is None else sigmas
+    and position family) with the mixture's estimate and covariance), or None when no model gave an answer. The
+    models' fits of problems with the same rows in use iterate side by side (each as alone: `correlated.gls`).
+    The fits are damped GLS on the rows the first solve kept, every row at weight 1 (the robust loss's phases and
+    scale guard kept, `correlated.gls`); robust weights updated on the rows' marginal residuals under a correlated
+    C are a fixed-point map with no objective, which from starts 1e-6 m apart ended metres to kilometres apart."""
+    sigmas = candidates(sigma)
     K = len(sigmas)
     by_rows: dict[tuple, list[int]] = {}  # the same frames with a pixel and with a range (`Models.concat`: the rest)
     for i, st in enumerate(sts):
@@ -110,14 +108,13 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
         g = groups.pop()
         X0 = np.asarray([X0s[i] for i in g])
         rows0 = [_correlated.rows_in_use(sts[i], X0[t]) for t, i in enumerate(g)]
-        held = None if weights is None else np.stack([weights[i] for i in g])
         try:
             per_family = []
             for fam in _families(sigmas):
                 models = _correlated.Models.concat([_correlated.problem_models(sts[i], X0[t], [sigmas[k] for k in fam])
                                                     for t, i in enumerate(g)])
                 per_family.append((fam, _correlated.gls([sts[i] for i in g], X0, models, robust, vce, tol_m,
-                                                        max_iterations, rows0, held)))
+                                                        max_iterations, rows0)))
         except ValueError:  # the models' states differ (`Models.concat`): one problem at a time
             if len(g) == 1:
                 raise

@@ -261,39 +261,35 @@ def _mle_dispatch(st: Stacked, o: dict):
             raise ValueError("mle: the terrain option is not available with time-correlated errors (sigma "
                              "attitude_tau_s / position_tau_s)")
     white = dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None)
-    res = _mle.mle(st, x0, white, robust, vce, tol, itmax, init_status, bias_deg, size_unknown, o.get("terrain"))
-    if configured:
+    if configured:  # the configured error model wins: no boresight bias (the GLS has none), even when asked for
+        res = _mle.mle(st, x0, white, robust, vce, tol, itmax, init_status, None, False)
         return _configured_tau(st, o, res, sigma, vce)
+    res = _mle.mle(st, x0, white, robust, vce, tol, itmax, init_status, bias_deg, size_unknown, o.get("terrain"))
     res = _bias_refit(st, o, x0, init_status, white, vce, res, bias_deg, size_unknown)
     return _with_learned_tau(st, o, res, white, vce, size_unknown)
 
 
 def _configured_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool) -> tuple:
     """One problem's answer under the configured correlation times from its white fit res (`mle.mle` with the
-    marginal variances, B = 1): the one-model `learned_tau.learn_tau` (damped GLS from the white answer on the rows
-    it kept, with its robust weights held) and `_drift_answer`; res where the white fit has no answer or the GLS
-    none."""
+    marginal variances, no bias, B = 1): the damped GLS fit (`correlated.gls`, the fit of each learned candidate)
+    from the white answer on the rows it kept, with its robust weights held (`_held`), finished by `_drift_answer`
+    (a GLS that diverges or is degenerate reports that status); res where the white fit has no answer."""
     if not np.isfinite(res[0]).all():
         return res
-    ex = res[5]
-    sub = _learned.without_rejected(st, ex["rejected"][0])
-    got = _learned.learn_tau([sub], res[0], sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"],
-                             o["max_iterations"], sigmas=[sigma], weights=[_held(sub, ex, o)])[0]
-    if got is None:
-        return res
-    _, _, _, (X, it, status, cond, cov, exg) = got
-    exg = {k: v for k, v in exg.items() if not k.startswith("error_model")}  # configured, not chosen by evidence
-    return _drift_answer(res, (X, it, status, cond, cov, exg))
+    sub = _learned.without_rejected(st, res[5]["rejected"][0])
+    models = _correlated.problem_models(sub, res[0][0], [sigma])
+    fit = _correlated.gls([sub], res[0], models, o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"],
+                          o["max_iterations"], weights=_held(res[5], o)[None])
+    return _drift_answer(st, res, fit)
 
 
-def _held(st: Stacked, ex: dict, o: dict) -> np.ndarray:
-    """The white fit's (extras ex, B = 1) final robust weights (m,) of st's rows in use (`correlated.rows_in_use`
-    order: u, v of the frames with a pixel, then the ranges)."""
-    E = ex["residual_sigmas"][0].T[..., None]  # (3,n,1) standardized as the fit weighed them
+def _held(ex: dict, o: dict) -> np.ndarray:
+    """(3,n) the white fit's (extras ex, B = 1) final robust weights of the u, v and range rows, from its residuals
+    as it weighed them (`White.adjust` reports its own residuals where no bias mixture moved them: a configured
+    correlation time has no bias)."""
+    E = ex["residual_sigmas"][0].T[..., None]  # (3,n,1)
     w = _mle._cost_weights(np.where(np.isfinite(E), E, 0.0), o.get("robust", _mle.DEFAULT_ROBUST))[1]
-    w = np.ones(E.shape) if w is None else w
-    pf, rf = np.flatnonzero(st.has_pix[0]), np.flatnonzero(st.has_range[0])
-    return np.concatenate([w[:2, pf, 0].T.ravel(), w[2, rf, 0]])
+    return np.ones(E.shape[:2]) if w is None else w[..., 0]
 
 
 def _bias_refit(st: Stacked, o: dict, x0: np.ndarray, init_status, sigma, vce: bool, res: tuple, bias_deg,
@@ -338,7 +334,7 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
                                  o["max_iterations"])
     for b, got in zip(need, learned, strict=True):
         row = _row(res, b)
-        answer = _learned_answer(row, got, sigma)
+        answer = _learned_answer(st.take(np.array([b])), row, got, sigma)
         if answer is not row:  # the drift model's answer was kept
             res = _replace_rows(res, answer, np.array([b]))
     return res
@@ -432,9 +428,10 @@ def _mle_multistart(st: Stacked, o: dict, first: tuple | None = None, answers: d
     return X, it, status, cond, cov, ex
 
 
-def _learned_answer(res: tuple, got, sigma) -> tuple:
-    """One problem's answer from its first answer res (B = 1) and `learned_tau.learn_tau`'s got for it: the drift
-    model's where it is kept, else res itself."""
+def _learned_answer(st: Stacked, res: tuple, got, sigma) -> tuple:
+    """One problem's answer (st, B = 1) from its first answer res and `learned_tau.learn_tau`'s got for it: the
+    drift model's where it is kept (its attitude sigma times the pixel group's variance factor: variance components
+    scale the whole pixel covariance), else res itself."""
     X = res[0]
     if got is None:
         return res
@@ -450,23 +447,25 @@ def _learned_answer(res: tuple, got, sigma) -> tuple:
         att_eff = att * float(np.sqrt(exg["variance_factor_pixel"][0]))
         if sigma.attitude_deg and att_eff > _starts.MAX_ATTITUDE_OVER_STATED * sigma.attitude_deg:
             return res
-    return _drift_answer(res, got[3], scale_attitude=True)
+    exg = {**exg, "error_model_attitude_deg": exg["error_model_attitude_deg"] * np.sqrt(exg["variance_factor_pixel"])}
+    return _drift_answer(st, res, (*got[3][:5], exg))
 
 
-def _drift_answer(res: tuple, fit: tuple, scale_attitude: bool = False) -> tuple:
-    """One problem's answer (B = 1) from the GLS fit fit of a drift model (learned or configured) on the rows its
-    white fit res kept: fit's, with the rows res rejected (left out of the fit's data) rejected, with their
-    residuals, and the iterations of both; scale_attitude: the learned attitude sigma times the pixel group's
-    variance factor (variance components scale the whole pixel covariance)."""
+def _drift_answer(st: Stacked, res: tuple, fit: tuple) -> tuple:
+    """One problem's answer (st, B = 1) from the GLS fit of a drift model (learned or configured) on the rows its
+    white fit res kept: fit's, with the rows res rejected (left out of the fit's data) rejected, their residuals
+    at fit's position (standardized by the white fit's sigmas of those rows), and the iterations of both."""
     Xg, it, status, cond, cov, exg = fit
     ex = res[5]
     out = dict(exg)
     rej = ex["rejected"]
     out["rejected"] = rej | exg["rejected"]
-    for k in ("residuals", "residual_sigmas"):
-        out[k] = np.where(rej, ex[k], exg[k])
-    if scale_attitude:
-        out["error_model_attitude_deg"] = out["error_model_attitude_deg"] * np.sqrt(exg["variance_factor_pixel"])
+    if rej.any() and np.isfinite(Xg).all():
+        r = np.concatenate([pixel_model(st, Xg)[1].reshape(1, -1, 2), range_model(st, Xg)[1][..., None]], axis=2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            isd = np.where(ex["residuals"] != 0, ex["residual_sigmas"] / ex["residuals"], 0.0)
+        out["residuals"] = np.where(rej, r, exg["residuals"])
+        out["residual_sigmas"] = np.where(rej, r * isd, exg["residual_sigmas"])
     return Xg, it + res[1], status, cond, cov, out
 
 

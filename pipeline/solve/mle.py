@@ -532,12 +532,12 @@ class White(_iterate.Model):
         """The bias averaged over its size (`_mixture`) where it is unknown: (cov, cov0, E_report, singular)."""
         if self.a is None or not self.bias_size_unknown:
             return cov, cov0, self.E, np.zeros(cov.shape[0], dtype=bool)
-        # a misfit (the robust scale guard, the chi-square's variance factor) scales every stated sigma: the shared
-        # GNSS offset's too (told wrong by that factor, they are likely all wrong alike; the larger of the two
-        # groups' factors). Not the bias prior by the guard: the guard measures the frame-to-frame spread (a late
-        # pose under a slewing gimbal: 5-17 x), which says nothing of the constant part of the attitude error, and
-        # a prior grown with it lets the bias turn every line of sight to where the ranges pull (docs/zoo.md,
-        # "Unseen families")
+        # a misfit scales every stated sigma (told wrong by that factor, they are likely all wrong alike): the
+        # shared GNSS offset by the larger of the robust scale guard and the chi-square's variance factor; the bias
+        # prior by the chi-square's factor only (the bias columns scaled by s, the rows by s / sqrt(vf_chi)): the
+        # guard measures the frame-to-frame spread (a late pose under a slewing gimbal: 5-17 x), which says nothing
+        # of the constant part of the attitude error, and a prior grown with it let the bias turn every line of
+        # sight to where the ranges pull (docs/zoo.md, "Unseen families")
         s, g = self._rows(infl), self._rows(1.0 / self.guard)
         mix, cov_stated, E_report = self._mixture(s / np.sqrt(vf_chi), s, g, failed, drift_pix)
         self.mix = mix
@@ -600,7 +600,7 @@ class White(_iterate.Model):
             g0 = take_last(g, restate)
             cov_stated[restate] = self._mix(*(take_last(x, restate) for x in (J, E, ok)), g0, g0, drift_pix[restate],
                                             restate)[0]["covariance"]
-        # the bias in units of the stated prior: the columns passed carry the misfit's scaling s_bias / s
+        # the bias in units of the stated prior: the columns passed carry the scaling s_bias / s (sqrt(vf_chi))
         unit = (s_bias / s)[0, 0]
         mix["bias"] = mix["bias"] * unit[:, None]
         mix["bias_var"] = mix["bias_var"] * (unit * unit)[:, None]
@@ -717,8 +717,9 @@ def _bias_summary(it: White, cov, hs, vf_chi) -> dict:
 
 
 def _mixture_summary(it: White, mix: dict, cov) -> dict:
-    """`_bias_summary` from the bias mixture, with the prior's sigma (B,2) (the largest bias, scaled by a misfit,
-    times the rms of PHI_GRID) and the bias size the flight supports (B,) deg (the prior scale's posterior rms)."""
+    """`_bias_summary` from the bias mixture, with the prior's sigma (B,2) (the largest bias, scaled by the
+    chi-square's variance factor, times the rms of PHI_GRID) and the bias size the flight supports (B,) deg (the
+    prior scale's posterior rms)."""
     sb = it.bias_sigma_deg
     sd = np.sqrt(mix["bias_var"]) * sb
     sx = np.sqrt(np.einsum("bii->bi", cov))

@@ -34,18 +34,17 @@ times. Every flight has one family (or two, "mix"), cycling with its index:
     mix              two of the error families above at once, or one of them and one geometric family
     control          the base errors only (white, at the stated sigmas): mle's own error model
 
-Each flight runs every method with defaults (`solve(method, obs)`; a method that raises is left out; mle with
-every `--solve-option KEY=VALUE`, e.g. `bias_prior_deg=0`) and applies the zoo's rules: a catastrophe is mle
-error > 2 x median(other methods' errors) + 5 m; coverage is the share of flights with e^T C^-1 e <=
-chi2_3(0.95) = 7.815 for mle's covariance (a calibrated one: 95 %, median 2.37). Printed per family and overall,
-with the median error of the best other method per flight (a family where every method is wrong is no mle
-failure); each catastrophe and each flight outside its ellipsoid is printed with mle's extras (status, chosen
-start, variance factors, chi-square / dof, lag-1 autocorrelation of the pixel residuals, rejected rows, boresight
-bias, learned correlation time, the other estimators outside its 99.9 % ellipsoid, the fit message); `-v` prints
-every flight; `--save DIR` writes the catastrophes (or with `--only`, the named flights) as observation files
-(`ridgeloc solve`) with the truth and the family in "meta"; `--diagnose` solves each of those flights again with
-the boresight bias prior fixed at the stated attitude sigma and with no bias. `control` is the base flight
-without any effect (mle's own error model).
+Each flight runs every method with defaults (`solve(method, obs)`; a method that raises is left out; mle with every
+`--solve-option KEY=VALUE`, e.g. `bias_prior_deg=0`) and applies the zoo's rules: a catastrophe is mle error > 2 x
+median(other methods' errors) + 5 m; coverage is the share of flights with e^T C^-1 e <= chi2_3(0.95) = 7.815 for
+mle's covariance (a calibrated one: 95 %, median 2.37). Printed per family and overall, with the median error of the
+best other method per flight (a family where every method is wrong is no mle failure); each catastrophe and each
+flight outside its ellipsoid is printed with mle's extras (status, chosen start, variance factors, chi-square / dof,
+lag-1 autocorrelation of the pixel residuals, rejected rows, boresight bias, learned correlation time and attitude
+sigma, the other estimators outside its 99.9 % ellipsoid, the fit message); `-v` prints every flight; `--save DIR`
+writes the catastrophes (or with `--only`, the named flights) as observation files (`ridgeloc solve`) with the truth
+and the family in "meta"; `--diagnose` solves each of those flights again with the boresight bias prior fixed at the
+stated attitude sigma and with no bias. `control` is the base flight without any effect (mle's own error model).
 
     PYTHONPATH=. python scripts/zoo_unseen.py [--flights 170] [--seed 0[,1,2]] [--timeout 20] [--only u017,u042]
                                               [--family lag,hover] [--save DIR] [--json OUT] [-v]
@@ -324,14 +323,15 @@ def _mle_extras(est) -> dict:
     starts = ex.get("starts", {}) or {}
     bias = ex.get("boresight_bias") or {}
     return {"status": est.status.name.lower(), "message": fit.get("message"), "consistent": fit.get("consistent"),
-            "chi2": fit.get("chi2"), "chi2_dof": fit.get("dof"),
+            "chi2": fit.get("chi2"), "chi2_dof": fit.get("dof"), "chi2_p": fit.get("p_value"),
             "autocorrelation_pixel": fit.get("autocorrelation_pixel"),
             "variance_factors": ex.get("variance_factors"), "sigma0_sq": ex.get("sigma0_sq"),
             "rejected": len(ex.get("rejected", [])), "robust": ex.get("robust"),
             "start": starts.get("chosen"), "not_determined": starts.get("not_determined"),
             "cov_inflation": fit.get("covariance_inflation"), "disagree": starts.get("disagree"),
             "bias_deg": [round(bias[k], 3) for k in ("u_deg", "v_deg", "u_prior_deg")] if bias else None,
-            "learned_tau_s": (ex.get("error_model") or {}).get("attitude_tau_s")}
+            "learned_tau_s": (ex.get("error_model") or {}).get("attitude_tau_s"),
+            "learned_attitude_deg": (ex.get("error_model") or {}).get("attitude_deg")}
 
 
 def evaluate(f: UnseenFlight, timeout_s: float, mle_options: dict | None = None) -> dict:
@@ -386,11 +386,12 @@ def _fmt_row(r: dict) -> str:
     nees = "-" if r["mle_nees"] is None else f"{r['mle_nees']:.1f}"
     mx = r.get("mle", {})
     vf = mx.get("variance_factors") or {}
-    chi2 = "-" if mx.get("chi2") is None else f"{mx['chi2']:.0f}/{mx['chi2_dof']:.0f}"
+    chi2 = "-" if mx.get("chi2") is None else f"{mx['chi2']:.0f}/{mx['chi2_dof']:.0f} p={mx['chi2_p']:.2g}"
+    tau = "-" if mx.get("learned_tau_s") is None else f"{mx['learned_tau_s']:g}s/{mx['learned_attitude_deg']:.2f}deg"
     acf = "-" if mx.get("autocorrelation_pixel") is None else f"{mx['autocorrelation_pixel']:.2f}"
     extra = (f" [{mx.get('status')} start={mx.get('start')} vf={vf.get('pixel', 1):.3g}/{vf.get('range', 1):.3g} "
              f"chi2/dof={chi2} acf_pix={acf} rej={mx.get('rejected')} bias(u,v,prior)={mx.get('bias_deg')} "
-             f"tau={mx.get('learned_tau_s')} "
+             f"tau={tau} "
              f"disagree={mx.get('disagree')} msg={mx.get('message')!r}]") if mx else ""
     fail = "; ".join(f"{m}: {why}" for m, why in r["failed"].items())
     return (f"{r['name']} {'+'.join(r['effects'])} {r['kind']} n={r['n']} pix={r['pixels']} rng={r['ranges']} "

@@ -4,15 +4,14 @@ blindly"; docs/zoo.md, "Unseen families").
 
 An independent generator (it shares nothing with scripts/zoo.py or `pipeline/synth` but the solve API's
 `Observations`; the running, NEES and catastrophe rule are scripts/zoo.py's): a platform on an arc or a straight
-pass; a gimbal that points at the target and slews about it
-(a sum of sinusoids, 2-8 % of the image's short side, periods 2-12 s, so the pointing moves between frames); a
-pinhole camera (fx, principal point near the centre, no distortion, pixels outside the image not seen); video at
-25 or 30 Hz, every k-th frame observed (30-250 observations); a laser on its own clock (1 Hz unless the family
-says otherwise), each pulse on the nearest observed frame within half the frames' spacing. The base errors are
-white at what the operator states: pixel 0.3-1.5 px (not stated on a third of the flights, except
-pixel_understated's, always stated), laser 1-5 m,
-position 1-5 m, attitude 0.05-0.3 deg (small yaw/pitch/roll of the camera). The told sigma has no correlation
-times. Every flight has one family (or two, "mix"), cycling with its index:
+pass; a gimbal that points at the target and slews about it (a sum of sinusoids, 2-8 % of the image's short side,
+periods 2-12 s, so the pointing moves between frames); a pinhole camera (fx, principal point near the centre, no
+distortion, pixels outside the image not seen); video at 25 or 30 Hz, every k-th frame observed (30-250
+observations); a laser on its own clock (1 Hz unless the family says otherwise), each pulse on the nearest observed
+frame within half the frames' spacing. The base errors are white at what the operator states: pixel 0.3-1.5 px (not
+stated on a third of the flights, except pixel_understated's, always stated), laser 1-5 m, position 1-5 m, attitude
+0.05-0.3 deg (small yaw/pitch/roll of the camera). The told sigma has no correlation times. Every flight has one
+family (or two, "mix"), cycling with its index:
 
     lag              pose (position and attitude) stamped 50-300 ms late against the pixels and ranges,
                      platform 25-90 m/s, gimbal slewing
@@ -69,7 +68,7 @@ from zoo import _median, _nees, catastrophe, run_method  # the zoo's running and
 from pipeline.observation_file import to_dict
 from pipeline.solve.observations import Observations, Sigma
 from pipeline.solve.uncertainty import CHI2_3_95
-from pipeline.solve_options import METHODS
+from pipeline.solve_options import METHODS, OPTIONS
 
 ERROR_FAMILIES = ("lag", "pixel_walk", "pixel_offset", "pixel_understated", "laser_sigma", "gnss_step",
                   "attitude_spike", "lever_arm", "range_quantised", "laser_rate", "few_pixels")
@@ -109,9 +108,8 @@ def _small_rotation(ypr_rad: np.ndarray) -> np.ndarray:
 
 
 class _Trajectory:
-    """The platform's true position at any time (s): an arc around the target at fixed height, a straight
-    pass abeam; and the gimbal's slew about the target
-    as a sum of sinusoids (rad in the camera's x and y)."""
+    """The platform's true position at any time (s): an arc around the target at fixed height or a straight pass
+    abeam; and the gimbal's slew about the target as a sum of sinusoids (rad in the camera's x and y)."""
 
     def __init__(self, rng, kind, target, el_deg, slant_m, gamma_deg, speed_mps, slew_rad, slew_period_s):
         self.kind, self.target, self.speed = kind, target, speed_mps
@@ -439,8 +437,9 @@ def main(argv: list[str] | None = None) -> int:
     mle_options = {}
     for kv in args.solve_option:
         key, sep, value = kv.partition("=")
-        if not sep or not key:
-            ap.error(f"--solve-option {kv!r}: expected KEY=VALUE")
+        if not sep or key not in {o.name for o in OPTIONS["mle"]}:
+            ap.error(f"--solve-option {kv!r}: expected KEY=VALUE with KEY one of mle's options "
+                     f"({', '.join(o.name for o in OPTIONS['mle'])})")
         try:
             mle_options[key] = json.loads(value)
         except json.JSONDecodeError:

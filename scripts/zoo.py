@@ -379,17 +379,19 @@ def _on_alarm(signum, frame):
 
 
 def run_method(method: str, obs: Observations, timeout_s: float, **options) -> dict:
-    """{'position', 'cov', 'wall_s', 'error'} of solve(method, obs); 'error' is the failure's one-line text."""
+    """{'position', 'cov', 'estimate', 'wall_s', 'error'} of solve(method, obs, **options); 'estimate' is the
+    Estimate (None on a failure), 'error' the failure's one-line text."""
     t0 = time.perf_counter()
     signal.signal(signal.SIGALRM, _on_alarm)
     signal.setitimer(signal.ITIMER_REAL, timeout_s)
     try:
         est = solve(method, obs, **options)
-        out = {"position": est.position_m, "cov": est.covariance_m2, "error": None}
+        out = {"position": est.position_m, "cov": est.covariance_m2, "estimate": est, "error": None}
     except _Timeout:
-        out = {"position": None, "cov": None, "error": f"did not finish in {timeout_s:g} s"}
+        out = {"position": None, "cov": None, "estimate": None, "error": f"did not finish in {timeout_s:g} s"}
     except Exception as exc:  # a method that cannot solve this flight is left out (its reason kept)
-        out = {"position": None, "cov": None, "error": f"{type(exc).__name__}: {str(exc).splitlines()[0][:120]}"}
+        out = {"position": None, "cov": None, "estimate": None,
+               "error": f"{type(exc).__name__}: {str(exc).splitlines()[0][:120]}"}
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
     out["wall_s"] = time.perf_counter() - t0
@@ -404,6 +406,16 @@ def _nees(res: dict, truth) -> float | None:
         return float(e @ np.linalg.solve(res["cov"], e))
     except np.linalg.LinAlgError:
         return None
+
+
+def catastrophe(errors_m: dict[str, float]) -> tuple[float | None, float | None, bool]:
+    """(median of the other methods' errors m, bound = 2 x it + 5 m, catastrophe) from {method: error m} of the
+    methods that solved a flight: a catastrophe is mle unsolved or beyond the bound (no bound without others)."""
+    others = [e for m, e in errors_m.items() if m != "mle"]
+    median = statistics.median(others) if others else None
+    bound = None if median is None else 2 * median + 5.0
+    mle = errors_m.get("mle")
+    return median, bound, bool(mle is None or (bound is not None and mle > bound))
 
 
 def evaluate(f: Flight, timeout_s: float) -> dict:
@@ -426,11 +438,7 @@ def evaluate(f: Flight, timeout_s: float) -> dict:
     row["told_nees"] = _nees(r, truth)
     if r["error"]:
         row["failed"]["told"] = r["error"]
-    others = [e for m, e in row["errors_m"].items() if m != "mle"]
-    row["others_median_m"] = statistics.median(others) if others else None
-    mle = row["errors_m"].get("mle")
-    row["bound_m"] = None if row["others_median_m"] is None else 2 * row["others_median_m"] + 5.0
-    row["catastrophe"] = bool(mle is None or (row["bound_m"] is not None and mle > row["bound_m"]))
+    row["others_median_m"], row["bound_m"], row["catastrophe"] = catastrophe(row["errors_m"])
     return row
 
 

@@ -2,19 +2,21 @@
 have, to find where `mle` is a catastrophe or its ellipsoid lies (issue 19's "the MLE a surveyor can trust
 blindly"; docs/zoo.md, "Unseen families").
 
-An independent generator (it shares nothing with scripts/zoo.py or `pipeline/synth` but the solve API): a
-platform on an arc, a straight pass or a slow loiter; a gimbal that points at the target and slews about it
-(a sum of sinusoids, 2-8 % of the image's short side, periods 2-12 s, so the pointing moves between frames); a
-pinhole camera (fx, principal point near the centre, no distortion, pixels outside the image not seen); video at
-25 or 30 Hz, every k-th frame observed (30-250 observations); a laser on its own clock (1 Hz unless the family
-says otherwise), each pulse on the nearest observed frame within half the frames' spacing. The base errors are
-white at what the operator states: pixel 0.3-1.5 px (not stated on a third of the flights), laser 1-5 m,
-position 1-5 m, attitude 0.05-0.3 deg (small yaw/pitch/roll of the camera). The told sigma has no correlation
-times. Every flight has one family (or two, "mix"), cycling with its index:
+An independent generator (it shares nothing with scripts/zoo.py or `pipeline/synth` but the solve API's
+`Observations`; the running, NEES and catastrophe rule are scripts/zoo.py's): a platform on an arc or a straight
+pass; a gimbal that points at the target and slews about it (a sum of sinusoids, 2-8 % of the image's short side,
+periods 2-12 s, so the pointing moves between frames); a pinhole camera (fx, principal point near the centre, no
+distortion, pixels outside the image not seen); video at 25 or 30 Hz, every k-th frame observed (30-250
+observations); a laser on its own clock (1 Hz unless the family says otherwise), each pulse on the nearest observed
+frame within half the frames' spacing. The base errors are white at what the operator states: pixel 0.3-1.5 px (not
+stated on a third of the flights, except pixel_understated's, always stated), laser 1-5 m, position 1-5 m, attitude
+0.05-0.3 deg (small yaw/pitch/roll of the camera). The told sigma has no correlation times. Every flight has one
+family (or two, "mix"), cycling with its index:
 
     lag              pose (position and attitude) stamped 50-300 ms late against the pixels and ranges,
                      platform 25-90 m/s, gimbal slewing
-    pixel_walk       the tracker slides: a pixel random walk reaching 3-8 px rms at the end (correlated pixels)
+    pixel_walk       the tracker slides: a pixel random walk reaching 3-8 px rms per axis at the end (correlated
+                     pixels)
     pixel_offset     the tracker holds the target's corner: a constant 2-6 px offset
     pixel_understated  the pixel sigma stated as 0.5 px, the real one 1.5-5 px (3-10 x)
     laser_sigma      the laser sigma stated 4-6 x too small or 4-6 x too large
@@ -24,27 +26,28 @@ times. Every flight has one family (or two, "mix"), cycling with its index:
     range_quantised  ranges rounded to 1 m or 5 m (the stated laser sigma unchanged)
     laser_rate       the laser at 0.2 Hz or 10 Hz
     few_pixels       5-10 pixels only, ranges on every observation
-    hover            a loiter with little baseline: intersection angle 2-8 deg, 3-12 m/s
+    hover            an arc with little baseline: intersection angle 2-8 deg, 3-12 m/s
     long_lens        fx 15,000-30,000 px at 10-20 km slant
     oblique          elevation 5-10 deg
     nadir            elevation 80-89 deg
     mix              two of the error families above at once, or one of them and one geometric family
     control          the base errors only (white, at the stated sigmas): mle's own error model
 
-Each flight runs every method with defaults (`solve(method, obs)`; a method that raises is left out) and applies
-the zoo's rules: a catastrophe is mle error > 2 x median(other methods' errors) + 5 m; coverage is the share of
-flights with e^T C^-1 e <= chi2_3(0.95) = 7.815 for mle's covariance (a calibrated one: 95 %, median 2.37).
-Printed per family and overall, with the median error of the best other method per flight (a family where
-every method is wrong is no mle failure); each catastrophe and each flight outside its ellipsoid is printed
-with mle's extras (status, chosen start, variance factors, rejected rows, boresight bias, the other estimators
-outside its 99.9 % ellipsoid, the fit message); `-v` prints every flight; `--save DIR` writes the catastrophes
-(or with `--only`, the named flights) as observation files (`ridgeloc solve`) with the truth and the family in
-"meta"; `--diagnose` solves each of those flights again with the boresight bias prior fixed at the stated
-attitude sigma and with no bias. `control` is the base flight without any effect (mle's own error model).
+Each flight runs every method with defaults (`solve(method, obs)`; a method that raises is left out; mle with every
+`--solve-option KEY=VALUE`, e.g. `bias_prior_deg=0`) and applies the zoo's rules: a catastrophe is mle error > 2 x
+median(other methods' errors) + 5 m; coverage is the share of flights with e^T C^-1 e <= chi2_3(0.95) = 7.815 for
+mle's covariance (a calibrated one: 95 %, median 2.37). Printed per family and overall, with the median error of the
+best other method per flight (a family where every method is wrong is no mle failure); each catastrophe and each
+flight outside its ellipsoid is printed with mle's extras (status, chosen start, variance factors, chi-square / dof,
+lag-1 autocorrelation of the pixel residuals, rejected rows, boresight bias, learned correlation time and attitude
+sigma, the other estimators outside its 99.9 % ellipsoid, the fit message); `-v` prints every flight; `--save DIR`
+writes the catastrophes (or with `--only`, the named flights) as observation files (`ridgeloc solve`) with the truth
+and the family in "meta"; `--diagnose` solves each of those flights again with the boresight bias prior fixed at the
+stated attitude sigma and with no bias. `control` is the base flight without any effect (mle's own error model).
 
     PYTHONPATH=. python scripts/zoo_unseen.py [--flights 170] [--seed 0[,1,2]] [--timeout 20] [--only u017,u042]
                                               [--family lag,hover] [--save DIR] [--json OUT] [-v]
-                                              [--diagnose]
+                                              [--diagnose] [--solve-option bias_prior_deg=0]
 """
 
 from __future__ import annotations
@@ -53,20 +56,19 @@ import argparse
 import dataclasses
 import json
 import math
-import signal
-import statistics
 import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
+from zoo import _median, _nees, catastrophe, run_method  # the zoo's running and rule (scripts/ is on sys.path)
 
 from pipeline.observation_file import to_dict
-from pipeline.solve import solve
 from pipeline.solve.observations import Observations, Sigma
 from pipeline.solve.uncertainty import CHI2_3_95
-from pipeline.solve_options import METHODS
+from pipeline.solve_options import METHODS, OPTIONS
 
 ERROR_FAMILIES = ("lag", "pixel_walk", "pixel_offset", "pixel_understated", "laser_sigma", "gnss_step",
                   "attitude_spike", "lever_arm", "range_quantised", "laser_rate", "few_pixels")
@@ -100,23 +102,14 @@ def _lookat_world_to_cam(pos_m: np.ndarray, point_m: np.ndarray) -> np.ndarray:
 
 
 def _small_rotation(ypr_rad: np.ndarray) -> np.ndarray:
-    """(n,3,3) camera-frame rotations from small yaw (about y), pitch (about x), roll (about z) angles (n,3)."""
-    y, p, r = ypr_rad.T
-    cy, sy, cp, sp, cr, sr = np.cos(y), np.sin(y), np.cos(p), np.sin(p), np.cos(r), np.sin(r)
-    n = ypr_rad.shape[0]
-    Ry = np.zeros((n, 3, 3))
-    Ry[:, 0, 0], Ry[:, 0, 2], Ry[:, 1, 1], Ry[:, 2, 0], Ry[:, 2, 2] = cy, sy, 1, -sy, cy
-    Rx = np.zeros((n, 3, 3))
-    Rx[:, 0, 0], Rx[:, 1, 1], Rx[:, 1, 2], Rx[:, 2, 1], Rx[:, 2, 2] = 1, cp, -sp, sp, cp
-    Rz = np.zeros((n, 3, 3))
-    Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = cr, -sr, sr, cr, 1
-    return Rz @ Rx @ Ry
+    """(n,3,3) camera-frame rotations R_z(roll) R_x(pitch) R_y(yaw) from small yaw (about y), pitch (about x) and
+    roll (about z) angles (n,3) rad."""
+    return Rotation.from_euler("ZXY", ypr_rad[:, ::-1]).as_matrix()
 
 
 class _Trajectory:
-    """The platform's true position at any time (s): an arc around the target at fixed height, a straight
-    pass abeam, or a slow loiter (a small circle offset from the target); and the gimbal's slew about the target
-    as a sum of sinusoids (rad in the camera's x and y)."""
+    """The platform's true position at any time (s): an arc around the target at fixed height or a straight pass
+    abeam; and the gimbal's slew about the target as a sum of sinusoids (rad in the camera's x and y)."""
 
     def __init__(self, rng, kind, target, el_deg, slant_m, gamma_deg, speed_mps, slew_rad, slew_period_s):
         self.kind, self.target, self.speed = kind, target, speed_mps
@@ -125,7 +118,7 @@ class _Trajectory:
         self.az0 = rng.uniform(0, 2 * math.pi)
         self.sign = rng.choice([-1.0, 1.0])
         g = math.radians(gamma_deg)
-        if kind in ("arc", "loiter"):
+        if kind == "arc":
             # constant elevation: cos(gamma) = sin^2 el + cos^2 el cos(daz)
             c = (math.cos(g) - math.sin(el) ** 2) / max(math.cos(el) ** 2, 1e-9)
             self.span = math.acos(float(np.clip(c, -1.0, 1.0)))
@@ -140,7 +133,7 @@ class _Trajectory:
 
     def position(self, t_s):
         s = np.clip(np.asarray(t_s) / self.duration, -0.2, 1.2) - 0.5
-        if self.kind in ("arc", "loiter"):
+        if self.kind == "arc":
             az = self.az0 + self.sign * s * self.span
             off = np.stack([self.r * np.cos(az), self.r * np.sin(az), np.full_like(az, self.h)], -1)
         else:
@@ -195,7 +188,7 @@ def make_flight(seed: int, i: int) -> UnseenFlight:
     fx = math.exp(rng.uniform(math.log(1500.0), math.log(10000.0)))
     kind = str(rng.choice(["arc", "straight"]))
     if "hover" in eff:
-        kind, gamma_deg, speed = "loiter", rng.uniform(2.0, 8.0), rng.uniform(3.0, 12.0)
+        kind, gamma_deg, speed = "arc", rng.uniform(2.0, 8.0), rng.uniform(3.0, 12.0)
     if "long_lens" in eff:
         fx, slant_m = rng.uniform(15000.0, 30000.0), rng.uniform(10000.0, 20000.0)
     if "oblique" in eff:
@@ -247,7 +240,7 @@ def make_flight(seed: int, i: int) -> UnseenFlight:
     j = np.where(np.abs(t_s[jm] - pulses) < np.abs(t_s[j] - pulses), jm, j)
     spacing = k / fps
     has_range = np.zeros(n, dtype=bool)
-    has_range[j[np.abs(t_s[j] - pulses) <= 0.5 * max(spacing, 1 / fps) + 1e-9]] = True
+    has_range[j[np.abs(t_s[j] - pulses) <= 0.5 * spacing + 1e-9]] = True
     has_pixel = np.ones(n, dtype=bool)
     if "few_pixels" in eff:
         has_range[:] = True
@@ -322,80 +315,43 @@ def make_flight(seed: int, i: int) -> UnseenFlight:
 
 # ---- running ------------------------------------------------------------------------------------------------
 
-class _Timeout(Exception):
-    pass
-
-
-def _alarm(signum, frame):
-    raise _Timeout()
-
-
-def _run(method: str, obs: Observations, timeout_s: float):
-    """(estimate or None, failure text or None, wall s)."""
-    t0 = time.perf_counter()
-    signal.signal(signal.SIGALRM, _alarm)
-    signal.setitimer(signal.ITIMER_REAL, timeout_s)
-    try:
-        est, why = solve(method, obs), None
-    except _Timeout:
-        est, why = None, f"did not finish in {timeout_s:g} s"
-    except Exception as exc:  # a method that cannot solve the flight is left out
-        est, why = None, f"{type(exc).__name__}: {str(exc).splitlines()[0][:100]}"
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-    if est is not None and not np.isfinite(est.position_m).all():
-        est, why = None, "non-finite estimate"
-    return est, why, time.perf_counter() - t0
-
-
 def _mle_extras(est) -> dict:
     ex = est.extras
     fit = ex.get("fit", {})
     starts = ex.get("starts", {}) or {}
     bias = ex.get("boresight_bias") or {}
     return {"status": est.status.name.lower(), "message": fit.get("message"), "consistent": fit.get("consistent"),
+            "chi2": fit.get("chi2"), "chi2_dof": fit.get("dof"), "chi2_p": fit.get("p_value"),
+            "autocorrelation_pixel": fit.get("autocorrelation_pixel"),
             "variance_factors": ex.get("variance_factors"), "sigma0_sq": ex.get("sigma0_sq"),
             "rejected": len(ex.get("rejected", [])), "robust": ex.get("robust"),
             "start": starts.get("chosen"), "not_determined": starts.get("not_determined"),
             "cov_inflation": fit.get("covariance_inflation"), "disagree": starts.get("disagree"),
             "bias_deg": [round(bias[k], 3) for k in ("u_deg", "v_deg", "u_prior_deg")] if bias else None,
-            "learned_tau_s": (ex.get("error_model") or {}).get("attitude_tau_s")}
+            "learned_tau_s": (ex.get("error_model") or {}).get("attitude_tau_s"),
+            "learned_attitude_deg": (ex.get("error_model") or {}).get("attitude_deg")}
 
 
-def evaluate(f: UnseenFlight, timeout_s: float) -> dict:
-    """Every method on flight f: errors (m), mle's NEES and extras, the catastrophe verdict."""
+def evaluate(f: UnseenFlight, timeout_s: float, mle_options: dict | None = None) -> dict:
+    """Every method on flight f (mle with mle_options): errors (m), mle's NEES and extras, the catastrophe verdict
+    (scripts/zoo.py's rule)."""
     truth = f.obs.truth_m
     row = {"name": f.name, "family": f.family, "effects": list(f.effects), **f.meta, "errors_m": {}, "failed": {}}
     for m in METHODS:
-        est, why, wall = _run(m, f.obs, timeout_s)
+        r = run_method(m, f.obs, timeout_s, **((mle_options or {}) if m == "mle" else {}))
+        solved = r["position"] is not None and np.isfinite(r["position"]).all()
         if m == "mle":
-            row["mle_wall_s"] = wall
-            row["mle_nees"] = None
-        if est is None:
-            row["failed"][m] = why
+            row["mle_wall_s"] = r["wall_s"]
+            row["mle_nees"] = _nees(r, truth) if solved else None
+        if not solved:
+            row["failed"][m] = r["error"] or "non-finite estimate"
             continue
-        e = est.position_m - truth
-        row["errors_m"][m] = float(np.linalg.norm(e))
+        row["errors_m"][m] = float(np.linalg.norm(r["position"] - truth))
         if m == "mle":
-            row["mle"] = _mle_extras(est)
-            C = est.covariance_m2
-            if C is not None and np.isfinite(C).all():
-                try:
-                    row["mle_nees"] = float(e @ np.linalg.solve(C, e))
-                except np.linalg.LinAlgError:
-                    pass
-    others = [e for m, e in row["errors_m"].items() if m != "mle"]
-    row["others_median_m"] = statistics.median(others) if others else None
-    row["bound_m"] = None if not others else 2 * row["others_median_m"] + 5.0
-    mle = row["errors_m"].get("mle")
-    row["catastrophe"] = bool(mle is None or (row["bound_m"] is not None and mle > row["bound_m"]))
+            row["mle"] = _mle_extras(r["estimate"])
+    row["others_median_m"], row["bound_m"], row["catastrophe"] = catastrophe(row["errors_m"])
     row["inside"] = row["mle_nees"] is not None and row["mle_nees"] <= CHI2_3_95
     return row
-
-
-def _median(xs):
-    xs = [x for x in xs if x is not None]
-    return statistics.median(xs) if xs else float("nan")
 
 
 def summarize(rows: list[dict], label: str) -> dict:
@@ -428,8 +384,12 @@ def _fmt_row(r: dict) -> str:
     nees = "-" if r["mle_nees"] is None else f"{r['mle_nees']:.1f}"
     mx = r.get("mle", {})
     vf = mx.get("variance_factors") or {}
+    chi2 = "-" if mx.get("chi2") is None else f"{mx['chi2']:.0f}/{mx['chi2_dof']:.0f} p={mx['chi2_p']:.2g}"
+    tau = "-" if mx.get("learned_tau_s") is None else f"{mx['learned_tau_s']:g}s/{mx['learned_attitude_deg']:.2f}deg"
+    acf = "-" if mx.get("autocorrelation_pixel") is None else f"{mx['autocorrelation_pixel']:.2f}"
     extra = (f" [{mx.get('status')} start={mx.get('start')} vf={vf.get('pixel', 1):.3g}/{vf.get('range', 1):.3g} "
-             f"rej={mx.get('rejected')} bias(u,v,prior)={mx.get('bias_deg')} tau={mx.get('learned_tau_s')} "
+             f"chi2/dof={chi2} acf_pix={acf} rej={mx.get('rejected')} bias(u,v,prior)={mx.get('bias_deg')} "
+             f"tau={tau} "
              f"disagree={mx.get('disagree')} msg={mx.get('message')!r}]") if mx else ""
     fail = "; ".join(f"{m}: {why}" for m, why in r["failed"].items())
     return (f"{r['name']} {'+'.join(r['effects'])} {r['kind']} n={r['n']} pix={r['pixels']} rng={r['ranges']} "
@@ -438,21 +398,15 @@ def _fmt_row(r: dict) -> str:
             + (f" (failed {fail})" if fail else ""))
 
 
-def diagnose(f: UnseenFlight, row: dict, timeout_s: float) -> None:
+def diagnose(f: UnseenFlight, row: dict, timeout_s: float, mle_options: dict | None = None) -> None:
     """mle again with the boresight bias prior fixed at the stated attitude sigma (no size learned, no learned
-    drift model) and with no bias (`bias_prior_deg` 0): row["diagnosis"] = {variant: [error m, NEES]}."""
+    drift model) and with no bias (`bias_prior_deg` 0): row["diagnosis"] = {variant: [error m, NEES or None] or
+    None where it did not solve}."""
     out = {}
     for label, b in (("bias_at_stated", f.obs.sigma.attitude_deg), ("no_bias", 0.0)):
-        signal.signal(signal.SIGALRM, _alarm)
-        signal.setitimer(signal.ITIMER_REAL, timeout_s)
-        try:
-            est = solve("mle", f.obs, bias_prior_deg=b)
-            e = est.position_m - f.obs.truth_m
-            out[label] = [float(np.linalg.norm(e)), float(e @ np.linalg.solve(est.covariance_m2, e))]
-        except Exception:  # a diagnosis that fails is reported as missing
-            out[label] = None
-        finally:
-            signal.setitimer(signal.ITIMER_REAL, 0)
+        r = run_method("mle", f.obs, timeout_s, **{**(mle_options or {}), "bias_prior_deg": b})
+        ok = r["position"] is not None and np.isfinite(r["position"]).all()
+        out[label] = [float(np.linalg.norm(r["position"] - f.obs.truth_m)), _nees(r, f.obs.truth_m)] if ok else None
     row["diagnosis"] = out
 
 
@@ -476,7 +430,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--verbose", "-v", action="store_true", help="one line per flight")
     ap.add_argument("--diagnose", action="store_true", help="on each catastrophe and flight outside its ellipsoid, "
                     "mle again with the bias prior fixed at the stated attitude sigma and with no bias")
+    ap.add_argument("--solve-option", action="append", default=[], metavar="KEY=VALUE",
+                    help="an option of every flight's mle (repeatable; VALUE as JSON, else a string), e.g. "
+                    "bias_prior_deg=0")
     args = ap.parse_args(argv)
+    mle_options = {}
+    for kv in args.solve_option:
+        key, sep, value = kv.partition("=")
+        if not sep or key not in {o.name for o in OPTIONS["mle"]}:
+            ap.error(f"--solve-option {kv!r}: expected KEY=VALUE with KEY one of mle's options "
+                     f"({', '.join(o.name for o in OPTIONS['mle'])})")
+        try:
+            mle_options[key] = json.loads(value)
+        except json.JSONDecodeError:
+            mle_options[key] = value
     names = set(args.only.split(",")) if args.only else None
     fams = set(args.family.split(",")) if args.family else None
     seeds = [int(x) for x in args.seed.split(",")]
@@ -491,13 +458,14 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     rows = []
     for f in flights:
-        r = evaluate(f, args.timeout)
+        r = evaluate(f, args.timeout, mle_options)
         rows.append(r)
         if args.diagnose and (r["catastrophe"] or not r["inside"]):
-            diagnose(f, r, args.timeout)
+            diagnose(f, r, args.timeout, mle_options)
         if args.verbose or r["catastrophe"] or not r["inside"]:
             flag = "CATASTROPHE " if r["catastrophe"] else ("" if r["inside"] else "OUTSIDE ")
-            dg = "".join(f" {k}: " + ("failed" if v is None else f"{v[0]:.1f} m (nees {v[1]:.1f})")
+            dg = "".join(f" {k}: " + ("failed" if v is None else f"{v[0]:.1f} m (nees "
+                                                    + ("-" if v[1] is None else f"{v[1]:.1f}") + ")")
                          for k, v in r.get("diagnosis", {}).items())
             print(flag + _fmt_row(r) + (f" | mle again:{dg}" if dg else ""), flush=True)
         if args.save and (r["catastrophe"] or names):

@@ -1,15 +1,55 @@
-"""scripts/zoo.py (the generator of unseen flights) as a module, loaded once."""
+"""The scripts under scripts/ as modules (scripts/zoo.py, scripts/zoo_unseen.py), loaded once, and the zoo's
+no-catastrophe rule on one flight."""
 
 import importlib.util
+import statistics
 import sys
 from pathlib import Path
 
+import numpy as np
+
+from pipeline.errors import RidgelocError
+from pipeline.solve import solve
+
+SCRIPTS = Path(__file__).resolve().parents[2] / "scripts"
+#: every method but mle: the no-catastrophe rule's reference
+OTHERS = ("dlt", "vision", "range", "los", "fusion-raw", "fusion", "ridge")
+
+
+def script(name: str):
+    """scripts/{name}.py as the module `name`, loaded once (scripts/ on sys.path while it loads, as when it is run:
+    zoo_unseen imports zoo)."""
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, SCRIPTS / f"{name}.py")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module  # registered before running it: its dataclasses look their module up
+        sys.path.insert(0, str(SCRIPTS))
+        try:
+            spec.loader.exec_module(module)
+        except BaseException:
+            del sys.modules[name]
+            raise
+        finally:
+            sys.path.remove(str(SCRIPTS))
+    return sys.modules[name]
+
 
 def zoo():
-    if "zoo" not in sys.modules:
-        path = Path(__file__).resolve().parents[2] / "scripts" / "zoo.py"
-        spec = importlib.util.spec_from_file_location("zoo", path)
-        module = importlib.util.module_from_spec(spec)
-        sys.modules["zoo"] = module  # registered before running it: its dataclasses look their module up
-        spec.loader.exec_module(module)
-    return sys.modules["zoo"]
+    return script("zoo")
+
+
+def error_m(method: str, obs) -> float | None:
+    """|solve(method, obs) - truth| m, or None where the method cannot solve the flight."""
+    try:
+        est = solve(method, obs)
+    except RidgelocError:  # this method cannot solve this flight (too few ranges, degenerate geometry...)
+        return None
+    e = float(np.linalg.norm(est.position_m - obs.truth_m))
+    return e if np.isfinite(e) else None
+
+
+def catastrophe_bound(obs) -> tuple[float | None, float, int]:
+    """(mle error m or None, bound m = 2 x median(the other methods' errors) + 5 m, how many others solved)."""
+    others = [e for e in (error_m(m, obs) for m in OTHERS) if e is not None]
+    bound = 2 * statistics.median(others) + 5.0 if others else float("nan")
+    return error_m("mle", obs), bound, len(others)

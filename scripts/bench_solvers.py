@@ -16,6 +16,7 @@ Reports, in one run:
     python scripts/bench_solvers.py [--problems 40] [--batch 8000] [--gamma 30]
     python scripts/bench_solvers.py --against COMMIT[,COMMIT...] [--batch 0]   (before / after, interleaved)
     python scripts/bench_solvers.py --scale [--sizes 300,600,1200,1800,18000] [--timeout 600] [--memory-gb 4]
+                                    [--attitude-unstated]
     OPENBLAS_NUM_THREADS=1 python scripts/bench_solvers.py --profile [--batch 8000] [--top 35]
 
 `--profile`: the batched mle on the paper's problems (issue 19's throughput): problems/s of CPU (best of 3) and a
@@ -282,7 +283,9 @@ def _gtsam_batch(probs, setups) -> tuple[float, float]:
 
 def scale_flight(n: int):
     """The scale benchmark's flight of n observations: n / 30 s of video at 30 Hz on an orbit at 20 m/s (5 km
-    slant, 2 km height: 10 s cover 2.5 deg of azimuth, 10 minutes 150 deg), a range per second."""
+    slant, 2 km height: 10 s cover 2.5 deg of azimuth, 10 minutes 150 deg), a range per second; told an attitude
+    sigma of 0.1 deg (`--attitude-unstated`: none, and the learned drift model weighs ATTITUDE_GRID_DEG too: 70
+    models, not 14)."""
     import sys
     from pathlib import Path
 
@@ -300,13 +303,14 @@ def scale_flight(n: int):
                            laser_keep=1.0, path="arc")
 
 
-def _scale_child(n: int) -> None:
+def _scale_child(n: int, attitude_unstated: bool) -> None:
     """In a child process: one solve("mle") on the n-observation flight; prints a JSON line."""
     import json
     import resource
 
     f = scale_flight(n)
-    obs = dataclasses.replace(f.obs, truth_m=None)
+    sigma = dataclasses.replace(f.obs.sigma, attitude_deg=None) if attitude_unstated else f.obs.sigma
+    obs = dataclasses.replace(f.obs, truth_m=None, sigma=sigma)
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     c, t = time.process_time(), time.perf_counter()
     est = solve("mle", obs)
@@ -318,7 +322,7 @@ def _scale_child(n: int) -> None:
                       "iterations": int(est.iterations)}), flush=True)
 
 
-def _run_scale_case(n: int, timeout_s: float, memory_gb: float) -> dict:
+def _run_scale_case(n: int, timeout_s: float, memory_gb: float, attitude_unstated: bool) -> dict:
     """_scale_child(n) in a child process: its JSON, plus its peak RSS (kB); {'n', 'timeout'} when killed,
     {'n', 'failed'} when it failed (e.g. out of memory: its address space is limited to memory_gb, so that a
     dense n x n path cannot take the shared machine's memory)."""
@@ -334,7 +338,8 @@ def _run_scale_case(n: int, timeout_s: float, memory_gb: float) -> dict:
         import resource
 
         limit = int(memory_gb * 2**30)
-        p = subprocess.Popen([sys.executable, __file__, "--scale-child", str(n)], stdout=out, env=env, cwd=repo,
+        p = subprocess.Popen([sys.executable, __file__, "--scale-child", str(n)]
+                             + (["--attitude-unstated"] if attitude_unstated else []), stdout=out, env=env, cwd=repo,
                              stderr=errf,
                              preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_AS, (limit, limit)))
         t0 = time.perf_counter()
@@ -362,15 +367,16 @@ def _run_scale_case(n: int, timeout_s: float, memory_gb: float) -> dict:
     return row
 
 
-def _scale(sizes: list[int], timeout_s: float, batch_size: int, memory_gb: float) -> None:
+def _scale(sizes: list[int], timeout_s: float, batch_size: int, memory_gb: float, attitude_unstated: bool) -> None:
     print(f"\nscale: solve('mle') on one continuous-video flight per size (30 Hz, a pixel per frame, a range per "
-          f"second, drifting attitude and GNSS errors, no correlation times), each in a child process, "
+          f"second, drifting attitude and GNSS errors, no correlation times"
+          f"{', no attitude sigma stated' if attitude_unstated else ''}), each in a child process, "
           f"timeout {timeout_s:g} s, address space limited to {memory_gb:g} GB")
     print(f"  {'observations':>12} {'ranges':>7} {'wall s':>9} {'cpu s':>9} {'peak RSS MB':>12} "
           f"{'RSS before MB':>14} {'error m':>9}  status")
     done = []
     for n in sizes:
-        r = _run_scale_case(n, timeout_s, memory_gb)
+        r = _run_scale_case(n, timeout_s, memory_gb, attitude_unstated)
         if "timeout" in r:
             print(f"  {n:>12}  did not finish in {timeout_s:g} s", flush=True)
             continue
@@ -427,18 +433,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--memory-gb", type=float, default=4.0, help="with --scale: address-space limit per case")
     ap.add_argument("--profile", action="store_true", help="instead: profile the batched mle (above)")
     ap.add_argument("--top", type=int, default=35, help="with --profile: functions listed")
+    ap.add_argument("--attitude-unstated", action="store_true", help="with --scale: the flight's sigma states no "
+                    "attitude sigma (the learned drift model's 70 candidates)")
     ap.add_argument("--scale-child", type=int, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.profile:
         _profile(args.batch, args.gamma, args.top)
         return 0
     if args.scale_child:
-        _scale_child(args.scale_child)
+        _scale_child(args.scale_child, args.attitude_unstated)
         return 0
     if args.scale:
         print(f"machine: {os.cpu_count()} cpus, load average {os.getloadavg()[0]:.1f}, one trivial numpy call "
               f"{_calibration_us():.2f} us")
-        _scale([int(x) for x in args.sizes.split(",")], args.timeout, args.batch, args.memory_gb)
+        _scale([int(x) for x in args.sizes.split(",")], args.timeout, args.batch, args.memory_gb,
+               args.attitude_unstated)
         return 0
     print(f"geometry: 10 frames, 5 km slant range, 2 km height, intersection {args.gamma:g} deg, paper noise")
     print(f"machine: {os.cpu_count()} cpus, load average {os.getloadavg()[0]:.1f}, one trivial numpy call "

@@ -232,6 +232,7 @@ class Correlated(_iterate.Model):
     drift is modelled (no autocorrelation inflation in `mle.finish`)."""
 
     drift_modelled = True
+    fixed_weights = True
     damped = True
 
     def __init__(self, st: Stacked, models: Models, X: np.ndarray, vce: bool, rows: list,

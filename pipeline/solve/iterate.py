@@ -47,6 +47,8 @@ class Model:
 
     damped = False
     drift_modelled = False
+    #: the rows' weights do not depend on the loss (`mle.run` skips a phase that would change nothing)
+    fixed_weights = False
     #: a step within tol_m ends the problem where it is, untried (the model's state was evaluated there)
     skips_last_step = False
 

@@ -24,6 +24,10 @@ from pipeline.solve.stacked import Stacked
 TAU_GRID_S = (5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0)
 #: candidate attitude sigmas (deg) where the sigma states none
 ATTITUDE_GRID_DEG = (0.01, 0.03, 0.1, 0.3, 1.0)
+#: rows of the candidates' fits side by side at most (models x problems x rows): their arrays (~750 bytes per
+#: row) stay within a few hundred MB on a 10-minute video at 30 Hz (36,600 rows: 6 models at a time, not 35;
+#: `python scripts/bench_solvers.py --scale`)
+MODEL_ROWS_AT_ONCE = 250_000
 
 
 def without_rejected(st: Stacked, rejected: np.ndarray) -> Stacked:
@@ -42,7 +46,8 @@ def log_likelihoods(st: Stacked, Xs: np.ndarray, sigmas: list, vfs: list) -> lis
     a model is not chosen for hiding the misfit in the target)."""
     vfs = np.asarray(vfs, dtype=np.float64).reshape(-1, 2)
     qs: list = [None] * len(sigmas)
-    for fam in _families(sigmas):  # one `quadratic_forms_stacked` per family of models with the same states
+    rows = 2 * int(st.has_pix[0].sum()) + int(st.has_range[0].sum())
+    for fam in _families(sigmas, rows):  # one `quadratic_forms_stacked` per part of a family (same states)
         K = len(fam)
         models = _correlated.Models.concat([_correlated.problem_models(st, Xs[k], [sigmas[k]]) for k in fam])
         A = _correlated.rows_in_use(st.take(np.zeros(K, dtype=np.intp)), Xs[fam])
@@ -76,11 +81,13 @@ def candidates(sigma: Sigma) -> list[Sigma]:
             for tied in positions for att in atts for tau in TAU_GRID_S]
 
 
-def _families(sigmas: list) -> list:
+def _families(sigmas: list, rows: int = 1) -> list:
     """Index arrays of the sigmas whose models have the same states (`correlated.Models.concat`): the position
-    error correlated or white."""
+    error correlated or white; each cut into parts of at most MODEL_ROWS_AT_ONCE / rows models (rows: the rows of
+    one model's fits side by side, at least one model per part), the models fitted side by side at once."""
     white = np.array([s.position_tau_s is None for s in sigmas])
-    return [f for f in (np.flatnonzero(~white), np.flatnonzero(white)) if f.size]
+    per = max(1, MODEL_ROWS_AT_ONCE // max(rows, 1))
+    return [f[i:i + per] for f in (np.flatnonzero(~white), np.flatnonzero(white)) for i in range(0, f.size, per)]
 
 
 def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
@@ -110,7 +117,7 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
         rows0 = [_correlated.rows_in_use(sts[i], X0[t]) for t, i in enumerate(g)]
         try:
             per_family = []
-            for fam in _families(sigmas):
+            for fam in _families(sigmas, len(g) * int(rows0[0].shape[0])):
                 models = _correlated.Models.concat([_correlated.problem_models(sts[i], X0[t], [sigmas[k] for k in fam])
                                                     for t, i in enumerate(g)])
                 per_family.append((fam, _correlated.gls([sts[i] for i in g], X0, models, robust, vce, tol_m,

@@ -205,7 +205,8 @@ def run(m, st: Stacked, X: np.ndarray, status: np.ndarray, bad: np.ndarray, robu
         max_iterations: int):
     """The one `mle` iteration and finish of a model m (`White`, or `correlated.Correlated`): Levenberg-Marquardt
     / IRLS by `iterate.drive` with m's loss; with the redescending loss Huber first, then the scale guard
-    (`robust_scale`), then the redescending loss from there. Returns `finish`'s tuple."""
+    (`robust_scale`), then the redescending loss from there (for a model with fixed weights, whose objective the
+    loss does not change, only where the guard rescaled a group). Returns `finish`'s tuple."""
     iterations = np.zeros(st.size, dtype=np.int64)
     centre, bound = divergence_bound(st, X)  # the bad starts' bound is never used: they do not iterate
     active = ~bad
@@ -213,6 +214,8 @@ def run(m, st: Stacked, X: np.ndarray, status: np.ndarray, bad: np.ndarray, robu
         if phase == "redescending":
             robust_scale(m)
             active = ~((status == Status.DIVERGED) | (status == Status.DEGENERATE)) & ~bad
+            if m.fixed_weights:  # the loss does not change the objective: only a rescaled group moves the fit
+                active &= (m.guard != 1).any(axis=1)
             status[active] = Status.MAX_ITERATIONS
         m.start(phase)
         m.start_only = phase != robust  # the Huber phase: the redescending phase's start

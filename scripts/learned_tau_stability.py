@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from pipeline.errors import RidgelocError
 from pipeline.observation_file import load
-from pipeline.solve import correlated, learned_tau, methods, solve
+from pipeline.solve import learned_tau, methods, solve
 
 
 def _observations(name: str):
@@ -117,13 +117,8 @@ def main(argv: list[str] | None = None) -> int:
         sigmas = learned_tau.candidates(sigma)
         fits = []
         for X0 in starts:
-            out = [None] * len(sigmas)
-            for fam in learned_tau._families(sigmas):
-                sub = [sigmas[k] for k in fam]
-                f = correlated.gls(sts, X0, correlated.problem_models(sts[0], X0[0], sub), robust, vce, tol_m, itmax)
-                for j, k in enumerate(fam):
-                    out[k] = (f[0][j], int(f[1][j]), int(f[2][j]))
-            fits.append(out)
+            f = learned_tau.fits(sts, X0, sigmas, robust, vce, tol_m, itmax)[0]
+            fits.append([(f[0][k], int(f[1][k]), int(f[2][k])) for k in range(len(sigmas))])
         for k, s in enumerate(sigmas):
             Xk = np.array([fit[k][0] for fit in fits])
             mv = float(np.linalg.norm(Xk[1:] - Xk[0], axis=1).max())

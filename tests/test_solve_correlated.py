@@ -14,6 +14,7 @@ from pipeline.geometry.camera import project
 from pipeline.solve import correlated, solve, solve_batch
 from pipeline.solve.estimate import Status
 from pipeline.solve.observations import Sigma
+from pipeline.solve.stacked import Stacked
 from pipeline.solve.uncertainty import CHI2_3_95
 from support.scenes import PAPER_SIGMA, correlated_problems, paper_batch, paper_problem
 from support.zoo import zoo
@@ -215,18 +216,22 @@ def test_the_configured_fit_does_not_jump_when_its_start_moves_by_a_micrometre(n
     assert np.linalg.norm(X[1:] - X[0], axis=1).max() < 1e-6
 
 
-def test_a_rejected_row_is_reported_at_the_returned_position():
-    """The configured path fits the rows its white fit kept; the range that fit rejected is reported with its
-    residual at the GLS answer (the position returned), not at the white fit's."""
+def test_rejected_rows_are_reported_at_the_returned_position():
+    """The configured path fits the rows its white fit kept; the range and the pixel that fit rejected are reported
+    with their residuals (observed - predicted; u, v in order) at the GLS answer (the position returned), not at
+    the white fit's."""
     obs = correlated_problems(1, seed=21)[0]
-    rng = obs.range_m.copy()
+    rng, pix = obs.range_m.copy(), obs.pixel.copy()
     rng[4] += 3000.0
-    obs = dataclasses.replace(obs, range_m=rng)
+    pix[7] += (400.0, -250.0)
+    obs = dataclasses.replace(obs, range_m=rng, pixel=pix)
     est = solve("mle", obs, sigma=CORR)
-    (rej,) = [r for r in est.extras["rejected"] if r["residual"] == "range"]
-    assert rej["frame"] == 4
-    expected = rng[4] - np.linalg.norm(est.position_m - obs.platform_m[4])
-    assert abs(rej["value"] - expected) < 1e-6, (rej["value"], expected)
+    got = {(r["frame"], r["residual"]): r["value"] for r in est.extras["rejected"]}
+    assert set(got) == {(4, "range"), (7, "u"), (7, "v")}, got
+    assert abs(got[4, "range"] - (rng[4] - np.linalg.norm(est.position_m - obs.platform_m[4]))) < 1e-6
+    predicted = project(obs.P[7], est.position_m)
+    assert abs(got[7, "u"] - (pix[7, 0] - predicted[0])) < 1e-6
+    assert abs(got[7, "v"] - (pix[7, 1] - predicted[1])) < 1e-6
 
 
 def test_a_failed_configured_fit_is_no_white_answer(monkeypatch):
@@ -243,3 +248,21 @@ def test_a_failed_configured_fit_is_no_white_answer(monkeypatch):
     monkeypatch.setattr(correlated, "gls", degenerate)
     with pytest.raises(GeometryError):
         solve("mle", obs, sigma=CORR)
+
+
+def test_skipping_the_second_phase_changes_no_answer(monkeypatch):
+    """A fit with fixed weights skips the redescending phase where the scale guard rescaled nothing and the first
+    phase converged (the loss does not change its objective); a fit that hit the iteration limit goes on as
+    before. Against the fit without the skip: the same status, the position within the stopping tolerance,
+    also with an iteration limit small enough to stop the first phase (review of 7c2496f: it had stopped there)."""
+    obs = paper_problem(seed=4)
+    st = Stacked.from_observations(obs)
+    X0 = obs.truth_m[None] + 20.0
+    models = correlated.problem_models(st, X0[0], [CORR])
+    for itmax in (3, 4, 50):
+        got = correlated.gls([st], X0, models, "redescending", False, 1e-4, itmax)
+        with monkeypatch.context() as mp:
+            mp.setattr(correlated.Correlated, "fixed_weights", False)
+            ref = correlated.gls([st], X0, models, "redescending", False, 1e-4, itmax)
+        assert got[2][0] == ref[2][0], (itmax, got[2], ref[2])
+        assert np.linalg.norm(got[0][0] - ref[0][0]) <= 1e-4, itmax

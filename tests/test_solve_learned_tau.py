@@ -102,3 +102,27 @@ def test_the_answer_says_which_position_model_it_learned(position_tau_s):
                                    position_tau_s=position_tau_s, seed=7):
         model = solve("mle", obs).extras["error_model"]
         assert (model["position_tau_s"] is None) == (position_tau_s is None)  # its tau is the attitude's, learned
+
+
+def test_the_candidates_fitted_in_parts_give_what_one_batch_gives(monkeypatch):
+    """The candidates' fits are cut into parts of at most MODEL_ROWS_AT_ONCE rows (memory on long videos); each
+    fit is independent of its neighbours, so one model per part gives the same answers as all at once, also for
+    several problems side by side (redescending loss: its phases and scale guard included)."""
+    told = Sigma(range_m=2.5, pixel_px=0.5)
+    probs = correlated_problems(3, n=40, attitude_tau_s=TRUE_TAU_S, position_tau_s=TRUE_TAU_S, seed=8)
+    sts = [Stacked.from_observations(dataclasses.replace(o, sigma=told)) for o in probs]
+    X0 = np.array([o.truth_m + 3.0 for o in probs])
+
+    def run():
+        return learned_tau.learn_tau(sts, X0, told, "redescending", False, 1e-4, 50)
+
+    whole = run()
+    monkeypatch.setattr(learned_tau, "MODEL_ROWS_AT_ONCE", 1)
+    parts = run()
+    for a, b in zip(whole, parts, strict=True):
+        assert a[0] == b[0] and a[1] == b[1]  # the same most likely model
+        np.testing.assert_allclose(b[3][0], a[3][0], rtol=0, atol=1e-9)  # the mixture's estimate
+        np.testing.assert_allclose(b[3][4], a[3][4], rtol=1e-9)  # and covariance
+        assert b[3][1][0] == a[3][1][0]  # iterations
+        for key in a[2]:
+            assert abs(a[2][key] - b[2][key]) < 1e-8, key  # every model's log-likelihood

@@ -81,7 +81,7 @@ def candidates(sigma: Sigma) -> list[Sigma]:
             for tied in positions for att in atts for tau in TAU_GRID_S]
 
 
-def _families(sigmas: list, rows: int = 1) -> list:
+def _families(sigmas: list, rows: int) -> list:
     """Index arrays of the sigmas whose models have the same states (`correlated.Models.concat`): the position
     error correlated or white; each cut into parts of at most MODEL_ROWS_AT_ONCE / rows models (rows: the rows of
     one model's fits side by side, at least one model per part), the models fitted side by side at once."""
@@ -105,7 +105,6 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
     scale guard kept, `correlated.gls`); robust weights updated on the rows' marginal residuals under a correlated
     C are a fixed-point map with no objective, which from starts 1e-6 m apart ended metres to kilometres apart."""
     sigmas = candidates(sigma)
-    K = len(sigmas)
     by_rows: dict[tuple, list[int]] = {}  # the same frames with a pixel and with a range (`Models.concat`: the rest)
     for i, st in enumerate(sts):
         by_rows.setdefault((st.n, st.has_pix.tobytes(), st.has_range.tobytes()), []).append(i)
@@ -113,33 +112,45 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
     out: list = [None] * len(sts)
     while groups:
         g = groups.pop()
-        X0 = np.asarray([X0s[i] for i in g])
-        rows0 = [_correlated.rows_in_use(sts[i], X0[t]) for t, i in enumerate(g)]
         try:
-            per_family = []
-            for fam in _families(sigmas, len(g) * int(rows0[0].shape[0])):
-                models = _correlated.Models.concat([_correlated.problem_models(sts[i], X0[t], [sigmas[k] for k in fam])
-                                                    for t, i in enumerate(g)])
-                per_family.append((fam, _correlated.gls([sts[i] for i in g], X0, models, robust, vce, tol_m,
-                                                        max_iterations, rows0)))
+            per_problem = fits([sts[i] for i in g], np.asarray([X0s[i] for i in g]), sigmas, robust, vce, tol_m,
+                               max_iterations)
         except ValueError:  # the models' states differ (`Models.concat`): one problem at a time
             if len(g) == 1:
                 raise
             groups.extend([i] for i in g)
             continue
-        for t, i in enumerate(g):
-            fits = [None] * 6
-            for fam, f in per_family:  # the problem's K fits in the order of sigmas
-                sl = slice(t * fam.size, (t + 1) * fam.size)
-                for j in range(5):
-                    if fits[j] is None:
-                        fits[j] = np.empty((K, *f[j].shape[1:]), dtype=f[j].dtype)
-                    fits[j][fam] = f[j][sl]
-                if fits[5] is None:
-                    fits[5] = {key: np.empty((K, *v.shape[1:]), dtype=v.dtype) for key, v in f[5].items()}
-                for key, v in f[5].items():
-                    fits[5][key][fam] = v[sl]
-            out[i] = _mixture(sts[i], sigmas, tuple(fits))
+        for i, f in zip(g, per_problem, strict=True):
+            out[i] = _mixture(sts[i], sigmas, f)
+    return out
+
+
+def fits(sts: list, X0: np.ndarray, sigmas: list, robust: str | None, vce: bool, tol_m: float,
+         max_iterations: int) -> list:
+    """Per problem of sts (B = 1 each, the same rows in use) from its start X0[t] (3,): the `correlated.gls` fits
+    (`mle.finish`'s tuple over the K sigmas, in their order) under every model of sigmas, side by side in parts of
+    at most MODEL_ROWS_AT_ONCE rows (`_families`). ValueError where the problems' models differ in their states."""
+    K = len(sigmas)
+    rows0 = [_correlated.rows_in_use(st, X0[t]) for t, st in enumerate(sts)]
+    per_family = []
+    for fam in _families(sigmas, len(sts) * int(rows0[0].shape[0])):
+        models = _correlated.Models.concat([_correlated.problem_models(st, X0[t], [sigmas[k] for k in fam])
+                                            for t, st in enumerate(sts)])
+        per_family.append((fam, _correlated.gls(sts, X0, models, robust, vce, tol_m, max_iterations, rows0)))
+    out = []
+    for t in range(len(sts)):
+        f_t = [None] * 6
+        for fam, f in per_family:  # the problem's K fits in the order of sigmas
+            sl = slice(t * fam.size, (t + 1) * fam.size)
+            for j in range(5):
+                if f_t[j] is None:
+                    f_t[j] = np.empty((K, *f[j].shape[1:]), dtype=f[j].dtype)
+                f_t[j][fam] = f[j][sl]
+            if f_t[5] is None:
+                f_t[5] = {key: np.empty((K, *v.shape[1:]), dtype=v.dtype) for key, v in f[5].items()}
+            for key, v in f[5].items():
+                f_t[5][key][fam] = v[sl]
+        out.append(tuple(f_t))
     return out
 
 

@@ -435,7 +435,8 @@ def _learned_answer(st: Stacked, res: tuple, got, sigma) -> tuple:
     X = res[0]
     if got is None:
         return res
-    _, att, _, (Xg, _, _, _, _, exg) = got
+    Xg, exg = got[3][0], got[3][5]
+    exg = {**exg, "error_model_attitude_deg": exg["error_model_attitude_deg"] * np.sqrt(exg["variance_factor_pixel"])}
     if np.isfinite(Xg[0]).all():
         # a drift model may trade the target against the drift where the flight cannot tell them apart (a short
         # burst, a run of mistracked frames): kept only when its estimate lies within the first answer's
@@ -444,10 +445,9 @@ def _learned_answer(st: Stacked, res: tuple, got, sigma) -> tuple:
         if not d2 <= _starts.DISAGREE_CHI2:
             return res
         # nor where it needs an attitude error far beyond the stated one (the drift then explains the pixels away)
-        att_eff = att * float(np.sqrt(exg["variance_factor_pixel"][0]))
+        att_eff = float(exg["error_model_attitude_deg"][0])
         if sigma.attitude_deg and att_eff > _starts.MAX_ATTITUDE_OVER_STATED * sigma.attitude_deg:
             return res
-    exg = {**exg, "error_model_attitude_deg": exg["error_model_attitude_deg"] * np.sqrt(exg["variance_factor_pixel"])}
     return _drift_answer(st, res, (*got[3][:5], exg))
 
 

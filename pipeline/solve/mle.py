@@ -214,8 +214,8 @@ def run(m, st: Stacked, X: np.ndarray, status: np.ndarray, bad: np.ndarray, robu
         if phase == "redescending":
             robust_scale(m)
             active = ~((status == Status.DIVERGED) | (status == Status.DEGENERATE)) & ~bad
-            if m.fixed_weights:  # the loss does not change the objective: only a rescaled group moves the fit
-                active &= (m.guard != 1).any(axis=1)
+            if m.fixed_weights:  # the loss does not change the objective: only a rescaled group or an unfinished
+                active &= (m.guard != 1).any(axis=1) | (status == Status.MAX_ITERATIONS)  # fit goes on
             status[active] = Status.MAX_ITERATIONS
         m.start(phase)
         m.start_only = phase != robust  # the Huber phase: the redescending phase's start

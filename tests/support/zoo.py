@@ -2,7 +2,6 @@
 no-catastrophe rule on one flight."""
 
 import importlib.util
-import statistics
 import sys
 from pathlib import Path
 
@@ -10,10 +9,9 @@ import numpy as np
 
 from pipeline.errors import RidgelocError
 from pipeline.solve import solve
+from pipeline.solve_options import METHODS
 
 SCRIPTS = Path(__file__).resolve().parents[2] / "scripts"
-#: every method but mle: the no-catastrophe rule's reference
-OTHERS = ("dlt", "vision", "range", "los", "fusion-raw", "fusion", "ridge")
 
 
 def script(name: str):
@@ -49,7 +47,8 @@ def error_m(method: str, obs) -> float | None:
 
 
 def catastrophe_bound(obs) -> tuple[float | None, float, int]:
-    """(mle error m or None, bound m = 2 x median(the other methods' errors) + 5 m, how many others solved)."""
-    others = [e for e in (error_m(m, obs) for m in OTHERS) if e is not None]
-    bound = 2 * statistics.median(others) + 5.0 if others else float("nan")
-    return error_m("mle", obs), bound, len(others)
+    """(mle error m or None, bound m (scripts/zoo.py's `catastrophe`: 2 x median(the other methods' errors) + 5 m;
+    NaN without others), how many others solved)."""
+    errors = {m: e for m in METHODS if (e := error_m(m, obs)) is not None}
+    _, bound, _ = zoo().catastrophe(errors)
+    return errors.get("mle"), float("nan") if bound is None else bound, len(errors) - ("mle" in errors)

@@ -418,19 +418,26 @@ def catastrophe(errors_m: dict[str, float]) -> tuple[float | None, float | None,
     return median, bound, bool(mle is None or (bound is not None and mle > bound))
 
 
+def run_methods(obs: Observations, timeout_s: float, mle_options: dict | None = None):
+    """Every method on obs (mle with mle_options): ({method: error m} of those that solved, {method: why not} of
+    the others, mle's `run_method` result)."""
+    errors, failed, mle = {}, {}, None
+    for m in METHODS:
+        r = run_method(m, obs, timeout_s, **((mle_options or {}) if m == "mle" else {}))
+        mle = r if m == "mle" else mle
+        if r["position"] is None or not np.isfinite(r["position"]).all():
+            failed[m] = r["error"] or "non-finite estimate"
+        else:
+            errors[m] = float(np.linalg.norm(r["position"] - obs.truth_m))
+    return errors, failed, mle
+
+
 def evaluate(f: Flight, timeout_s: float) -> dict:
     """Every method and `told` on flight f: errors (m), NEES, wall times, the catastrophe verdict."""
     truth = f.obs.truth_m
-    row = {"name": f.name, "family": f.family, "shape": f.shape, **f.meta, "errors_m": {}, "failed": {}}
-    for m in METHODS:
-        r = run_method(m, f.obs, timeout_s)
-        if m == "mle":
-            row["mle_wall_s"] = r["wall_s"]
-            row["mle_nees"] = _nees(r, truth)
-        if r["position"] is None or not np.isfinite(r["position"]).all():
-            row["failed"][m] = r["error"] or "non-finite estimate"
-        else:
-            row["errors_m"][m] = float(np.linalg.norm(r["position"] - truth))
+    errors, failed, r = run_methods(f.obs, timeout_s)
+    row = {"name": f.name, "family": f.family, "shape": f.shape, **f.meta, "errors_m": errors, "failed": failed,
+           "mle_wall_s": r["wall_s"], "mle_nees": _nees(r, truth)}
     keep = ~(f.bad_pixel | f.bad_range)
     told_obs = dataclasses.replace(f.obs.subset(keep), sigma=f.told_sigma)
     r = run_method("mle", told_obs, timeout_s, **f.told_options)

@@ -63,14 +63,14 @@ from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
-from zoo import _median, _nees, catastrophe, run_method  # the zoo's running and rule (scripts/ is on sys.path)
+from zoo import _median, _nees, catastrophe, run_method, run_methods  # the zoo's scoring (scripts/ on sys.path)
 
 from pipeline.config_schema import load_dataclass
 from pipeline.errors import ConfigError
 from pipeline.observation_file import to_dict
 from pipeline.solve.observations import Observations, Sigma
 from pipeline.solve.uncertainty import CHI2_3_95
-from pipeline.solve_options import METHOD_SCHEMAS, METHODS
+from pipeline.solve_options import METHOD_SCHEMAS
 
 ERROR_FAMILIES = ("lag", "pixel_walk", "pixel_offset", "pixel_understated", "laser_sigma", "gnss_step",
                   "attitude_spike", "lever_arm", "range_quantised", "laser_rate", "few_pixels")
@@ -337,20 +337,12 @@ def _mle_extras(est) -> dict:
 def evaluate(f: UnseenFlight, timeout_s: float, mle_options: dict | None = None) -> dict:
     """Every method on flight f (mle with mle_options): errors (m), mle's NEES and extras, the catastrophe verdict
     (scripts/zoo.py's rule)."""
-    truth = f.obs.truth_m
-    row = {"name": f.name, "family": f.family, "effects": list(f.effects), **f.meta, "errors_m": {}, "failed": {}}
-    for m in METHODS:
-        r = run_method(m, f.obs, timeout_s, **((mle_options or {}) if m == "mle" else {}))
-        solved = r["position"] is not None and np.isfinite(r["position"]).all()
-        if m == "mle":
-            row["mle_wall_s"] = r["wall_s"]
-            row["mle_nees"] = _nees(r, truth) if solved else None
-        if not solved:
-            row["failed"][m] = r["error"] or "non-finite estimate"
-            continue
-        row["errors_m"][m] = float(np.linalg.norm(r["position"] - truth))
-        if m == "mle":
-            row["mle"] = _mle_extras(r["estimate"])
+    errors, failed, r = run_methods(f.obs, timeout_s, mle_options)
+    row = {"name": f.name, "family": f.family, "effects": list(f.effects), **f.meta, "errors_m": errors,
+           "failed": failed, "mle_wall_s": r["wall_s"],
+           "mle_nees": _nees(r, f.obs.truth_m) if "mle" in errors else None}
+    if "mle" in errors:
+        row["mle"] = _mle_extras(r["estimate"])
     row["others_median_m"], row["bound_m"], row["catastrophe"] = catastrophe(row["errors_m"])
     row["inside"] = row["mle_nees"] is not None and row["mle_nees"] <= CHI2_3_95
     return row

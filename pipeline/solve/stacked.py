@@ -77,15 +77,9 @@ class Stacked:
         return g
 
     @cached_property
-    def planes(self):
-        """Mc (3,3,B,n), p4c (3,B,n), pixc (2,B,n): every entry of M, p4 and the pixels as a contiguous (B,n) plane."""
-        c = np.ascontiguousarray
-        return c(self.M.transpose(2, 3, 0, 1)), c(self.p4.transpose(2, 0, 1)), c(self.pix.transpose(2, 0, 1))
-
-    @cached_property
-    def planes_platform(self) -> np.ndarray:
-        """(3,B,n) platform coordinates as contiguous planes."""
-        return np.ascontiguousarray(self.platform_m.transpose(2, 0, 1))
+    def unit_planes(self) -> Planes:
+        """The problems as `Planes` with every row's sigma 1 (`pixel_model`, `range_model`)."""
+        return Planes.from_stacked(self, np.ones((self.size, 3 * self.n)))
 
     @cached_property
     def det_M(self) -> np.ndarray:
@@ -159,70 +153,52 @@ def put_last(x: np.ndarray, idx: np.ndarray, v: np.ndarray) -> None:
     np.put(x, flat, np.broadcast_to(v, (*x.shape[:-1], len(idx))))
 
 
-def evaluate(pl: Planes, X: np.ndarray):
+def evaluate(pl: Planes, X: np.ndarray, rows: slice = slice(0, 3)):
     """Standardized Jacobian J (3,3,n,b) (J[c, k] = d row / d X_c over the row's sigma, rows k = u, v, range of
     each frame) and residuals E (3,n,b) at X (b,3); unusable rows (missing, q3 = 0, X on a platform) are zero;
-    and their mask ok (3,n,b). The one measurement model (reprojection and range) of every estimator."""
+    and their mask ok (3,n,b). The one measurement model (reprojection and range) of every estimator; rows: only
+    those rows (slice(0, 2) the pixels, slice(2, 3) the ranges), J (3,k,n,b), E and ok (k,n,b)."""
     n, b = pl.has_pix.shape
     J = np.empty((3, 3, n, b))
     E = np.empty((3, n, b))
     ok = np.empty((3, n, b), dtype=bool)
     Mc, isd = pl.Mc, pl.isd
     Xp = X.T[:, None, :]  # (3,1,b): broadcasts over the frames
-    q = Mc[:, 0] * Xp[0] + Mc[:, 1] * Xp[1] + Mc[:, 2] * Xp[2] + pl.p4c  # (3,n,b)
-    okp = np.logical_and(pl.has_pix, q[2] != 0, out=ok[0])
-    ok[1] = okp
-    iw = 1.0 / np.where(okp, q[2], np.inf)  # 1/q3, 0 on unusable rows
-    uv = q[:2] * iw
-    s = iw * isd[:2]
-    for c in range(3):  # per coordinate, so that the temporaries stay (2,n,b) planes (in cache)
-        np.multiply(Mc[:2, c] - uv * Mc[2, c], s, out=J[c, :2])
-    np.multiply(pl.pixc - uv, np.where(okp, isd[:2], 0.0), out=E[:2])
-    d = Xp - pl.sc
-    dist = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    okr = np.logical_and(pl.has_range, dist > 0, out=ok[2])
-    np.multiply(d, isd[2] / np.where(okr, dist, np.inf), out=J[:, 2])
-    np.multiply(pl.rng - dist, np.where(okr, isd[2], 0.0), out=E[2])
-    return J, E, ok
+    if rows.start < 2:
+        q = Mc[:, 0] * Xp[0] + Mc[:, 1] * Xp[1] + Mc[:, 2] * Xp[2] + pl.p4c  # (3,n,b)
+        okp = np.logical_and(pl.has_pix, q[2] != 0, out=ok[0])
+        ok[1] = okp
+        iw = 1.0 / np.where(okp, q[2], np.inf)  # 1/q3, 0 on unusable rows
+        uv = q[:2] * iw
+        s = iw * isd[:2]
+        for c in range(3):  # per coordinate, so that the temporaries stay (2,n,b) planes (in cache)
+            np.multiply(Mc[:2, c] - uv * Mc[2, c], s, out=J[c, :2])
+        np.multiply(pl.pixc - uv, np.where(okp, isd[:2], 0.0), out=E[:2])
+    if rows.stop > 2:
+        d = Xp - pl.sc
+        dist = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        okr = np.logical_and(pl.has_range, dist > 0, out=ok[2])
+        np.multiply(d, isd[2] / np.where(okr, dist, np.inf), out=J[:, 2])
+        np.multiply(pl.rng - dist, np.where(okr, isd[2], 0.0), out=E[2])
+    return J[:, rows], E[rows], ok[rows]
 
 
 def pixel_model(st: Stacked, X: np.ndarray):
     """Reprojection Jacobian J (B,2n,3) d(u,v)/dX, residuals r (B,2n) observed - predicted (px) and mask (B,2n)
-    at X (B,3), rows u_1, v_1, u_2, ...: with q = M X + p4, u = q1/q3, du/dX = (m1 - u m3)/q3; a missing pixel
-    or q3 = 0 is masked (zero). On (B,n) planes (`Stacked.planes`): numpy is slow on tiny trailing axes."""
+    at X (B,3), rows u_1, v_1, u_2, ...: `evaluate`'s pixel rows at unit sigmas, as rows (zero where masked: a
+    missing pixel or q3 = 0)."""
+    J, E, ok = evaluate(st.unit_planes, X, rows=slice(0, 2))
     B, n = st.has_pix.shape
-    Mc, p4c, pixc = st.planes
-    x0, x1, x2 = X[:, 0, None], X[:, 1, None], X[:, 2, None]
-    q0 = Mc[0, 0] * x0 + Mc[0, 1] * x1 + Mc[0, 2] * x2 + p4c[0]
-    q1 = Mc[1, 0] * x0 + Mc[1, 1] * x1 + Mc[1, 2] * x2 + p4c[1]
-    q2 = Mc[2, 0] * x0 + Mc[2, 1] * x1 + Mc[2, 2] * x2 + p4c[2]
-    ok = st.has_pix & (q2 != 0)
-    iw = ok / np.where(ok, q2, 1.0)  # 1/q3, 0 on masked rows
-    u, v = q0 * iw, q1 * iw
-    J = np.empty((B, n, 2, 3))
-    for c in range(3):
-        J[:, :, 0, c] = (Mc[0, c] - u * Mc[2, c]) * iw
-        J[:, :, 1, c] = (Mc[1, c] - v * Mc[2, c]) * iw
-    r = np.empty((B, n, 2))
-    r[:, :, 0] = (pixc[0] - u) * ok
-    r[:, :, 1] = (pixc[1] - v) * ok
-    return J.reshape(B, 2 * n, 3), r.reshape(B, 2 * n), np.repeat(ok, 2, axis=1)
+    return (J.transpose(3, 2, 1, 0).reshape(B, 2 * n, 3), E.transpose(2, 1, 0).reshape(B, 2 * n),
+            ok.transpose(2, 1, 0).reshape(B, 2 * n))
 
 
 def range_model(st: Stacked, X: np.ndarray):
     """Range residuals and Jacobian at X (B,3): J (B,n,3) = (X - s_i)/|X - s_i|, r (B,n) = d_i - |X - s_i| (m),
-    mask (B,n) bool (a missing range, or X on a platform position, is masked)."""
-    B, n = st.has_range.shape
-    sc = st.planes_platform
-    d = [X[:, c, None] - sc[c] for c in range(3)]
-    dist = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    ok = st.has_range & (dist > 0)
-    inv = ok / np.where(ok, dist, 1.0)
-    J = np.empty((B, n, 3))
-    for c in range(3):
-        J[:, :, c] = d[c] * inv
-    r = (st.range_m - dist) * ok
-    return J, r, ok
+    mask (B,n) bool (a missing range, or X on a platform position, is masked): `evaluate`'s range rows at unit
+    sigmas, as rows."""
+    J, E, ok = evaluate(st.unit_planes, X, rows=slice(2, 3))
+    return J[:, 0].transpose(2, 1, 0), E[0].T, ok[0].T
 
 
 def normal_equations(J: np.ndarray, r: np.ndarray, w: np.ndarray):

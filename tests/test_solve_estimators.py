@@ -9,9 +9,10 @@ from scipy.optimize import least_squares
 from pipeline.geometry.camera import project
 from pipeline.solve import METHODS, solve, solve_batch
 from pipeline.solve.estimate import Status
-from pipeline.solve.least_squares import normalized_normal_equations, normalized_system
+from pipeline.solve.least_squares import normalized_normal_equations
 from pipeline.solve.observations import ObservationBatch, Observations, Sigma
 from pipeline.solve.stacked import Stacked, pixel_model, range_model, solve_spd
+from support.references import normalized_system
 from support.scenes import PAPER_SIGMA, paper_batch, paper_problem
 
 NOISE_FREE = Sigma(0.0, 0.0, 0.0, 0.0)

@@ -91,28 +91,11 @@ def _minmax(r: np.ndarray, ok: np.ndarray):
     return lo, np.where(good, span, 1.0)
 
 
-def normalized_system(st: Stacked, X: np.ndarray):
-    """The paper's eqs. (36)-(38) at X: T (B, 2n+n, 4), dPhi (B, 3n) (unused rows zero) and the rows in use (B,)."""
-    Jp, rp, okp = pixel_model(st, X)
-    Jr, rr, okr = range_model(st, X)
-    Lo, Sp = _minmax(rp, okp)
-    lo, sp = _minmax(rr, okr)
-    m = rp.shape[1]
-    T = np.empty((X.shape[0], m + rr.shape[1], 4))
-    T[:, :m, :3] = Jp * (1.0 / Sp)[:, None, None]  # Jp, Jr are zero on unused rows
-    T[:, m:, :3] = Jr * (1.0 / sp)[:, None, None]
-    T[:, :m, 3] = (-Lo / Sp)[:, None] * okp
-    T[:, m:, 3] = (-lo / sp)[:, None] * okr
-    dPhi = np.concatenate([(rp - Lo[:, None]) * (okp / Sp[:, None]), (rr - lo[:, None]) * (okr / sp[:, None])],
-                          axis=1)
-    rows = okp.sum(axis=1) + okr.sum(axis=1)
-    return T, dPhi, rows
-
-
 def normalized_normal_equations(st: Stacked, X: np.ndarray):
     """N = T^T T (B,4,4), g = T^T dPhi (B,4), dd = dPhi^T dPhi (B,) and the rows in use (B,) of eqs. (36)-(38) at X,
-    without forming T: a block's rows of T are [J, -L]/S and of dPhi (r - L)/S, so each block contributes through
-    the Gram matrix of [J | r | 1] over its rows (L = Min or min, S = Max - Min or max - min)."""
+    without forming T (tests/support/references.py forms it, as the paper writes it): a block's rows of T are
+    [J, -L]/S and of dPhi (r - L)/S, so each block contributes through the Gram matrix of [J | r | 1] over its rows
+    (L = Min or min, S = Max - Min or max - min)."""
     Jp, rp, okp = pixel_model(st, X)
     Jr, rr, okr = range_model(st, X)
     B = X.shape[0]

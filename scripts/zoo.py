@@ -536,16 +536,22 @@ def main(argv: list[str] | None = None) -> int:
               if any(r["family"] == fam for r in rows)]
     groups += [summarize([r for r in rows if r["shape"] == sh], f"shape {sh}") for sh in SHAPES
                if any(r["shape"] == sh for r in rows)]
-    overall = summarize(rows, "all")
+    print_run(rows, groups, summarize(rows, "all"), _table, args.seed, t0, args.json, float)
+    return 0
+
+
+def print_run(rows: list[dict], groups: list[dict], overall: dict, table, seed, t0: float, json_path: str | None,
+              json_default) -> None:
+    """The end of a zoo run (this script's and zoo_unseen.py's): the table (`table` of the group summaries and
+    the overall one), the catastrophes by name, the count and time, and the JSON file where asked for."""
     print()
-    print(_table([*groups, overall]))
+    print(table([*groups, overall]))
     cats = [r["name"] for r in rows if r["catastrophe"]]
     print(f"\ncatastrophes ({len(cats)}): {', '.join(cats) or 'none'}")
-    print(f"{len(rows)} flights, seed {args.seed}, {time.perf_counter() - t0:.0f} s")
-    if args.json:
-        Path(args.json).write_text(json.dumps({"seed": args.seed, "flights": rows, "groups": groups,
-                                               "overall": overall}, indent=1, default=float))
-    return 0
+    print(f"{len(rows)} flights, seed {seed}, {time.perf_counter() - t0:.0f} s")
+    if json_path:
+        Path(json_path).write_text(json.dumps({"seed": seed, "flights": rows, "groups": groups, "overall": overall},
+                                              indent=1, default=json_default))
 
 
 if __name__ == "__main__":

@@ -63,7 +63,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
-from zoo import _median, _nees, catastrophe, run_method, run_methods  # the zoo's scoring (scripts/ on sys.path)
+from zoo import _median, _nees, catastrophe, print_run, run_method, run_methods  # scripts/ is on sys.path
 
 from pipeline.config_schema import load_dataclass
 from pipeline.errors import ConfigError
@@ -469,15 +469,7 @@ def main(argv: list[str] | None = None) -> int:
             _save(f, Path(args.save))
     groups = [summarize([r for r in rows if r["family"] == fam], fam) for fam in FAMILIES
               if any(r["family"] == fam for r in rows)]
-    overall = summarize(rows, "all")
-    print()
-    print(_table([*groups, overall]))
-    cats = [r["name"] for r in rows if r["catastrophe"]]
-    print(f"\ncatastrophes ({len(cats)}): {', '.join(cats) or 'none'}")
-    print(f"{len(rows)} flights, seed {args.seed}, {time.perf_counter() - t0:.0f} s")
-    if args.json:
-        Path(args.json).write_text(json.dumps({"seed": args.seed, "flights": rows, "groups": groups,
-                                               "overall": overall}, indent=1, default=str))
+    print_run(rows, groups, summarize(rows, "all"), _table, args.seed, t0, args.json, str)
     return 0
 
 

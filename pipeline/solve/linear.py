@@ -16,17 +16,20 @@ def dlt(st: Stacked, with_condition: bool = True):
 
     Returns X (B,3) (NaN, status DEGENERATE with fewer than two pixels or parallel rays), status (B,) int8, cond
     (B,) sigma_1 / sigma_3 of the normalised A (NaN unless with_condition)."""
+    B, n = st.has_pix.shape
     c = st.platform_m.mean(axis=1)  # (B,3)
-    spread = np.sqrt(((st.platform_m - c[:, None, :]) ** 2).sum(-1).mean(-1))
+    d = st.platform_m - c[:, None, :]
+    spread = np.sqrt(np.einsum("bni,bni->b", d, d) / n)
     sc = np.where(spread > 1.0, spread, 1.0)
-    # P' = P [[sc I, c], [0, 1]]
-    Mp = st.M * sc[:, None, None, None]
-    p4p = (st.M @ c[:, None, :, None])[..., 0] + st.p4
-    Pp = np.concatenate([Mp, p4p[..., None]], axis=-1)  # (B,n,3,4)
-    rows = st.pix[..., :, None] * Pp[..., 2:3, :] - Pp[..., :2, :]  # (B,n,2,4)
-    norm = np.sqrt((rows * rows).sum(axis=-1, keepdims=True))
-    ok = st.has_pix[..., None, None] & (norm > 0)
-    A = np.where(ok, rows / np.where(ok, norm, 1.0), 0.0).reshape(st.size, -1, 4)
+    # the rows of P' = P [[sc I, c], [0, 1]]: (B,n,2,4)
+    rows = np.empty((B, n, 2, 4))
+    np.multiply(st.pix[..., :, None] * st.M[..., 2:3, :] - st.M[..., :2, :], sc[:, None, None, None],
+                out=rows[..., :3])
+    p4p = np.einsum("bnij,bj->bni", st.M, c) + st.p4
+    rows[..., 3] = st.pix * p4p[..., 2:3] - p4p[..., :2]
+    norm = np.sqrt(np.einsum("bnkj,bnkj->bnk", rows, rows))
+    ok = st.has_pix[..., None] & (norm > 0)
+    A = np.where(ok[..., None], rows / np.where(ok, norm, 1.0)[..., None], 0.0).reshape(B, -1, 4)
     N = np.swapaxes(A, 1, 2) @ A
     enough = st.has_pix.sum(axis=1) >= 2
     evals, evecs = np.linalg.eigh(N)

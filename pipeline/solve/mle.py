@@ -609,8 +609,8 @@ class White(_iterate.Model):
         mix["bias_var"] = mix["bias_var"] * (unit * unit)[:, None]
         mix["bias_cross"] = mix["bias_cross"] * unit[:, None, None]
         mix["prior_scale"] = unit
-        # the residuals at the final X, to first order
-        E_report = E - np.einsum("cknb,bc->knb", J, step)
+        # the residuals at the final X, evaluated there
+        E_report = evaluate(self.pl, self.X)[1]
         E_report[:2] -= a0 * mix["bias"].T[:, None, :]
         return mix, cov_stated, E_report
 

@@ -500,7 +500,8 @@ def _fmt_row(r: dict) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--flights", type=int, default=210, help="flights, the 3 named ones included (default 210)")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", default="0", help="a seed, or several comma-separated (flights named s1/z019): seed 0 "
+                    "is the zoo mle was developed on, the others are flights it was not tuned on")
     ap.add_argument("--timeout", type=float, default=120.0, help="seconds per solve before it counts as unsolved "
                     "(an unsolved mle counts as a catastrophe; timeouts are also counted apart, they depend on the "
                     "machine's load)")
@@ -510,7 +511,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--list", action="store_true", help="list the flights' parameters and stop")
     ap.add_argument("--verbose", "-v", action="store_true", help="one line per flight")
     args = ap.parse_args(argv)
-    flights = zoo(args.flights, args.seed)
+    seeds = [int(x) for x in args.seed.split(",")]
+    flights = []
+    for seed in seeds:
+        for f in zoo(args.flights, seed):
+            if len(seeds) > 1:
+                f.name = f"s{seed}/{f.name}"
+            flights.append(f)
     if args.only:
         wanted = set(args.only.split(","))
         flights = [f for f in flights if f.name in wanted]
@@ -521,6 +528,7 @@ def main(argv: list[str] | None = None) -> int:
             doc = to_dict(f.obs)
             doc["meta"] = {"family": f.family, "shape": f.shape, **f.meta,
                            "told_sigma": f.told_sigma.to_dict(), "told_options": f.told_options}
+            (out / f"{f.name}.json").parent.mkdir(parents=True, exist_ok=True)
             (out / f"{f.name}.json").write_text(json.dumps(doc))
     if args.list:
         for f in flights:
@@ -530,7 +538,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for f in flights:
         rows.append(evaluate(f, args.timeout))
-        if args.verbose or rows[-1]["catastrophe"] or f.name in ("arc", "straight", "obsfile"):
+        if args.verbose or rows[-1]["catastrophe"] or f.name.split("/")[-1] in ("arc", "straight", "obsfile"):
             print(("CATASTROPHE " if rows[-1]["catastrophe"] else "") + _fmt_row(rows[-1]), flush=True)
     groups = [summarize([r for r in rows if r["family"] == fam], fam) for fam in FAMILIES
               if any(r["family"] == fam for r in rows)]

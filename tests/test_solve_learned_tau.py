@@ -126,3 +126,31 @@ def test_the_candidates_fitted_in_parts_give_what_one_batch_gives(monkeypatch):
         assert b[3][1][0] == a[3][1][0]  # iterations
         for key in a[2]:
             assert abs(a[2][key] - b[2][key]) < 1e-8, key  # every model's log-likelihood
+
+
+@pytest.mark.parametrize("tau_s", [TRUE_TAU_S, None], ids=["drifting", "white"])
+def test_the_evidence_tells_drifting_errors_from_white_ones(tau_s):
+    """The white models (no correlation time) are weighed with the drifting ones: on problems whose attitude and
+    position errors are white, the evidence keeps the first (white) answer (`learn_tau` gives no drift fit) on
+    nearly all; on problems drawn with tau 20 s it gives the drift model's answer on nearly all."""
+    told = PAPER_SIGMA
+    drift = []
+    for obs in correlated_problems(12, n=60, sigma=told, attitude_tau_s=tau_s, position_tau_s=tau_s, seed=8):
+        got = learned_tau.learn_tau([Stacked.from_observations(obs)], obs.truth_m[None], told, None, False, 1e-4,
+                                    50)[0]
+        drift.append(got[3] is not None)
+    assert np.mean(drift) >= 0.9 if tau_s else np.mean(drift) <= 0.1
+
+
+def test_a_model_that_explains_the_ranges_away_is_not_admitted():
+    """A candidate whose fit needs the ranges' variance more than 9 x the stated one (3 x the sigma) is left out
+    of the evidence, as one that needs the attitude error beyond 3 x the stated one."""
+    told = PAPER_SIGMA
+    drifting = dataclasses.replace(told, attitude_tau_s=20.0, position_tau_s=20.0)
+    assert learned_tau.admitted(told, drifting, 1.0, 8.9)
+    assert not learned_tau.admitted(told, drifting, 1.0, 9.1)
+    assert not learned_tau.admitted(told, drifting, 9.1, 1.0)
+    assert learned_tau.admitted(dataclasses.replace(told, range_m=None), drifting, 1.0, 100.0)  # range unstated
+    grid = dataclasses.replace(drifting, attitude_deg=1.0)  # attitude unstated: the grid's sigma, the pixel noise
+    assert learned_tau.admitted(dataclasses.replace(told, attitude_deg=None), grid, 8.9, 1.0)
+    assert not learned_tau.admitted(dataclasses.replace(told, attitude_deg=None), grid, 9.1, 1.0)

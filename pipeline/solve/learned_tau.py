@@ -16,6 +16,7 @@ import math
 import numpy as np
 
 from pipeline.solve import correlated as _correlated
+from pipeline.solve import starts as _starts
 from pipeline.solve.estimate import Status
 from pipeline.solve.observations import Sigma
 from pipeline.solve.stacked import Stacked
@@ -74,20 +75,29 @@ def candidates(sigma: Sigma) -> list[Sigma]:
     sigma, or ATTITUDE_GRID_DEG where none is stated; the position error drifting with the attitude's tau, or
     (where the sigma states a position accuracy) white: a GNSS error that wanders with the attitude's tau moves
     the target as a shared offset, one that does not must not be modelled so (zoo flight z024: 22.5 m tied,
-    5.2 m white, the white family 4.6 log units likelier)."""
+    5.2 m white, the white family 4.6 log units likelier). Last the white models (no correlation time, one per
+    attitude sigma): the tau -> 0 end of the grid, weighed on the same evidence (`is_white`)."""
     atts = (sigma.attitude_deg,) if sigma.attitude_deg else ATTITUDE_GRID_DEG
     positions = (True, False) if sigma.position_m else (True,)
-    return [dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau if tied else None, attitude_deg=att)
-            for tied in positions for att in atts for tau in TAU_GRID_S]
+    drifting = [dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau if tied else None, attitude_deg=att)
+                for tied in positions for att in atts for tau in TAU_GRID_S]
+    return drifting + [dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None, attitude_deg=att)
+                       for att in atts]
+
+
+def is_white(sigma: Sigma) -> bool:
+    """A candidate without a correlation time (errors independent from frame to frame)."""
+    return sigma.attitude_tau_s is None and sigma.position_tau_s is None
 
 
 def _families(sigmas: list, rows: int) -> list:
     """Index arrays of the sigmas whose models have the same states (`correlated.Models.concat`): the position
-    error correlated or white; each cut into parts of at most MODEL_ROWS_AT_ONCE / rows models (rows: the rows of
-    one model's fits side by side, at least one model per part), the models fitted side by side at once."""
-    white = np.array([s.position_tau_s is None for s in sigmas])
+    error correlated, white, or both errors white (no states); each cut into parts of at most MODEL_ROWS_AT_ONCE /
+    rows models (rows: the rows of one model's fits side by side, at least one model per part), the models fitted
+    side by side at once."""
+    kind = np.array([2 if is_white(s) else int(s.position_tau_s is None) for s in sigmas])
     per = max(1, MODEL_ROWS_AT_ONCE // max(rows, 1))
-    return [f[i:i + per] for f in (np.flatnonzero(~white), np.flatnonzero(white)) for i in range(0, f.size, per)]
+    return [f[i:i + per] for f in (np.flatnonzero(kind == k) for k in range(3)) for i in range(0, f.size, per)]
 
 
 def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
@@ -121,7 +131,7 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
             groups.extend([i] for i in g)
             continue
         for i, f in zip(g, per_problem, strict=True):
-            out[i] = _mixture(sts[i], sigmas, f)
+            out[i] = _mixture(sts[i], sigma, sigmas, f)
     return out
 
 
@@ -154,8 +164,23 @@ def fits(sts: list, X0: np.ndarray, sigmas: list, robust: str | None, vce: bool,
     return out
 
 
-def _mixture(st: Stacked, sigmas: list, out: tuple):
-    """`learn_tau`'s answer from the candidates' fits out (`mle.finish`'s tuple over the K sigmas)."""
+def admitted(stated: Sigma, candidate: Sigma, vf_pixel: float, vf_range: float) -> bool:
+    """Whether a candidate's fit, with its variance factors, stays within `starts.MAX_OVER_STATED` times the
+    stated sigmas: the range noise, and the attitude error (the candidate's attitude sigma times the pixel
+    rows' factor; the pixel noise where no attitude sigma is stated). A fit that needs more explains those
+    observations away (zoo flight s0/z162: the position drifting with the attitude, the ranges' variance 121 x
+    the stated, 1,061 m off, the likeliest model)."""
+    k = _starts.MAX_OVER_STATED
+    if stated.range_m and not vf_range <= k * k:
+        return False
+    if stated.attitude_deg:
+        return candidate.attitude_deg * math.sqrt(vf_pixel) <= k * stated.attitude_deg
+    return not stated.pixel_px or vf_pixel <= k * k
+
+
+def _mixture(st: Stacked, stated: Sigma, sigmas: list, out: tuple):
+    """`learn_tau`'s answer from the candidates' fits out (`mle.finish`'s tuple over the K sigmas), over the
+    `admitted` ones."""
     lls: dict[tuple, float] = {}
     fits = []
     X, status = out[0], out[2]
@@ -163,8 +188,8 @@ def _mixture(st: Stacked, sigmas: list, out: tuple):
                 and np.isfinite(X[k]).all()]
     vfs = [(float(out[5]["variance_factor_pixel"][k]), float(out[5]["variance_factor_range"][k])) for k in answered]
     lk = log_likelihoods(st, X[answered], [sigmas[k] for k in answered], vfs) if answered else []
-    for k, (ll, _, _) in zip(answered, lk, strict=True):
-        if not np.isfinite(ll):
+    for k, (ll, _, _), vf in zip(answered, lk, vfs, strict=True):
+        if not (np.isfinite(ll) and admitted(stated, sigmas[k], *vf)):
             continue
         res = (out[0][k:k + 1], out[1][k:k + 1], out[2][k:k + 1], out[3][k:k + 1], out[4][k:k + 1],
                {key: v[k:k + 1] for key, v in out[5].items()})
@@ -176,8 +201,13 @@ def _mixture(st: Stacked, sigmas: list, out: tuple):
     ll = np.array([f[0] for f in fits])
     post = np.exp(ll - ll.max())
     post /= post.sum()
+    white = np.array([f[1] is None and f[3] is None for f in fits])
+    if post[white].sum() >= 0.5:  # the evidence is for errors independent from frame to frame
+        return None, fits[int(np.argmax(np.where(white, ll, -np.inf)))][2], lls, None
+    # the posterior mixture over the drifting models: the mean, and the covariance with the spread between them
+    fits = [f for f, w in zip(fits, white, strict=True) if not w]
+    ll, post = ll[~white], post[~white] / post[~white].sum()
     best = fits[int(np.argmax(ll))]
-    # the posterior mixture over the models: the mean, and the covariance with the spread between them
     Xs = np.array([f[4][0][0] for f in fits])
     covs = np.array([f[4][4][0] for f in fits])
     Xm = post @ Xs

@@ -300,7 +300,7 @@ def _bias_refit(st: Stacked, o: dict, x0: np.ndarray, init_status, sigma, vce: b
     if bias_deg and size_unknown:
         # the stated attitude sigma is the largest bias: a bias estimated far beyond it (as the learned drift
         # model's limit) is the bias explaining the pixels away, not a bias of this flight; refit without it
-        far = np.abs(res[5]["bias_deg"]).max(axis=1) > _starts.MAX_ATTITUDE_OVER_STATED * bias_deg
+        far = np.abs(res[5]["bias_deg"]).max(axis=1) > _starts.MAX_OVER_STATED * bias_deg
         if far.any():
             idx = np.flatnonzero(far)
             sub = st.take(idx)
@@ -334,7 +334,7 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
                                  o["max_iterations"])
     for b, got in zip(need, learned, strict=True):
         row = _row(res, b)
-        answer = _learned_answer(st.take(np.array([b])), row, got, sigma)
+        answer = _learned_answer(st.take(np.array([b])), row, got)
         if answer is not row:  # the drift model's answer was kept
             res = _replace_rows(res, answer, np.array([b]))
     return res
@@ -428,26 +428,15 @@ def _mle_multistart(st: Stacked, o: dict, first: tuple | None = None, answers: d
     return X, it, status, cond, cov, ex
 
 
-def _learned_answer(st: Stacked, res: tuple, got, sigma) -> tuple:
+def _learned_answer(st: Stacked, res: tuple, got) -> tuple:
     """One problem's answer (st, B = 1) from its first answer res and `learned_tau.learn_tau`'s got for it: the
-    drift model's where it is kept (its attitude sigma times the pixel group's variance factor: variance components
-    scale the whole pixel covariance), else res itself."""
-    X = res[0]
-    if got is None:
+    drift model's where the evidence is for a drift (`learned_tau`: the white models hold less than half of the
+    admitted models' posterior), its attitude sigma times the pixel group's variance factor (variance components
+    scale the whole pixel covariance); else res itself."""
+    if got is None or got[3] is None:
         return res
-    Xg, exg = got[3][0], got[3][5]
+    exg = got[3][5]
     exg = {**exg, "error_model_attitude_deg": exg["error_model_attitude_deg"] * np.sqrt(exg["variance_factor_pixel"])}
-    if np.isfinite(Xg[0]).all():
-        # a drift model may trade the target against the drift where the flight cannot tell them apart (a short
-        # burst, a run of mistracked frames): kept only when its estimate lies within the first answer's
-        # uncertainty (chi-square 99.9 %); otherwise the first answer stands
-        d2 = _starts.disagreement(X[0], res[4][0], {"learned": Xg[0]}).get("learned", np.inf)
-        if not d2 <= _starts.DISAGREE_CHI2:
-            return res
-        # nor where it needs an attitude error far beyond the stated one (the drift then explains the pixels away)
-        att_eff = float(exg["error_model_attitude_deg"][0])
-        if sigma.attitude_deg and att_eff > _starts.MAX_ATTITUDE_OVER_STATED * sigma.attitude_deg:
-            return res
     return _drift_answer(st, res, (*got[3][:5], exg))
 
 

@@ -21,8 +21,10 @@ VARIANCE_FACTOR_RANGE = (1e-3, 1e3)
 DISAGREE_CHI2 = 16.27
 #: another start's fit replaces the default start's when its common robust cost is lower by this share
 CLEARLY_BETTER = 0.02
-#: a learned drift model needing an attitude sigma beyond this many times the stated one is refused
-MAX_ATTITUDE_OVER_STATED = 3.0
+#: a model needing a stated sigma (the attitude error, the pixel or range noise) beyond this many times the stated
+#: one explains those observations away: a boresight bias that large is refitted without (`methods._bias_refit`),
+#: a learned drift model that needs it is not admitted (`learned_tau`)
+MAX_OVER_STATED = 3.0
 #: starts closer than this (m) to one already run are not run again
 SAME_START_M = 1.0
 

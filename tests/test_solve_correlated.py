@@ -64,6 +64,32 @@ def _hand_covariance(obs, x, sigma):
     return C
 
 
+@pytest.mark.parametrize("sigma", [CORR, dataclasses.replace(PAPER_SIGMA, attitude_tau_s=1e-9, position_tau_s=1e-9)],
+                         ids=["drifting", "white"])
+def test_the_boresight_bias_is_integrated_out_exactly(sigma):
+    """The GLS models with a constant boresight bias (prior 0.3 deg: a column f * angle on the u rows, another on
+    the v rows): the forms [J|r]^T C^-1 [J|r] and log det C of `quadratic_forms_stacked`, summed over the groups,
+    equal the dense ones of the covariance written out with the bias added (C + b^2 a_u a_u^T + b^2 a_v a_v^T)."""
+    obs = correlated_problems(1, n=12, seed=4)[0]
+    st = Stacked.from_observations(obs)
+    x = obs.truth_m + np.array([3.0, -2.0, 1.0])
+    b = math.radians(0.3)
+    C = _hand_covariance(obs, x, sigma)
+    for i in range(obs.n):
+        M = obs.P[i, :, :3]
+        f = [np.linalg.norm(np.cross(M[a], M[2])) / (M[2] @ M[2]) for a in (0, 1)]
+        for j in range(obs.n):
+            Mj = obs.P[j, :, :3]
+            fj = [np.linalg.norm(np.cross(Mj[a], Mj[2])) / (Mj[2] @ Mj[2]) for a in (0, 1)]
+            for a in (0, 1):
+                C[2 * i + a, 2 * j + a] += b * b * f[a] * fj[a]
+    A = correlated.rows_in_use(st, x)
+    models = correlated.problem_models(st, x, [sigma], [0.3])
+    q = correlated.quadratic_forms_stacked(models, A[None], np.ones((1, A.shape[0])), np.ones((1, 2)))[0]
+    np.testing.assert_allclose(sum(f for f, _, _ in q), A.T @ np.linalg.solve(C, A), rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(sum(ld for _, ld, _ in q), np.linalg.slogdet(C)[1], rtol=1e-10)
+
+
 def test_gls_minimizes_the_correlated_cost_and_reports_its_covariance():
     obs = correlated_problems(1, seed=3)[0]
     est = solve("mle", obs, sigma=CORR, robust=None, tol_m=1e-9)

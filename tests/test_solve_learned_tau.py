@@ -154,3 +154,4 @@ def test_a_model_that_explains_the_ranges_away_is_not_admitted():
     grid = dataclasses.replace(drifting, attitude_deg=1.0)  # attitude unstated: the grid's sigma, the pixel noise
     assert learned_tau.admitted(dataclasses.replace(told, attitude_deg=None), grid, 8.9, 1.0)
     assert not learned_tau.admitted(dataclasses.replace(told, attitude_deg=None), grid, 9.1, 1.0)
+

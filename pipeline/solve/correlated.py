@@ -34,16 +34,19 @@ class Models:
     the ranges), stacked over K (`problem_models`, `Models.concat`): per group u, v, range (rows (k,), gains
     (K,k,p) of p unit-variance Gauss-Markov states, the band template of A (K,p+1,kp) and K^-1's diagonal (K,k,p)
     (the parts of A that do not depend on the row weights), log det K (K,)); the marginal and white variances
-    Cii, R0 (K,m); correlated (K,): some state has a nonzero transition (else C is diagonal)."""
+    Cii, R0 (K,m); correlated (K,): some state has a nonzero transition (else C is diagonal); bias: per group the
+    rows' gains (K,k) of a constant boresight bias of unit prior variance (zero: none; the range group's always).
+    """
     groups: tuple
     Cii: np.ndarray
     R0: np.ndarray
     npix: int
     correlated: np.ndarray
+    bias: tuple
 
     def take(self, idx: np.ndarray) -> Models:
         return Models(tuple((r, G[idx], ab[idx], dg[idx], li[idx]) for r, G, ab, dg, li in self.groups),
-                      self.Cii[idx], self.R0[idx], self.npix, self.correlated[idx])
+                      self.Cii[idx], self.R0[idx], self.npix, self.correlated[idx], tuple(b[idx] for b in self.bias))
 
     @staticmethod
     def concat(parts: list) -> Models:
@@ -55,14 +58,16 @@ class Models:
             groups.append((gs[0][0], *(np.concatenate([g[j] for g in gs]) for j in range(1, 5))))
         cat = np.concatenate
         return Models(tuple(groups), cat([md.Cii for md in parts]), cat([md.R0 for md in parts]), parts[0].npix,
-                      cat([md.correlated for md in parts]))
+                      cat([md.correlated for md in parts]),
+                      tuple(cat([md.bias[g] for md in parts]) for g in range(len(groups))))
 
 
-def problem_models(st: Stacked, X0: np.ndarray, sigmas: list) -> Models:
+def problem_models(st: Stacked, X0: np.ndarray, sigmas: list, bias_deg: list | None = None) -> Models:
     """The `Models` of one problem (B = 1) under the sigmas, with the focal lengths, the distances at X0 (3,) and
     the frames' times (frames with a pixel, ranged frames, each in time order). Unknown pixel / range sigmas count
     as 1 px / 1 m (variance components then scale them), like `mle.base_variances`; a part without a correlation
-    time is white (on R). ValueError where the sigmas give different states."""
+    time is white (on R); bias_deg (per sigma, None or 0: none): the prior sigma of a constant boresight bias
+    (pixel offsets f * angle in u and v, as `mle`'s). ValueError where the sigmas give different states."""
     t_ns = st.t_ns[0]
     t_s = (t_ns - t_ns.min()).astype(np.float64) * 1e-9  # differences of int64 first: no rounding of epochs
     hp, hr = st.has_pix[0], st.has_range[0]
@@ -75,7 +80,7 @@ def problem_models(st: Stacked, X0: np.ndarray, sigmas: list) -> Models:
     k = order_p.size
     m = 2 * k + tr.size
     out = []
-    for sigma in sigmas:
+    for sigma, b_deg in zip(sigmas, bias_deg or [None] * len(sigmas), strict=True):
         s_px = 1.0 if sigma.pixel_px is None else sigma.pixel_px
         s_r = 1.0 if sigma.range_m is None else sigma.range_m
         s_pos = 0.0 if sigma.position_m is None else sigma.position_m
@@ -86,11 +91,13 @@ def problem_models(st: Stacked, X0: np.ndarray, sigmas: list) -> Models:
             built.append(_group(2 * order_p + axis, np.full(k, s_px ** 2), parts, tp))
         built.append(_group(2 * k + order_r, np.full(tr.size, s_r ** 2), [(np.full(tr.size, s_pos),
                                                                             sigma.position_tau_s)], tr))
+        b = math.radians(b_deg or 0.0)
+        bias = (fx[0, hp][order_p] * b, fy[0, hp][order_p] * b, np.zeros(tr.size))
         Cii, R0 = np.empty(m), np.empty(m)
-        for g, r0, cii, _ in built:
-            Cii[g[0]], R0[g[0]] = cii, r0
+        for (g, r0, cii, _), gb in zip(built, bias, strict=True):
+            Cii[g[0]], R0[g[0]] = cii + gb * gb, r0
         out.append(Models(tuple((g[0], *(np.asarray(x)[None] for x in g[1:])) for g, _, _, _ in built), Cii[None],
-                          R0[None], 2 * k, np.array([any(c for _, _, _, c in built)])))
+                          R0[None], 2 * k, np.array([any(c for _, _, _, c in built)]), tuple(x[None] for x in bias)))
     return Models.concat(out)
 
 
@@ -146,7 +153,9 @@ def quadratic_forms_stacked(sk: Models, A: np.ndarray, w: np.ndarray, vf: np.nda
     """Per model of the K `Models` and per group (u, v, range): ([J|r]^T C_w^-1 [J|r] (4,4), log det C_w, rows with
     weight) at its rows A (K,m,4), robust weights w (K,m) (a row's variance C_ii / w, the rest of C unchanged) and
     variance factors vf (K,2); one banded factorization per group for all K (side by side, their band matrices are
-    one block-diagonal band matrix)."""
+    one block-diagonal band matrix). A boresight bias (`Models.bias`, a gain column a of unit prior variance) is
+    integrated out by Sherman-Morrison on the forms: with F = [J|r|a]^T C^-1 [J|r|a], the form is
+    F_yy - F_ya F_ay / (1 + F_aa) and log det grows by log(1 + F_aa)."""
     K = A.shape[0]
     # R_w = C_ii / w - (C_ii - R0): the weight inflates the row's own variance only
     with np.errstate(divide="ignore"):
@@ -159,6 +168,9 @@ def quadratic_forms_stacked(sk: Models, A: np.ndarray, w: np.ndarray, vf: np.nda
                 o.append((np.zeros((4, 4)), 0.0, 0))
             continue
         Rinv, Y = Rinv_all[:, rows], A[:, rows]
+        biased = bool((sk.bias[gi] != 0).any())
+        if biased:
+            Y = np.concatenate([Y, sk.bias[gi][..., None]], axis=2)
         scale = vf[:, 0] if gi < 2 else vf[:, 1]
         RiY = Rinv[:, :, None] * Y
         logdet = np.log(scale[:, None] / np.where(Rinv > 0, Rinv, scale[:, None])).sum(axis=1)  # rows with weight
@@ -182,6 +194,10 @@ def quadratic_forms_stacked(sk: Models, A: np.ndarray, w: np.ndarray, vf: np.nda
             CY = (RiY - Rinv[:, :, None] * np.einsum("jkp,jkpq->jkq", G, Z)) / scale[:, None, None]
             logdet = logdet + (2.0 * np.log(cb[0]).reshape(K, k * p).sum(axis=1) + log_inn)
         forms = np.swapaxes(Y, 1, 2) @ CY
+        if biased:
+            faa = forms[:, 4, 4]
+            forms = forms[:, :4, :4] - forms[:, :4, 4:] * forms[:, 4:, :4] / (1.0 + faa)[:, None, None]
+            logdet = logdet + np.log1p(faa)
         counts = np.count_nonzero(Rinv, axis=1)
         for j in range(K):
             out[j].append((forms[j], float(logdet[j]), int(counts[j])))

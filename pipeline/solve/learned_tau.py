@@ -25,6 +25,9 @@ from pipeline.solve.stacked import Stacked
 TAU_GRID_S = (5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0)
 #: candidate attitude sigmas (deg) where the sigma states none
 ATTITUDE_GRID_DEG = (0.01, 0.03, 0.1, 0.3, 1.0)
+#: the boresight bias's prior scale in the white candidates with a bias (`white_biased`; `bias_mixture.PHI_GRID`'s
+#: middle and end: the white model without a bias is `candidates`')
+WHITE_BIAS_PHI = (0.5, 1.0)
 #: rows of the candidates' fits side by side at most (models x problems x rows): their arrays (~750 bytes per
 #: row) stay within a few hundred MB on a 10-minute video at 30 Hz (36,600 rows: 6 models at a time, not 35;
 #: `python scripts/bench_solvers.py --scale`)
@@ -39,18 +42,21 @@ def without_rejected(st: Stacked, rejected: np.ndarray) -> Stacked:
     return dataclasses.replace(st, has_pix=has_pix, has_range=has_range)
 
 
-def log_likelihoods(st: Stacked, Xs: np.ndarray, sigmas: list, vfs: list) -> list:
+def log_likelihoods(st: Stacked, Xs: np.ndarray, sigmas: list, vfs: list, biases: list | None = None) -> list:
     """(restricted log L, chi-square r^T C^-1 r, rows m) of one problem at K points Xs (K,3), each under its sigma
-    and variance factors vf (2,) scaling the pixel and range blocks of C (models with the same parts: the
+    (and boresight bias prior, deg: biases, None: none) and variance factors vf (2,) scaling the pixel and range
+    blocks of C (models with the same parts: the
     candidates), in one `correlated.quadratic_forms_stacked`; every row at full weight (the same data under every
     model); C's overall scale k = max(chi2 / m, 1) (the stated sigmas a lower bound: with sigmas stated too small,
     a model is not chosen for hiding the misfit in the target)."""
     vfs = np.asarray(vfs, dtype=np.float64).reshape(-1, 2)
+    biases = biases or [None] * len(sigmas)
     qs: list = [None] * len(sigmas)
     rows = 2 * int(st.has_pix[0].sum()) + int(st.has_range[0].sum())
     for fam in _families(sigmas, rows):  # one `quadratic_forms_stacked` per part of a family (same states)
         K = len(fam)
-        models = _correlated.Models.concat([_correlated.problem_models(st, Xs[k], [sigmas[k]]) for k in fam])
+        models = _correlated.Models.concat([_correlated.problem_models(st, Xs[k], [sigmas[k]], [biases[k]])
+                                            for k in fam])
         A = _correlated.rows_in_use(st.take(np.zeros(K, dtype=np.intp)), Xs[fam])
         m = models.Cii.shape[1]
         for k, q in zip(fam, _correlated.quadratic_forms_stacked(models, A, np.ones((K, m)), vfs[fam]), strict=True):
@@ -85,6 +91,19 @@ def candidates(sigma: Sigma) -> list[Sigma]:
                        for att in atts]
 
 
+def white_biased(sigma: Sigma, bias_deg: float) -> tuple[list[Sigma], list[float]]:
+    """The white models with a constant boresight bias of prior sigma phi bias_deg (phi in WHITE_BIAS_PHI, the
+    model of `mle`'s first answer, whose bias size the flight decides): per attitude sigma of `candidates`, the
+    frame-to-frame part sqrt(1 - phi^2) of the stated one (all of it where none is stated, as `mle`). Returns the
+    sigmas and their biases (deg)."""
+    atts = (sigma.attitude_deg,) if sigma.attitude_deg else ATTITUDE_GRID_DEG
+    split = bool(sigma.attitude_deg)
+    out = [(dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None,
+                                attitude_deg=att * math.sqrt(1.0 - phi * phi) if split else att), phi * bias_deg)
+           for att in atts for phi in WHITE_BIAS_PHI]
+    return [o[0] for o in out], [o[1] for o in out]
+
+
 def is_white(sigma: Sigma) -> bool:
     """A candidate without a correlation time (errors independent from frame to frame)."""
     return sigma.attitude_tau_s is None and sigma.position_tau_s is None
@@ -101,7 +120,7 @@ def _families(sigmas: list, rows: int) -> list:
 
 
 def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
-              max_iterations: int) -> list:
+              max_iterations: int, bias_deg: float | None = None) -> list:
     """Per problem of sts (B = 1 each, without their rejected rows), from its start X0s[i] (3,): the GLS `mle`
     averaged over the models of `candidates(sigma)` (correlation time, position error drifting or white, and
     attitude sigma where unstated), each weighted by its likelihood (equal priors): the posterior mean
@@ -115,6 +134,10 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
     scale guard kept, `correlated.gls`); robust weights updated on the rows' marginal residuals under a correlated
     C are a fixed-point map with no objective, which from starts 1e-6 m apart ended metres to kilometres apart."""
     sigmas = candidates(sigma)
+    biases = [None] * len(sigmas)
+    if bias_deg:  # the first answer's model: white errors and a boresight bias whose size the flight decides
+        more, more_b = white_biased(sigma, bias_deg)
+        sigmas, biases = sigmas + more, biases + more_b
     by_rows: dict[tuple, list[int]] = {}  # the same frames with a pixel and with a range (`Models.concat`: the rest)
     for i, st in enumerate(sts):
         by_rows.setdefault((st.n, st.has_pix.tobytes(), st.has_range.tobytes()), []).append(i)
@@ -124,27 +147,29 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
         g = groups.pop()
         try:
             per_problem = fits([sts[i] for i in g], np.asarray([X0s[i] for i in g]), sigmas, robust, vce, tol_m,
-                               max_iterations)
+                               max_iterations, biases)
         except ValueError:  # the models' states differ (`Models.concat`): one problem at a time
             if len(g) == 1:
                 raise
             groups.extend([i] for i in g)
             continue
         for i, f in zip(g, per_problem, strict=True):
-            out[i] = _mixture(sts[i], sigma, sigmas, f)
+            out[i] = _mixture(sts[i], sigma, sigmas, f, biases)
     return out
 
 
 def fits(sts: list, X0: np.ndarray, sigmas: list, robust: str | None, vce: bool, tol_m: float,
-         max_iterations: int) -> list:
+         max_iterations: int, biases: list | None = None) -> list:
     """Per problem of sts (B = 1 each, the same rows in use) from its start X0[t] (3,): the `correlated.gls` fits
     (`mle.finish`'s tuple over the K sigmas, in their order) under every model of sigmas, side by side in parts of
     at most MODEL_ROWS_AT_ONCE rows (`_families`). ValueError where the problems' models differ in their states."""
     K = len(sigmas)
+    biases = biases or [None] * K
     rows0 = [_correlated.rows_in_use(st, X0[t]) for t, st in enumerate(sts)]
     per_family = []
     for fam in _families(sigmas, len(sts) * int(rows0[0].shape[0])):
-        models = _correlated.Models.concat([_correlated.problem_models(st, X0[t], [sigmas[k] for k in fam])
+        models = _correlated.Models.concat([_correlated.problem_models(st, X0[t], [sigmas[k] for k in fam],
+                                                                      [biases[k] for k in fam])
                                             for t, st in enumerate(sts)])
         per_family.append((fam, _correlated.gls(sts, X0, models, robust, vce, tol_m, max_iterations, rows0)))
     out = []
@@ -178,42 +203,44 @@ def admitted(stated: Sigma, candidate: Sigma, vf_pixel: float, vf_range: float) 
     return not stated.pixel_px or vf_pixel <= k * k
 
 
-def _mixture(st: Stacked, stated: Sigma, sigmas: list, out: tuple):
-    """`learn_tau`'s answer from the candidates' fits out (`mle.finish`'s tuple over the K sigmas), over the
-    `admitted` ones."""
+def _mixture(st: Stacked, stated: Sigma, sigmas: list, out: tuple, biases: list):
+    """`learn_tau`'s answer from the candidates' fits out (`mle.finish`'s tuple over the K sigmas, with their
+    boresight biases), over the `admitted` ones."""
     lls: dict[tuple, float] = {}
-    fits = []
+    fits = []  # (log L, candidate index, its fit)
     X, status = out[0], out[2]
     answered = [k for k in range(len(sigmas)) if status[k] not in (Status.DIVERGED, Status.DEGENERATE)
                 and np.isfinite(X[k]).all()]
     vfs = [(float(out[5]["variance_factor_pixel"][k]), float(out[5]["variance_factor_range"][k])) for k in answered]
-    lk = log_likelihoods(st, X[answered], [sigmas[k] for k in answered], vfs) if answered else []
+    lk = log_likelihoods(st, X[answered], [sigmas[k] for k in answered], vfs,
+                         [biases[k] for k in answered]) if answered else []
     for k, (ll, _, _), vf in zip(answered, lk, vfs, strict=True):
-        if not (np.isfinite(ll) and admitted(stated, sigmas[k], *vf)):
+        c = sigmas[k]
+        total = dataclasses.replace(c, attitude_deg=math.hypot(c.attitude_deg or 0.0, biases[k] or 0.0))
+        if not (np.isfinite(ll) and admitted(stated, total, *vf)):
             continue
-        res = (out[0][k:k + 1], out[1][k:k + 1], out[2][k:k + 1], out[3][k:k + 1], out[4][k:k + 1],
-               {key: v[k:k + 1] for key, v in out[5].items()})
-        key = (sigmas[k].attitude_tau_s, sigmas[k].attitude_deg, sigmas[k].position_tau_s)
+        key = (c.attitude_tau_s, c.attitude_deg, c.position_tau_s) + ((biases[k],) if biases[k] else ())
         lls[key] = ll
-        fits.append((ll, *key, res))
+        fits.append((ll, k, (out[0][k:k + 1], out[1][k:k + 1], out[2][k:k + 1], out[3][k:k + 1], out[4][k:k + 1],
+                             {key: v[k:k + 1] for key, v in out[5].items()})))
     if not fits:
         return None
     ll = np.array([f[0] for f in fits])
     post = np.exp(ll - ll.max())
     post /= post.sum()
-    white = np.array([f[1] is None and f[3] is None for f in fits])
+    white = np.array([is_white(sigmas[f[1]]) for f in fits])
     if post[white].sum() >= 0.5:  # the evidence is for errors independent from frame to frame
-        return None, fits[int(np.argmax(np.where(white, ll, -np.inf)))][2], lls, None
+        return None, sigmas[fits[int(np.argmax(np.where(white, ll, -np.inf)))][1]].attitude_deg, lls, None
     # the posterior mixture over the drifting models: the mean, and the covariance with the spread between them
     fits = [f for f, w in zip(fits, white, strict=True) if not w]
     ll, post = ll[~white], post[~white] / post[~white].sum()
-    best = fits[int(np.argmax(ll))]
-    Xs = np.array([f[4][0][0] for f in fits])
-    covs = np.array([f[4][4][0] for f in fits])
+    _, k_best, (_, it, status, cond, _, ex) = fits[int(np.argmax(ll))]
+    Xs = np.array([f[2][0][0] for f in fits])
+    covs = np.array([f[2][4][0] for f in fits])
     Xm = post @ Xs
     d = Xs - Xm
     cov = np.einsum("k,kij->ij", post, covs + d[:, :, None] * d[:, None, :])
-    _, tau, att, ptau, (_, it, status, cond, _, ex) = best
+    tau, att, ptau = sigmas[k_best].attitude_tau_s, sigmas[k_best].attitude_deg, sigmas[k_best].position_tau_s
     tied = ptau is not None
     ex = {**ex, "error_model_tau_s": np.array([tau]), "error_model_attitude_deg": np.array([att]),
           "error_model_position_tau_s": np.array([tau if tied else np.nan]),

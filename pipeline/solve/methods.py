@@ -11,8 +11,8 @@ import numpy as np
 
 from pipeline.errors import GeometryError, ObservationError, RidgelocError, SolverError
 from pipeline.solve import correlated as _correlated
+from pipeline.solve import fit_checks, least_squares, linear, mle_outputs, uncertainty
 from pipeline.solve import learned_tau as _learned
-from pipeline.solve import least_squares, linear, mle_outputs, uncertainty
 from pipeline.solve import mle as _mle
 from pipeline.solve import starts as _starts
 from pipeline.solve.estimate import BatchEstimate, Estimate, Status
@@ -266,7 +266,7 @@ def _mle_dispatch(st: Stacked, o: dict):
         return _configured_tau(st, o, res, sigma, vce)
     res = _mle.mle(st, x0, white, robust, vce, tol, itmax, init_status, bias_deg, size_unknown, o.get("terrain"))
     res = _bias_refit(st, o, x0, init_status, white, vce, res, bias_deg, size_unknown)
-    return _with_learned_tau(st, o, res, white, vce, size_unknown)
+    return _with_learned_tau(st, o, res, white, vce, size_unknown, bias_deg)
 
 
 def _configured_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool) -> tuple:
@@ -317,21 +317,25 @@ def _bias_refit(st: Stacked, o: dict, x0: np.ndarray, init_status, sigma, vce: b
     return res
 
 
-def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_unknown: bool) -> tuple:
-    """res with each problem's answer replaced by the learned drift model's (`learned_tau.learn_tau`,
-    `_learned_answer`) where its residuals drift, it has real timestamps and the configured sigma gives no
+def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_unknown: bool,
+                      bias_deg: float | None = None) -> tuple:
+    """res with each problem's answer replaced by the learned drift model's (`learned_tau.learn_tau` with res's
+    model, white errors and a boresight bias of prior bias_deg, among the candidates; `_learned_answer`) where
+    the first fit's residuals drift or its chi-square is below its lower CHI2_ALPHA tail (the stated errors do not
+    show from frame to frame: they are slow, or smaller), it has real timestamps and the configured sigma gives no
     correlation time; not with a terrain prior (the drift model takes none)."""
     if st.t_ns is None or not size_unknown or o.get("terrain") is not None:
         return res
     ex, t = res[5], st.t_ns
     span = t.max(axis=1) - t.min(axis=1) if t.shape[1] > 1 else np.zeros(st.size, dtype=np.int64)
-    need = np.flatnonzero(np.isfinite(res[0]).all(axis=1) & (ex["drift_pixel"] | ex["drift_range"])
+    too_small = np.isfinite(ex["chi2_p"]) & (ex["chi2_p"] > 1.0 - fit_checks.CHI2_ALPHA)
+    need = np.flatnonzero(np.isfinite(res[0]).all(axis=1) & (ex["drift_pixel"] | ex["drift_range"] | too_small)
                           & (span >= REAL_TIMES_NS))
     if not need.size:
         return res
     sts = [_learned.without_rejected(st.take(np.array([b])), ex["rejected"][b]) for b in need]
     learned = _learned.learn_tau(sts, res[0][need], sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"],
-                                 o["max_iterations"])
+                                 o["max_iterations"], bias_deg)
     for b, got in zip(need, learned, strict=True):
         row = _row(res, b)
         answer = _learned_answer(st.take(np.array([b])), row, got)

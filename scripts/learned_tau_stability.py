@@ -9,12 +9,14 @@ independent-error fit's answer) moves by 1e-6 m (docs/solvers.md, "The learned m
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py --told-zoo 210
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py --scenes
 
-A name is a zoo flight (`scripts/zoo.py`: arc, straight, obsfile, z000, ...) or an observations file. Per flight:
-the mle error, the start's error, the learned answer's error, its largest standard deviation and the largest move
-of the answer over --starts starts 1e-6 m from the first (random directions, seed 1). --candidates: per candidate
-model (tau, attitude sigma, position error drifting or white), its `correlated.gls` fit from those starts (every
-row at weight 1, the fit `learn_tau` uses): error, largest move, iterations and status (0 converged, 1 iteration
-limit). --told: the configured-correlation-time path (the white fit, then the damped GLS fit `correlated.gls` with
+A name is a zoo flight (`scripts/zoo.py`: arc, straight, obsfile, z000, ...; s1/z019: z019 of seed 1) or an
+observations file. Per flight: the mle error, the start's error, the learned answer's error, its largest standard
+deviation and the largest move of the answer over --starts starts 1e-6 m from the first (random directions, seed
+1). --candidates: per candidate model (tau or white, attitude sigma, boresight bias, position error drifting or
+white), its `correlated.gls` fit from those starts (every row at weight 1, the fit `learn_tau` uses): error,
+restricted log-likelihood, variance factors (pixel / range; "not admitted" where they exceed
+`learned_tau.admitted`), largest move, iterations and status (0 converged, 1 iteration limit). --told: the
+configured-correlation-time path (the white fit, then the damped GLS fit `correlated.gls` with
 the white fit's robust weights held, `methods._configured_tau`) told each zoo flight's true correlation times, from
 the los answer and starts 1e-6 m from it: error, largest move, rows the white fit rejected, iterations;
 --told-zoo N: that on every flight of `zoo.py --flights N --seed 0` whose told sigma has a correlation time.
@@ -45,7 +47,8 @@ def _observations(name: str):
         return load(name)
     import zoo
 
-    return zoo.flight(name).obs
+    seed, _, base = name.rpartition("/")  # s1/z019: flight z019 of seed 1
+    return zoo.flight(base, seed=int(seed[1:]) if seed else 0).obs
 
 
 def _starts(X0: np.ndarray, count: int) -> list:
@@ -102,30 +105,46 @@ def main(argv: list[str] | None = None) -> int:
         if not calls:
             print(f"{name}: mle {err:.2f} m, no learned model (the residuals do not drift)")
             continue
-        sts, X0s, sigma, robust, vce, tol_m, itmax = calls[0]
+        sts, X0s, sigma, robust, vce, tol_m, itmax, bias_deg = (*calls[0], None)[:8]
         starts = _starts(np.asarray(X0s, dtype=np.float64), args.starts)
-        answers = [real(sts, X, sigma, robust, vce, tol_m, itmax)[0] for X in starts]
-        X = np.array([a[3][0][0] for a in answers])
-        sd = float(np.sqrt(np.linalg.eigvalsh(answers[0][3][4][0]).max()))
-        move = float(np.linalg.norm(X[1:] - X[0], axis=1).max())
-        largest = max(largest, (move, name), key=lambda m: m[0])
-        print(f"{name}: mle {err:.2f} m; start {np.linalg.norm(starts[0][0] - truth):.2f} m; learned "
-              f"{np.linalg.norm(X[0] - truth):.2f} m (tau {answers[0][0]:g} s, largest sd {sd:.1f} m); largest move "
-              f"from {args.starts} starts 1e-6 m away {move:.1e} m")
+        answers = [real(sts, X, sigma, robust, vce, tol_m, itmax, bias_deg)[0] for X in starts]
+        if answers[0] is None or answers[0][3] is None:
+            why = "no candidate answered" if answers[0] is None else "the evidence is for white errors"
+            print(f"{name}: mle {err:.2f} m; {why} (the first answer stands)")
+        else:
+            X = np.array([a[3][0][0] if a is not None and a[3] is not None else np.full(3, np.nan) for a in answers])
+            sd = float(np.sqrt(np.linalg.eigvalsh(answers[0][3][4][0]).max()))
+            move = float(np.linalg.norm(X[1:] - X[0], axis=1).max())
+            largest = max(largest, (move, name), key=lambda m: m[0])
+            print(f"{name}: mle {err:.2f} m; start {np.linalg.norm(starts[0][0] - truth):.2f} m; learned "
+                  f"{np.linalg.norm(X[0] - truth):.2f} m (tau {answers[0][0]:g} s, largest sd {sd:.1f} m); largest "
+                  f"move from {args.starts} starts 1e-6 m away {move:.1e} m")
         if not args.candidates:
             continue
-        sigmas = learned_tau.candidates(sigma)
+        sigmas, biases = learned_tau.candidates(sigma), [None] * len(learned_tau.candidates(sigma))
+        if bias_deg:
+            more, more_b = learned_tau.white_biased(sigma, bias_deg)
+            sigmas, biases = sigmas + more, biases + more_b
         fits = []
         for X0 in starts:
-            f = learned_tau.fits(sts, X0, sigmas, robust, vce, tol_m, itmax)[0]
+            f = learned_tau.fits(sts, X0, sigmas, robust, vce, tol_m, itmax, biases)[0]
             fits.append([(f[0][k], int(f[1][k]), int(f[2][k])) for k in range(len(sigmas))])
+            if X0 is starts[0]:
+                ex = f[5]
+                vfs = [(float(ex["variance_factor_pixel"][k]), float(ex["variance_factor_range"][k]))
+                       for k in range(len(sigmas))]
+                lls = learned_tau.log_likelihoods(sts[0], f[0], sigmas, vfs, biases)
         for k, s in enumerate(sigmas):
             Xk = np.array([fit[k][0] for fit in fits])
             mv = float(np.linalg.norm(Xk[1:] - Xk[0], axis=1).max())
             pos = "drifting" if s.position_tau_s else "white"
-            print(f"    tau {s.attitude_tau_s:5g} s, attitude {s.attitude_deg:.3g} deg, position {pos:8s}: "
-                  f"{np.linalg.norm(Xk[0] - truth):8.2f} m, largest move {mv:.1e} m, iterations "
-                  f"{sorted({fit[k][1] for fit in fits})}, status {sorted({fit[k][2] for fit in fits})}")
+            tau = "white" if s.attitude_tau_s is None else f"{s.attitude_tau_s:g} s"
+            total = dataclasses.replace(s, attitude_deg=float(np.hypot(s.attitude_deg or 0.0, biases[k] or 0.0)))
+            ok = learned_tau.admitted(sigma, total, *vfs[k])
+            print(f"    tau {tau:>6s}, attitude {s.attitude_deg or 0:.3g} deg, bias {biases[k] or 0:.3g} deg, position "
+                  f"{pos:8s}: {np.linalg.norm(Xk[0] - truth):8.2f} m, log L {lls[k][0]:9.1f}, variance factors "
+                  f"{vfs[k][0]:.3g} / {vfs[k][1]:.3g}{'' if ok else ' (not admitted)'}, largest move {mv:.1e} m, "
+                  f"iterations {sorted({fit[k][1] for fit in fits})}, status {sorted({fit[k][2] for fit in fits})}")
     print(f"largest move: {largest[0]:.1e} m ({largest[1]})")
     return 0
 

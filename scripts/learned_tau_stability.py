@@ -121,10 +121,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"move from {args.starts} starts 1e-6 m away {move:.1e} m")
         if not args.candidates:
             continue
-        sigmas, biases = learned_tau.candidates(sigma), [None] * len(learned_tau.candidates(sigma))
-        if bias_deg:
-            more, more_b = learned_tau.white_biased(sigma, bias_deg)
-            sigmas, biases = sigmas + more, biases + more_b
+        sigmas, biases = learned_tau.candidates(sigma, bias_deg)
         fits = []
         for X0 in starts:
             f = learned_tau.fits(sts, X0, sigmas, robust, vce, tol_m, itmax, biases)[0]

@@ -25,8 +25,8 @@ from pipeline.solve.stacked import Stacked
 TAU_GRID_S = (5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0)
 #: candidate attitude sigmas (deg) where the sigma states none
 ATTITUDE_GRID_DEG = (0.01, 0.03, 0.1, 0.3, 1.0)
-#: the boresight bias's prior scale in the white candidates with a bias (`white_biased`; `bias_mixture.PHI_GRID`'s
-#: middle and end: the white model without a bias is `candidates`')
+#: the boresight bias's prior scale in the white candidates with a bias (`candidates`; `bias_mixture.PHI_GRID`'s
+#: middle and end)
 WHITE_BIAS_PHI = (0.5, 1.0)
 #: rows of the candidates' fits side by side at most (models x problems x rows): their arrays (~750 bytes per
 #: row) stay within a few hundred MB on a 10-minute video at 30 Hz (36,600 rows: 6 models at a time, not 35;
@@ -76,32 +76,27 @@ def log_likelihoods(st: Stacked, Xs: np.ndarray, sigmas: list, vfs: list, biases
     return out
 
 
-def candidates(sigma: Sigma) -> list[Sigma]:
-    """sigma under each model of the (attitude_tau_s, attitude_deg, position_tau_s) grid: the stated attitude
-    sigma, or ATTITUDE_GRID_DEG where none is stated; the position error drifting with the attitude's tau, or
-    (where the sigma states a position accuracy) white: a GNSS error that wanders with the attitude's tau moves
-    the target as a shared offset, one that does not must not be modelled so (zoo flight z024: 22.5 m tied,
-    5.2 m white, the white family 4.6 log units likelier). Last the white models (no correlation time, one per
-    attitude sigma): the tau -> 0 end of the grid, weighed on the same evidence (`is_white`)."""
+def candidates(sigma: Sigma, bias_deg: float | None = None) -> tuple[list[Sigma], list]:
+    """The models weighed by evidence and their boresight bias priors (deg, None: none). sigma under each model of
+    the (attitude_tau_s, attitude_deg, position_tau_s) grid: the stated attitude sigma, or ATTITUDE_GRID_DEG where
+    none is stated; the position error drifting with the attitude's tau, or (where the sigma states a position
+    accuracy) white: a GNSS error that wanders with the attitude's tau moves the target as a shared offset, one
+    that does not must not be modelled so (zoo flight z024: 22.5 m tied, 5.2 m white, the white family 4.6 log
+    units likelier). Then the white models (no correlation time: the tau -> 0 end of the grid), per attitude
+    sigma without a bias and, given bias_deg (`mle`'s first answer's model, whose bias size the flight decides),
+    with a bias of prior phi bias_deg for phi in WHITE_BIAS_PHI, the attitude's frame-to-frame part sqrt(1 - phi^2)
+    of the stated one (all of it where none is stated, as `mle`)."""
     atts = (sigma.attitude_deg,) if sigma.attitude_deg else ATTITUDE_GRID_DEG
     positions = (True, False) if sigma.position_m else (True,)
-    drifting = [dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau if tied else None, attitude_deg=att)
-                for tied in positions for att in atts for tau in TAU_GRID_S]
-    return drifting + [dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None, attitude_deg=att)
-                       for att in atts]
-
-
-def white_biased(sigma: Sigma, bias_deg: float) -> tuple[list[Sigma], list[float]]:
-    """The white models with a constant boresight bias of prior sigma phi bias_deg (phi in WHITE_BIAS_PHI, the
-    model of `mle`'s first answer, whose bias size the flight decides): per attitude sigma of `candidates`, the
-    frame-to-frame part sqrt(1 - phi^2) of the stated one (all of it where none is stated, as `mle`). Returns the
-    sigmas and their biases (deg)."""
-    atts = (sigma.attitude_deg,) if sigma.attitude_deg else ATTITUDE_GRID_DEG
+    models = [(dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau if tied else None, attitude_deg=att),
+               None) for tied in positions for att in atts for tau in TAU_GRID_S]
     split = bool(sigma.attitude_deg)
-    out = [(dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None,
-                                attitude_deg=att * math.sqrt(1.0 - phi * phi) if split else att), phi * bias_deg)
-           for att in atts for phi in WHITE_BIAS_PHI]
-    return [o[0] for o in out], [o[1] for o in out]
+    for att in atts:
+        for phi in (0.0, *(WHITE_BIAS_PHI if bias_deg else ())):
+            white_att = att * math.sqrt(1.0 - phi * phi) if split else att
+            models.append((dataclasses.replace(sigma, attitude_tau_s=None, position_tau_s=None, attitude_deg=white_att),
+                           phi * bias_deg if phi else None))
+    return [m[0] for m in models], [m[1] for m in models]
 
 
 def is_white(sigma: Sigma) -> bool:
@@ -122,7 +117,7 @@ def _families(sigmas: list, rows: int) -> list:
 def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
               max_iterations: int, bias_deg: float | None = None) -> list:
     """Per problem of sts (B = 1 each, without their rejected rows), from its start X0s[i] (3,): the GLS `mle`
-    averaged over the models of `candidates(sigma)` (correlation time, position error drifting or white, and
+    averaged over the models of `candidates(sigma, bias_deg)` (correlation time, position error drifting or white, and
     attitude sigma where unstated), each weighted by its likelihood (equal priors): the posterior mean
     estimate and the mixture's covariance (the spread between the models included). Each answer is (tau_s,
     attitude_deg of the most likely model, {(tau, att, position tau or None): log L}, the `correlated.gls` result
@@ -133,11 +128,7 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
     The fits are damped GLS on the rows the first solve kept, every row at weight 1 (the robust loss's phases and
     scale guard kept, `correlated.gls`); robust weights updated on the rows' marginal residuals under a correlated
     C are a fixed-point map with no objective, which from starts 1e-6 m apart ended metres to kilometres apart."""
-    sigmas = candidates(sigma)
-    biases = [None] * len(sigmas)
-    if bias_deg:  # the first answer's model: white errors and a boresight bias whose size the flight decides
-        more, more_b = white_biased(sigma, bias_deg)
-        sigmas, biases = sigmas + more, biases + more_b
+    sigmas, biases = candidates(sigma, bias_deg)
     by_rows: dict[tuple, list[int]] = {}  # the same frames with a pixel and with a range (`Models.concat`: the rest)
     for i, st in enumerate(sts):
         by_rows.setdefault((st.n, st.has_pix.tobytes(), st.has_range.tobytes()), []).append(i)

@@ -42,6 +42,7 @@ def test_the_attitude_size_is_learned_where_unstated():
     for obs in correlated_problems(12, n=60, attitude_tau_s=TRUE_TAU_S, position_tau_s=TRUE_TAU_S, seed=6):
         st = Stacked.from_observations(dataclasses.replace(obs, sigma=told))
         _, att, _, res = learned_tau.learn_tau([st], obs.truth_m[None], told, None, True, 1e-4, 50)[0]
+        assert res is not None, "the evidence was for white errors on drifting data"
         chosen.append(att * np.sqrt(res[5]["variance_factor_pixel"][0]))
     assert np.mean((np.array(chosen) > 0.1) & (np.array(chosen) < 0.4)) >= 0.75
 
@@ -63,13 +64,13 @@ def test_the_learned_answer_does_not_jump_when_its_start_moves_by_a_micrometre(n
 
     monkeypatch.setattr(methods._learned, "learn_tau", spy)
     solve("mle", _zoo().flight(name).obs)
-    assert calls, "the flight's residuals no longer drift: pick another flight"
+    assert calls, "the flight no longer calls for the learned model: pick another flight"
     args = calls[0]
     X0 = np.asarray(args[1], dtype=np.float64)
     answers = []
     for d in [np.zeros(3), *np.random.default_rng(3).normal(size=(3, 3))]:
         got = real(args[0], X0 + 1e-6 * d / max(np.linalg.norm(d), 1e-300), *args[2:])[0]
-        assert got is not None
+        assert got is not None and got[3] is not None, "no drift model answers: pick another flight"
         answers.append((got[3][0][0], got[3][4][0]))
     sd = float(np.sqrt(np.linalg.eigvalsh(answers[0][1]).max()))
     for X, _ in answers[1:]:
@@ -155,3 +156,19 @@ def test_a_model_that_explains_the_ranges_away_is_not_admitted():
     assert learned_tau.admitted(dataclasses.replace(told, attitude_deg=None), grid, 8.9, 1.0)
     assert not learned_tau.admitted(dataclasses.replace(told, attitude_deg=None), grid, 9.1, 1.0)
 
+
+def test_a_constant_attitude_error_is_taken_for_a_bias_when_the_bias_is_a_candidate():
+    """An attitude error that stands still over the flight (Gauss-Markov with tau 1e9 s), position errors white:
+    with the first answer's model (white errors and a boresight bias of the stated attitude sigma's prior) among
+    the candidates the evidence is for it (the first answer stands) on nearly every problem; without it, a drift
+    of the longest correlation time (a drift that stands still) takes nearly every problem."""
+    told = PAPER_SIGMA
+    white = {True: [], False: []}
+    for obs in correlated_problems(12, n=60, sigma=told, attitude_tau_s=1e9, position_tau_s=None, seed=9):
+        st = Stacked.from_observations(obs)
+        for with_bias in (True, False):
+            got = learned_tau.learn_tau([st], obs.truth_m[None], told, None, False, 1e-4, 50,
+                                        told.attitude_deg if with_bias else None)[0]
+            white[with_bias].append(got is not None and got[3] is None)
+    assert np.mean(white[True]) >= 0.9
+    assert np.mean(white[False]) <= 0.1

@@ -83,9 +83,10 @@ def candidates(sigma: Sigma, bias_deg: float | None = None) -> tuple[list[Sigma]
     accuracy) white: a GNSS error that wanders with the attitude's tau moves the target as a shared offset, one
     that does not must not be modelled so (zoo flight z024: 22.5 m tied, 5.2 m white, the white family 4.6 log
     units likelier). Then the white models (no correlation time: the tau -> 0 end of the grid), per attitude
-    sigma without a bias and, given bias_deg (`mle`'s first answer's model, whose bias size the flight decides),
-    with a bias of prior phi bias_deg for phi in WHITE_BIAS_PHI, the attitude's frame-to-frame part sqrt(1 - phi^2)
-    of the stated one (all of it where none is stated, as `mle`)."""
+    sigma without a bias and, given bias_deg (the model of `mle`'s first answer: white errors and a bias whose size
+    the flight decides), with a bias of prior phi bias_deg for phi in WHITE_BIAS_PHI, the attitude's
+    frame-to-frame part sqrt(1 - phi^2) of the stated one (all of it where none is stated). The split is taken
+    also where `mle`'s first answer takes none (where its pixel residuals drift)."""
     atts = (sigma.attitude_deg,) if sigma.attitude_deg else ATTITUDE_GRID_DEG
     positions = (True, False) if sigma.position_m else (True,)
     models = [(dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau if tied else None, attitude_deg=att),
@@ -116,18 +117,21 @@ def _families(sigmas: list, rows: int) -> list:
 
 def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
               max_iterations: int, bias_deg: float | None = None) -> list:
-    """Per problem of sts (B = 1 each, without their rejected rows), from its start X0s[i] (3,): the GLS `mle`
-    averaged over the models of `candidates(sigma, bias_deg)` (correlation time, position error drifting or white, and
-    attitude sigma where unstated), each weighted by its likelihood (equal priors): the posterior mean
-    estimate and the mixture's covariance (the spread between the models included). Each answer is (tau_s,
-    attitude_deg of the most likely model, {(tau, att, position tau or None): log L}, the `correlated.gls` result
-    tuple of that model (its fit checks and extras, and error_model_tau_s, error_model_attitude_deg,
-    error_model_position_tau_s (NaN: white), error_model_log_likelihoods over TAU_GRID_S at its attitude sigma
-    and position family) with the mixture's estimate and covariance), or None when no model gave an answer. The
-    models' fits of problems with the same rows in use iterate side by side (each as alone: `correlated.gls`).
-    The fits are damped GLS on the rows the first solve kept, every row at weight 1 (the robust loss's phases and
-    scale guard kept, `correlated.gls`); robust weights updated on the rows' marginal residuals under a correlated
-    C are a fixed-point map with no objective, which from starts 1e-6 m apart ended metres to kilometres apart."""
+    """Per problem of sts (B = 1 each, without their rejected rows), from its start X0s[i] (3,): the GLS `mle` fit
+    under every model of `candidates(sigma, bias_deg)` (correlation time, position error drifting or white, the
+    white models with and without a boresight bias, attitude sigma where unstated), each `admitted` one weighted
+    by its restricted likelihood (equal priors). Each answer is None when no model was admitted with an answer;
+    (None, attitude_deg of the likeliest white model, lls, None) where the white models hold at least half of the
+    posterior (the first answer stands); else (tau_s, attitude_deg of the likeliest drifting model, lls, the
+    `correlated.gls` result tuple of that model with the drifting models' posterior mean estimate and mixture
+    covariance (the spread between them included), its fit checks and extras, and error_model_tau_s,
+    error_model_attitude_deg, error_model_position_tau_s (NaN: white), error_model_log_likelihoods over TAU_GRID_S
+    at its attitude sigma and position family). lls: {(tau, att, position tau), or (None, att, None, bias_deg)
+    for a white model with a bias: log L} of the admitted models. The models' fits of problems with the same rows
+    in use iterate side by side (each as alone: `correlated.gls`). The fits are damped GLS on the rows the first
+    solve kept, every row at weight 1 (the robust loss's phases and scale guard kept, `correlated.gls`); robust
+    weights updated on the rows' marginal residuals under a correlated C are a fixed-point map with no objective,
+    which from starts 1e-6 m apart ended metres to kilometres apart."""
     sigmas, biases = candidates(sigma, bias_deg)
     by_rows: dict[tuple, list[int]] = {}  # the same frames with a pixel and with a range (`Models.concat`: the rest)
     for i, st in enumerate(sts):

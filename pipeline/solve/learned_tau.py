@@ -189,7 +189,7 @@ def admitted(stated: Sigma, candidate: Sigma, vf_pixel: float, vf_range: float) 
     stated sigmas: the range noise, and the attitude error (the candidate's attitude sigma times the pixel
     rows' factor; the pixel noise where no attitude sigma is stated). A fit that needs more explains those
     observations away (zoo flight s0/z162: the position drifting with the attitude, the ranges' variance 121 x
-    the stated, 1,061 m off, the likeliest model)."""
+    the stated, 1,062 m off, the likeliest model)."""
     k = _starts.MAX_OVER_STATED
     if stated.range_m and not vf_range <= k * k:
         return False

@@ -1,11 +1,12 @@
-"""The telemetry errors' correlation time (and, where the sigma does not state it, their size) learned from the
-flight by evidence, for `mle` on one problem whose sigma gives no correlation time (docs/solvers.md, "Correlation
-time learned from the flight"): the GLS fit (`correlated.gls`) under every candidate of `candidates`, without the
-rows the first solve rejected and without robust weights (the first solve's loss did that job; an iteratively
-reweighted GLS fit descends no objective and wandered, docs/solvers.md), weighted by its restricted (REML)
-Gaussian likelihood (`log_likelihoods`); the answer is the candidates' posterior mixture, with the fit checks of
-the most likely one. A configured correlation time is the same fit with one model, the first solve's robust
-weights held (`methods._configured_tau`).
+"""The telemetry errors' model (white, with a boresight bias, or drifting with a correlation time; and, where the
+sigma does not state it, their size) chosen from the flight by evidence, for `mle` on one problem whose sigma gives
+no correlation time (docs/solvers.md, "Error model learned from the flight, by evidence"): the GLS fit
+(`correlated.gls`) under every candidate of `candidates`, without the rows the first solve rejected and without
+robust weights (the first solve's loss did that job; an iteratively reweighted GLS fit descends no objective and
+wandered, docs/solvers.md), each `admitted` one weighted by its restricted (REML) Gaussian likelihood
+(`log_likelihoods`); where the white models hold half of the posterior the first answer stands, else the answer
+is the drifting models' posterior mixture, with the fit checks of the most likely one. A configured correlation
+time is the same fit with one model, the first solve's robust weights held (`methods._configured_tau`).
 """
 
 from __future__ import annotations

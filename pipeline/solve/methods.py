@@ -246,7 +246,7 @@ def _terrain_start(st: Stacked, fn) -> tuple[np.ndarray, np.ndarray]:
 def _mle_dispatch(st: Stacked, o: dict):
     """`mle.mle` on the batch; for one problem whose sigma has correlation times (a non-diagonal residual
     covariance) that white fit, then the GLS fit of the configured model from it (`_configured_tau`); else the
-    learned drift model (`_with_learned_tau`) where the residuals drift."""
+    error model chosen by evidence (`_with_learned_tau`) where the residuals drift or the chi-square is too small."""
     x0, init_status, sigma, vce = _mle_start(st, o)
     robust, tol, itmax = o.get("robust", _mle.DEFAULT_ROBUST), o["tol_m"], o["max_iterations"]
     bias_deg, size_unknown = _mle.bias_prior_deg(sigma, o)  # configured correlation times win, even vanishing ones

@@ -96,8 +96,8 @@ def test_solve_problems_equals_solve_one_at_a_time(options, monkeypatch):
     if not options:
         assert all("error_model" in g["mle"].extras for g in got[7:10])
         assert not any("error_model" in g["mle"].extras for g in got[10:])  # white errors in the same batch
-        # one call per family of states: the position drifting, the position white, no drift at all
-        assert [n for n in batched if n > 1] == [3, 3, 3]
+        # one call per family of states: both errors drifting, the attitude's alone, the position's alone, neither
+        assert [n for n in batched if n > 1] == [3, 3, 3, 3]
 
 
 def test_solve_problems_reports_a_bad_option_for_every_problem():

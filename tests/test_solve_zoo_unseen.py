@@ -18,3 +18,16 @@ def test_mle_is_no_catastrophe_on_a_late_pose(seed, index):
     mle, bound, solved = catastrophe_bound(f.obs)
     assert solved >= 3
     assert mle is not None and mle <= bound, f"s{seed}/{f.name}: mle error {mle} m > bound {bound:.1f} m"
+
+
+@pytest.mark.parametrize("seed,index", [(1, 6), (4, 23), (5, 74)])
+def test_mle_is_no_catastrophe_on_a_gnss_step(seed, index):
+    """A GNSS multipath jump of 3-10 m held to the end of the flight under a steady attitude: the evidence step
+    weighs a drifting GNSS error with a white attitude error since 2026-11-24 (`learned_tau.candidates`); before,
+    it could only tie the position's drift to the attitude's or take it white, and mle was a catastrophe on
+    these three (docs/zoo.md, "A GNSS drift under a steady attitude")."""
+    f = script("zoo_unseen").make_flight(seed, index)
+    assert f.effects == ("gnss_step",)
+    mle, bound, solved = catastrophe_bound(f.obs)
+    assert solved >= 3
+    assert mle is not None and mle <= bound, f"s{seed}/{f.name}: mle error {mle} m > bound {bound:.1f} m"

@@ -83,15 +83,19 @@ def candidates(sigma: Sigma, bias_deg: float | None = None) -> tuple[list[Sigma]
     none is stated; the position error drifting with the attitude's tau, or (where the sigma states a position
     accuracy) white: a GNSS error that wanders with the attitude's tau moves the target as a shared offset, one
     that does not must not be modelled so (zoo flight z024: 22.5 m tied, 5.2 m white, the white family 4.6 log
-    units likelier). Then the white models (no correlation time: the tau -> 0 end of the grid), per attitude
-    sigma without a bias and, given bias_deg (the model of `mle`'s first answer: white errors and a bias whose size
-    the flight decides), with a bias of prior phi bias_deg for phi in WHITE_BIAS_PHI, the attitude's
-    frame-to-frame part sqrt(1 - phi^2) of the stated one (all of it where none is stated). The split is taken
-    also where `mle`'s first answer takes none (where its pixel residuals drift)."""
+    units likelier); and (where the sigma states a position accuracy) the GNSS error alone drifting, the attitude
+    white: a GNSS drift or multipath step under a steady gimbal (`scripts/zoo.py`'s gnss_drift,
+    `scripts/zoo_unseen.py`'s gnss_step). Then the white models (no correlation time: the tau -> 0 end of the
+    grid), per attitude sigma without a bias and, given bias_deg (the model of `mle`'s first answer: white errors
+    and a bias whose size the flight decides), with a bias of prior phi bias_deg for phi in WHITE_BIAS_PHI, the
+    attitude's frame-to-frame part sqrt(1 - phi^2) of the stated one (all of it where none is stated). The split
+    is taken also where `mle`'s first answer takes none (where its pixel residuals drift)."""
     atts = (sigma.attitude_deg,) if sigma.attitude_deg else ATTITUDE_GRID_DEG
-    positions = (True, False) if sigma.position_m else (True,)
-    models = [(dataclasses.replace(sigma, attitude_tau_s=tau, position_tau_s=tau if tied else None, attitude_deg=att),
-               None) for tied in positions for att in atts for tau in TAU_GRID_S]
+    # which errors drift: (attitude, position) both, the attitude alone, the position alone
+    kinds = ((True, True), (True, False), (False, True)) if sigma.position_m else ((True, True),)
+    models = [(dataclasses.replace(sigma, attitude_tau_s=tau if att_drifts else None,
+                                   position_tau_s=tau if pos_drifts else None, attitude_deg=att), None)
+              for att_drifts, pos_drifts in kinds for att in atts for tau in TAU_GRID_S]
     split = bool(sigma.attitude_deg)
     for att in atts:
         for phi in (0.0, *(WHITE_BIAS_PHI if bias_deg else ())):
@@ -107,28 +111,29 @@ def is_white(sigma: Sigma) -> bool:
 
 
 def _families(sigmas: list, rows: int) -> list:
-    """Index arrays of the sigmas whose models have the same states (`correlated.Models.concat`): the position
-    error correlated, white, or both errors white (no states); each cut into parts of at most MODEL_ROWS_AT_ONCE /
-    rows models (rows: the rows of one model's fits side by side, at least one model per part), the models fitted
-    side by side at once."""
-    kind = np.array([2 if is_white(s) else int(s.position_tau_s is None) for s in sigmas])
+    """Index arrays of the sigmas whose models have the same states (`correlated.Models.concat`): both errors
+    drifting, the attitude's alone, the position's alone, or both white (no states); each cut into parts of at
+    most MODEL_ROWS_AT_ONCE / rows models (rows: the rows of one model's fits side by side, at least one model per
+    part), the models fitted side by side at once."""
+    kind = np.array([2 * (s.attitude_tau_s is None) + (s.position_tau_s is None) for s in sigmas])
     per = max(1, MODEL_ROWS_AT_ONCE // max(rows, 1))
-    return [f[i:i + per] for f in (np.flatnonzero(kind == k) for k in range(3)) for i in range(0, f.size, per)]
+    return [f[i:i + per] for f in (np.flatnonzero(kind == k) for k in range(4)) for i in range(0, f.size, per)]
 
 
 def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
               max_iterations: int, bias_deg: float | None = None) -> list:
     """Per problem of sts (B = 1 each, without their rejected rows), from its start X0s[i] (3,): the GLS `mle` fit
-    under every model of `candidates(sigma, bias_deg)` (correlation time, position error drifting or white, the
-    white models with and without a boresight bias, attitude sigma where unstated), each `admitted` one weighted
+    under every model of `candidates(sigma, bias_deg)` (correlation time, which errors drift, the white models
+    with and without a boresight bias, attitude sigma where unstated), each `admitted` one weighted
     by its restricted likelihood (equal priors). Each answer is None when no model was admitted with an answer;
     (None, attitude_deg of the likeliest white model, lls, None) where the white models hold at least half of the
-    posterior (the first answer stands); else (tau_s, attitude_deg of the likeliest drifting model, lls, the
-    `correlated.gls` result tuple of that model with the drifting models' posterior mean estimate and mixture
-    covariance (the spread between them included), its fit checks and extras, and error_model_tau_s,
-    error_model_attitude_deg, error_model_position_tau_s (NaN: white), error_model_log_likelihoods over TAU_GRID_S
-    at its attitude sigma and position family). lls: {(tau, att, position tau), or (None, att, None, bias_deg)
-    for a white model with a bias: log L} of the admitted models. The models' fits of problems with the same rows
+    posterior (the first answer stands); else (tau_s of the likeliest drifting model (its drifting errors'),
+    its attitude_deg, lls, the `correlated.gls` result tuple of that model with the drifting models' posterior
+    mean estimate and mixture covariance (the spread between them included), its fit checks and extras, and
+    error_model_tau_s, error_model_attitude_deg, error_model_attitude_tau_s and error_model_position_tau_s (NaN:
+    white), error_model_log_likelihoods over TAU_GRID_S at its attitude sigma and with the same errors drifting).
+    lls: {(attitude tau, att, position tau), or (None, att, None, bias_deg) for a white model with a bias: log L}
+    of the admitted models. The models' fits of problems with the same rows
     in use iterate side by side (each as alone: `correlated.gls`). The fits are damped GLS on the rows the first
     solve kept, every row at weight 1 (the robust loss's phases and scale guard kept, `correlated.gls`); robust
     weights updated on the rows' marginal residuals under a correlated C are a fixed-point map with no objective,
@@ -236,10 +241,12 @@ def _mixture(st: Stacked, stated: Sigma, sigmas: list, out: tuple, biases: list)
     Xm = post @ Xs
     d = Xs - Xm
     cov = np.einsum("k,kij->ij", post, covs + d[:, :, None] * d[:, None, :])
-    tau, att, ptau = sigmas[k_best].attitude_tau_s, sigmas[k_best].attitude_deg, sigmas[k_best].position_tau_s
-    tied = ptau is not None
+    best = sigmas[k_best]
+    a_tau, p_tau, att = best.attitude_tau_s, best.position_tau_s, best.attitude_deg
+    tau = a_tau if a_tau is not None else p_tau  # the drifting errors' (one tau when both drift)
     ex = {**ex, "error_model_tau_s": np.array([tau]), "error_model_attitude_deg": np.array([att]),
-          "error_model_position_tau_s": np.array([tau if tied else np.nan]),
-          "error_model_log_likelihoods": np.array([[lls.get((t, att, t if tied else None), np.nan)
+          "error_model_attitude_tau_s": np.array([np.nan if a_tau is None else a_tau]),
+          "error_model_position_tau_s": np.array([np.nan if p_tau is None else p_tau]),
+          "error_model_log_likelihoods": np.array([[lls.get((t if a_tau else None, att, t if p_tau else None), np.nan)
                                                     for t in TAU_GRID_S]])}
     return tau, att, lls, (Xm[None], it, status, cond, cov[None], ex)

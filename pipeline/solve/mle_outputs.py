@@ -92,9 +92,12 @@ def notes(extras: dict, t_ns: np.ndarray | None = None, video_frames=None) -> li
         out.append(f"mle: {fit['message']}")
     model = extras.get("error_model")
     if model:
-        out.append(f"mle: the residuals drift; error correlation time learned from the flight: "
-                   f"{model['attitude_tau_s']:g} s (Gauss-Markov, largest likelihood over 5-320 s), generalized "
-                   "least squares")
+        a_tau, p_tau = model["attitude_tau_s"], model["position_tau_s"]
+        which = ("attitude and position errors" if a_tau is not None and p_tau is not None
+                 else "attitude error" if a_tau is not None else "position (GNSS) error")
+        out.append(f"mle: the residuals drift; the {which} drifting, correlation time learned from the flight: "
+                   f"{a_tau if a_tau is not None else p_tau:g} s (Gauss-Markov, largest likelihood over 5-320 s), "
+                   "generalized least squares")
     bias = extras.get("boresight_bias")
     if bias:
         out.append(f"mle: boresight bias {_bias_words(bias)}")
@@ -129,7 +132,8 @@ def problem_extras(ex: dict, t_ns: np.ndarray) -> dict:
         out["boresight_bias"] = bias
     if "error_model_tau_s" in ex and np.isfinite(ex["error_model_tau_s"]):  # NaN: a problem without one
         out["error_model"] = {
-            "attitude_tau_s": float(ex["error_model_tau_s"]), "position_tau_s": _f(ex["error_model_position_tau_s"]),
+            "attitude_tau_s": _f(ex["error_model_attitude_tau_s"]),
+            "position_tau_s": _f(ex["error_model_position_tau_s"]),
             "attitude_deg": float(ex["error_model_attitude_deg"]), "chosen_by": "likelihood",
             "log_likelihood": {f"{t:g}": _f(v) for t, v in zip(TAU_GRID_S, ex["error_model_log_likelihoods"],
                                                                  strict=True)}}

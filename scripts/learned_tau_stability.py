@@ -12,9 +12,9 @@ independent-error fit's answer) moves by 1e-6 m (docs/solvers.md, "The learned m
 A name is a zoo flight (`scripts/zoo.py`: arc, straight, obsfile, z000, ...; s1/z019: z019 of seed 1) or an
 observations file. Per flight: the mle error, the start's error, the learned answer's error, its largest standard
 deviation and the largest move of the answer over --starts starts 1e-6 m from the first (random directions, seed
-1). --candidates: per candidate model (tau or white, attitude sigma, boresight bias, position error drifting or
-white), its `correlated.gls` fit from those starts (every row at weight 1, the fit `learn_tau` uses): error,
-restricted log-likelihood, variance factors (pixel / range; "not admitted" where they exceed
+1). --candidates: per candidate model (the attitude error's tau or white, attitude sigma, boresight bias, the
+position error's tau or white), its `correlated.gls` fit from those starts (every row at weight 1, the fit
+`learn_tau` uses): error, restricted log-likelihood, variance factors (pixel / range; "not admitted" where they exceed
 `learned_tau.admitted`), largest move, iterations and status (0 converged, 1 iteration limit). --told: the
 configured-correlation-time path (the white fit, then the damped GLS fit `correlated.gls` with
 the white fit's robust weights held, `methods._configured_tau`) told each zoo flight's true correlation times, from
@@ -114,11 +114,14 @@ def main(argv: list[str] | None = None) -> int:
         else:
             X = np.array([a[3][0][0] if a is not None and a[3] is not None else np.full(3, np.nan) for a in answers])
             sd = float(np.sqrt(np.linalg.eigvalsh(answers[0][3][4][0]).max()))
+            ex0 = answers[0][3][5]
+            which = " and ".join(k for k in ("attitude", "position") if np.isfinite(ex0[f"error_model_{k}_tau_s"][0]))
+            which += " drifting"
             move = float(np.linalg.norm(X[1:] - X[0], axis=1).max())
             largest = max(largest, (move, name), key=lambda m: m[0])
             print(f"{name}: mle {err:.2f} m; start {np.linalg.norm(starts[0][0] - truth):.2f} m; learned "
-                  f"{np.linalg.norm(X[0] - truth):.2f} m (tau {answers[0][0]:g} s, largest sd {sd:.1f} m); largest "
-                  f"move from {args.starts} starts 1e-6 m away {move:.1e} m")
+                  f"{np.linalg.norm(X[0] - truth):.2f} m (tau {answers[0][0]:g} s, {which}, largest sd {sd:.1f} m); "
+                  f"largest move from {args.starts} starts 1e-6 m away {move:.1e} m")
         if not args.candidates:
             continue
         sigmas, biases = learned_tau.candidates(sigma, bias_deg)
@@ -134,14 +137,15 @@ def main(argv: list[str] | None = None) -> int:
         for k, s in enumerate(sigmas):
             Xk = np.array([fit[k][0] for fit in fits])
             mv = float(np.linalg.norm(Xk[1:] - Xk[0], axis=1).max())
-            pos = "drifting" if s.position_tau_s else "white"
+            pos = "white" if s.position_tau_s is None else f"{s.position_tau_s:g} s"
             tau = "white" if s.attitude_tau_s is None else f"{s.attitude_tau_s:g} s"
             total = dataclasses.replace(s, attitude_deg=float(np.hypot(s.attitude_deg or 0.0, biases[k] or 0.0)))
             ok = learned_tau.admitted(sigma, total, *vfs[k])
-            print(f"    tau {tau:>6s}, attitude {s.attitude_deg or 0:.3g} deg, bias {biases[k] or 0:.3g} deg, position "
-                  f"{pos:8s}: {np.linalg.norm(Xk[0] - truth):8.2f} m, log L {lls[k][0]:9.1f}, variance factors "
-                  f"{vfs[k][0]:.3g} / {vfs[k][1]:.3g}{'' if ok else ' (not admitted)'}, largest move {mv:.1e} m, "
-                  f"iterations {sorted({fit[k][1] for fit in fits})}, status {sorted({fit[k][2] for fit in fits})}")
+            print(f"    attitude tau {tau:>6s}, attitude {s.attitude_deg or 0:.3g} deg, bias {biases[k] or 0:.3g} deg, "
+                  f"position tau {pos:>6s}: {np.linalg.norm(Xk[0] - truth):8.2f} m, log L {lls[k][0]:9.1f}, "
+                  f"variance factors {vfs[k][0]:.3g} / {vfs[k][1]:.3g}{'' if ok else ' (not admitted)'}, "
+                  f"largest move {mv:.1e} m, iterations {sorted({fit[k][1] for fit in fits})}, "
+                  f"status {sorted({fit[k][2] for fit in fits})}")
     print(f"largest move: {largest[0]:.1e} m ({largest[1]})")
     return 0
 

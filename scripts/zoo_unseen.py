@@ -330,16 +330,17 @@ def _mle_extras(est) -> dict:
             "start": starts.get("chosen"), "not_determined": starts.get("not_determined"),
             "cov_inflation": fit.get("covariance_inflation"), "disagree": starts.get("disagree"),
             "bias_deg": [round(bias[k], 3) for k in ("u_deg", "v_deg", "u_prior_deg")] if bias else None,
-            "learned_tau_s": _learned_tau_words(ex.get("error_model")),
+            "learned_tau_s": _learned(ex.get("error_model"))[0], "learned_drifts": _learned(ex.get("error_model"))[1],
             "learned_attitude_deg": (ex.get("error_model") or {}).get("attitude_deg")}
 
 
-def _learned_tau_words(model: dict | None) -> str | None:
-    """The learned drift model's correlation time and which errors drift (a: attitude, p: position), e.g. 80s(p)."""
+def _learned(model: dict | None) -> tuple:
+    """The learned drift model's correlation time (s) and which errors drift ("a": attitude, "p": position, "ap"),
+    or (None, None)."""
     if not model:
-        return None
+        return None, None
     a, p = model.get("attitude_tau_s"), model.get("position_tau_s")
-    return f"{a if a is not None else p:g}s({'a' if a is not None else ''}{'p' if p is not None else ''})"
+    return (a if a is not None else p), ("a" if a is not None else "") + ("p" if p is not None else "")
 
 
 def evaluate(f: UnseenFlight, timeout_s: float, mle_options: dict | None = None) -> dict:
@@ -387,7 +388,8 @@ def _fmt_row(r: dict) -> str:
     mx = r.get("mle", {})
     vf = mx.get("variance_factors") or {}
     chi2 = "-" if mx.get("chi2") is None else f"{mx['chi2']:.0f}/{mx['chi2_dof']:.0f} p={mx['chi2_p']:.2g}"
-    tau = "-" if mx.get("learned_tau_s") is None else f"{mx['learned_tau_s']}/{mx['learned_attitude_deg']:.2f}deg"
+    tau = ("-" if mx.get("learned_tau_s") is None else
+           f"{mx['learned_tau_s']:g}s({mx['learned_drifts']})/{mx['learned_attitude_deg']:.2f}deg")
     acf = "-" if mx.get("autocorrelation_pixel") is None else f"{mx['autocorrelation_pixel']:.2f}"
     extra = (f" [{mx.get('status')} start={mx.get('start')} vf={vf.get('pixel', 1):.3g}/{vf.get('range', 1):.3g} "
              f"chi2/dof={chi2} acf_pix={acf} rej={mx.get('rejected')} bias(u,v,prior)={mx.get('bias_deg')} "

@@ -175,7 +175,8 @@ def test_drifting_errors_get_a_correlation_time_learned_from_the_flight():
         e = est.position_m - obs.truth_m
         inside.append(e @ np.linalg.solve(est.covariance_m2, e) <= 7.81)
         if "error_model" in est.extras:
-            taus.append(est.extras["error_model"]["attitude_tau_s"])
+            model = est.extras["error_model"]
+            taus.append(model["attitude_tau_s"] or model["position_tau_s"])
             assert est.extras["fit"]["autocorrelation_pixel"] is not None
     assert len(taus) >= 20 and 10.0 <= np.median(taus) <= 80.0
     assert np.mean(inside) >= 0.85

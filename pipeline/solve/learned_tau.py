@@ -79,17 +79,18 @@ def log_likelihoods(st: Stacked, Xs: np.ndarray, sigmas: list, vfs: list, biases
 
 def candidates(sigma: Sigma, bias_deg: float | None = None) -> tuple[list[Sigma], list]:
     """The models weighed by evidence and their boresight bias priors (deg, None: none). sigma under each model of
-    the (attitude_tau_s, attitude_deg, position_tau_s) grid: the stated attitude sigma, or ATTITUDE_GRID_DEG where
-    none is stated; the position error drifting with the attitude's tau, or (where the sigma states a position
-    accuracy) white: a GNSS error that wanders with the attitude's tau moves the target as a shared offset, one
-    that does not must not be modelled so (zoo flight z024: 22.5 m tied, 5.2 m white, the white family 4.6 log
-    units likelier); and (where the sigma states a position accuracy) the GNSS error alone drifting, the attitude
-    white: a GNSS drift or multipath step under a steady gimbal (`scripts/zoo.py`'s gnss_drift,
-    `scripts/zoo_unseen.py`'s gnss_step). Then the white models (no correlation time: the tau -> 0 end of the
-    grid), per attitude sigma without a bias and, given bias_deg (the model of `mle`'s first answer: white errors
-    and a bias whose size the flight decides), with a bias of prior phi bias_deg for phi in WHITE_BIAS_PHI, the
-    attitude's frame-to-frame part sqrt(1 - phi^2) of the stated one (all of it where none is stated). The split
-    is taken also where `mle`'s first answer takes none (where its pixel residuals drift)."""
+    the grid of which errors drift x attitude sigma x correlation time (TAU_GRID_S): the stated attitude sigma, or
+    ATTITUDE_GRID_DEG where none is stated; the attitude and position errors drifting with one tau; and, where the
+    sigma states a position accuracy, the attitude's alone (the position white: a GNSS error that does not wander
+    with the attitude must not be modelled as a shared offset; zoo flight z024: 22.5 m tied, 5.2 m white, the white
+    family 4.6 log units likelier) or the position's alone (the attitude white: a GNSS drift or multipath step under
+    a steady gimbal, `scripts/zoo.py`'s gnss_drift, `scripts/zoo_unseen.py`'s gnss_step). Then the white models (no
+    correlation time: the tau -> 0 end of the grid), per attitude sigma without a bias and, given bias_deg (the
+    model of `mle`'s first answer: white errors and a bias whose size the flight decides), with a bias of prior phi
+    bias_deg for phi in WHITE_BIAS_PHI, the attitude's frame-to-frame part sqrt(1 - phi^2) of the stated one (all
+    of it where none is stated). The split is taken also where `mle`'s first answer takes none (where its pixel
+    residuals drift). Every model has the same prior: with 21 drifting models against 3 white ones (everything
+    stated), the white ones start with 1/8 of the prior."""
     atts = (sigma.attitude_deg,) if sigma.attitude_deg else ATTITUDE_GRID_DEG
     # which errors drift: (attitude, position) both, the attitude alone, the position alone
     kinds = ((True, True), (True, False), (False, True)) if sigma.position_m else ((True, True),)

@@ -103,7 +103,8 @@ def main(argv: list[str] | None = None) -> int:
         est = solve("mle", obs)
         err = float(np.linalg.norm(est.position_m - truth))
         if not calls:
-            print(f"{name}: mle {err:.2f} m, learned step not called (no drift, chi-square not too small)")
+            print(f"{name}: mle {err:.2f} m, learned step not called (no drift, chi-square not too small, "
+                  "variance factors admitted)")
             continue
         sts, X0s, sigma, robust, vce, tol_m, itmax, bias_deg = (*calls[0], None)[:8]
         starts = _starts(np.asarray(X0s, dtype=np.float64), args.starts)

@@ -246,7 +246,8 @@ def _terrain_start(st: Stacked, fn) -> tuple[np.ndarray, np.ndarray]:
 def _mle_dispatch(st: Stacked, o: dict):
     """`mle.mle` on the batch; for one problem whose sigma has correlation times (a non-diagonal residual
     covariance) that white fit, then the GLS fit of the configured model from it (`_configured_tau`); else the
-    error model chosen by evidence (`_with_learned_tau`) where the residuals drift or the chi-square is too small."""
+    error model chosen by evidence (`_with_learned_tau`) where the residuals drift, the chi-square is too small or
+    the variance components need a stated sigma beyond 3 x."""
     x0, init_status, sigma, vce = _mle_start(st, o)
     robust, tol, itmax = o.get("robust", _mle.DEFAULT_ROBUST), o["tol_m"], o["max_iterations"]
     bias_deg, size_unknown = _mle.bias_prior_deg(sigma, o)  # configured correlation times win, even vanishing ones
@@ -321,16 +322,20 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
                       bias_deg: float | None = None) -> tuple:
     """res with each problem's answer replaced by the learned drift model's (`learned_tau.learn_tau` with res's
     model, white errors and a boresight bias of prior bias_deg, among the candidates; `_learned_answer`) where
-    the first fit's residuals drift or its chi-square is below its lower CHI2_ALPHA tail (the stated errors do not
-    show from frame to frame: they are slow, or smaller), it has real timestamps and the configured sigma gives no
-    correlation time; not with a terrain prior (the drift model takes none)."""
+    the first fit's residuals drift, its chi-square is below its lower CHI2_ALPHA tail (the stated errors do not
+    show from frame to frame: they are slow, or smaller) or its variance components need a stated sigma beyond
+    `starts.MAX_OVER_STATED` times (the rule every candidate is held to, `learned_tau.admitted`: a white fit that
+    puts the ranges' sigma at 17 x the stated explains them away), it has real timestamps and the configured sigma
+    gives no correlation time; not with a terrain prior (the drift model takes none)."""
     if st.t_ns is None or not size_unknown or o.get("terrain") is not None:
         return res
     ex, t = res[5], st.t_ns
     span = t.max(axis=1) - t.min(axis=1) if t.shape[1] > 1 else np.zeros(st.size, dtype=np.int64)
     too_small = np.isfinite(ex["chi2_p"]) & (ex["chi2_p"] > 1.0 - fit_checks.CHI2_ALPHA)
-    need = np.flatnonzero(np.isfinite(res[0]).all(axis=1) & (ex["drift_pixel"] | ex["drift_range"] | too_small)
-                          & (span >= REAL_TIMES_NS))
+    inadmissible = np.array([not _learned.admitted(sigma, sigma, float(vp), float(vr)) for vp, vr in
+                             zip(ex["variance_factor_pixel"], ex["variance_factor_range"], strict=True)])
+    need = np.flatnonzero(np.isfinite(res[0]).all(axis=1) & (span >= REAL_TIMES_NS)
+                          & (ex["drift_pixel"] | ex["drift_range"] | too_small | inadmissible))
     if not need.size:
         return res
     sts = [_learned.without_rejected(st.take(np.array([b])), ex["rejected"][b]) for b in need]

@@ -188,3 +188,20 @@ def test_a_constant_attitude_error_is_taken_for_a_bias_when_the_bias_is_a_candid
             white[with_bias].append(got is not None and got[3] is None)
     assert np.mean(white[True]) >= 0.9
     assert np.mean(white[False]) <= 0.1
+
+
+def test_a_tracker_slip_is_found_where_the_pixels_are_off_by_one_offset():
+    """`slip_segment` on standardized pixel residuals with one run of frames off by a constant (u, v) offset of
+    1.5 sigma finds that run exactly (the zoo's mistracked runs sit at 1-5 sigma of the rows' sigma), with its
+    offset's prior sigma 3 x the rows' median sigma; on white residuals it still names the most outlying run (the
+    evidence then weighs it), never fewer than 2 frames."""
+    obs = correlated_problems(1, n=200, attitude_tau_s=None, position_tau_s=None, seed=3)[0]
+    st = Stacked.from_observations(obs)
+    rng = np.random.default_rng(4)
+    E = rng.normal(size=(200, 3))
+    E[120:150, :2] += [1.5, -1.5]
+    slip = learned_tau.slip_segment(st, E, 2.0 * E)
+    assert np.array_equal(np.flatnonzero(slip.mask), np.arange(120, 150))
+    assert slip.prior_px == pytest.approx(6.0)
+    white = learned_tau.slip_segment(st, rng.normal(size=(200, 3)), np.ones((200, 3)))
+    assert white is not None and 2 <= white.mask.sum() <= 100

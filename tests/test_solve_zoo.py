@@ -47,9 +47,11 @@ def test_mle_is_no_catastrophe(name):
 # lose to a drift without the white models with a bias among the candidates (z065, 5.0 m with them); where the
 # first answer's variance components put the ranges' sigma beyond 3 x the stated (the rule every candidate is held
 # to) and nothing else called the evidence step (s7/z183 127.4 -> 51.8 m, bound 114.4 m; s16/z099 49.5 -> 4.7 m,
-# bound 30.2 m: a range variance factor of 290 on two ranges)
+# bound 30.2 m: a range variance factor of 290 on two ranges); where a tracker slip (a run of frames on a wrong
+# feature at 1-5 sigma) read as a drift, before a slip was among the candidates (s24/z034 32.5 -> 0.8 m, bound
+# 16.4 m; s30/z027 63.4 m, bound 27.8 m)
 OTHER_SEEDS = [(1, "z150"), (2, "z024"), (1, "z019"), (0, "z162"), (3, "z003"), (5, "z065"), (7, "z183"),
-               (16, "z099")]
+               (16, "z099"), (24, "z034"), (30, "z027")]
 
 
 @pytest.mark.parametrize("seed,name", OTHER_SEEDS, ids=[f"s{s}/{n}" for s, n in OTHER_SEEDS])
@@ -84,3 +86,17 @@ def test_zoo_is_deterministic_and_as_specified():
     assert straight.obs.has_range.sum() == 2 and straight.meta["occlusion_s"] == 1.5
     gap_s = np.diff(straight.obs.t_ns).max() / 1e9
     assert 1.5 <= gap_s < 1.6
+
+
+def test_a_tracker_slip_is_reported_where_the_tracker_slipped():
+    """s24/z034 (mistracked: 32 consecutive frames on a wrong feature): mle's `tracker_slip` extra names exactly
+    those frames and its note says so."""
+    from pipeline.solve import solve
+    from pipeline.solve.mle_outputs import notes
+
+    f = _zoo().flight("z034", seed=24)
+    bad = np.flatnonzero(f.bad_pixel)
+    extras = solve("mle", f.obs).extras
+    assert extras["tracker_slip"] == {"first_observation": int(bad[0]), "last_observation": int(bad[-1]),
+                                      "observations": int(bad.size)}
+    assert any("tracker slip" in line for line in notes(extras))

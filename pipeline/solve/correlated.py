@@ -28,6 +28,14 @@ from pipeline.solve.stacked import Stacked, inverse3, pixel_model, range_model, 
 _MIN_INNOVATION = 1e-10
 
 
+@dataclass(frozen=True)
+class Slip:
+    """A tracker slip: the target's pixel off by a constant offset (u and v, each of prior sigma prior_px) over the
+    frames of mask (n,) bool, integrated out like the boresight bias (a gain column on those u and v rows)."""
+    mask: np.ndarray
+    prior_px: float
+
+
 @dataclass
 class Models:
     """K GLS residual models of one problem's rows in use (`rows_in_use`: npix pixel rows, u v interleaved, then
@@ -67,7 +75,8 @@ def problem_models(st: Stacked, X0: np.ndarray, sigmas: list, bias_deg: list | N
     the frames' times (frames with a pixel, ranged frames, each in time order). Unknown pixel / range sigmas count
     as 1 px / 1 m (variance components then scale them), like `mle.base_variances`; a part without a correlation
     time is white (on R); bias_deg (per sigma, None or 0: none): the prior sigma of a constant boresight bias
-    (pixel offsets f * angle in u and v, as `mle`'s). ValueError where the sigmas give different states."""
+    (pixel offsets f * angle in u and v, as `mle`'s), or a `Slip` (that offset on its frames only). ValueError
+    where the sigmas give different states."""
     t_ns = st.t_ns[0]
     t_s = (t_ns - t_ns.min()).astype(np.float64) * 1e-9  # differences of int64 first: no rounding of epochs
     hp, hr = st.has_pix[0], st.has_range[0]
@@ -91,8 +100,12 @@ def problem_models(st: Stacked, X0: np.ndarray, sigmas: list, bias_deg: list | N
             built.append(_group(2 * order_p + axis, np.full(k, s_px ** 2), parts, tp))
         built.append(_group(2 * k + order_r, np.full(tr.size, s_r ** 2), [(np.full(tr.size, s_pos),
                                                                             sigma.position_tau_s)], tr))
-        b = math.radians(b_deg or 0.0)
-        bias = (fx[0, hp][order_p] * b, fy[0, hp][order_p] * b, np.zeros(tr.size))
+        if isinstance(b_deg, Slip):
+            g = np.where(b_deg.mask[hp][order_p], b_deg.prior_px, 0.0)
+            bias = (g, g.copy(), np.zeros(tr.size))
+        else:
+            b = math.radians(b_deg or 0.0)
+            bias = (fx[0, hp][order_p] * b, fy[0, hp][order_p] * b, np.zeros(tr.size))
         Cii, R0 = np.empty(m), np.empty(m)
         for (g, r0, cii, _), gb in zip(built, bias, strict=True):
             Cii[g[0]], R0[g[0]] = cii + gb * gb, r0

@@ -339,8 +339,10 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
     if not need.size:
         return res
     sts = [_learned.without_rejected(st.take(np.array([b])), ex["rejected"][b]) for b in need]
+    slips = [_learned.slip_segment(s, ex["residual_sigmas"][b], ex["residuals"][b]) for s, b in zip(sts, need,
+                                                                                                    strict=True)]
     learned = _learned.learn_tau(sts, res[0][need], sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"],
-                                 o["max_iterations"], bias_deg)
+                                 o["max_iterations"], bias_deg, slips)
     for b, got in zip(need, learned, strict=True):
         row = _row(res, b)
         answer = _learned_answer(st.take(np.array([b])), row, got)

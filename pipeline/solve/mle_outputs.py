@@ -98,6 +98,11 @@ def notes(extras: dict, t_ns: np.ndarray | None = None, video_frames=None) -> li
         out.append(f"mle: the residuals drift; the {which} drifting, correlation time learned from the flight: "
                    f"{a_tau if a_tau is not None else p_tau:g} s (Gauss-Markov, largest likelihood over 5-320 s), "
                    "generalized least squares")
+    slip = extras.get("tracker_slip")
+    if slip:
+        out.append(f"mle: the pixels of observations {slip['first_observation']}-{slip['last_observation']} read as a "
+                   "tracker slip (off by one constant offset there: likelier than a drift); fitted with that offset "
+                   "free")
     bias = extras.get("boresight_bias")
     if bias:
         out.append(f"mle: boresight bias {_bias_words(bias)}")
@@ -124,9 +129,14 @@ def notes(extras: dict, t_ns: np.ndarray | None = None, video_frames=None) -> li
 
 
 def problem_extras(ex: dict, t_ns: np.ndarray) -> dict:
-    """The JSON-ready extras of one problem's kernel extras ex: fit, rejected, boresight_bias and error_model (when
-    learned)."""
+    """The JSON-ready extras of one problem's kernel extras ex: fit, rejected, boresight_bias, error_model (when
+    learned) and tracker_slip (when the evidence chose one)."""
     out = {"fit": fit_summary(ex), "rejected": rejected_observations(ex, t_ns)}
+    slip = ex.get("tracker_slip")
+    if slip is not None and slip.any():  # absent (False) for a problem without one
+        frames = np.flatnonzero(slip)
+        out["tracker_slip"] = {"first_observation": int(frames[0]), "last_observation": int(frames[-1]),
+                               "observations": int(frames.size)}
     bias = boresight_bias(ex)
     if bias is not None:
         out["boresight_bias"] = bias

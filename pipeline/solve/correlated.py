@@ -31,9 +31,11 @@ _MIN_INNOVATION = 1e-10
 @dataclass(frozen=True)
 class Slip:
     """A tracker slip: the target's pixel off by a constant offset (u and v, each of prior sigma prior_px) over the
-    frames of mask (n,) bool, integrated out like the boresight bias (a gain column on those u and v rows)."""
+    frames of mask (n,) bool, integrated out like the boresight bias (a gain column on those u and v rows); the
+    run was the likeliest of `runs` searched (its prior: one in that many)."""
     mask: np.ndarray
     prior_px: float
+    runs: int = 1
 
 
 @dataclass

@@ -53,10 +53,11 @@ def slip_segment(st: Stacked, E: np.ndarray, r: np.ndarray) -> _correlated.Slip 
     """The tracker-slip candidate of one problem (st B = 1) from its first fit's standardized residuals E (n,3) and
     residuals r (n,3) (px): the run of consecutive frames with a pixel (in time order, at least 2, at most half of
     them) whose residuals' sums (u, v) are largest for its length, |sum e_u|^2 + |sum e_v|^2 over the length (the
-    mean-shift statistic); its offset's prior sigma `starts.MAX_OVER_STATED` times the pixel rows' median sigma (an
-    error up to 3 x the stated, the admission rule's). None with fewer than 8 such frames. Every run length up to
+    mean-shift statistic); its offset's prior sigma `starts.MAX_OVER_STATED` times the pixel rows' median sigma in
+    the first fit (the admission rule's factor), and the number of runs searched (all starts and lengths; the
+    evidence gives each the same prior, `_mixture`). None with fewer than 8 such frames. Every run length up to
     SLIP_EXACT_LENGTHS, longer ones on a grid of ratio SLIP_LENGTH_STEP with the best run's ends refined: O(k) per
-    length, ~1,100 lengths at most (0.2 s on 18,000 frames)."""
+    length, ~1,100 lengths at most (0.4 s on 18,000 frames)."""
     idx = np.flatnonzero(st.has_pix[0] & np.isfinite(E[:, :2]).all(axis=1))
     idx = idx[np.argsort(st.t_ns[0][idx], kind="stable")]
     k = idx.size
@@ -84,14 +85,19 @@ def slip_segment(st: Stacked, E: np.ndarray, r: np.ndarray) -> _correlated.Slip 
         a = np.arange(max(run[0] - d, 0), run[0] + d + 1)[:, None]
         b = np.arange(run[1] - d, min(run[1] + d, k) + 1)[None, :]
         D = S[b] - S[a]
-        t = (D * D).sum(axis=-1) / (b - a)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where((b - a >= 2) & (b - a <= longest), (D * D).sum(axis=-1) / (b - a), -np.inf)
         i, j = np.unravel_index(int(np.argmax(t)), t.shape)
         run = (int(a[i, 0]), int(b[0, j]))
     with np.errstate(divide="ignore", invalid="ignore"):
         sd = np.abs(r[idx, :2] / e)
+        prior_px = _starts.MAX_OVER_STATED * float(np.nanmedian(np.where(np.isfinite(sd), sd, np.nan)))
+    if not (np.isfinite(prior_px) and prior_px > 0):
+        return None
     mask = np.zeros(st.n, dtype=bool)
     mask[idx[run[0]:run[1]]] = True
-    return _correlated.Slip(mask, _starts.MAX_OVER_STATED * float(np.nanmedian(np.where(np.isfinite(sd), sd, np.nan))))
+    runs = (longest - 1) * (k + 1) - (longest * (longest + 1) // 2 - 1)  # sum of k - L + 1 over L = 2 .. longest
+    return _correlated.Slip(mask, prior_px, runs)
 
 
 def log_likelihoods(st: Stacked, Xs: np.ndarray, sigmas: list, vfs: list, biases: list | None = None) -> list:
@@ -283,6 +289,8 @@ def _mixture(st: Stacked, stated: Sigma, sigmas: list, out: tuple, biases: list)
             continue
         key = (c.attitude_tau_s, c.attitude_deg, c.position_tau_s) + (("slip",) if slip else (biases[k],) if biases[k]
                                                                       else ())
+        if slip:  # one run of those searched, each a priori as likely: the search's price (look-elsewhere)
+            ll = ll - math.log(biases[k].runs)
         lls[key] = ll
         fits.append((ll, k, (out[0][k:k + 1], out[1][k:k + 1], out[2][k:k + 1], out[3][k:k + 1], out[4][k:k + 1],
                              {key: v[k:k + 1] for key, v in out[5].items()})))

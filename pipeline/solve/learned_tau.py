@@ -1,11 +1,13 @@
 """The telemetry errors' model (white, with a boresight bias, or drifting with a correlation time; and, where the
-sigma does not state it, their size) chosen from the flight by evidence, for `mle` on one problem whose sigma gives
-no correlation time (docs/solvers.md, "Error model learned from the flight, by evidence"): the GLS fit
-(`correlated.gls`) under every candidate of `candidates`, without the rows the first solve rejected and without
-robust weights (the first solve's loss did that job; an iteratively reweighted GLS fit descends no objective and
-wandered, docs/solvers.md), each `admitted` one weighted by its restricted (REML) Gaussian likelihood
-(`log_likelihoods`); where the white models hold half of the posterior the first answer stands, else the answer
-is the drifting models' posterior mixture, with the fit checks of the most likely one. A configured correlation
+sigma does not state it, their size; or white with a tracker slip) chosen from the flight by evidence, for `mle` on
+one problem whose sigma gives no correlation time (docs/solvers.md, "Error model learned from the flight, by
+evidence"): the GLS fit (`correlated.gls`) under every candidate of `candidates` (and the problem's
+`slip_segment`), without the rows the first solve rejected and without robust weights (the first solve's loss did
+that job; an iteratively reweighted GLS fit descends no objective and wandered, docs/solvers.md), each `admitted`
+one weighted by its restricted (REML) Gaussian likelihood (`log_likelihoods`; the slip's less the price of its
+search); where the slip is the likeliest its fit is the answer, where the white models hold half of the posterior
+the first answer stands, else the answer is the drifting models' posterior mixture, with the fit checks of the
+most likely one. A configured correlation
 time is the same fit with one model, the first solve's robust weights held (`methods._configured_tau`).
 """
 

@@ -89,6 +89,26 @@ def test_the_boresight_bias_is_integrated_out_exactly(sigma):
     np.testing.assert_allclose(sum(ld for _, ld, _ in q), np.linalg.slogdet(C)[1], rtol=1e-10)
 
 
+def test_a_tracker_slip_is_integrated_out_exactly():
+    """A `Slip` (a constant offset of prior sigma 5 px on the u and v rows of frames 3-7 only) through the same
+    Sherman-Morrison columns: the forms and log det equal the dense covariance's with that offset added."""
+    obs = correlated_problems(1, n=12, seed=4)[0]
+    st = Stacked.from_observations(obs)
+    x = obs.truth_m + np.array([3.0, -2.0, 1.0])
+    mask = np.zeros(obs.n, dtype=bool)
+    mask[3:8] = True
+    C = _hand_covariance(obs, x, CORR)
+    for i in np.flatnonzero(mask):
+        for j in np.flatnonzero(mask):
+            for a in (0, 1):
+                C[2 * i + a, 2 * j + a] += 25.0
+    A = correlated.rows_in_use(st, x)
+    models = correlated.problem_models(st, x, [CORR], [correlated.Slip(mask, 5.0, 1)])
+    q = correlated.quadratic_forms_stacked(models, A[None], np.ones((1, A.shape[0])), np.ones((1, 2)))[0]
+    np.testing.assert_allclose(sum(f for f, _, _ in q), A.T @ np.linalg.solve(C, A), rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(sum(ld for _, ld, _ in q), np.linalg.slogdet(C)[1], rtol=1e-10)
+
+
 def test_gls_minimizes_the_correlated_cost_and_reports_its_covariance():
     obs = correlated_problems(1, seed=3)[0]
     est = solve("mle", obs, sigma=CORR, robust=None, tol_m=1e-9)

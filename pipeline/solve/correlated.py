@@ -35,7 +35,7 @@ class Slip:
     run was the likeliest of `runs` searched (its prior: one in that many)."""
     mask: np.ndarray
     prior_px: float
-    runs: int = 1
+    runs: int
 
 
 @dataclass

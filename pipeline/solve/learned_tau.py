@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from pipeline.solve import bias_mixture
 from pipeline.solve import correlated as _correlated
 from pipeline.solve import starts as _starts
 from pipeline.solve.estimate import Status
@@ -28,9 +29,10 @@ from pipeline.solve.stacked import Stacked
 TAU_GRID_S = (5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0)
 #: candidate attitude sigmas (deg) where the sigma states none
 ATTITUDE_GRID_DEG = (0.01, 0.03, 0.1, 0.3, 1.0)
-#: the boresight bias's prior scale in the white candidates with a bias (`candidates`; `bias_mixture.PHI_GRID`'s
-#: middle and end)
-WHITE_BIAS_PHI = (0.5, 1.0)
+#: the boresight bias's prior scale in the white candidates with a bias (`candidates`): the first fit's grid
+#: (`bias_mixture.PHI_GRID`) without its 0 (the white model without a bias); the likelihood is sharp in phi (zoo
+#: flight s18/z128: 95 log units between phi 0.875 and 1), so a coarser grid let a drift win for want of the bias
+WHITE_BIAS_PHI = tuple(float(p) for p in bias_mixture.PHI_GRID[1:])
 #: rows of the candidates' fits side by side at most (models x problems x rows): their arrays (~750 bytes per
 #: row) stay within a few hundred MB on a 10-minute video at 30 Hz (36,600 rows: 6 models at a time, not 35;
 #: `python scripts/bench_solvers.py --scale`)
@@ -147,8 +149,8 @@ def candidates(sigma: Sigma, bias_deg: float | None = None) -> tuple[list[Sigma]
     model of `mle`'s first answer: white errors and a bias whose size the flight decides), with a bias of prior phi
     bias_deg for phi in WHITE_BIAS_PHI, the attitude's frame-to-frame part sqrt(1 - phi^2) of the stated one (all
     of it where none is stated). The split is taken also where `mle`'s first answer takes none (where its pixel
-    residuals drift). Every model has the same prior: with 21 drifting models against 3 white ones (everything
-    stated), the white ones start with 1/8 of the prior."""
+    residuals drift). Every model has the same prior: with 21 drifting models against 9 white ones (everything
+    stated), the white ones start with 3/10 of the prior."""
     atts = (sigma.attitude_deg,) if sigma.attitude_deg else ATTITUDE_GRID_DEG
     # which errors drift: (attitude, position) both, the attitude alone, the position alone
     kinds = ((True, True), (True, False), (False, True)) if sigma.position_m else ((True, True),)

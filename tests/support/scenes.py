@@ -77,11 +77,12 @@ def gauss_markov(rng: np.random.Generator, shape: tuple, t_s: np.ndarray, sigma:
 def correlated_problems(B: int, n: int = 10, gamma_deg: float = 30.0, sigma: Sigma = PAPER_SIGMA,
                         dt_s: float = 1.0, attitude_tau_s: float | None = 20.0,
                         position_tau_s: float | None = 60.0, seed: int = 0, K: np.ndarray = PAPER_K,
-                        ) -> list[Observations]:
+                        attitude_white_deg: float = 0.0) -> list[Observations]:
     """B problems on the arc geometry of `paper_batch` whose attitude (rotation vector, per axis) and platform
     position (per axis) errors are Gauss-Markov processes over the frames' times (dt_s apart) with the given
-    correlation times, like real telemetry; pixel and range noise white. The problems' sigma is `sigma`
-    without correlation times (add them to model the correlation); t_ns is set."""
+    correlation times, like real telemetry, plus white attitude noise of attitude_white_deg per axis; pixel and
+    range noise white. The problems' sigma is `sigma` without correlation times (add them to model the
+    correlation); t_ns is set."""
     rng = np.random.default_rng(seed)
     t_s = np.arange(n) * dt_s
     target = np.zeros(3)
@@ -91,6 +92,8 @@ def correlated_problems(B: int, n: int = 10, gamma_deg: float = 30.0, sigma: Sig
     pixel = project(P_true, np.broadcast_to(target, (B, n, 3))) + rng.normal(0.0, sigma.pixel_px or 0.0, (B, n, 2))
     pos_err = gauss_markov(rng, (B, 3), t_s, sigma.position_m or 0.0, position_tau_s).transpose(0, 2, 1)
     rotvec = gauss_markov(rng, (B, 3), t_s, np.deg2rad(sigma.attitude_deg or 0.0), attitude_tau_s)
+    if attitude_white_deg:
+        rotvec = rotvec + rng.normal(0.0, np.deg2rad(attitude_white_deg), rotvec.shape)
     R_err = Rotation.from_rotvec(rotvec.transpose(0, 2, 1).reshape(-1, 3)).as_matrix().reshape(B, n, 3, 3)
     meas_pos = true_pos + pos_err
     P = projection_matrix(K, R_err @ R_true, meas_pos)

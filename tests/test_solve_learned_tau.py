@@ -194,7 +194,7 @@ def test_a_bias_under_white_attitude_noise_is_taken_for_a_bias():
     """An attitude error that is part constant (0.87 of the stated sigma per axis) and part white (0.5 of it), as
     the zoo's bias family draws it: the white models with a bias on the first fit's whole grid of prior scales
     (`bias_mixture.PHI_GRID`) keep the first answer on nearly every problem. (With the scales 0.5 and 1 alone, the
-    grid before 2026-11-24, a drift won a third of them: the likelihood is sharp in the bias's scale.)"""
+    grid before 2026-11-24, a drift won 7 of 24: the likelihood is sharp in the bias's scale.)"""
     told = PAPER_SIGMA
     constant = dataclasses.replace(told, attitude_deg=0.87 * told.attitude_deg)
     white = []

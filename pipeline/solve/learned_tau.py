@@ -34,8 +34,8 @@ ATTITUDE_GRID_DEG = (0.01, 0.03, 0.1, 0.3, 1.0)
 #: flight s18/z128: 95 log units between phi 0.875 and 1), so a coarser grid let a drift win for want of the bias
 WHITE_BIAS_PHI = tuple(float(p) for p in bias_mixture.PHI_GRID[1:])
 #: rows of the candidates' fits side by side at most (models x problems x rows): their arrays (~750 bytes per
-#: row) stay within a few hundred MB on a 10-minute video at 30 Hz (36,600 rows: 6 models at a time, not 35;
-#: `python scripts/bench_solvers.py --scale`)
+#: row) stay within a few hundred MB on a 10-minute video at 30 Hz (36,600 rows: 6 models at a time, not a
+#: family's 35-45; `python scripts/bench_solvers.py --scale`)
 MODEL_ROWS_AT_ONCE = 250_000
 
 

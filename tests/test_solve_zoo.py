@@ -51,9 +51,11 @@ def test_mle_is_no_catastrophe(name):
 # feature at 1-5 sigma) read as a drift, before a slip was among the candidates (s24/z034 32.5 -> 0.8 m, bound
 # 16.4 m; s30/z027 63.4 m, bound 27.8 m); where a constant attitude error under white attitude noise (the bias
 # family) lost to a drift while the white models with a bias had the scales 0.5 and 1 only, not the first fit's
-# grid (s18/z128 34.0 -> 0.8 m, bound 15.7 m; s43/z009 101.7 -> 3.6 m, bound 70.8 m)
+# grid (s18/z128 34.0 -> 0.8 m, bound 15.7 m; s43/z009 101.7 -> 3.6 m, bound 70.8 m); where a Gauss-Markov attitude
+# drift showed in the batch-means test only, before that test called the evidence step (s3/z043 22.8 -> 6.0 m,
+# bound 18.5 m)
 OTHER_SEEDS = [(1, "z150"), (2, "z024"), (1, "z019"), (0, "z162"), (3, "z003"), (5, "z065"), (7, "z183"),
-               (16, "z099"), (24, "z034"), (30, "z027"), (18, "z128"), (43, "z009")]
+               (16, "z099"), (24, "z034"), (30, "z027"), (18, "z128"), (43, "z009"), (3, "z043")]
 
 
 @pytest.mark.parametrize("seed,name", OTHER_SEEDS, ids=[f"s{s}/{n}" for s, n in OTHER_SEEDS])

@@ -322,7 +322,8 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
                       bias_deg: float | None = None) -> tuple:
     """res with each problem's answer replaced by the learned drift model's (`learned_tau.learn_tau` with res's
     model, white errors and a boresight bias of prior bias_deg, among the candidates; `_learned_answer`) where
-    the first fit's residuals drift, its chi-square is below its lower CHI2_ALPHA tail (the stated errors do not
+    the first fit's residuals drift (at lag 1 or over blocks of frames, the batch-means test: a slow drift under
+    white noise shows in the second only), its chi-square is below its lower CHI2_ALPHA tail (the stated errors do not
     show from frame to frame: they are slow, or smaller) or its variance components need a stated sigma beyond
     `starts.MAX_OVER_STATED` times (the rule every candidate is held to, `learned_tau.admitted`: a white fit that
     puts the ranges' sigma at 17 x the stated explains them away), it has real timestamps and the configured sigma
@@ -335,7 +336,8 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
     inadmissible = np.array([not _learned.admitted(sigma, sigma, float(vp), float(vr)) for vp, vr in
                              zip(ex["variance_factor_pixel"], ex["variance_factor_range"], strict=True)])
     need = np.flatnonzero(np.isfinite(res[0]).all(axis=1) & (span >= REAL_TIMES_NS)
-                          & (ex["drift_pixel"] | ex["drift_range"] | too_small | inadmissible))
+                          & (ex["drift_pixel"] | ex["drift_range"] | ex["block_drift_pixel"] | ex["block_drift_range"]
+                             | too_small | inadmissible))
     if not need.size:
         return res
     sts = [_learned.without_rejected(st.take(np.array([b])), ex["rejected"][b]) for b in need]

@@ -260,7 +260,7 @@ def finish(m, X: np.ndarray, status: np.ndarray, iterations: np.ndarray):
     # the residuals as the fit weighs them: a run of frames the robust loss (partly) rejects is no drift
     Ew = E if wr is None else np.sqrt(wr) * E
     # a slow drift under white noise hardly shows at lag 1 but does in the means over blocks of frames (batch
-    # means): the larger factor inflates; it does not call for the learned drift model (`methods._with_learned_tau`)
+    # means): the larger factor inflates, and either test calls the evidence step (`methods._with_learned_tau`)
     # a run of consecutive frames beyond the redescending loss's full-weight zone (rejected ones included) is one
     # outlying segment (a mistracked run), not drift: left out of the lag-1 test (the batch means keep it)
     seg_pix = fit_checks.outlying_runs(ok[0] & (np.hypot(E[0], E[1]) > REDESCEND_A_PIXEL))

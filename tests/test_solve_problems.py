@@ -70,11 +70,14 @@ def _assert_same(a, b):
                                            atol=1e-12)
             ex, ey = x.extras.get("error_model"), y.extras.get("error_model")
             assert (ex is None) == (ey is None), m
-            if ex is not None:  # the same model chosen; its likelihoods to rounding (the first fit ran in a batch)
-                assert {k: v for k, v in ex.items() if k != "log_likelihood"} == \
-                    {k: v for k, v in ey.items() if k != "log_likelihood"}
+            if ex is not None:  # the same model chosen; its likelihoods and spreads to rounding (the first fit ran
+                spreads = ("log_likelihood", "models_spread_m", "model_sd_m")  # in a batch)
+                assert {k: v for k, v in ex.items() if k not in spreads} == \
+                    {k: v for k, v in ey.items() if k not in spreads}
                 np.testing.assert_allclose(list(ey["log_likelihood"].values()), list(ex["log_likelihood"].values()),
                                            rtol=1e-10)
+                np.testing.assert_allclose([ey["models_spread_m"], ey["model_sd_m"]],
+                                           [ex["models_spread_m"], ex["model_sd_m"]], rtol=1e-8, atol=1e-9)
 
 
 @pytest.mark.parametrize("options", [{}, {"mle": {"tol_m": 1e-6}, "vision": {"max_iterations": 7}}],

@@ -104,3 +104,19 @@ def test_a_tracker_slip_is_reported_where_the_tracker_slipped():
     assert extras["tracker_slip"] == {"first_observation": int(bad[0]), "last_observation": int(bad[-1]),
                                       "observations": int(bad.size)}
     assert any("tracker slip" in line for line in notes(extras))
+
+
+def test_a_flight_that_does_not_pin_down_its_error_model_says_so():
+    """s33/z141 (no ranges; Gauss-Markov attitude): the likely drift models' answers spread 117 m, more than each
+    one's own 65 m; the error_model extra gives both and a note says the answer is their average. On z001 (seed 0)
+    one model's uncertainty dominates: no such note."""
+    from pipeline.solve import solve
+    from pipeline.solve.mle_outputs import notes
+
+    spread = solve("mle", _zoo().flight("z141", seed=33).obs).extras
+    model = spread["error_model"]
+    assert model["models_spread_m"] > model["model_sd_m"] > 0
+    assert any("does not pin down its error model" in line for line in notes(spread))
+    tight = solve("mle", _zoo().flight("z001", seed=0).obs).extras
+    assert tight["error_model"]["models_spread_m"] < tight["error_model"]["model_sd_m"]
+    assert not any("does not pin down" in line for line in notes(tight))

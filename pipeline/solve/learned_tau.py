@@ -319,7 +319,9 @@ def _mixture(st: Stacked, stated: Sigma, sigmas: list, out: tuple, biases: list)
     covs = np.array([f[2][4][0] for f in fits])
     Xm = post @ Xs
     d = Xs - Xm
-    cov = np.einsum("k,kij->ij", post, covs + d[:, :, None] * d[:, None, :])
+    within = np.einsum("k,kij->ij", post, covs)
+    between = np.einsum("k,ki,kj->ij", post, d, d)  # the spread of the models' answers
+    cov = within + between
     best = sigmas[k_best]
     a_tau, p_tau, att = best.attitude_tau_s, best.position_tau_s, best.attitude_deg
     tau = a_tau if a_tau is not None else p_tau  # the drifting errors' (one tau when both drift)
@@ -327,8 +329,15 @@ def _mixture(st: Stacked, stated: Sigma, sigmas: list, out: tuple, biases: list)
           "error_model_attitude_tau_s": np.array([np.nan if a_tau is None else a_tau]),
           "error_model_position_tau_s": np.array([np.nan if p_tau is None else p_tau]),
           "error_model_log_likelihoods": np.array([[lls.get((t if a_tau else None, att, t if p_tau else None), np.nan)
-                                                    for t in TAU_GRID_S]])}
+                                                    for t in TAU_GRID_S]]),
+          "error_model_spread_m": np.array([_largest_sd(between)]),
+          "error_model_within_m": np.array([_largest_sd(within)])}
     return tau, att, lls, (Xm[None], it, status, cond, cov[None], ex)
+
+
+def _largest_sd(cov: np.ndarray) -> float:
+    """The largest standard deviation (m) of a (3,3) covariance: the square root of its largest eigenvalue."""
+    return float(np.sqrt(max(np.linalg.eigvalsh(cov)[-1], 0.0)))
 
 
 def _no_drift(attitude_deg: float | None) -> dict:
@@ -336,4 +345,5 @@ def _no_drift(attitude_deg: float | None) -> dict:
     nan = np.array([np.nan])
     return {"error_model_tau_s": nan, "error_model_attitude_deg": np.array([attitude_deg or np.nan]),
             "error_model_attitude_tau_s": nan, "error_model_position_tau_s": nan,
-            "error_model_log_likelihoods": np.full((1, len(TAU_GRID_S)), np.nan)}
+            "error_model_log_likelihoods": np.full((1, len(TAU_GRID_S)), np.nan),
+            "error_model_spread_m": nan, "error_model_within_m": nan}

@@ -98,6 +98,11 @@ def notes(extras: dict, t_ns: np.ndarray | None = None, video_frames=None) -> li
         out.append(f"mle: the residuals drift; the {which} drifting, correlation time learned from the flight: "
                    f"{a_tau if a_tau is not None else p_tau:g} s (Gauss-Markov, largest likelihood over 5-320 s), "
                    "generalized least squares")
+        spread, own = model.get("models_spread_m"), model.get("model_sd_m")
+        if spread is not None and own is not None and spread > own:
+            out.append(f"mle: the flight does not pin down its error model: the answers of the likely drift models "
+                       f"spread {spread:.1f} m (largest standard deviation), more than each one's own {own:.1f} m; "
+                       "the answer is their average and its covariance holds that spread")
     slip = extras.get("tracker_slip")
     if slip:
         out.append(f"mle: the pixels of observations {slip['first_observation']}-{slip['last_observation']} read as a "
@@ -145,6 +150,7 @@ def problem_extras(ex: dict, t_ns: np.ndarray) -> dict:
             "attitude_tau_s": _f(ex["error_model_attitude_tau_s"]),
             "position_tau_s": _f(ex["error_model_position_tau_s"]),
             "attitude_deg": float(ex["error_model_attitude_deg"]), "chosen_by": "likelihood",
+            "models_spread_m": _f(ex["error_model_spread_m"]), "model_sd_m": _f(ex["error_model_within_m"]),
             "log_likelihood": {f"{t:g}": _f(v) for t, v in zip(TAU_GRID_S, ex["error_model_log_likelihoods"],
                                                                  strict=True)}}
     return out

@@ -192,7 +192,9 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
     tuple of that model with the drifting models' posterior mean estimate and mixture covariance (the spread between
     them included), its fit checks and extras, and error_model_tau_s, error_model_attitude_deg,
     error_model_attitude_tau_s and error_model_position_tau_s (NaN: white), error_model_log_likelihoods over TAU_GRID_S
-    at its attitude sigma and with the same errors drifting). lls: {(attitude tau, att, position tau), or (None, att,
+    at its attitude sigma and with the same errors drifting, error_model_spread_m and error_model_within_m (m: the
+    largest standard deviation of the models' answers about their mean, and of their own covariances' posterior
+    mean)). lls: {(attitude tau, att, position tau), or (None, att,
     None, bias_deg) for a white model with a bias, or (None, att, None, "slip"): log L} of the admitted models. slips:
     per problem its `slip_segment` (None: no slip candidate), weighed with the others less log of the runs searched;
     where it is the likeliest admitted model the answer is (None, its attitude_deg, lls, its `correlated.gls` result
@@ -319,9 +321,8 @@ def _mixture(st: Stacked, stated: Sigma, sigmas: list, out: tuple, biases: list)
     covs = np.array([f[2][4][0] for f in fits])
     Xm = post @ Xs
     d = Xs - Xm
-    within = np.einsum("k,kij->ij", post, covs)
-    between = np.einsum("k,ki,kj->ij", post, d, d)  # the spread of the models' answers
-    cov = within + between
+    cov = np.einsum("k,kij->ij", post, covs + d[:, :, None] * d[:, None, :])
+    within = np.einsum("k,kij->ij", post, covs)  # the models' own uncertainty; the rest is their answers' spread
     best = sigmas[k_best]
     a_tau, p_tau, att = best.attitude_tau_s, best.position_tau_s, best.attitude_deg
     tau = a_tau if a_tau is not None else p_tau  # the drifting errors' (one tau when both drift)
@@ -330,7 +331,7 @@ def _mixture(st: Stacked, stated: Sigma, sigmas: list, out: tuple, biases: list)
           "error_model_position_tau_s": np.array([np.nan if p_tau is None else p_tau]),
           "error_model_log_likelihoods": np.array([[lls.get((t if a_tau else None, att, t if p_tau else None), np.nan)
                                                     for t in TAU_GRID_S]]),
-          "error_model_spread_m": np.array([_largest_sd(between)]),
+          "error_model_spread_m": np.array([_largest_sd(np.einsum("k,ki,kj->ij", post, d, d))]),
           "error_model_within_m": np.array([_largest_sd(within)])}
     return tau, att, lls, (Xm[None], it, status, cond, cov[None], ex)
 

@@ -101,8 +101,9 @@ def notes(extras: dict, t_ns: np.ndarray | None = None, video_frames=None) -> li
         spread, own = model.get("models_spread_m"), model.get("model_sd_m")
         if spread is not None and own is not None and spread > own:
             out.append(f"mle: the flight does not pin down its error model: the answers of the likely drift models "
-                       f"spread {spread:.1f} m (largest standard deviation), more than each one's own {own:.1f} m; "
-                       "the answer is their average and its covariance holds that spread")
+                       f"spread {spread:.1f} m (largest standard deviation), more than their own uncertainty "
+                       f"({own:.1f} m, weighted average); the answer is their average and its covariance holds that "
+                       "spread (laser ranges, or the errors' correlation times where known, would narrow it)")
     slip = extras.get("tracker_slip")
     if slip:
         out.append(f"mle: the pixels of observations {slip['first_observation']}-{slip['last_observation']} read as a "

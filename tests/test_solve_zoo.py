@@ -10,6 +10,8 @@ z104, z132: 1.6-1.7 x the bound; docs/zoo.md)."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -120,3 +122,24 @@ def test_a_flight_that_does_not_pin_down_its_error_model_says_so():
     tight = solve("mle", _zoo().flight("z001", seed=0).obs).extras
     assert tight["error_model"]["models_spread_m"] < tight["error_model"]["model_sd_m"]
     assert not any("does not pin down" in line for line in notes(tight))
+
+
+def test_zoo_compare_counts_flight_by_flight(tmp_path, capsys):
+    """scripts/zoo_compare.py (the before / after tables of docs/zoo.md) on two hand-made runs: one flight closer and
+    no longer a catastrophe, one further, one unchanged; the coverage counts e^T C^-1 e <= 7.81."""
+    from support.zoo import script
+
+    def flight(name, mle, nees, cat):
+        return {"name": name, "family": "bias", "errors_m": {"mle": mle}, "mle_nees": nees, "catastrophe": cat,
+                "bound_m": 10.0}
+    before = [flight("s0/z001", 20.0, 9.0, True), flight("s0/z002", 2.0, 1.0, False),
+              flight("s9/z003", 3.0, 1.0, False)]
+    after = [flight("s0/z001", 4.0, 2.0, False), flight("s0/z002", 5.0, 1.0, False),
+             flight("s9/z003", 3.0, 1.0, False)]
+    for name, rows in (("a.json", before), ("b.json", after)):
+        (tmp_path / name).write_text(json.dumps({"flights": rows}))
+    assert script("zoo_compare").main([str(tmp_path / "a.json"), "--after", str(tmp_path / "b.json")]) == 0
+    out = capsys.readouterr().out
+    assert "| 0-7 | 2 | 1 / 0 | 11.00 / 4.50 m | 50.0 % / 100.0 % | 2, 1 closer, sum -13 m |" in out
+    assert "| all | 3 | 1 / 0 | 3.00 / 4.00 m | 66.7 % / 100.0 % | 2, 1 closer, sum -13 m |" in out
+    assert "catastrophes gone: s0/z001" in out and "catastrophes new: -" in out

@@ -194,8 +194,8 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
     error_model_attitude_tau_s and error_model_position_tau_s (NaN: white), error_model_log_likelihoods over TAU_GRID_S
     at its attitude sigma and with the same errors drifting, error_model_spread_m and error_model_within_m (m: the
     largest standard deviation of the models' answers about their mean, and of their own covariances' posterior
-    mean)). lls: {(attitude tau, att, position tau), or (None, att,
-    None, bias_deg) for a white model with a bias, or (None, att, None, "slip"): log L} of the admitted models. slips:
+    mean)). lls: {(attitude tau, att, position tau), or (None, att, None, bias_deg) for a white model with a bias,
+    or (None, att, None, "slip"): log L} of the admitted models. slips:
     per problem its `slip_segment` (None: no slip candidate), weighed with the others less log of the runs searched;
     where it is the likeliest admitted model the answer is (None, its attitude_deg, lls, its `correlated.gls` result
     with tracker_slip (1,n) and the error-model extras NaN). The models' fits of problems with the same rows in use

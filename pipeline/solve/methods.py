@@ -24,6 +24,10 @@ from pipeline.solve_options import METHODS, NOT_IN_CONFIG, OPTIONS
 # the keyword options of each method: the config table's, plus what only code can pass (terrain: a function)
 _OPTIONS = {m: {o.name for o in OPTIONS[m]} | NOT_IN_CONFIG.get(m, frozenset()) for m in METHODS}
 _USES_PIXELS = {"dlt", "vision", "fusion-raw", "fusion", "ridge", "mle"}
+#: the white fit's boresight bias beyond this many stated attitude sigmas (the bias's largest prior) calls the
+#: evidence step: under the stated model that happens on < 5 % of flights per axis; a drift whose mean over the
+#: flight is large (a random walk, a long correlation time) does it (docs/zoo.md, "A bias beyond its prior")
+BIAS_BEYOND_STATED = 2.0
 
 
 def _check_options(method: str, options: dict) -> dict:
@@ -246,8 +250,9 @@ def _terrain_start(st: Stacked, fn) -> tuple[np.ndarray, np.ndarray]:
 def _mle_dispatch(st: Stacked, o: dict):
     """`mle.mle` on the batch; for one problem whose sigma has correlation times (a non-diagonal residual
     covariance) that white fit, then the GLS fit of the configured model from it (`_configured_tau`); else the
-    error model chosen by evidence (`_with_learned_tau`) where the residuals drift, the chi-square is too small or
-    the variance components need a stated sigma beyond 3 x."""
+    error model chosen by evidence (`_with_learned_tau`) where the residuals drift, the chi-square is too small,
+    the variance components need a stated sigma beyond 3 x or the boresight bias comes out beyond
+    BIAS_BEYOND_STATED x the stated attitude sigma."""
     x0, init_status, sigma, vce = _mle_start(st, o)
     robust, tol, itmax = o.get("robust", _mle.DEFAULT_ROBUST), o["tol_m"], o["max_iterations"]
     bias_deg, size_unknown = _mle.bias_prior_deg(sigma, o)  # configured correlation times win, even vanishing ones
@@ -266,8 +271,12 @@ def _mle_dispatch(st: Stacked, o: dict):
         res = _mle.mle(st, x0, white, robust, vce, tol, itmax, init_status, None, False)
         return _configured_tau(st, o, res, sigma, vce)
     res = _mle.mle(st, x0, white, robust, vce, tol, itmax, init_status, bias_deg, size_unknown, o.get("terrain"))
+    beyond = np.zeros(st.size, dtype=bool)
+    if bias_deg and size_unknown:
+        with np.errstate(invalid="ignore"):
+            beyond = (np.abs(res[5]["bias_deg"]) > BIAS_BEYOND_STATED * bias_deg).any(axis=1)
     res = _bias_refit(st, o, x0, init_status, white, vce, res, bias_deg, size_unknown)
-    return _with_learned_tau(st, o, res, white, vce, size_unknown, bias_deg)
+    return _with_learned_tau(st, o, res, white, vce, size_unknown, bias_deg, beyond)
 
 
 def _configured_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool) -> tuple:
@@ -319,15 +328,17 @@ def _bias_refit(st: Stacked, o: dict, x0: np.ndarray, init_status, sigma, vce: b
 
 
 def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_unknown: bool,
-                      bias_deg: float | None = None) -> tuple:
+                      bias_deg: float | None, beyond: np.ndarray) -> tuple:
     """res with each problem's answer replaced by the learned drift model's (`learned_tau.learn_tau` with res's
     model, white errors and a boresight bias of prior bias_deg, among the candidates; `_learned_answer`) where
     the first fit's residuals drift (at lag 1 or over blocks of frames, the batch-means test: a slow drift under
-    white noise shows in the second only), its chi-square is below its lower CHI2_ALPHA tail (the stated errors do not
-    show from frame to frame: they are slow, or smaller) or its variance components need a stated sigma beyond
-    `starts.MAX_OVER_STATED` times (the rule every candidate is held to, `learned_tau.admitted`: a white fit that
-    puts the ranges' sigma at 17 x the stated explains them away), it has real timestamps and the configured sigma
-    gives no correlation time; not with a terrain prior (the drift model takes none)."""
+    white noise shows in the second only), its chi-square is below its lower CHI2_ALPHA tail (the stated errors
+    do not show from frame to frame: they are slow, or smaller), its variance components need a stated sigma
+    beyond `starts.MAX_OVER_STATED` times (the rule every candidate is held to, `learned_tau.admitted`: a white
+    fit that puts the ranges' sigma at 17 x the stated explains them away) or its boresight bias came out beyond
+    BIAS_BEYOND_STATED x its largest prior (beyond (B,) bool: the mean of a drift larger than the stated attitude
+    error), it has real timestamps and the configured sigma gives no correlation time; not with a terrain prior
+    (the drift model takes none)."""
     if st.t_ns is None or not size_unknown or o.get("terrain") is not None:
         return res
     ex, t = res[5], st.t_ns
@@ -337,7 +348,7 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
                              zip(ex["variance_factor_pixel"], ex["variance_factor_range"], strict=True)])
     need = np.flatnonzero(np.isfinite(res[0]).all(axis=1) & (span >= REAL_TIMES_NS)
                           & (ex["drift_pixel"] | ex["drift_range"] | ex["block_drift_pixel"] | ex["block_drift_range"]
-                             | too_small | inadmissible))
+                             | too_small | inadmissible | beyond))
     if not need.size:
         return res
     sts = [_learned.without_rejected(st.take(np.array([b])), ex["rejected"][b]) for b in need]

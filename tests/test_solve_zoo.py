@@ -58,7 +58,10 @@ def test_mle_is_no_catastrophe(name):
 # bound 18.5 m)
 OTHER_SEEDS = [(1, "z150"), (2, "z024"), (1, "z019"), (0, "z162"), (3, "z003"), (5, "z065"), (7, "z183"),
                (16, "z099"), (24, "z034"), (30, "z027"), (18, "z128"), (43, "z009"), (3, "z043"), (67, "z080"),
-               (25, "z164")]
+               (25, "z164"), (5, "z124")]
+#: flights whose few laser ranges gave a variance factor near zero (pixel sigma unstated): far outside their
+#: ellipsoid before the stated range sigma counted in its component (`mle.VCE_PRIOR_DOF`)
+FEW_RANGES = [(40, "z183"), (42, "z083")]
 
 
 @pytest.mark.parametrize("seed,name", OTHER_SEEDS, ids=[f"s{s}/{n}" for s, n in OTHER_SEEDS])
@@ -66,6 +69,18 @@ def test_mle_is_no_catastrophe_on_flights_of_other_seeds(seed, name):
     f = _zoo().flight(name, seed=seed)
     mle, bound, _ = catastrophe_bound(f.obs)
     assert mle is not None and mle <= bound, f"s{seed}/{name} ({f.family}, {f.shape}): mle {mle} m > {bound:.1f} m"
+
+
+@pytest.mark.parametrize("seed,name", FEW_RANGES, ids=[f"s{s}/{n}" for s, n in FEW_RANGES])
+def test_a_few_ranges_do_not_shrink_the_stated_range_sigma(seed, name):
+    """s40/z183 (2 ranges; e^T C^-1 e 1,684 before) and s42/z083 (2 ranges; 408): inside the 99.9 % ellipsoid."""
+    from pipeline.solve import solve
+
+    f = _zoo().flight(name, seed=seed)
+    est = solve("mle", f.obs)
+    e = est.position_m - f.obs.truth_m
+    assert est.extras["variance_factors"]["range"] > 0.3
+    assert e @ np.linalg.solve(est.covariance_m2, e) < 16.27  # chi2_3(0.999)
 
 
 def test_zoo_is_deterministic_and_as_specified():

@@ -220,13 +220,14 @@ def quadratic_forms_stacked(sk: Models, A: np.ndarray, w: np.ndarray, vf: np.nda
 
 
 def gls(sts: list, X0s: np.ndarray, models: Models, robust: str | None, vce: bool, tol_m: float,
-        max_iterations: int, rows0: list | None = None, weights: np.ndarray | None = None):
+        max_iterations: int, rows0: list | None = None, weights: np.ndarray | None = None, prior_dof=0.0):
     """Generalized least squares `mle` of T problems (B = 1 each) with the same rows in use (the same frames with
     a pixel and with a range, in the same time order) from usable starts X0s (T,3), each under K models of its
     rows (models: T K, problem by problem), all T K fits side by side, each exactly as alone: `Correlated` through
     the one iteration and finish of `mle.run` (the loss's phases and scale guard), damped, with fixed robust
     weights (T,3,n) of the u, v and range rows (None: 1); rows0: the problems' `rows_in_use` at their starts
-    where the caller has them. Returns `mle.finish`'s tuple over the T K fits."""
+    where the caller has them; prior_dof: the variance components' prior (`mle.vce_prior_dof` of the stated
+    sigma). Returns `mle.finish`'s tuple over the T K fits."""
     T = len(sts)
     K = models.Cii.shape[0] // T
     X = np.repeat(np.asarray(X0s, dtype=np.float64).reshape(T, 3), K, axis=0)
@@ -236,7 +237,8 @@ def gls(sts: list, X0s: np.ndarray, models: Models, robust: str | None, vce: boo
         rows0 = [rows_in_use(st, X[t * K]) for t, st in enumerate(sts)]
     rows = [r for r in rows0 for _ in range(K)]
     w = None if weights is None else np.repeat(np.asarray(weights, dtype=np.float64), K, axis=0)
-    return _mle.run(Correlated(stk, models, X, vce, rows, w), stk, X, status, bad, robust, tol_m, max_iterations)
+    return _mle.run(Correlated(stk, models, X, vce, rows, w, prior_dof), stk, X, status, bad, robust, tol_m,
+                    max_iterations)
 
 
 def stack_problems(sts: list) -> Stacked:
@@ -267,7 +269,7 @@ class Correlated(_iterate.Model):
     damped = True
 
     def __init__(self, st: Stacked, models: Models, X: np.ndarray, vce: bool, rows: list,
-                 weights: np.ndarray | None = None):
+                 weights: np.ndarray | None = None, prior_dof=0.0):
         """st: problems with the same rows in use, each once per model (`gls`); X (K,3) their starts, rows the
         list of each model's rows at its start (`rows_in_use`), weights (K,3,n) of their u, v and range rows
         (None: 1)."""
@@ -277,6 +279,7 @@ class Correlated(_iterate.Model):
         self.grp = np.r_[np.zeros(models.npix, dtype=int), np.ones(m - models.npix, dtype=int)]
         self.vf, self.guard = np.ones((K, 2)), np.ones((K, 2))
         self.vce_rounds = np.zeros(K, dtype=np.int64)
+        self.prior_dof = prior_dof
         pf, rf = np.flatnonzero(st.has_pix[0]), np.flatnonzero(st.has_range[0])
         # the rows' places in the (3,n,K) residual planes: u, v of the pixel frames (interleaved), the ranged frames
         self._at = np.concatenate([(np.arange(2)[None, :] * st.n + pf[:, None]).ravel(), 2 * st.n + rf])
@@ -360,7 +363,7 @@ class Correlated(_iterate.Model):
             return again
         for j, k in enumerate(idx):
             if self.vce_rounds[k] < VCE_MAX_ROUNDS:
-                factors, usable = _vce_factors(*self._forms([k])[0])
+                factors, usable = _vce_factors(*self._forms([k])[0], self.vf[k], self.prior_dof)
                 if (usable & (np.abs(factors - 1) > VCE_TOL)).any():
                     self.vf[k] = np.where(usable, self.vf[k] * factors, self.vf[k])
                     self.vce_rounds[k] += 1
@@ -381,12 +384,13 @@ class Correlated(_iterate.Model):
         return G[:, :3, :3].copy(), G[:, 3, 3].copy()
 
 
-def _vce_factors(q, G):
+def _vce_factors(q, G, vf, prior_dof):
     """`mle.helmert` factors (2,) and usable (2,) of the pixel and range groups from the per-group forms q and their
-    sum G: a group's r^T C^-1 r over its rows with weight minus trace(N^-1 J_g^T C_g^-1 J_g)."""
+    sum G: a group's r^T C^-1 r over its rows with weight minus trace(N^-1 J_g^T C_g^-1 J_g), at the current
+    factors vf (2,), with the prior prior_dof."""
     Ninv = inverse3(G[None, :3, :3])[0][0]
     Q = [sum(f for f, _, _ in parts) for parts in (q[:2], q[2:])]
     red = [sum(n for _, _, n in parts) - float(np.sum(Ninv * Qg[:3, :3])) for parts, Qg in zip((q[:2], q[2:]), Q,
                                                                                               strict=True)]
-    f, usable = _mle.helmert(np.array([[Qg[3, 3] for Qg in Q]]), np.array([red]))
+    f, usable = _mle.helmert(np.array([[Qg[3, 3] for Qg in Q]]), np.array([red]), vf[None], prior_dof)
     return f[0], usable[0]

@@ -20,6 +20,7 @@ import numpy as np
 
 from pipeline.solve import bias_mixture
 from pipeline.solve import correlated as _correlated
+from pipeline.solve import mle as _mle
 from pipeline.solve import starts as _starts
 from pipeline.solve.estimate import Status
 from pipeline.solve.observations import Sigma
@@ -245,7 +246,8 @@ def fits(sts: list, X0: np.ndarray, sigmas: list, robust: str | None, vce: bool,
         models = _correlated.Models.concat([_correlated.problem_models(st, X0[t], [sigmas[k] for k in fam],
                                                                       [per[t][k] for k in fam])
                                             for t, st in enumerate(sts)])
-        per_family.append((fam, _correlated.gls(sts, X0, models, robust, vce, tol_m, max_iterations, rows0)))
+        per_family.append((fam, _correlated.gls(sts, X0, models, robust, vce, tol_m, max_iterations, rows0,
+                                                prior_dof=_mle.vce_prior_dof(sigmas[fam[0]]))))
     out = []
     for t in range(len(sts)):
         f_t = [None] * 6

@@ -24,9 +24,10 @@ from pipeline.solve_options import METHODS, NOT_IN_CONFIG, OPTIONS
 # the keyword options of each method: the config table's, plus what only code can pass (terrain: a function)
 _OPTIONS = {m: {o.name for o in OPTIONS[m]} | NOT_IN_CONFIG.get(m, frozenset()) for m in METHODS}
 _USES_PIXELS = {"dlt", "vision", "fusion-raw", "fusion", "ridge", "mle"}
-#: the white fit's boresight bias beyond this many stated attitude sigmas (the bias's largest prior) calls the
-#: evidence step: under the stated model that happens on < 5 % of flights per axis; a drift whose mean over the
-#: flight is large (a random walk, a long correlation time) does it (docs/zoo.md, "A bias beyond its prior")
+#: the white fit's boresight bias beyond this many stated attitude sigmas (the bias's largest prior until a misfit
+#: scales it; `mle.DEFAULT_BIAS_PRIOR_DEG` where none is stated) calls the evidence step: under the stated model
+#: that happens on ~5 % of flights at most (either axis); a drift whose mean over the flight is large (a random
+#: walk, a long correlation time) does it (docs/zoo.md, "A bias beyond its prior")
 BIAS_BEYOND_STATED = 2.0
 
 
@@ -289,7 +290,7 @@ def _configured_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool) -> tuple
     sub = _learned.without_rejected(st, res[5]["rejected"][0])
     models = _correlated.problem_models(sub, res[0][0], [sigma])
     fit = _correlated.gls([sub], res[0], models, o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"],
-                          o["max_iterations"], weights=_held(res[5], o)[None])
+                          o["max_iterations"], weights=_held(res[5], o)[None], prior_dof=_mle.vce_prior_dof(sigma))
     return _drift_answer(st, res, fit)
 
 
@@ -336,8 +337,8 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
     do not show from frame to frame: they are slow, or smaller), its variance components need a stated sigma
     beyond `starts.MAX_OVER_STATED` times (the rule every candidate is held to, `learned_tau.admitted`: a white
     fit that puts the ranges' sigma at 17 x the stated explains them away) or its boresight bias came out beyond
-    BIAS_BEYOND_STATED x its largest prior (beyond (B,) bool: the mean of a drift larger than the stated attitude
-    error), it has real timestamps and the configured sigma gives no correlation time; not with a terrain prior
+    BIAS_BEYOND_STATED x the stated attitude sigma (beyond (B,) bool: the mean of a drift larger than the stated
+    attitude error), it has real timestamps and the configured sigma gives no correlation time; not with a terrain prior
     (the drift model takes none)."""
     if st.t_ns is None or not size_unknown or o.get("terrain") is not None:
         return res

@@ -54,6 +54,10 @@ MIXTURE_RELINEARIZE_SIGMA = 0.1
 MIXTURE_MAX_ROUNDS = 5
 VCE_MAX_ROUNDS = 10
 VCE_TOL = 0.01
+#: a group's stated sigma counts as this many residuals where its variance component would shrink it (the factor
+#: at least (the group's r^T C^-1 r + VCE_PRIOR_DOF) / (its redundancy + VCE_PRIOR_DOF), in units of the stated
+#: variance), so that a handful of rows (two or three laser ranges) cannot shrink a stated sigma to nothing
+VCE_PRIOR_DOF = 4.0
 
 
 def _curvature(e: np.ndarray, robust: str) -> np.ndarray:
@@ -142,6 +146,12 @@ def base_variances(st: Stacked, X0: np.ndarray, sigma: Sigma):
     var = np.concatenate([var_pix, var_rng], axis=1)
     var = np.where(var > 0, var, 1.0)  # all sigmas zero: unit weights
     return var
+
+
+def vce_prior_dof(sigma: Sigma) -> np.ndarray:
+    """(2,) the variance components' prior degrees of freedom of the pixel and range groups: VCE_PRIOR_DOF where
+    the sigma states that group's noise (pixel_px, range_m), 0 where not (its component from the rows alone)."""
+    return VCE_PRIOR_DOF * np.array([sigma.pixel_px is not None, sigma.range_m is not None], dtype=np.float64)
 
 
 def _sum_rows(A: np.ndarray) -> np.ndarray:
@@ -332,6 +342,7 @@ class White(_iterate.Model):
         self.position_m = sigma.position_m if bias_deg and bias_size_unknown and sigma.position_m else 0.0
         self.vf = np.ones((B, 2))  # variance factors of the pixel and range groups
         self.vce_rounds = np.zeros(B, dtype=np.int64)
+        self.prior_dof = vce_prior_dof(sigma)
         self.z = np.zeros((3, B))  # the bias in prior standard deviations (u, v; the range row stays 0)
         self.guard = np.ones((B, 2))  # `robust_scale`'s factors: a misfit, unlike variance components
         self.mix = None
@@ -461,7 +472,8 @@ class White(_iterate.Model):
         J = self._reevaluate(d_idx)
         factors, usable = _vce_factors(J, take_last(self.E, d_idx), take_last(self.ok, d_idx),
                                        self.robust, None if self.a is None else take_last(self.a, d_idx),
-                                       None if self.terrain is None else _terrain_rows(self.terrain, self.X[d_idx]))
+                                       None if self.terrain is None else _terrain_rows(self.terrain, self.X[d_idx]),
+                                       self.vf[d_idx], self.prior_dof)
         more = (np.abs(factors - 1) > VCE_TOL) & usable
         again = more.any(axis=1) & (self.vce_rounds[d_idx] < VCE_MAX_ROUNDS)
         change = np.where(usable & again[:, None], factors, 1.0)
@@ -740,12 +752,12 @@ def _inverse_spd(N: np.ndarray):
     return 0.5 * (inv + np.swapaxes(inv, 1, 2)), singular
 
 
-def _vce_factors(J, E, ok, robust, a=None, terrain_rows=None):
-    """Helmert/Foerstner variance component factors (b, 2) = (sum_g w e^2) / r_g with the redundancy numbers
-    r_g = sum_g (1 - w_i h_i) over the usable rows of each group (pixels: the u and v rows, ranges; rows a
-    redescending loss rejected do not count), h_i the leverage of row i in the joint problem (target, and the
-    bias columns a when given, the terrain prior's `_terrain_rows` when given), from the standardized J (3,3,n,b),
-    E (3,n,b); and a (b, 2) flag 'usable' (redundancy of the group >= 0.5)."""
+def _vce_factors(J, E, ok, robust, a=None, terrain_rows=None, vf=None, prior_dof=0.0):
+    """Helmert/Foerstner variance component factors (b, 2) (`helmert`: sum_g w e^2 over the redundancy numbers
+    r_g = sum_g (1 - w_i h_i), with the prior prior_dof on the current factors vf (b, 2)) over the usable rows of
+    each group (pixels: the u and v rows, ranges; rows a redescending loss rejected do not count), h_i the leverage
+    of row i in the joint problem (target, and the bias columns a when given, the terrain prior's `_terrain_rows`
+    when given), from the standardized J (3,3,n,b), E (3,n,b); and a (b, 2) flag 'usable'."""
     _, w = _cost_weights(E, robust)
     N, _ = _normal(J, E, w)
     hs = _bias_terms(J, a, w) if a is not None else []
@@ -765,15 +777,22 @@ def _vce_factors(J, E, ok, robust, a=None, terrain_rows=None):
     use = ok if w is None else ok & (w > 0)
     groups = (slice(0, 2), slice(2, 3))
     return helmert(np.stack([_sum_rows(np.where(use[r], q[r], 0.0)) for r in groups], axis=1),
-                   np.stack([_sum_rows(np.where(use[r], 1.0 - lev[r], 0.0)) for r in groups], axis=1))
+                   np.stack([_sum_rows(np.where(use[r], 1.0 - lev[r], 0.0)) for r in groups], axis=1), vf, prior_dof)
 
 
-def helmert(q: np.ndarray, red: np.ndarray):
+def helmert(q: np.ndarray, red: np.ndarray, vf=None, prior_dof=0.0):
     """The one Helmert/Foerstner variance-component step of every `mle` model: factors (b,2) of the pixel and
-    range groups, each group's weighted r^T C^-1 r q (b,2) over its redundancy red (b,2) (rows with weight minus
-    the trace of their share of the hat matrix), and whether usable (redundancy >= 0.5, a finite factor > 0;
-    else 1)."""
+    range groups that multiply their current variance factors vf (b,2) (None: 1), from each group's weighted
+    r^T C^-1 r q (b,2) at those factors over its redundancy red (b,2) (rows with weight minus the trace of their
+    share of the hat matrix). A stated variance (prior_dof (2,) or (b,2) > 0, `vce_prior_dof`) is not shrunk
+    below what it gives counted as prior_dof more residuals: the new factor is the larger of vf q / red and
+    (vf q + prior_dof) / (red + prior_dof) (a few rows cannot shrink it to nothing; a group the rows say is worse
+    than stated keeps what they say: the admission rule and the loss see it). Usable: red + prior_dof >= 0.5, a
+    finite factor > 0 (else 1)."""
+    vf = np.ones_like(q) if vf is None else vf
+    n0 = np.broadcast_to(np.asarray(prior_dof, dtype=np.float64), q.shape)
     with np.errstate(divide="ignore", invalid="ignore"):
-        f = np.where(red >= 0.5, q / red, 1.0)
-    usable = (red >= 0.5) & np.isfinite(f) & (f > 0)
+        own = np.where(red >= 0.5, vf * q / red, 0.0)
+        f = np.where(red + n0 >= 0.5, np.maximum(own, (vf * q + n0) / (red + n0)) / vf, 1.0)
+    usable = (red + n0 >= 0.5) & np.isfinite(f) & (f > 0)
     return np.where(usable, f, 1.0), usable

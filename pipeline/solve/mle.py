@@ -787,12 +787,13 @@ def helmert(q: np.ndarray, red: np.ndarray, vf=None, prior_dof=0.0):
     share of the hat matrix). A stated variance (prior_dof (2,) or (b,2) > 0, `vce_prior_dof`) is not shrunk
     below what it gives counted as prior_dof more residuals: the new factor is the larger of vf q / red and
     (vf q + prior_dof) / (red + prior_dof) (a few rows cannot shrink it to nothing; a group the rows say is worse
-    than stated keeps what they say: the admission rule and the loss see it). Usable: red + prior_dof >= 0.5, a
-    finite factor > 0 (else 1)."""
+    than stated keeps what they say: the admission rule and the loss see it; with red < 0.5, as one range, the
+    second alone). Usable: red + prior_dof >= 0.5, a finite factor > 0 (else 1)."""
     vf = np.ones_like(q) if vf is None else vf
     n0 = np.broadcast_to(np.asarray(prior_dof, dtype=np.float64), q.shape)
     with np.errstate(divide="ignore", invalid="ignore"):
         own = np.where(red >= 0.5, vf * q / red, 0.0)
         f = np.where(red + n0 >= 0.5, np.maximum(own, (vf * q + n0) / (red + n0)) / vf, 1.0)
+        f = np.where(n0 > 0, f, np.where(red >= 0.5, q / red, 1.0))  # no prior: the rows' factor, to the bit
     usable = (red + n0 >= 0.5) & np.isfinite(f) & (f > 0)
     return np.where(usable, f, 1.0), usable

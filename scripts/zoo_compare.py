@@ -19,7 +19,7 @@ import json
 import statistics
 import sys
 
-CHI2_3_95 = 7.814727903251178
+from pipeline.solve.uncertainty import CHI2_3_95
 
 
 def _load(paths: list[str]) -> dict[str, dict]:

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from pipeline.solve import bias_mixture
+from pipeline.solve import bias_mixture, uncertainty
 from pipeline.solve import correlated as _correlated
 from pipeline.solve import mle as _mle
 from pipeline.solve import starts as _starts
@@ -333,14 +333,9 @@ def _mixture(st: Stacked, stated: Sigma, sigmas: list, out: tuple, biases: list)
           "error_model_position_tau_s": np.array([np.nan if p_tau is None else p_tau]),
           "error_model_log_likelihoods": np.array([[lls.get((t if a_tau else None, att, t if p_tau else None), np.nan)
                                                     for t in TAU_GRID_S]]),
-          "error_model_spread_m": np.array([_largest_sd(np.einsum("k,ki,kj->ij", post, d, d))]),
-          "error_model_within_m": np.array([_largest_sd(within)])}
+          "error_model_spread_m": uncertainty.ellipsoid(np.einsum("k,ki,kj->ij", post, d, d)[None])[0][:, -1],
+          "error_model_within_m": uncertainty.ellipsoid(within[None])[0][:, -1]}
     return tau, att, lls, (Xm[None], it, status, cond, cov[None], ex)
-
-
-def _largest_sd(cov: np.ndarray) -> float:
-    """The largest standard deviation (m) of a (3,3) covariance: the square root of its largest eigenvalue."""
-    return float(np.sqrt(max(np.linalg.eigvalsh(cov)[-1], 0.0)))
 
 
 def _no_drift(attitude_deg: float | None) -> dict:

@@ -26,8 +26,9 @@ _OPTIONS = {m: {o.name for o in OPTIONS[m]} | NOT_IN_CONFIG.get(m, frozenset()) 
 _USES_PIXELS = {"dlt", "vision", "fusion-raw", "fusion", "ridge", "mle"}
 #: the white fit's boresight bias beyond this many stated attitude sigmas (the bias's largest prior until a misfit
 #: scales it; `mle.DEFAULT_BIAS_PRIOR_DEG` where none is stated) calls the evidence step: under the stated model
-#: that happens on ~5 % of flights at most (either axis); a drift whose mean over the flight is large (a random
-#: walk, a long correlation time) does it (docs/zoo.md, "A bias beyond its prior")
+#: that happens on < 5 % of flights per axis (a prior of at most N(0, sigma^2), the posterior mean shrunk); a
+#: drift whose mean over the flight is large (a random walk, a long correlation time) does it (docs/zoo.md,
+#: "A bias beyond its prior")
 BIAS_BEYOND_STATED = 2.0
 
 

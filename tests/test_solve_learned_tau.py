@@ -5,6 +5,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from scipy.optimize import minimize_scalar
 from scipy.special import logsumexp
 
 from pipeline.solve import learned_tau
@@ -172,6 +173,27 @@ def test_a_model_that_explains_the_ranges_away_is_not_admitted():
     assert learned_tau.admitted(dataclasses.replace(told, attitude_deg=None), grid, 8.9, 1.0)
     assert not learned_tau.admitted(dataclasses.replace(told, attitude_deg=None), grid, 9.1, 1.0)
 
+
+def test_the_evidence_counts_the_variance_factors_prior_as_the_helmert_step_does():
+    """The evidence's prior on a group's variance factor lam is 0 at the stated variance and, with the rows'
+    likelihood -1/2 (q / lam + red log lam), peaks where `mle.helmert` puts a factor the rows alone would shrink:
+    (q + n0) / (red + n0). A group without the prior (sigma unstated) adds nothing at any lam."""
+    from pipeline.solve.mle import helmert
+
+    n0 = np.array([4.0, 4.0])
+    assert learned_tau._variance_prior(np.array([1.0, 1.0]), n0) == 0.0
+    assert learned_tau._variance_prior(np.array([26.0, 1.0]), n0) < -4.0  # s72/z036's ranges: about -4.6
+    assert learned_tau._variance_prior(np.array([0.0, np.inf]), np.zeros(2)) == 0.0
+    q, red = np.array([0.6, 2.0]), np.array([3.0, 2.5])  # both groups below their stated variance
+    expected, _ = helmert(q[None], red[None], prior_dof=n0)
+    for g, only in enumerate(np.eye(2)):
+
+        def minus_total(log_lam, g=g, only=only):
+            lam = np.where(only > 0, np.exp(log_lam), 1.0)
+            return 0.5 * (q[g] / lam[g] + red[g] * log_lam) - learned_tau._variance_prior(lam, n0 * only)
+
+        best = minimize_scalar(minus_total, bounds=(-5.0, 3.0), method="bounded", options={"xatol": 1e-10})
+        assert np.exp(best.x) == pytest.approx(expected[0, g], rel=1e-6)
 
 def test_a_constant_attitude_error_is_taken_for_a_bias_when_the_bias_is_a_candidate():
     """An attitude error that stands still over the flight (Gauss-Markov with tau 1e9 s), position errors white:

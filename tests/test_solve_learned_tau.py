@@ -177,7 +177,8 @@ def test_a_model_that_explains_the_ranges_away_is_not_admitted():
 def test_the_evidence_counts_the_variance_factors_prior_as_the_helmert_step_does():
     """The evidence's prior on a group's variance factor lam is 0 at the stated variance and, with the rows'
     likelihood -1/2 (q / lam + red log lam), peaks where `mle.helmert` puts a factor the rows alone would shrink:
-    (q + n0) / (red + n0). A group without the prior (sigma unstated) adds nothing at any lam."""
+    (q + n0) / (red + n0) (checked there, below the stated variance, where helmert applies it; the evidence applies
+    it on both sides). A group without the prior (sigma unstated) adds nothing at any lam."""
     from pipeline.solve.mle import helmert
 
     n0 = np.array([4.0, 4.0])
@@ -194,6 +195,21 @@ def test_the_evidence_counts_the_variance_factors_prior_as_the_helmert_step_does
 
         best = minimize_scalar(minus_total, bounds=(-5.0, 3.0), method="bounded", options={"xatol": 1e-10})
         assert np.exp(best.x) == pytest.approx(expected[0, g], rel=1e-6)
+
+
+def test_a_group_without_rows_pays_no_prior_for_its_factor():
+    """A flight without laser ranges whose sigma states the laser's: the range group's variance factor scales no
+    row of C, and the evidence adds no prior for it (a model is not penalized for a factor nothing measured)."""
+    obs = correlated_problems(1, n=40, attitude_tau_s=TRUE_TAU_S, position_tau_s=TRUE_TAU_S, seed=3)[0]
+    obs = dataclasses.replace(obs, range_m=np.full_like(obs.range_m, np.nan), sigma=PAPER_SIGMA)
+    st = Stacked.from_observations(obs)
+    drifting = dataclasses.replace(PAPER_SIGMA, attitude_tau_s=TRUE_TAU_S, position_tau_s=TRUE_TAU_S)
+    X = obs.truth_m[None] + 1.0
+    at_one, at_thirty = (learned_tau.log_likelihoods(st, X, [drifting], [[1.0, vr]])[0][0] for vr in (1.0, 30.0))
+    assert np.isfinite(at_one) and at_thirty == at_one
+    with_pixels_off = learned_tau.log_likelihoods(st, X, [drifting], [[30.0, 1.0]])[0][0]
+    assert with_pixels_off < at_one  # the pixel group has rows: its factor counts
+
 
 def test_a_constant_attitude_error_is_taken_for_a_bias_when_the_bias_is_a_candidate():
     """An attitude error that stands still over the flight (Gauss-Markov with tau 1e9 s), position errors white:

@@ -4,8 +4,8 @@ one problem whose sigma gives no correlation time (docs/solvers.md, "Error model
 evidence"): the GLS fit (`correlated.gls`) under every candidate of `candidates` (and the problem's
 `slip_segment`), without the rows the first solve rejected and without robust weights (the first solve's loss did
 that job; an iteratively reweighted GLS fit descends no objective and wandered, docs/solvers.md), each `admitted`
-one weighted by its restricted (REML) Gaussian likelihood (`log_likelihoods`; the slip's less the price of its
-search); where the slip is the likeliest its fit is the answer, where the white models hold half of the posterior
+one weighted by its restricted (REML) Gaussian likelihood and the prior of its variance factors (`log_likelihoods`;
+the slip's less the price of its search); where the slip is the likeliest its fit is the answer, where the white models hold half of the posterior
 the first answer stands, else the answer is the drifting models' posterior mixture, with the fit checks of the
 most likely one. A configured correlation time is the same fit with one model, the first solve's robust weights
 held (`methods._configured_tau`).
@@ -106,16 +106,17 @@ def slip_segment(st: Stacked, E: np.ndarray, r: np.ndarray) -> _correlated.Slip 
 
 
 def log_likelihoods(st: Stacked, Xs: np.ndarray, sigmas: list, vfs: list, biases: list | None = None) -> list:
-    """(restricted log L, chi-square r^T C^-1 r, rows m) of one problem at K points Xs (K,3), each under its sigma (and
+    """(restricted log L plus the variance factors' prior, chi-square r^T C^-1 r, rows m) of one problem at K points Xs (K,3), each under its sigma (and
     boresight bias prior, deg, or `correlated.Slip`: biases, None: none) and variance factors vf (2,) scaling the pixel
     and range blocks of C (models with the same parts: the candidates), in one `correlated.quadratic_forms_stacked`;
     every row at full weight (the same data under every model); C's overall scale k = max(chi2 / m, 1) (the stated
     sigmas a lower bound: with sigmas stated too small, a model is not chosen for hiding the misfit in the target).
     A group with rows whose noise sigma is stated adds the log prior of the variance factor lam = vf k at which C
-    takes it: the stated variance counted as n0 = `mle.VCE_PRIOR_DOF` pseudo-residuals (the prior whose mode
-    `mle.helmert` computes), -n0/2 (log lam + 1/lam - 1), 0 at lam = 1; a model that fits only with a stated sigma
-    several times larger pays for it (zoo flight s72/z036: the position drifting with the attitude, its ranges'
-    variance at 26 x the stated, 65 m off, was the likeliest model by 1 log unit)."""
+    takes it: the stated variance counted as n0 = `mle.VCE_PRIOR_DOF` pseudo-residuals, -n0/2 (log lam + 1/lam - 1),
+    0 at lam = 1 (the prior `mle.helmert` uses as a floor on a stated variance, here in both directions); a model
+    that fits only with a stated sigma several times larger pays for it (zoo flight s72/z036: the position drifting
+    with the attitude, its ranges' variance at 26 x the stated, its own fit 65 m off and the answer 45.9 m, was the
+    likeliest model by 1 log unit). The first value returned includes that prior."""
     vfs = np.asarray(vfs, dtype=np.float64).reshape(-1, 2)
     biases = biases or [None] * len(sigmas)
     qs: list = [None] * len(sigmas)
@@ -147,7 +148,8 @@ def log_likelihoods(st: Stacked, Xs: np.ndarray, sigmas: list, vfs: list, biases
 def _variance_prior(lam: np.ndarray, n0: np.ndarray) -> float:
     """The log prior (0 at lam = 1) of the variance factors lam (2,) of the pixel and range groups, each group's
     stated variance counted as n0 (2,) pseudo-residuals (0: no prior), in log lam: its maximum is at lam = 1 and,
-    with the rows' likelihood, at `mle.helmert`'s (r^T C^-1 r + n0) / (redundancy + n0)."""
+    with the rows' likelihood, at (r^T C^-1 r + n0) / (redundancy + n0), the floor `mle.helmert` puts under a
+    stated variance."""
     with np.errstate(divide="ignore", invalid="ignore"):
         terms = -n0 / 2 * (np.log(lam) + 1 / lam - 1)
     return float(np.where(n0 > 0, terms, 0.0).sum())
@@ -202,7 +204,7 @@ def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce:
     """Per problem of sts (B = 1 each, without their rejected rows), from its start X0s[i] (3,): the GLS `mle` fit under
     every model of `candidates(sigma, bias_deg)` (correlation time, which errors drift, the white models with and
     without a boresight bias, attitude sigma where unstated), each `admitted` one weighted by its restricted likelihood
-    (equal priors). Each answer is None when no model was admitted with an answer; (None, attitude_deg of the likeliest
+    with its variance factors' prior (`log_likelihoods`; equal priors on the models). Each answer is None when no model was admitted with an answer; (None, attitude_deg of the likeliest
     white model, lls, None) where the white models hold at least half of the posterior (the first answer stands); else
     (tau_s of the likeliest drifting model (its drifting errors'), its attitude_deg, lls, the `correlated.gls` result
     tuple of that model with the drifting models' posterior mean estimate and mixture covariance (the spread between

@@ -1,13 +1,13 @@
-"""The telemetry errors' model (white, with a boresight bias, or drifting with a correlation time; and, where the
-sigma does not state it, their size; or white with a tracker slip) chosen from the flight by evidence, for `mle` on
-one problem whose sigma gives no correlation time (docs/solvers.md, "Error model learned from the flight, by
-evidence"): the GLS fit (`correlated.gls`) under every candidate of `candidates` (and the problem's
-`slip_segment`), without the rows the first solve rejected and without robust weights (the first solve's loss did
-that job; an iteratively reweighted GLS fit descends no objective and wandered, docs/solvers.md), each `admitted`
-one weighted by its restricted (REML) Gaussian likelihood and the prior of its variance factors (`log_likelihoods`;
-the slip's less the price of its search); where the slip is the likeliest its fit is the answer, where the white models hold half of the posterior
-the first answer stands, else the answer is the drifting models' posterior mixture, with the fit checks of the
-most likely one. A configured correlation time is the same fit with one model, the first solve's robust weights
+"""The telemetry errors' model (white, with a boresight bias, or drifting with a correlation time; and, where the sigma
+does not state it, their size; or white with a tracker slip) chosen from the flight by evidence, for `mle` on one
+problem whose sigma gives no correlation time (docs/solvers.md, "Error model learned from the flight, by evidence"):
+the GLS fit (`correlated.gls`) under every candidate of `candidates` (and the problem's `slip_segment`), without the
+rows the first solve rejected and without robust weights (the first solve's loss did that job; an iteratively
+reweighted GLS fit descends no objective and wandered, docs/solvers.md), each `admitted` one weighted by its
+restricted (REML) Gaussian likelihood and the prior of its variance factors (`log_likelihoods`; the slip's less the
+price of its search); where the slip is the likeliest its fit is the answer, where the white models hold half of the
+posterior the first answer stands, else the answer is the drifting models' posterior mixture, with the fit checks of
+the most likely one. A configured correlation time is the same fit with one model, the first solve's robust weights
 held (`methods._configured_tau`).
 """
 
@@ -106,11 +106,12 @@ def slip_segment(st: Stacked, E: np.ndarray, r: np.ndarray) -> _correlated.Slip 
 
 
 def log_likelihoods(st: Stacked, Xs: np.ndarray, sigmas: list, vfs: list, biases: list | None = None) -> list:
-    """(restricted log L plus the variance factors' prior, chi-square r^T C^-1 r, rows m) of one problem at K points Xs (K,3), each under its sigma (and
-    boresight bias prior, deg, or `correlated.Slip`: biases, None: none) and variance factors vf (2,) scaling the pixel
-    and range blocks of C (models with the same parts: the candidates), in one `correlated.quadratic_forms_stacked`;
-    every row at full weight (the same data under every model); C's overall scale k = max(chi2 / m, 1) (the stated
-    sigmas a lower bound: with sigmas stated too small, a model is not chosen for hiding the misfit in the target).
+    """(restricted log L plus the variance factors' prior, chi-square r^T C^-1 r, rows m) of one problem at K points
+    Xs (K,3), each under its sigma (and boresight bias prior, deg, or `correlated.Slip`: biases, None: none) and
+    variance factors vf (2,) scaling the pixel and range blocks of C (models with the same parts: the candidates),
+    in one `correlated.quadratic_forms_stacked`; every row at full weight (the same data under every model); C's
+    overall scale k = max(chi2 / m, 1) (the stated sigmas a lower bound: with sigmas stated too small, a model is
+    not chosen for hiding the misfit in the target).
     A group with rows whose noise sigma is stated adds the log prior of the variance factor lam = vf k at which C
     takes it: the stated variance counted as n0 = `mle.VCE_PRIOR_DOF` pseudo-residuals, -n0/2 (log lam + 1/lam - 1),
     0 at lam = 1 (the prior `mle.helmert` uses as a floor on a stated variance, here in both directions); a model
@@ -201,26 +202,26 @@ def _families(sigmas: list, rows: int) -> list:
 
 def learn_tau(sts: list, X0s: np.ndarray, sigma: Sigma, robust: str | None, vce: bool, tol_m: float,
               max_iterations: int, bias_deg: float | None = None, slips: list | None = None) -> list:
-    """Per problem of sts (B = 1 each, without their rejected rows), from its start X0s[i] (3,): the GLS `mle` fit under
-    every model of `candidates(sigma, bias_deg)` (correlation time, which errors drift, the white models with and
-    without a boresight bias, attitude sigma where unstated), each `admitted` one weighted by its restricted likelihood
-    with its variance factors' prior (`log_likelihoods`; equal priors on the models). Each answer is None when no model was admitted with an answer; (None, attitude_deg of the likeliest
-    white model, lls, None) where the white models hold at least half of the posterior (the first answer stands); else
-    (tau_s of the likeliest drifting model (its drifting errors'), its attitude_deg, lls, the `correlated.gls` result
-    tuple of that model with the drifting models' posterior mean estimate and mixture covariance (the spread between
-    them included), its fit checks and extras, and error_model_tau_s, error_model_attitude_deg,
-    error_model_attitude_tau_s and error_model_position_tau_s (NaN: white), error_model_log_likelihoods over TAU_GRID_S
-    at its attitude sigma and with the same errors drifting, error_model_spread_m and error_model_within_m (m: the
-    largest standard deviation of the models' answers about their mean, and of their own covariances' posterior
-    mean)). lls: {(attitude tau, att, position tau), or (None, att, None, bias_deg) for a white model with a bias,
-    or (None, att, None, "slip"): log L} of the admitted models. slips:
-    per problem its `slip_segment` (None: no slip candidate), weighed with the others less log of the runs searched;
-    where it is the likeliest admitted model the answer is (None, its attitude_deg, lls, its `correlated.gls` result
-    with tracker_slip (1,n) and the error-model extras NaN). The models' fits of problems with the same rows in use
-    iterate side by side (each as alone: `correlated.gls`). The fits are damped GLS on the rows the first solve kept,
-    every row at weight 1 (the robust loss's phases and scale guard kept, `correlated.gls`); robust weights updated on
-    the rows' marginal residuals under a correlated C are a fixed-point map with no objective, which from starts 1e-6 m
-    apart ended metres to kilometres apart."""
+    """Per problem of sts (B = 1 each, without their rejected rows), from its start X0s[i] (3,): the GLS `mle` fit
+    under every model of `candidates(sigma, bias_deg)` (correlation time, which errors drift, the white models with
+    and without a boresight bias, attitude sigma where unstated), each `admitted` one weighted by its restricted
+    likelihood with its variance factors' prior (`log_likelihoods`; equal priors on the models). Each answer is None
+    when no model was admitted with an answer; (None, attitude_deg of the likeliest white model, lls, None) where
+    the white models hold at least half of the posterior (the first answer stands); else (tau_s of the likeliest
+    drifting model (its drifting errors'), its attitude_deg, lls, the `correlated.gls` result tuple of that model
+    with the drifting models' posterior mean estimate and mixture covariance (the spread between them included), its
+    fit checks and extras, and error_model_tau_s, error_model_attitude_deg, error_model_attitude_tau_s and
+    error_model_position_tau_s (NaN: white), error_model_log_likelihoods over TAU_GRID_S at its attitude sigma and
+    with the same errors drifting, error_model_spread_m and error_model_within_m (m: the largest standard deviation
+    of the models' answers about their mean, and of their own covariances' posterior mean)). lls: {(attitude tau,
+    att, position tau), or (None, att, None, bias_deg) for a white model with a bias, or (None, att, None, "slip"):
+    log L} of the admitted models. slips: per problem its `slip_segment` (None: no slip candidate), weighed with the
+    others less log of the runs searched; where it is the likeliest admitted model the answer is (None, its
+    attitude_deg, lls, its `correlated.gls` result with tracker_slip (1,n) and the error-model extras NaN). The
+    models' fits of problems with the same rows in use iterate side by side (each as alone: `correlated.gls`). The
+    fits are damped GLS on the rows the first solve kept, every row at weight 1 (the robust loss's phases and scale
+    guard kept, `correlated.gls`); robust weights updated on the rows' marginal residuals under a correlated C are a
+    fixed-point map with no objective, which from starts 1e-6 m apart ended metres to kilometres apart."""
     grid = candidates(sigma, bias_deg)
     slips = slips or [None] * len(sts)
     by_rows: dict[tuple, list[int]] = {}  # the same frames with a pixel and with a range (`Models.concat`: the rest)

@@ -55,9 +55,9 @@ def test_mle_is_no_catastrophe(name):
 # family) lost to a drift while the white models with a bias had the scales 0.5 and 1 only, not the first fit's
 # grid (s18/z128 34.0 -> 0.8 m, bound 15.7 m; s43/z009 101.7 -> 3.6 m, bound 70.8 m); where a Gauss-Markov attitude
 # drift showed in the batch-means test only, before that test called the evidence step (s3/z043 22.8 -> 6.0 m,
-# bound 18.5 m); where the position drifting with the attitude was the likeliest model only
-# because its fit took a stated pixel or range variance many times larger, before the evidence counted the
-# variance factors' prior (s72/z036 45.9 -> 5.4 m, bound 35.3 m; s33/z141 129.6 -> 16.9 m, bound 37.0 m; s65/z183
+# bound 18.5 m); where the position drifting with the attitude was the likeliest model only because its fit took
+# a stated pixel or range variance many times larger, before the evidence counted the variance factors' prior
+# (s72/z036 45.9 -> 5.4 m, bound 35.3 m; s33/z141 129.6 -> 16.9 m, bound 37.0 m; s65/z183
 # 55.5 -> 19.3 m, bound 43.9 m; s4/z108 27.7 -> 7.1 m, bound 22.4 m)
 OTHER_SEEDS = [(1, "z150"), (2, "z024"), (1, "z019"), (0, "z162"), (3, "z003"), (5, "z065"), (7, "z183"),
                (16, "z099"), (24, "z034"), (30, "z027"), (18, "z128"), (43, "z009"), (3, "z043"), (67, "z080"),

@@ -165,6 +165,30 @@ def test_a_bias_beyond_its_prior_calls_the_evidence_step(monkeypatch):
     assert "error_model" not in white.extras and nees(white) > 16.27
 
 
+def test_a_misfit_alone_looks_for_a_tracker_slip_only():
+    """s38/z174 (mistracked, pixel sigma unstated: 10 frames off by 1-5 sigma): no drift test fires, the first
+    fit's chi-square is above its upper 1 % tail; the evidence step finds the slip inside the mistracked run and
+    the answer is within the no-catastrophe bound (24.5 m against 18.8 m before 2026-11-25). s55/z058 (bias
+    family: a stated attitude sigma 1.5-3 x too small): the same misfit, where a drift model that absorbs it would
+    claim an accuracy the flight lacks (10.5 m at e^T C^-1 e 53 with the drift's answer taken); the first answer
+    stands and the truth is inside its 99.9 % ellipsoid."""
+    from pipeline.solve import solve
+
+    f = _zoo().flight("z174", seed=38)
+    mle, bound, _ = catastrophe_bound(f.obs)
+    assert mle <= bound, f"s38/z174: mle {mle:.1f} m > {bound:.1f} m"
+    slip = solve("mle", f.obs).extras["tracker_slip"]
+    bad = np.flatnonzero(f.bad_pixel)
+    assert bad[0] <= slip["first_observation"] <= slip["last_observation"] <= bad[-1]
+
+    f = _zoo().flight("z058", seed=55)
+    est = solve("mle", f.obs)
+    assert est.extras["fit"]["p_value"] < 0.01
+    assert "error_model" not in est.extras and "tracker_slip" not in est.extras
+    e = est.position_m - f.obs.truth_m
+    assert e @ np.linalg.solve(est.covariance_m2, e) < 16.27  # chi2_3(0.999)
+
+
 def test_zoo_compare_counts_flight_by_flight(tmp_path, capsys):
     """scripts/zoo_compare.py (the before / after tables of docs/zoo.md) on two hand-made runs: one flight closer and
     no longer a catastrophe, one further, one unchanged; the coverage counts e^T C^-1 e <= 7.81."""

@@ -340,7 +340,9 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
     fit that puts the ranges' sigma at 17 x the stated explains them away) or its boresight bias came out beyond
     BIAS_BEYOND_STATED x the stated attitude sigma (beyond (B,) bool: the mean of a drift larger than the stated
     attitude error), it has real timestamps and the configured sigma gives no correlation time; not with a terrain prior
-    (the drift model takes none)."""
+    (the drift model takes none). Where only the chi-square is above its upper CHI2_ALPHA tail (a misfit), the
+    evidence's answer is taken only if it is a tracker slip: a drift that absorbs a misfit claims an accuracy the
+    flight lacks where the stated sigmas are simply too small (docs/zoo.md, "A misfit looks for a tracker slip")."""
     if st.t_ns is None or not size_unknown or o.get("terrain") is not None:
         return res
     ex, t = res[5], st.t_ns
@@ -348,9 +350,10 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
     too_small = np.isfinite(ex["chi2_p"]) & (ex["chi2_p"] > 1.0 - fit_checks.CHI2_ALPHA)
     inadmissible = np.array([not _learned.admitted(sigma, sigma, float(vp), float(vr)) for vp, vr in
                              zip(ex["variance_factor_pixel"], ex["variance_factor_range"], strict=True)])
-    need = np.flatnonzero(np.isfinite(res[0]).all(axis=1) & (span >= REAL_TIMES_NS)
-                          & (ex["drift_pixel"] | ex["drift_range"] | ex["block_drift_pixel"] | ex["block_drift_range"]
-                             | too_small | inadmissible | beyond))
+    flagged = (ex["drift_pixel"] | ex["drift_range"] | ex["block_drift_pixel"] | ex["block_drift_range"] | too_small
+               | inadmissible | beyond)
+    too_large = np.isfinite(ex["chi2_p"]) & (ex["chi2_p"] < fit_checks.CHI2_ALPHA)
+    need = np.flatnonzero(np.isfinite(res[0]).all(axis=1) & (span >= REAL_TIMES_NS) & (flagged | too_large))
     if not need.size:
         return res
     sts = [_learned.without_rejected(st.take(np.array([b])), ex["rejected"][b]) for b in need]
@@ -359,6 +362,8 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
     learned = _learned.learn_tau(sts, res[0][need], sigma, o.get("robust", _mle.DEFAULT_ROBUST), vce, o["tol_m"],
                                  o["max_iterations"], bias_deg, slips)
     for b, got in zip(need, learned, strict=True):
+        if not flagged[b] and (got is None or got[3] is None or "tracker_slip" not in got[3][5]):
+            continue  # a misfit alone: only a tracker slip's answer replaces the first
         row = _row(res, b)
         answer = _learned_answer(st.take(np.array([b])), row, got)
         if answer is not row:  # the drift model's answer was kept

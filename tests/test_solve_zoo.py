@@ -168,9 +168,9 @@ def test_a_bias_beyond_its_prior_calls_the_evidence_step(monkeypatch):
 def test_a_misfit_alone_looks_for_a_tracker_slip_only():
     """s38/z174 (mistracked, pixel sigma unstated: 10 frames off by 1-5 sigma): no drift test fires, the first
     fit's chi-square is above its upper 1 % tail; the evidence step finds the slip inside the mistracked run and
-    the answer is within the no-catastrophe bound (24.5 m against 18.8 m before 2026-11-25). s55/z058 (bias
+    the answer is within the no-catastrophe bound (24.5 m against 18.8 m before 2026-11-24). s55/z058 (bias
     family: a stated attitude sigma 1.5-3 x too small): the same misfit, where a drift model that absorbs it would
-    claim an accuracy the flight lacks (10.5 m at e^T C^-1 e 53 with the drift's answer taken); the first answer
+    claim an accuracy the flight lacks (10.5 m at e^T C^-1 e 53.0 with the drift's answer taken); the first answer
     stands and the truth is inside its 99.9 % ellipsoid."""
     from pipeline.solve import solve
 

@@ -254,7 +254,7 @@ def _mle_dispatch(st: Stacked, o: dict):
     covariance) that white fit, then the GLS fit of the configured model from it (`_configured_tau`); else the
     error model chosen by evidence (`_with_learned_tau`) where the residuals drift, the chi-square is too small,
     the variance components need a stated sigma beyond 3 x or the boresight bias comes out beyond
-    BIAS_BEYOND_STATED x the stated attitude sigma."""
+    BIAS_BEYOND_STATED x the stated attitude sigma; where the chi-square is too large, only a tracker slip's."""
     x0, init_status, sigma, vce = _mle_start(st, o)
     robust, tol, itmax = o.get("robust", _mle.DEFAULT_ROBUST), o["tol_m"], o["max_iterations"]
     bias_deg, size_unknown = _mle.bias_prior_deg(sigma, o)  # configured correlation times win, even vanishing ones

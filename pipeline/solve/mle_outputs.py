@@ -106,9 +106,9 @@ def notes(extras: dict, t_ns: np.ndarray | None = None, video_frames=None) -> li
                        "spread (laser ranges, or the errors' correlation times where known, would narrow it)")
     slip = extras.get("tracker_slip")
     if slip:
-        out.append(f"mle: the pixels of observations {slip['first_observation']}-{slip['last_observation']} read as a "
-                   "tracker slip (off by one constant offset there: likelier than a drift); fitted with that offset "
-                   "free")
+        out.append(f"mle: the pixels of observations {slip['first_observation']}-{slip['last_observation']} fit best "
+                   "as a tracker slip (off by one constant offset there: likelier than a drift; any error constant "
+                   "over those frames looks alike); fitted with that offset free: check the tracking there")
     bias = extras.get("boresight_bias")
     if bias:
         out.append(f"mle: boresight bias {_bias_words(bias)}")

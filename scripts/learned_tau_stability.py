@@ -104,13 +104,19 @@ def main(argv: list[str] | None = None) -> int:
         est = solve("mle", obs)
         err = float(np.linalg.norm(est.position_m - truth))
         if not calls:
-            print(f"{name}: mle {err:.2f} m, learned step not called (no drift, chi-square not too small, "
-                  "variance factors admitted)")
+            print(f"{name}: mle {err:.2f} m, learned step not called (no fit check called it)")
             continue
-        sts, X0s, sigma, robust, vce, tol_m, itmax, bias_deg = (*calls[0], None)[:8]
+        sts, X0s, sigma, robust, vce, tol_m, itmax, bias_deg, slips = (*calls[0], None, None)[:9]
         starts = _starts(np.asarray(X0s, dtype=np.float64), args.starts)
-        answers = [real(sts, X, sigma, robust, vce, tol_m, itmax, bias_deg)[0] for X in starts]
-        if answers[0] is None or answers[0][3] is None:
+        answers = [real(sts, X, sigma, robust, vce, tol_m, itmax, bias_deg, slips)[0] for X in starts]
+        slip = est.extras.get("tracker_slip")
+        if slip:
+            print(f"{name}: mle {err:.2f} m; the tracker slip is the likeliest model (observations "
+                  f"{slip['first_observation']}-{slip['last_observation']}): its fit is the answer")
+        elif answers[0] is not None and answers[0][3] is not None and "error_model" not in est.extras:
+            print(f"{name}: mle {err:.2f} m; a drift is the likeliest model but a misfit alone called the step: "
+                  "the first answer stands")
+        elif answers[0] is None or answers[0][3] is None:
             why = "no candidate answered" if answers[0] is None else "the evidence is for white errors"
             print(f"{name}: mle {err:.2f} m; {why} (the first answer stands)")
         else:

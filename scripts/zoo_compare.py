@@ -9,7 +9,7 @@ Each file is the `--json` output of `scripts/zoo.py` or `scripts/zoo_unseen.py` 
 pooled; flights are matched by name). Printed: per block of --blocks seeds and over all, catastrophes (before /
 after), median mle error, 95 % ellipsoid coverage (e^T C^-1 e <= chi2_3(0.95)) and the flights whose mle error moved
 by more than 1 cm (how many came closer, the sum of the changes); the same per family; the catastrophes that went
-and came; every flight that moved by more than --moved metres.
+and came; mle's wall time per flight (median and sum); every flight that moved by more than --moved metres.
 """
 
 from __future__ import annotations
@@ -78,6 +78,10 @@ def main(argv: list[str] | None = None) -> int:
     gone = [k for k in names if a[k]["catastrophe"] and not b[k]["catastrophe"]]
     new = [k for k in names if b[k]["catastrophe"] and not a[k]["catastrophe"]]
     print(f"\ncatastrophes gone: {' '.join(gone) or '-'}\ncatastrophes new: {' '.join(new) or '-'}")
+    walls = [[d[k]["mle_wall_s"] for k in names if d[k].get("mle_wall_s") is not None] for d in (a, b)]
+    if all(walls):  # the machine's load moves these: compare runs made alike (processes per core)
+        print(f"mle wall time per flight: median {statistics.median(walls[0]):.3f} -> "
+              f"{statistics.median(walls[1]):.3f} s, sum {sum(walls[0]):,.0f} -> {sum(walls[1]):,.0f} s")
     moved = sorted((_mle(b[k]) - _mle(a[k]), k) for k in names if _mle(a[k]) is not None and _mle(b[k]) is not None
                    and abs(_mle(b[k]) - _mle(a[k])) > args.moved)
     for d, k in moved:

@@ -347,12 +347,12 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
         return res
     ex, t = res[5], st.t_ns
     span = t.max(axis=1) - t.min(axis=1) if t.shape[1] > 1 else np.zeros(st.size, dtype=np.int64)
-    too_small = np.isfinite(ex["chi2_p"]) & (ex["chi2_p"] > 1.0 - fit_checks.CHI2_ALPHA)
+    p = np.where(np.isfinite(ex["chi2_p"]), ex["chi2_p"], 0.5)
+    too_small, too_large = p > 1.0 - fit_checks.CHI2_ALPHA, p < fit_checks.CHI2_ALPHA
     inadmissible = np.array([not _learned.admitted(sigma, sigma, float(vp), float(vr)) for vp, vr in
                              zip(ex["variance_factor_pixel"], ex["variance_factor_range"], strict=True)])
     flagged = (ex["drift_pixel"] | ex["drift_range"] | ex["block_drift_pixel"] | ex["block_drift_range"] | too_small
                | inadmissible | beyond)
-    too_large = np.isfinite(ex["chi2_p"]) & (ex["chi2_p"] < fit_checks.CHI2_ALPHA)
     need = np.flatnonzero(np.isfinite(res[0]).all(axis=1) & (span >= REAL_TIMES_NS) & (flagged | too_large))
     if not need.size:
         return res

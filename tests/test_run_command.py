@@ -139,3 +139,22 @@ def test_quiet_run_still_says_when_the_mle_model_does_not_fit(tmp_path, capsys, 
     monkeypatch.setattr(pipeline.batch, "run_groups", lambda *a, **k: ([r], [], []))
     assert main(["run", str(SAMPLE), "-o", str(tmp_path / "out"), "--no-figures", "-q"]) == 0
     assert capsys.readouterr().out.splitlines() == [f"g: {misfit}", "all 1 flight(s) finished"]
+
+
+def test_an_existing_file_as_the_output_folder_is_refused_before_any_flight_runs(tmp_path, capsys, monkeypatch):
+    import pipeline.batch
+
+    def no_flight(*args, **kwargs):
+        raise AssertionError("a flight ran before the output folder was checked")
+
+    monkeypatch.setattr(pipeline.batch, "run_groups", no_flight)
+    afile = tmp_path / "afile"
+    afile.write_text("keep me")
+    assert main(["run", str(SAMPLE), "-o", str(afile), "--no-figures", "-q"]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"ridgeloc: error: {afile}: cannot create the output folder: File exists"]
+    assert main(["run", str(SAMPLE), "-o", str(afile / "sub"), "--no-figures", "-q"]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"ridgeloc: error: {afile / 'sub'}: cannot create the output folder: {afile} is not a folder"]
+    assert afile.read_text() == "keep me"
+

@@ -7,6 +7,7 @@ import sys
 import time
 from pathlib import Path
 
+from pipeline.commands import output_folder
 from pipeline.errors import InputError
 from pipeline.flight_config import FlightConfig, load_run_config
 
@@ -83,6 +84,7 @@ def group_summary(r, reused: bool = False) -> list[str]:
 
 
 def main(args) -> int:
+    output_folder(args.outdir)  # a file there is refused before any flight runs
     config = _resolve_config(args.config)
     entries = load_run_config(config)  # a malformed run config is refused before the heavy imports below
     from pipeline import __version__

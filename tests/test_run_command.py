@@ -3,6 +3,7 @@
 import json
 from pathlib import Path
 
+import pytest
 import yaml
 
 from pipeline.cli import main
@@ -52,7 +53,7 @@ def test_twenty_flights_two_broken_give_eighteen_reports_and_a_summary(tmp_path,
     finished = sorted(p.parent.name for p in out.glob("*/estimates.json"))
     assert finished == [f"flight{i:02d}" for i in range(18)]
     assert not (out / "missing_log").exists() and not (out / "garbage_log").exists()
-    assert "2 of 20 flight(s) failed" in captured.out
+    assert "2 of 20 flight(s) failed (the others finished): missing_log, garbage_log" in captured.out
     summary = captured.err.strip().splitlines()
     assert len(summary) == 2 and all(line.startswith("ridgeloc: ") for line in summary)
     assert any("missing_log" in line and "nowhere.tlog" in line for line in summary)
@@ -158,3 +159,19 @@ def test_an_existing_file_as_the_output_folder_is_refused_before_any_flight_runs
         f"ridgeloc: error: {afile / 'sub'}: cannot create the output folder: {afile} is not a folder"]
     assert afile.read_text() == "keep me"
 
+
+@pytest.mark.parametrize("content", [b"", b"a text file, not a video\n",
+                                     (REPO / "sample_data" / "fmv" / "flight.ts").read_bytes()[:3072]],
+                         ids=["empty", "text", "first-3KB"])
+def test_a_single_bad_video_fails_in_one_line_and_writes_nothing(tmp_path, capsys, content):
+    """A run whose every flight failed writes no report, run.json or empty targets.* (as a bad config), and its
+    summary names the flight without saying that others finished."""
+    video = tmp_path / "bad.ts"
+    video.write_bytes(content)
+    out = tmp_path / "out"
+    assert main(["run", str(video), "-o", str(out), "--no-figures", "-q"]) == 1
+    captured = capsys.readouterr()
+    err = captured.err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"ridgeloc: bad: failed: {video}: "), err
+    assert captured.out.splitlines() == ["1 of 1 flight(s) failed: bad"]
+    assert not out.exists()

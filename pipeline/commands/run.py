@@ -111,10 +111,11 @@ def main(args) -> int:
     settings = {"config": str(config), "outdir": str(args.outdir), "workers": args.workers,
                 "executor": args.executor, "ridgeloc": __version__, "reused": reused}
     t0 = time.perf_counter()
-    write_run_outputs(args.outdir, results, failures, settings, figures=not args.no_figures)
-    t1 = time.perf_counter()
-    md, tab = write_table4(args.outdir, results, failures)
-    t2 = time.perf_counter()
+    if results:  # when every flight failed, no output at all (as for a flight config that does not load)
+        write_run_outputs(args.outdir, results, failures, settings, figures=not args.no_figures)
+        t1 = time.perf_counter()
+        md, tab = write_table4(args.outdir, results, failures)
+        t2 = time.perf_counter()
     from pipeline.results import per_target, target_failures
 
     for r in per_target(results):  # a summary per target of a flight with named targets
@@ -128,9 +129,9 @@ def main(args) -> int:
     not_located = target_failures(results)
     for name, f in not_located:  # the flight's other targets are in the outputs
         print(f"ridgeloc: {name}:{f.target}: not located: {f.message}", file=sys.stderr)
-    for f in failures:  # one line each on stderr; the count goes to stdout with the rest of the summary
+    for f in failures:  # one line each on stderr; the count and the names go to stdout with the rest of the summary
         print(f"ridgeloc: {f.name}: failed: {f.message}", file=sys.stderr)
-    if not args.quiet:
+    if results and not args.quiet:
         print(f"wrote {md}, {tab}, {Path(args.outdir) / 'report.html'} and targets.csv/.geojson/.kml in "
               f"{t2 - t0:.2f} s (report.html, targets.*, run.json {t1 - t0:.2f}; report.md, table4.csv "
               f"{t2 - t1:.2f} s)")

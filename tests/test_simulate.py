@@ -127,3 +127,18 @@ def test_a_bad_command_line_override_is_one_line_and_writes_nothing(tmp_path, ca
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and err[0].startswith(f"ridgeloc: error: command-line override: {problem}"), err
     assert not out.exists()
+
+
+def test_an_existing_file_as_out_is_refused_before_the_experiment_runs(tmp_path, capsys, monkeypatch):
+    import pipeline.simulate
+
+    def no_experiment(*args, **kwargs):
+        raise AssertionError("the experiment ran before the output folder was checked")
+
+    monkeypatch.setattr(pipeline.simulate, "run_simulation", no_experiment)
+    afile = tmp_path / "afile"
+    afile.write_text("keep me")
+    assert cli_main(["simulate", str(CONFIGS / "simulation_table2.yaml"), "--out", str(afile), "--quiet"]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"ridgeloc: error: {afile}: cannot create the output folder: File exists"]
+    assert afile.read_text() == "keep me"

@@ -175,3 +175,39 @@ def test_a_single_bad_video_fails_in_one_line_and_writes_nothing(tmp_path, capsy
     assert len(err) == 1 and err[0].startswith(f"ridgeloc: bad: failed: {video}: "), err
     assert captured.out.splitlines() == ["1 of 1 flight(s) failed: bad"]
     assert not out.exists()
+
+
+def _not_configs(folder: Path) -> dict[str, Path]:
+    """Inputs that are not configs, by the readers' suffix and content sniffing: kind -> path."""
+    folder.mkdir()
+    (folder / "flight.tlog").write_bytes(b"\xfd\x09\x00\x00" * 64)
+    (folder / "clip.SRT").write_text("1\n00:00:00,000 --> 00:00:00,033\n[latitude: 46.5] [longitude: 7.5]\n")
+    (folder / "ros2_bag").mkdir()
+    (folder / "ros2_bag" / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    (folder / "DJI_0001.JPG").write_bytes(b"\xff\xd8\xff")
+    (folder / "clip.avi").write_bytes(b"RIFF")
+    return {"telemetry log": folder / "flight.tlog", "srt": folder / "clip.SRT", "ros2": folder / "ros2_bag",
+            "photo": folder / "DJI_0001.JPG", "video": folder / "clip.avi"}
+
+
+LOG_NOT_CONFIG = ("a telemetry log, not a flight config: use `ridgeloc inspect`, or name it in a flight config's "
+                  "files.telemetry")
+NOT_CONFIG = {"telemetry log": LOG_NOT_CONFIG, "srt": LOG_NOT_CONFIG, "ros2": LOG_NOT_CONFIG,
+              "photo": "drone photos, not a flight config: use `ridgeloc inspect` or `ridgeloc locate`",
+              "video": "a video, not a flight config: use `ridgeloc inspect`, or name it in a flight config's "
+                       "files.video"}
+
+
+def test_run_of_a_log_says_it_is_not_a_config(tmp_path, capsys):
+    """A log given as the config is named as such (was "cannot read: 'utf-8' codec can't decode ..." or "the top
+    level must be a mapping of keys"), alone and listed in a manifest."""
+    out = tmp_path / "out"
+    for kind, path in _not_configs(tmp_path / "in").items():
+        assert main(["run", str(path), "-o", str(out), "-q"]) == 1, kind
+        assert capsys.readouterr().err.splitlines() == [f"ridgeloc: error: {path}: {NOT_CONFIG[kind]}"], kind
+    log = tmp_path / "in" / "flight.tlog"
+    manifest = tmp_path / "manifest.yaml"
+    manifest.write_text(yaml.safe_dump([str(log)]))
+    assert main(["run", str(manifest), "-o", str(out), "-q"]) == 1
+    assert capsys.readouterr().err.splitlines() == [f"ridgeloc: flight: failed: {log}: {LOG_NOT_CONFIG}"]
+    assert not out.exists()

@@ -21,8 +21,8 @@ def main(args) -> int:
     import numpy as np
 
     from pipeline.atomic import atomic_write_text
-    from pipeline.commands import output_file
-    from pipeline.errors import ConfigError
+    from pipeline.commands import not_a_config, output_file
+    from pipeline.errors import ConfigError, InputError
     from pipeline.flight import Flight
     from pipeline.flight_config import load_flight_config
     from pipeline.report.mark_page import mark_page
@@ -30,7 +30,10 @@ def main(args) -> int:
 
     # a folder or a file in the page's way is refused before the video is read
     out = output_file(args.output or Path(args.config).resolve().parent / "marks.html", "marks.html")
-    config = load_flight_config(args.config)
+    try:
+        config = load_flight_config(args.config)
+    except InputError as exc:
+        raise not_a_config(args.config) or exc from None
     with Flight.open(config) as flight:
         available = set(np.asarray(flight.frames.index).tolist())
         if args.frames:

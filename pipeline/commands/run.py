@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from pipeline.commands import output_folder
+from pipeline.commands import not_a_config, output_folder
 from pipeline.errors import InputError
 from pipeline.flight_config import FlightConfig, load_run_config
 
@@ -86,7 +86,10 @@ def group_summary(r, reused: bool = False) -> list[str]:
 def main(args) -> int:
     output_folder(args.outdir)  # a file there is refused before any flight runs
     config = _resolve_config(args.config)
-    entries = load_run_config(config)  # a malformed run config is refused before the heavy imports below
+    try:
+        entries = load_run_config(config)  # a malformed run config is refused before the heavy imports below
+    except InputError as exc:
+        raise not_a_config(config) or exc from None
     from pipeline import __version__
     from pipeline.batch import Job, job_digest, run_groups, summarize_failures
     from pipeline.report.outputs import write_run_outputs
@@ -98,7 +101,8 @@ def main(args) -> int:
     loaded: list[tuple[str, FlightConfig]] = []
     for entry in entries:
         if entry.config is None:
-            config_failures.append(GroupFailure(Path(entry.source).stem, entry.source, entry.error))
+            log = not_a_config(entry.source)  # a log listed as a flight config
+            config_failures.append(GroupFailure(Path(entry.source).stem, entry.source, str(log or entry.error)))
         else:
             loaded.append((entry.source, entry.config))
     jobs = [Job(cfg.name, source, cfg) for source, cfg in loaded]

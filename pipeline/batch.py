@@ -408,11 +408,13 @@ def run_jobs(jobs: Sequence[Job], fn: Callable[[Any], Any], *, workers: int = 1,
 
 
 def summarize_failures(failures: Iterable[GroupFailure], total: int) -> str:
-    """A short multi-line summary: 'k of n flight(s) failed:' then one line per failure."""
+    """A short summary: 'k of n flight(s) failed (the others finished): a, b' (the names; 'the others finished'
+    only when some did), then one line per failure with its message."""
     failures = list(failures)
     if not failures:
         return f"all {total} flight(s) finished"
-    lines = [f"{len(failures)} of {total} flight(s) failed (the others finished):"]
+    others = " (the others finished)" if len(failures) < total else ""
+    lines = [f"{len(failures)} of {total} flight(s) failed{others}: " + ", ".join(f.name for f in failures)]
     lines += [f"  {f.name} ({f.source}): {f.message}" for f in failures]
     return "\n".join(lines)
 

@@ -73,8 +73,9 @@ def test_twenty_flights_two_broken(tmp_path):
     assert all("\n" not in f.message for f in failures)
     assert f4.detail == "" and f13.detail == ""  # input errors, not bugs: no traceback
     summary = summarize_failures(failures, len(jobs))
-    assert summary.splitlines()[0] == "2 of 20 flight(s) failed (the others finished):"
-    assert "flight04" in summary and "flight13" in summary
+    assert summary.splitlines()[0] == "2 of 20 flight(s) failed (the others finished): flight04, flight13"
+    assert summary.splitlines()[1].startswith("  flight04 (") and "not valid JSON" in summary.splitlines()[1]
+    assert summarize_failures(failures, 2).splitlines()[0] == "2 of 2 flight(s) failed: flight04, flight13"
 
     out = tmp_path / "out"
     write_run_outputs(out, results, failures, {"workers": 2}, figures=False)

@@ -213,3 +213,20 @@ def test_range_bias_not_flagged_where_nearly_parallel_rays_do_not_fix_the_meetin
     feet = cluster(origins, d, dist * 3.2808)
     assert not feet.meet_undetermined and re.search(r"km longer than the distance", range_bias_problem(feet))
     assert meet_undetermined_warning(feet) is None
+
+
+def test_check_and_mark_of_a_log_say_it_is_not_a_config(tmp_path, capsys):
+    """A log given as the flight config is named as such; a YAML config named other than .yaml is checked."""
+    from pathlib import Path
+
+    log = tmp_path / "flight.tlog"
+    log.write_bytes(b"\xfd\x09\x00\x00" * 64)
+    for command in (["check"], ["mark", "-o", str(tmp_path / "marks.html")]):
+        assert cli_main([*command, str(log)]) == 1
+        assert capsys.readouterr().err.splitlines() == [
+            f"ridgeloc: error: {log}: a telemetry log, not a flight config: use `ridgeloc inspect`, or name it in a "
+            "flight config's files.telemetry"]
+    repo = Path(__file__).resolve().parents[1]
+    cfg = tmp_path / "group1.cfg"
+    cfg.write_text((repo / "configs" / "flights" / "group1.yaml").read_text().replace("../../", f"{repo}/"))
+    assert cli_main(["check", "--no-clock", str(cfg)]) == 0  # was "unknown log type (suffix '.cfg', ...)"

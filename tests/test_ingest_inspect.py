@@ -51,3 +51,18 @@ def test_inspect_flight_folder(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "gps.bag  [ros1]" in out and "camera.bag  [ros1]" in out and "truth.json" not in out
     assert f"all files of {folder} together, missing for localization: attitude, gimbal, range" in out
+
+
+def test_inspect_a_folder_without_logs_is_one_line_and_exit_1(tmp_path, capsys):
+    """An empty folder, one of notes only and one named like a log: one line each, not silence and exit 0."""
+    empty, notes, named = tmp_path / "empty", tmp_path / "notes", tmp_path / "x.tlog"
+    for d in (empty, notes, named):
+        d.mkdir()
+    (notes / "notes.txt").write_text("flown on Tuesday\n")
+    for d in (empty, notes, named):
+        assert main(["inspect", str(d)]) == 1
+        cap = capsys.readouterr()
+        assert cap.out == "" and cap.err.splitlines() == [f"ridgeloc: error: {d}: no logs, videos or photos found"]
+    assert main(["inspect", "--json", str(empty)]) == 1
+    cap = capsys.readouterr()
+    assert json.loads(cap.out)["files"] == [{"path": str(empty), "error": f"{empty}: no logs, videos or photos found"}]

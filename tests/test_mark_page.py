@@ -103,3 +103,21 @@ def test_mark_command_writes_the_page_of_a_flight(tmp_path):
     assert html.count("data:image/jpeg") == 3  # frames 4 (the marks' frame), and three spread observation frames
     for name in ("panel", "small_grey", "far_north"):  # the config's marks, to edit
         assert f'"name": "{name}"' in html
+
+
+def test_mark_refuses_a_folder_or_a_file_in_the_pages_way_before_reading_the_flight(tmp_path, capsys, monkeypatch):
+    from pipeline.cli import main
+    from pipeline.flight import Flight
+
+    def no_flight(*args, **kwargs):
+        raise AssertionError("the flight was read before the output path was checked")
+
+    monkeypatch.setattr(Flight, "open", no_flight)
+    config = str(ROOT / "configs" / "flights" / "group1.yaml")
+    afile = tmp_path / "afile"
+    afile.write_text("keep me")
+    for out, problem in ((tmp_path, f"is a folder: name the file to write, e.g. {tmp_path / 'marks.html'}"),
+                         (afile / "m.html", f"cannot write: {afile} is not a folder")):
+        assert main(["mark", config, "-o", str(out)]) == 1
+        assert capsys.readouterr().err.splitlines() == [f"ridgeloc: error: {out}: {problem}"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"] and afile.read_text() == "keep me"

@@ -33,3 +33,14 @@ def test_inspect_json_with_a_bad_photo(tmp_path, capsys):
     assert doc["photos"][0]["intrinsics"]["source"] == "drone-dji Calibrated* + DewarpData"
     assert len(doc["errors"]) == 1 and "DJI_0003.JPG" in doc["errors"][0]["path"]
     assert "DJI_0003.JPG" in cap.err
+
+
+def test_inspect_a_photo_flight_config_lists_its_photos(capsys):
+    """`inspect FLIGHT.yaml` of a photo flight (files.photos) lists what its photos state ('no input files given')."""
+    config = Path(__file__).resolve().parents[1] / "configs" / "flights" / "h20_laser.yaml"
+    assert cli_main(["inspect", str(config)]) == 0
+    cap = capsys.readouterr()
+    assert cap.out.count("[photo DJI ZH20T 640x480]") == 5 and cap.err == ""
+    assert cli_main(["inspect", "--json", str(config)]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["config"] == str(config) and len(doc["photos"]) == 5 and doc["errors"] == []

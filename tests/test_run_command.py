@@ -3,6 +3,7 @@
 import json
 from pathlib import Path
 
+import pytest
 import yaml
 
 from pipeline.cli import main
@@ -52,7 +53,7 @@ def test_twenty_flights_two_broken_give_eighteen_reports_and_a_summary(tmp_path,
     finished = sorted(p.parent.name for p in out.glob("*/estimates.json"))
     assert finished == [f"flight{i:02d}" for i in range(18)]
     assert not (out / "missing_log").exists() and not (out / "garbage_log").exists()
-    assert "2 of 20 flight(s) failed" in captured.out
+    assert "2 of 20 flight(s) failed (the others finished): missing_log, garbage_log" in captured.out
     summary = captured.err.strip().splitlines()
     assert len(summary) == 2 and all(line.startswith("ridgeloc: ") for line in summary)
     assert any("missing_log" in line and "nowhere.tlog" in line for line in summary)
@@ -139,3 +140,74 @@ def test_quiet_run_still_says_when_the_mle_model_does_not_fit(tmp_path, capsys, 
     monkeypatch.setattr(pipeline.batch, "run_groups", lambda *a, **k: ([r], [], []))
     assert main(["run", str(SAMPLE), "-o", str(tmp_path / "out"), "--no-figures", "-q"]) == 0
     assert capsys.readouterr().out.splitlines() == [f"g: {misfit}", "all 1 flight(s) finished"]
+
+
+def test_an_existing_file_as_the_output_folder_is_refused_before_any_flight_runs(tmp_path, capsys, monkeypatch):
+    import pipeline.batch
+
+    def no_flight(*args, **kwargs):
+        raise AssertionError("a flight ran before the output folder was checked")
+
+    monkeypatch.setattr(pipeline.batch, "run_groups", no_flight)
+    afile = tmp_path / "afile"
+    afile.write_text("keep me")
+    assert main(["run", str(SAMPLE), "-o", str(afile), "--no-figures", "-q"]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"ridgeloc: error: {afile}: cannot create the output folder: File exists"]
+    assert main(["run", str(SAMPLE), "-o", str(afile / "sub"), "--no-figures", "-q"]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"ridgeloc: error: {afile / 'sub'}: cannot create the output folder: {afile} is not a folder"]
+    assert afile.read_text() == "keep me"
+
+
+@pytest.mark.parametrize("content", [b"", b"a text file, not a video\n",
+                                     (REPO / "sample_data" / "fmv" / "flight.ts").read_bytes()[:3072]],
+                         ids=["empty", "text", "first-3KB"])
+def test_a_single_bad_video_fails_in_one_line_and_writes_nothing(tmp_path, capsys, content):
+    """A run whose every flight failed writes no report, run.json or empty targets.* (as a bad config), and its
+    summary names the flight without saying that others finished."""
+    video = tmp_path / "bad.ts"
+    video.write_bytes(content)
+    out = tmp_path / "out"
+    assert main(["run", str(video), "-o", str(out), "--no-figures", "-q"]) == 1
+    captured = capsys.readouterr()
+    err = captured.err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"ridgeloc: bad: failed: {video}: "), err
+    assert captured.out.splitlines() == ["1 of 1 flight(s) failed: bad"]
+    assert not out.exists()
+
+
+def _not_configs(folder: Path) -> dict[str, Path]:
+    """Inputs that are not configs, by the readers' suffix and content sniffing: kind -> path."""
+    folder.mkdir()
+    (folder / "flight.tlog").write_bytes(b"\xfd\x09\x00\x00" * 64)
+    (folder / "clip.SRT").write_text("1\n00:00:00,000 --> 00:00:00,033\n[latitude: 46.5] [longitude: 7.5]\n")
+    (folder / "ros2_bag").mkdir()
+    (folder / "ros2_bag" / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    (folder / "DJI_0001.JPG").write_bytes(b"\xff\xd8\xff")
+    (folder / "clip.avi").write_bytes(b"RIFF")
+    return {"telemetry log": folder / "flight.tlog", "srt": folder / "clip.SRT", "ros2": folder / "ros2_bag",
+            "photo": folder / "DJI_0001.JPG", "video": folder / "clip.avi"}
+
+
+LOG_NOT_CONFIG = ("a telemetry log, not a flight config: use `ridgeloc inspect`, or name it in a flight config's "
+                  "files.telemetry")
+NOT_CONFIG = {"telemetry log": LOG_NOT_CONFIG, "srt": LOG_NOT_CONFIG, "ros2": LOG_NOT_CONFIG,
+              "photo": "drone photos, not a flight config: use `ridgeloc inspect` or `ridgeloc locate`",
+              "video": "a video, not a flight config: use `ridgeloc inspect`, or name it in a flight config's "
+                       "files.video"}
+
+
+def test_run_of_a_log_says_it_is_not_a_config(tmp_path, capsys):
+    """A log given as the config is named as such (was "cannot read: 'utf-8' codec can't decode ..." or "the top
+    level must be a mapping of keys"), alone and listed in a manifest."""
+    out = tmp_path / "out"
+    for kind, path in _not_configs(tmp_path / "in").items():
+        assert main(["run", str(path), "-o", str(out), "-q"]) == 1, kind
+        assert capsys.readouterr().err.splitlines() == [f"ridgeloc: error: {path}: {NOT_CONFIG[kind]}"], kind
+    log = tmp_path / "in" / "flight.tlog"
+    manifest = tmp_path / "manifest.yaml"
+    manifest.write_text(yaml.safe_dump([str(log)]))
+    assert main(["run", str(manifest), "-o", str(out), "-q"]) == 1
+    assert capsys.readouterr().err.splitlines() == [f"ridgeloc: flight: failed: {log}: {LOG_NOT_CONFIG}"]
+    assert not out.exists()

@@ -114,3 +114,31 @@ def test_range_diagnostics_degeneracy_is_geometry_and_the_start_does_not_matter(
     # the large errors are the least-squares problem's own minimum, not a bad start
     assert d["starts_agree_within_1m_pct"] >= 95.0
     assert d["median_m"] > 500.0
+
+
+@pytest.mark.parametrize("flag, value, problem", [("--trials", "0", "'trials' must be >= 1, got 0"),
+                                                  ("--trials", "-5", "'trials' must be >= 1, got -5"),
+                                                  ("--seed", "-1", "'seed' must be >= 0, got -1")])
+def test_a_bad_command_line_override_is_one_line_and_writes_nothing(tmp_path, capsys, flag, value, problem):
+    """--trials and --seed are validated as the YAML keys are (they reached the solver: a ValueError there)."""
+    out = tmp_path / "out"
+    assert cli_main(["simulate", str(CONFIGS / "simulation_table2.yaml"), flag, value, "--out", str(out),
+                     "--quiet"]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"ridgeloc: error: command-line override: {problem}"), err
+    assert not out.exists()
+
+
+def test_an_existing_file_as_out_is_refused_before_the_experiment_runs(tmp_path, capsys, monkeypatch):
+    import pipeline.simulate
+
+    def no_experiment(*args, **kwargs):
+        raise AssertionError("the experiment ran before the output folder was checked")
+
+    monkeypatch.setattr(pipeline.simulate, "run_simulation", no_experiment)
+    afile = tmp_path / "afile"
+    afile.write_text("keep me")
+    assert cli_main(["simulate", str(CONFIGS / "simulation_table2.yaml"), "--out", str(afile), "--quiet"]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"ridgeloc: error: {afile}: cannot create the output folder: File exists"]
+    assert afile.read_text() == "keep me"

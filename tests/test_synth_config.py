@@ -69,3 +69,15 @@ def test_cli_writes_a_flight(tmp_path, capsys):
     assert main(["synth", str(cfg), "-o", str(out)]) == 1
     assert "already exists" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["flight", "tiny.yaml"]
+
+
+@pytest.mark.parametrize("args", [["--photos", "2", "--overwrite"], [str(ROOT / "configs" / "synth" / "example.yaml"),
+                                                                      "--overwrite"]], ids=["photos", "config"])
+def test_cli_refuses_a_file_as_the_output_folder_even_with_overwrite(tmp_path, capsys, args):
+    from pipeline.cli import main
+    afile = tmp_path / "afile"
+    afile.write_text("keep me")
+    assert main(["synth", *args, "-o", str(afile)]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"ridgeloc: error: {afile}: cannot create the output folder: File exists"]
+    assert afile.read_text() == "keep me"

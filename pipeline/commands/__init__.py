@@ -1,1 +1,56 @@
-"""Command-line layer: one module per `ridgeloc` subcommand, each thin over library functions."""
+"""Command-line layer: one module per `ridgeloc` subcommand, each thin over library functions; the checks they
+share on output paths (made before any work) and on a log given where a config belongs."""
+
+from __future__ import annotations
+
+from os import PathLike
+from pathlib import Path
+
+from pipeline.errors import InputError, RidgelocError
+
+
+def output_folder(path: str | PathLike) -> Path:
+    """`path` as an output folder (existing or not); InputError when it, or the nearest existing parent, is a file."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise InputError("cannot create the output folder: File exists", path)
+    _parent_is_a_folder(path, "cannot create the output folder")
+    return path
+
+
+def output_file(path: str | PathLike, example_name: str) -> Path:
+    """`path` as an output file; InputError when it is a folder (naming `example_name` inside it as the fix) or
+    the nearest existing parent is a file."""
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"is a folder: name the file to write, e.g. {path / example_name}", path)
+    _parent_is_a_folder(path, "cannot write")
+    return path
+
+
+def _parent_is_a_folder(path: Path, what: str) -> None:
+    parent = next((p for p in path.parents if p.exists()), None)
+    if parent is not None and not parent.is_dir():
+        raise InputError(f"{what}: {parent} is not a folder", path)
+
+
+def not_a_config(path: str | PathLike) -> InputError | None:
+    """The one-line error for a telemetry log, bag, video or drone photo given where a flight or run config
+    belongs (by the readers' own suffix and content sniffing), saying what to do with it; None otherwise."""
+    from pipeline.ingest.dispatch import detect_format
+    from pipeline.ingest.photo_inspect import is_photo_input
+
+    p = Path(path)
+    if p.suffix.lower() in (".yaml", ".yml") or not p.exists():
+        return None
+    if is_photo_input(p):
+        return InputError("drone photos, not a flight config: use `ridgeloc inspect` or `ridgeloc locate`", p)
+    try:
+        fmt = detect_format(p)
+    except RidgelocError:
+        return None
+    if fmt == "video":
+        return InputError("a video, not a flight config: use `ridgeloc inspect`, or name it in a flight config's "
+                          "files.video", p)
+    return InputError("a telemetry log, not a flight config: use `ridgeloc inspect`, or name it in a flight "
+                      "config's files.telemetry", p)

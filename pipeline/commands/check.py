@@ -19,13 +19,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args) -> int:
+    from pipeline.commands import not_a_config
+    from pipeline.errors import InputError
     from pipeline.flight_config import flight_config_for_video, load_flight_config
 
     kind = _klv_kind(args.config)  # a video or KLV dump given alone
     if kind == "klv":
         return _check_klv_dump(args)
     # a mistake in the config is refused before the heavy imports below
-    config = flight_config_for_video(args.config) if kind == "video" else load_flight_config(args.config)
+    try:
+        config = flight_config_for_video(args.config) if kind == "video" else load_flight_config(args.config)
+    except InputError as exc:
+        raise not_a_config(args.config) or exc from None
     from pipeline.check.report import check_flight, format_check
 
     result = check_flight(config, clock=not args.no_clock)
@@ -43,6 +48,7 @@ def _klv_kind(path) -> str | None:
     """"video" or "klv" when `path` is a video or a raw KLV dump rather than a YAML config, else None."""
     from pathlib import Path
 
+    from pipeline.errors import RidgelocError
     from pipeline.flight_config import FMV_SUFFIXES
     from pipeline.ingest.dispatch import detect_format
 
@@ -51,7 +57,10 @@ def _klv_kind(path) -> str | None:
         return None
     if p.suffix.lower() in FMV_SUFFIXES:
         return "video"
-    return "klv" if detect_format(p) == "klv" else None
+    try:
+        return "klv" if detect_format(p) == "klv" else None
+    except RidgelocError:  # not a log: read as a config (a YAML file named other than .yaml)
+        return None
 
 
 def _check_klv_dump(args) -> int:

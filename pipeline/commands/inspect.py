@@ -23,7 +23,15 @@ def _inspect_config(path: str, as_json: bool) -> int:
     from pipeline.flight import Flight
     from pipeline.flight_config import load_flight_config
 
-    with Flight.open(load_flight_config(path)) as flight:
+    config = load_flight_config(path)
+    if config.files.photos:  # a photo flight: what its photos state
+        doc, errors = _inspect_photos(list(config.files.photos), as_json)
+        for e in errors:
+            print(f"ridgeloc: error: {e}", file=sys.stderr)
+        if as_json:
+            print(json.dumps({"config": path, **doc}, indent=2))
+        return 1 if errors else 0
+    with Flight.open(config) as flight:
         lines = mapping_lines(flight)
     print(json.dumps({"config": path, "mapping": lines}, indent=2) if as_json else "\n".join(lines))
     return 0

@@ -21,13 +21,19 @@ def main(args) -> int:
     import numpy as np
 
     from pipeline.atomic import atomic_write_text
-    from pipeline.errors import ConfigError
+    from pipeline.commands import not_a_config, output_file
+    from pipeline.errors import ConfigError, InputError
     from pipeline.flight import Flight
     from pipeline.flight_config import load_flight_config
     from pipeline.report.mark_page import mark_page
     from pipeline.targets import flight_targets
 
-    config = load_flight_config(args.config)
+    # a folder or a file in the page's way is refused before the video is read
+    out = output_file(args.output or Path(args.config).resolve().parent / "marks.html", "marks.html")
+    try:
+        config = load_flight_config(args.config)
+    except InputError as exc:
+        raise not_a_config(args.config) or exc from None
     with Flight.open(config) as flight:
         available = set(np.asarray(flight.frames.index).tolist())
         if args.frames:
@@ -43,7 +49,6 @@ def main(args) -> int:
                  for t in flight_targets(config) if t.name is not None for m in t.marks if m.template is None]
         wanted = sorted(set(wanted) | {m["frame"] for m in known})
         images = flight.decoder(wanted)
-    out = Path(args.output) if args.output else Path(args.config).resolve().parent / "marks.html"
     atomic_write_text(out, mark_page(images, f"ridgeloc mark: {config.name}", known))
     print(f"wrote {out} ({len(images)} frame(s)); open it in a browser, click the targets and save marks.csv, "
           "then set `marks_file: marks.csv` in the flight config")

@@ -7,6 +7,7 @@ import sys
 import time
 from pathlib import Path
 
+from pipeline.commands import not_a_config, output_folder
 from pipeline.errors import InputError
 from pipeline.flight_config import FlightConfig, load_run_config
 
@@ -83,8 +84,12 @@ def group_summary(r, reused: bool = False) -> list[str]:
 
 
 def main(args) -> int:
+    output_folder(args.outdir)  # a file there is refused before any flight runs
     config = _resolve_config(args.config)
-    entries = load_run_config(config)  # a malformed run config is refused before the heavy imports below
+    try:
+        entries = load_run_config(config)  # a malformed run config is refused before the heavy imports below
+    except InputError as exc:
+        raise not_a_config(config) or exc from None
     from pipeline import __version__
     from pipeline.batch import Job, job_digest, run_groups, summarize_failures
     from pipeline.report.outputs import write_run_outputs
@@ -96,7 +101,8 @@ def main(args) -> int:
     loaded: list[tuple[str, FlightConfig]] = []
     for entry in entries:
         if entry.config is None:
-            config_failures.append(GroupFailure(Path(entry.source).stem, entry.source, entry.error))
+            log = not_a_config(entry.source)  # a log listed as a flight config
+            config_failures.append(GroupFailure(Path(entry.source).stem, entry.source, str(log or entry.error)))
         else:
             loaded.append((entry.source, entry.config))
     jobs = [Job(cfg.name, source, cfg) for source, cfg in loaded]
@@ -109,10 +115,11 @@ def main(args) -> int:
     settings = {"config": str(config), "outdir": str(args.outdir), "workers": args.workers,
                 "executor": args.executor, "ridgeloc": __version__, "reused": reused}
     t0 = time.perf_counter()
-    write_run_outputs(args.outdir, results, failures, settings, figures=not args.no_figures)
-    t1 = time.perf_counter()
-    md, tab = write_table4(args.outdir, results, failures)
-    t2 = time.perf_counter()
+    if results:  # when every flight failed, no output at all (as for a flight config that does not load)
+        write_run_outputs(args.outdir, results, failures, settings, figures=not args.no_figures)
+        t1 = time.perf_counter()
+        md, tab = write_table4(args.outdir, results, failures)
+        t2 = time.perf_counter()
     from pipeline.results import per_target, target_failures
 
     for r in per_target(results):  # a summary per target of a flight with named targets
@@ -126,9 +133,9 @@ def main(args) -> int:
     not_located = target_failures(results)
     for name, f in not_located:  # the flight's other targets are in the outputs
         print(f"ridgeloc: {name}:{f.target}: not located: {f.message}", file=sys.stderr)
-    for f in failures:  # one line each on stderr; the count goes to stdout with the rest of the summary
+    for f in failures:  # one line each on stderr; the count and the names go to stdout with the rest of the summary
         print(f"ridgeloc: {f.name}: failed: {f.message}", file=sys.stderr)
-    if not args.quiet:
+    if results and not args.quiet:
         print(f"wrote {md}, {tab}, {Path(args.outdir) / 'report.html'} and targets.csv/.geojson/.kml in "
               f"{t2 - t0:.2f} s (report.html, targets.*, run.json {t1 - t0:.2f}; report.md, table4.csv "
               f"{t2 - t1:.2f} s)")

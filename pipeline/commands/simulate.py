@@ -25,11 +25,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from pipeline.commands import output_folder
     from pipeline.errors import ConfigError
     from pipeline.simulate import SimulationConfig, run_simulation, write_outputs
     from pipeline.simulate.report import markdown_table
 
     t0, cpu0 = time.perf_counter(), time.process_time()
+    output_folder(args.out)  # a file there is refused before the experiment runs
     source = args.config
     if source is None and not Path(DEFAULT_CONFIG).is_file():
         cfg, source = SimulationConfig(), "built-in defaults (= configs/simulation_table2.yaml)"

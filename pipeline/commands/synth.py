@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from pipeline.commands import output_folder
 from pipeline.errors import InputError
 
 HELP = "generate a synthetic flight (video + telemetry + laser + ground truth) from a YAML config"
@@ -51,6 +52,7 @@ def _photo_flight(args) -> int:
 def main(args) -> int:
     import dataclasses
 
+    output_folder(args.output)  # a file there is refused, even with --overwrite
     if args.photos is not None:
         if args.config is not None:
             raise InputError("give a config or --photos, not both")
@@ -76,8 +78,6 @@ def main(args) -> int:
     if changes:
         cfg = cfg.replace(**changes)
     out = Path(args.output)
-    if out.exists() and not out.is_dir():
-        raise InputError("output exists and is not a folder", out)
     res = generate(cfg, out, overwrite=args.overwrite, write_flight_config=True)
     print(f"{cfg.group}: {res.n_observations} observations, intersection angle {res.intersection_angle_deg:.2f} deg, "
           f"{res.n_frames} frames, {cfg.format} -> {out} ({res.seconds:.1f} s)")

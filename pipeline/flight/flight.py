@@ -105,7 +105,11 @@ class Flight:
     @classmethod
     def open(cls, config: FlightConfig) -> Flight:
         """Read the logs and the frame index (no pixels decoded) and resolve every role; raises RidgelocError for
-        what makes the flight unreadable. The frame reader stays open: use the flight in a `with` block."""
+        what makes the flight unreadable. The frame reader stays open: use the flight in a `with` block. A photo
+        flight (files.photos) is refused: `pipeline.locate` reads it."""
+        if config.files.photos:
+            raise ConfigError("a photo flight (files.photos), not a video flight: use `ridgeloc locate` or "
+                              "`ridgeloc run`", config.path)
         log = read_flight_logs(config)
         source = open_frames(config, log)
         try:

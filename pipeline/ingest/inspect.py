@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from pipeline.errors import RidgelocError
+from pipeline.errors import InputError, RidgelocError
 from pipeline.ingest.dispatch import detect_format, merge_logs, read_file
 from pipeline.ingest.model import FlightLog
 
@@ -27,19 +27,26 @@ class InspectResult:
 
 def expand_flight_folders(paths) -> list[tuple[str, Path]]:
     """(group, path) pairs: each flight folder (a folder that is not a ROS 2 bag) is replaced by the logs, bags
-    and videos in it, grouped under the folder (truth.json, frame CSVs and other companions are left out)."""
+    and videos in it, grouped under the folder (truth.json, frame CSVs and other companions are left out); a
+    flight folder with none stays, as (folder, folder)."""
     out: list[tuple[str, Path]] = []
     for p in map(Path, paths):
-        if p.is_dir() and not (p / "metadata.yaml").is_file():
+        if _is_flight_folder(p):
+            found = []
             for child in sorted(p.iterdir()):
                 try:
                     detect_format(child)
                 except RidgelocError:
                     continue
-                out.append((str(p), child))
+                found.append((str(p), child))
+            out += found or [(str(p), p)]
         else:
             out.append(("", p))
     return out
+
+
+def _is_flight_folder(p: Path) -> bool:
+    return p.is_dir() and not (p / "metadata.yaml").is_file()
 
 
 def inspect_paths(paths, mapping: dict | None = None) -> list[InspectResult]:
@@ -48,6 +55,8 @@ def inspect_paths(paths, mapping: dict | None = None) -> list[InspectResult]:
     out = []
     for group, p in expand_flight_folders(paths):
         try:
+            if _is_flight_folder(p):
+                raise InputError("no logs, videos or photos found", p)
             fmt = detect_format(p)
             out.append(InspectResult(str(p), fmt, read_file(p, mapping, scan_all=True), group=group))
         except RidgelocError as exc:

@@ -97,7 +97,7 @@ class SimulationConfig:
 
     name: str = "table2"
     description: str = ""
-    seed: int = 20240601
+    seed: Annotated[int, Ge(0)] = 20240601
     trials: Annotated[int, Ge(1)] = 1000
     angles_deg: Annotated[tuple[float, ...], MinLen(1)] = (10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0)
     methods: Annotated[tuple[Method, ...], MinLen(1)] = METHODS
@@ -121,7 +121,8 @@ class SimulationConfig:
         return cls.from_dict(read_yaml(path), path)
 
     def replace(self, **changes) -> SimulationConfig:
-        return dataclasses.replace(self, **changes)
+        """A copy with `changes`, validated as a YAML config is (ConfigError: `'trials' must be >= 1, got 0`)."""
+        return type(self).from_dict(dataclasses.replace(self, **changes).to_dict())
 
     def to_dict(self) -> dict:
         return to_plain(self)

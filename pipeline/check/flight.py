@@ -73,8 +73,10 @@ def mapping_lines(r: Flight) -> list[str]:
         lines.append(f"  {'':<10} span {_when(a + off)} .. {_when(b + off)} ({(b - a) / 1e9:.1f} s)")
     f = r.frames
     off = c.offset_ns("video")
+    first_ns = int(f.t_ns[0]) + off if f.t_ns.size else None  # the first frame on the telemetry clock
     lines.append(f"  {'frames':<10} {f.source}: {f.t_ns.size} frames, {_rate(f.t_ns)}, {f.clock} clock + "
-                 f"{off / 1e9:.3f} s" + (f" (first frame at {_utc(off)})" if off > 10**17 else "")
+                 f"{off / 1e9:.3f} s"
+                 + (f" (first frame at {_utc(first_ns)})" if first_ns is not None and first_ns > 10**17 else "")
                  + (" (video_start " + str(c.video_start) + ")" if c.video_start is not None else ""))
     if f.t_ns.size:
         lines.append(f"  {'':<10} span {_when(int(f.t_ns[0]) + off)} .. {_when(int(f.t_ns[-1]) + off)}")

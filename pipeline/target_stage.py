@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pipeline.check.flight import outside_telemetry, refusal_reason
+from pipeline.check.flight import outside_telemetry, run_checks
 from pipeline.clock_estimate import ClockEstimate
 from pipeline.errors import ConfigError, InputError, RidgelocError
 from pipeline.flight import Flight, TargetMark, acquire_mark
@@ -178,9 +178,10 @@ def _on_axis_ranges(flight: Flight, plan: ObservationPlan, track: TrackResult, n
 
 
 def _synchronize(flight: Flight, plan: ObservationPlan, track: TrackResult, range_m: np.ndarray, truth_m,
-                 notes: list[str]) -> tuple[Observations, np.ndarray, np.ndarray]:
-    """(observations, useful (m,), inside (m,)): the observations of the planned frames the telemetry covers with a
-    tracked pixel or a range, after the geometry check (`pipeline.check.flight.refusal_reason`)."""
+                 notes: list[str]) -> tuple[Observations, np.ndarray, np.ndarray, list[str]]:
+    """(observations, useful (m,), inside (m,), geometry warnings): the observations of the planned frames the
+    telemetry covers with a tracked pixel or a range, after the geometry checks (`pipeline.check.flight.run_checks`;
+    its warnings are also added to notes)."""
     config = flight.config
     poses, inside = flight.poses(plan.t_ns)
     if not inside.any():
@@ -195,14 +196,15 @@ def _synchronize(flight: Flight, plan: ObservationPlan, track: TrackResult, rang
         raise InputError("no usable observation: the target was never tracked and no laser range is valid",
                          config.path)
     # A wrong convention gives an answer kilometres off with nothing else to show for it: refuse the flight.
-    refusal = refusal_reason(flight, plan.t_ns[useful], track.pixel_px[useful], range_m[useful])
+    refusal, geometry_warnings = run_checks(flight, plan.t_ns[useful], track.pixel_px[useful], range_m[useful])
     if refusal is not None:
         raise InputError(refusal, config.path)
+    notes += geometry_warnings
     K = frame_K(flight.camera, flight.camera_source, flight.log, plan.t_ns)  # per frame when a zoom reports its FOV
     obs = assemble_observations(poses.subset(useful[inside]), plan.t_ns[useful], track.pixel_px[useful],
                                 range_m[useful], K=K[useful], dist=flight.camera.dist,
                                 sigma=sigma, truth_m=truth_m)
-    return obs, useful, inside
+    return obs, useful, inside, geometry_warnings
 
 
 def truth_file_targets(config: FlightConfig) -> dict[str, tuple[float, float, float]]:
@@ -235,6 +237,7 @@ class _Tracked:
     truth_m: np.ndarray | None
     notes: list[str]
     times: StageTimes
+    geometry_warnings: list[str]
 
 
 def _track_and_sync(fp: FlightPass, target: NamedTarget | None, marks: list[TargetMark] | None) -> _Tracked:
@@ -258,8 +261,8 @@ def _track_and_sync(fp: FlightPass, target: NamedTarget | None, marks: list[Targ
     truth_lla = _truth_lla(fp, target)
     truth_m = None if truth_lla is None else enu_from_lla(*truth_lla, fp.origin)
     with times("sync"):
-        obs, useful, inside = _synchronize(flight, plan, track, range_m, truth_m, notes)
-    return _Tracked(target, marks, track, obs, useful, inside, truth_m, notes, times)
+        obs, useful, inside, geometry_warnings = _synchronize(flight, plan, track, range_m, truth_m, notes)
+    return _Tracked(target, marks, track, obs, useful, inside, truth_m, notes, times, geometry_warnings)
 
 
 def _solve_tracked(fp: FlightPass, tracked: list[_Tracked]) -> list[tuple[dict[str, Estimate], dict]]:
@@ -311,6 +314,8 @@ def _result(fp: FlightPass, t: _Tracked, estimates: dict[str, Estimate], failure
     settings["camera_resolved"] = {"source": flight.camera_source, **{k: getattr(cam, k) for k in (
         "width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px", "dist")}}
     settings["notes"] = [*fp.notes, *notes]
+    if t.geometry_warnings:  # also in notes; every estimate's reason in the exports carries them
+        settings["geometry_warnings"] = list(t.geometry_warnings)
     if fp.clock_estimate is not None:
         settings["clock_estimate"] = fp.clock_estimate.to_dict()
     settings["solve_failures"] = failures
@@ -358,8 +363,10 @@ def locate_targets(fp: FlightPass, targets: list[NamedTarget], first_marks: list
                          fp.flight.config.path)
     for r in results:
         r.settings["frames_decoded"] = fp.flight.decoder.decoded  # the flight's frames, decoded once for all
-    # the flight's own settings: a target's without its solve failures and CPU times, with the flight's notes
-    flight_settings = {k: v for k, v in results[0].settings.items() if k not in ("solve_failures", "cpu_s")}
+    # the flight's own settings: a target's without its solve failures, geometry warnings and CPU times, with the
+    # flight's notes
+    flight_settings = {k: v for k, v in results[0].settings.items()
+                       if k not in ("solve_failures", "geometry_warnings", "cpu_s")}
     flight_settings["notes"] = list(fp.notes)
     flight_settings["frames_decoded"] = fp.flight.decoder.decoded
     return FlightResult(name=fp.flight.config.name, targets=results, failed=failed, timings_s=total.wall,

@@ -3,9 +3,11 @@
 flight with a one-line reason; the right configs pass and locate the target. Plus the pieces: orientation frames,
 clock keys, the clusters."""
 
+import csv
 import datetime
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -69,6 +71,24 @@ def test_inspect_takes_a_flight_config(flights, capsys):
     assert cli_main(["inspect", str(case_config(flights[case.flight], case))]) == 0
     out = capsys.readouterr().out
     assert "read as optical_enu" in out and "CameraInfo" in out and "geometry" not in out
+
+
+def test_inspect_gives_the_first_frames_time(capsys):
+    """The frames line names the first frame's UTC time: the video offset plus the first frame's time on the video
+    clock (group1's frames CSV starts 5.56 s after the video clock's zero), the first time of the span line."""
+    config = Path(__file__).resolve().parents[1] / "configs" / "flights" / "group1.yaml"
+    cfg = load_flight_config(config)
+    with open(cfg.files.frames_csv, newline="") as f:
+        first_pts_ns = int(next(csv.DictReader(f))["pts_ns"])
+    assert first_pts_ns > 0  # the frames do not start at the video clock's zero
+    first = (datetime.datetime(1970, 1, 1, tzinfo=datetime.timezone.utc)
+             + datetime.timedelta(microseconds=(cfg.clock.offset_ns("video") + first_pts_ns) // 1000))
+    utc = first.isoformat(timespec="milliseconds").replace("+00:00", "Z")
+    assert cli_main(["inspect", str(config)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    i = next(i for i, line in enumerate(lines) if line.strip().startswith("frames "))
+    assert lines[i].endswith(f"(first frame at {utc})"), lines[i]
+    assert lines[i + 1].split() == ["span", utc, "..", lines[i + 1].split()[-1]]
 
 
 def test_a_batch_goes_on_past_a_refused_flight(flights, tmp_path, capsys):

@@ -83,6 +83,25 @@ def test_csv_values(tmp_path, groups):
     assert rows[("g2", "mle")]["error_m"] == ""  # no truth known
 
 
+def test_geometry_warnings_reach_every_estimates_reason(tmp_path, groups):
+    """A group's geometry warnings (`ridgeloc run`'s checks: settings["geometry_warnings"]) are in the reason of
+    each of its finite estimates, after the solver's own reason (the mle's fit message); one without a finite
+    position (range, diverged) does not get them, nor do the other groups' estimates."""
+    warned = hand_group("g1")
+    warned.settings["geometry_warnings"] = ["the lines of sight are nearly parallel"]
+    warned.estimates["mle"].extras["fit"] = {"message": "mle: the error model does not fit this flight"}
+    path = tmp_path / "targets.csv"
+    write_targets_csv(path, [warned, groups[1]])
+    with path.open(newline="") as f:
+        rows = {(r["group"], r["method"]): r for r in csv.DictReader(f)}
+    parallel = "the lines of sight are nearly parallel"
+    assert rows[("g1", "vision")]["reason"] == rows[("g1", "ridge")]["reason"] == parallel
+    assert rows[("g1", "mle")]["reason"] == ("mle: the error model does not fit this flight; the lines of sight are "
+                                             "nearly parallel")
+    assert "nearly parallel" not in rows[("g1", "range")]["reason"]
+    assert all(r["reason"] == "" for (g, m), r in rows.items() if g == "g2" and m != "range")
+
+
 def test_kml_is_kml22_and_agrees_with_geojson(tmp_path, groups):
     import json
 

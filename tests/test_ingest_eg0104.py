@@ -5,6 +5,7 @@ on the synth's ST 0601 writer (right and deliberately wrong sensor-angle convent
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -198,6 +199,17 @@ def test_run_on_a_clip_locates_the_crosshair_near_the_frame_centre(name):
                    (log.frame_centre.lon_deg - lon) * 111_000 * np.cos(np.radians(lat)))
     assert d_m.min() < 100.0
     assert any(n.startswith(f"frame centre: {CLIPS[name][0]} packets") for n in result.settings["notes"])
+    # the lines of sight are 1.3 and 7.9 deg apart, the ranges 1.7 km and 517 m shorter than where they meet
+    # (docs/check.md): run carries check's warning into the notes and every estimate's reason in the exports
+    (warning,) = result.settings["geometry_warnings"]
+    assert warning in result.settings["notes"]
+    assert re.search(r"nearly parallel \(first to last \d+\.\d deg\): where they meet is undetermined", warning)
+    from pipeline.report.exports import target_rows
+
+    rows = {r["method"]: r for r in target_rows([result])}
+    assert "vision" in result.estimates and "dlt" in result.estimates
+    for m in result.estimates:
+        assert warning in rows[m]["reason"], m
 
 
 # ---- the synth's ST 0601 writer ------------------------------------------------------------------------

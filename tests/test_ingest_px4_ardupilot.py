@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from pipeline.errors import LogReadError
-from pipeline.ingest import read_flight
+from pipeline.ingest import read_file, read_flight
 
 LOGS = Path(__file__).resolve().parents[1] / ".." / "shared" / "logs"
 
@@ -61,6 +62,19 @@ def test_ulog_truncated_and_garbage(tmp_path):
     log = read_flight([cut])
     assert 0 < log.attitude.t_ns.size < 1730
     assert any("corrupt or cut off" in w and "covering" in w for w in log.warnings)
+    # the sample log cut after about a second of its streams, read as `ridgeloc inspect` reads it (every topic)
+    # and for a flight: the warning's span is that of the streams read, as inspect lists them, not pyulog's
+    # last_timestamp - start_timestamp (1174 s: the log's one `mission` message is stamped 1194 s)
+    short = tmp_path / "short.ulg"
+    short.write_bytes((LOGS / "px4_pyulog_sample_log_small.ulg").read_bytes()[:100_000])
+    for log, topics in ((read_file(short, scan_all=True), "every topic"), (read_flight([short]), "the selected")):
+        (warning,) = [w for w in log.warnings if "corrupt or cut off" in w]
+        assert f"messages of {topics}" in warning
+        covering_s = float(re.search(r"covering ([0-9.]+) s", warning).group(1))
+        streams = [st for st in log.streams if st.count >= 2]
+        listed_s = (max(st.t_last_ns for st in streams) - min(st.t_first_ns for st in streams)) / 1e9
+        assert covering_s == pytest.approx(listed_s, abs=0.05) and covering_s < 2.0
+        assert covering_s >= (log.attitude.t_ns[-1] - log.attitude.t_ns[0]) / 1e9 - 0.05
     bad = tmp_path / "bad.ulg"
     bad.write_bytes(b"ULog\x01\x12\x35" + bytes(range(256)) * 3)
     with pytest.raises(LogReadError, match=r"bad\.ulg: "):

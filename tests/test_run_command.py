@@ -130,6 +130,9 @@ def test_console_summary_says_misfit_rejections_and_unsolved_methods():
     r.estimates["mle"].extras["rejected"] = []
     r.settings = {"notes": []}
     assert group_summary(r, reused=True) == ["g: 3 observations, reused, error mle 5.00 m"]
+    parallel = "the lines of sight are nearly parallel (first to last 1.3 deg): where they meet is undetermined"
+    r.settings = {"notes": [parallel], "geometry_warnings": [parallel]}  # the geometry checks' warning comes first
+    assert group_summary(r) == ["g: 3 observations, 0.50 s, error mle 5.00 m", f"  warning: {parallel}"]
 
 
 def test_quiet_run_still_says_when_the_mle_model_does_not_fit(tmp_path, capsys, monkeypatch):

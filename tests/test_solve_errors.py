@@ -40,6 +40,21 @@ def test_vision_needs_two_pixels(obs):
     assert est.converged
 
 
+def test_the_fusions_refuse_a_problem_without_ranges(obs):
+    """Without a range, fusion-raw's stacked system is vision's alone (its answer was vision's, called a fusion):
+    it refuses as fusion and ridge do, from vision's start or a given one; with ranges it solves."""
+    from pipeline.solve.methods import solve_problems
+
+    no_ranges = _drop(obs, ranges=range(obs.n))
+    for method in ("fusion-raw", "fusion", "ridge"):
+        with pytest.raises(ObservationError, match=f"^{method} fuses pixels with ranges but there are no ranges"):
+            solve(method, no_ranges)
+        with pytest.raises(ObservationError, match="there are no ranges"):
+            solve(method, no_ranges, initial_m=obs.truth_m)
+    refused, solved = solve_problems([no_ranges, obs], ["fusion-raw"])  # the path of `run` and `locate`
+    assert isinstance(refused["fusion-raw"], ObservationError) and solved["fusion-raw"].converged
+
+
 def test_ranges_without_pixels_still_give_range(obs):
     """Issue 12: a file with laser ranges but no pixels. range-only (the paper's start is vision's estimate)
     starts from the ranges along the optical axes (the rangefinder is boresighted) and solves, reaching the

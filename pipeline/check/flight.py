@@ -1,6 +1,6 @@
 """The checks of one flight (a `pipeline.flight.Flight`): what each role was resolved to (`mapping_lines`), the
-geometry checks (`geometry_checks`) and the one-line refusal `ridgeloc run` gives an inconsistent flight
-(`refusal_reason`)."""
+geometry checks (`geometry_checks`) and those of `ridgeloc run` (`run_checks`: the one-line refusal of an
+inconsistent flight, the warnings it carries into its report and exports)."""
 
 from __future__ import annotations
 
@@ -73,8 +73,10 @@ def mapping_lines(r: Flight) -> list[str]:
         lines.append(f"  {'':<10} span {_when(a + off)} .. {_when(b + off)} ({(b - a) / 1e9:.1f} s)")
     f = r.frames
     off = c.offset_ns("video")
+    first_ns = int(f.t_ns[0]) + off if f.t_ns.size else None  # the first frame on the telemetry clock
     lines.append(f"  {'frames':<10} {f.source}: {f.t_ns.size} frames, {_rate(f.t_ns)}, {f.clock} clock + "
-                 f"{off / 1e9:.3f} s" + (f" (first frame at {_utc(off)})" if off > 10**17 else "")
+                 f"{off / 1e9:.3f} s"
+                 + (f" (first frame at {_utc(first_ns)})" if first_ns is not None and first_ns > 10**17 else "")
                  + (" (video_start " + str(c.video_start) + ")" if c.video_start is not None else ""))
     if f.t_ns.size:
         lines.append(f"  {'':<10} span {_when(int(f.t_ns[0]) + off)} .. {_when(int(f.t_ns[-1]) + off)}")
@@ -297,19 +299,31 @@ def geometry_checks(r: Flight, pixel_px: np.ndarray | None = None, t_ns: np.ndar
     rb = range_bias_problem(c)
     if rb and not alts:
         problems.append(rb)
-    undetermined = meet_undetermined_warning(c)
-    if undetermined and c.consistent:
-        warnings.append(undetermined)
+    warnings += cluster_warnings(c)
     if marks_ok and (c.consistent or alts):  # the first mark's line of sight against where the others meet
         problems += mark_checks(r, c.centre_m if c.consistent else (alts[0].cluster.centre_m if alts else None),
                                 alts[0].convention if alts and not c.consistent else None, now)[0]
     return GeometryResult(c, alts, problems, warnings, what)
 
 
-def refusal_reason(r: Flight, t_ns, pixel_px, ranges_m) -> str | None:
-    """One line when the flight's geometry is inconsistent beyond doubt (ridgeloc run refuses it), else None."""
+def cluster_warnings(c: Cluster) -> list[str]:
+    """The warnings of a consistent cluster, one line each (`check` and `run` alike): lines of sight so nearly
+    parallel that where they meet is undetermined along them and the ranges cannot be checked against it."""
+    undetermined = meet_undetermined_warning(c)
+    return [undetermined] if undetermined and c.consistent else []
+
+
+def run_checks(r: Flight, t_ns, pixel_px, ranges_m) -> tuple[str | None, list[str]]:
+    """The geometry checks of `ridgeloc run` at its observations (lines of sight through the tracked target):
+    (one line when the geometry is inconsistent beyond doubt (run refuses the flight), else None; the warnings
+    `check` gives the same cluster (`cluster_warnings`))."""
     o, d, _ = rays(r, t_ns, pixel_px)
     c = cluster(o, d, ranges_m)
+    return _refusal(r, t_ns, pixel_px, ranges_m, c), ([] if c is None else cluster_warnings(c))
+
+
+def _refusal(r: Flight, t_ns, pixel_px, ranges_m, c: Cluster | None) -> str | None:
+    """`run_checks`' refusal, from the cluster c of its lines of sight."""
     if c is None or not c.inconsistent:
         # consistent lines of sight through a wrong mark: the gimbal (and the laser) track something else
         oa, da, _ = rays(r, t_ns)

@@ -83,8 +83,10 @@ def unsolved_methods(r: GroupResult) -> dict[str, tuple[str, str]]:
 
 def _status_reason(r: GroupResult, method: str) -> tuple[str, str | None]:
     """(status, reason) of a method: its status and reason when it could not run, else the estimate's status
-    and the reason the solver gives (`reason`/`message` in its extras, or the mle's fit message when its error
-    model does not fit the flight: the covariance was inflated and is not to be trusted blindly), if any."""
+    and why it is not to be trusted blindly, if anything says so: the reason the solver gives (`reason`/`message`
+    in its extras, or the mle's fit message when its error model does not fit the flight: the covariance was
+    inflated), then, for a finite estimate, the group's geometry warnings (settings["geometry_warnings"], from
+    `ridgeloc run`'s checks: lines of sight too nearly parallel to fix where they meet), joined by "; "."""
     failures = r.settings.get("solve_failures") or {}
     e = r.estimates.get(method)
     if e is None:
@@ -94,7 +96,9 @@ def _status_reason(r: GroupResult, method: str) -> tuple[str, str | None]:
     fit = extras.get("fit")
     if reason is None and isinstance(fit, dict) and fit.get("message"):
         reason = fit["message"]
-    return e.status.name.lower(), (None if reason is None else str(reason))
+    warnings = (r.settings.get("geometry_warnings") or []) if np.isfinite(e.position_m).all() else []
+    reasons = [str(x) for x in (reason, *warnings) if x is not None]
+    return e.status.name.lower(), ("; ".join(reasons) or None)
 
 
 def group_methods(r: GroupResult) -> list[str]:

@@ -586,7 +586,7 @@ def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
         if sv[1] <= 1e-9 * sv[0]:
             raise GeometryError("the platform positions of the ranged frames are collinear: ranges cannot fix "
                                 "the rotation of the target about that line")
-    if method in ("fusion", "ridge") and nrng == 0:
+    if method in ("fusion-raw", "fusion", "ridge") and nrng == 0:  # without ranges their answer is vision's
         raise ObservationError(f"{method} fuses pixels with ranges but there are no ranges; use vision")
 
 

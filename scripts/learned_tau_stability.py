@@ -14,12 +14,13 @@ observations file. Per flight: the mle error, the start's error, the learned ans
 deviation and the largest move of the answer over --starts starts 1e-6 m from the first (random directions, seed
 1). --candidates: per candidate model (the attitude error's tau or white, attitude sigma, boresight bias, the
 position error's tau or white), its `correlated.gls` fit from those starts (every row at weight 1, the fit
-`learn_tau` uses): error, restricted log-likelihood with the variance factors' prior, variance factors (pixel / range;
-"not admitted" where they exceed `learned_tau.admitted`) and the likelihood's overall scale k (C's variances are the
-stated ones x factor x k), largest move, iterations and status (0 converged, 1 iteration limit). --told: the
-configured-correlation-time path (the white fit, then the damped GLS fit `correlated.gls` with
-the white fit's robust weights held, `methods._configured_tau`) told each zoo flight's true correlation times, from
-the los answer and starts 1e-6 m from it: error, largest move, rows the white fit rejected, iterations;
+`learn_tau` uses): error, restricted log-likelihood with the variance factors' prior, variance factors (pixel /
+range; "not admitted" where they, or k of a drift, exceed `learned_tau.admitted`) and the likelihood's overall
+scale k (C's variances are the stated ones x factor x k), largest move, iterations and status (0 converged, 1
+iteration limit). --told: the configured-correlation-time path (the white fit, then the damped GLS fit
+`correlated.gls` with the white fit's robust weights held, `methods._configured_tau`) told each zoo flight's true
+correlation times, from the los answer and starts 1e-6 m from it: error, largest move, rows the white fit
+rejected, iterations;
 --told-zoo N: that on every flight of `zoo.py --flights N --seed 0` whose told sigma has a correlation time.
 --scenes: the configured path's coverage of the 95 % ellipsoid and median error on the test scenes
 (tests/support/scenes.py, docs/solvers.md "Time-correlated attitude and position errors"): Gauss-Markov attitude
@@ -148,11 +149,12 @@ def main(argv: list[str] | None = None) -> int:
             pos = "white" if s.position_tau_s is None else f"{s.position_tau_s:g} s"
             tau = "white" if s.attitude_tau_s is None else f"{s.attitude_tau_s:g} s"
             total = dataclasses.replace(s, attitude_deg=float(np.hypot(s.attitude_deg or 0.0, biases[k] or 0.0)))
-            ok = learned_tau.admitted(sigma, total, *vfs[k])
+            scale = max(lls[k][1] / lls[k][2], 1.0)  # C's overall scale k
+            ok = learned_tau.admitted(sigma, total, *vfs[k], scale=1.0 if learned_tau.is_white(s) else scale)
             print(f"    attitude tau {tau:>6s}, attitude {s.attitude_deg or 0:.3g} deg, bias {biases[k] or 0:.3g} deg, "
                   f"position tau {pos:>6s}: {np.linalg.norm(Xk[0] - truth):8.2f} m, log L {lls[k][0]:9.1f}, "
                   f"variance factors {vfs[k][0]:.3g} / {vfs[k][1]:.3g}{'' if ok else ' (not admitted)'} "
-                  f"x scale {max(lls[k][1] / lls[k][2], 1.0):.3g}, "
+                  f"x scale {scale:.3g}, "
                   f"largest move {mv:.1e} m, iterations {sorted({fit[k][1] for fit in fits})}, "
                   f"status {sorted({fit[k][2] for fit in fits})}")
     print(f"largest move: {largest[0]:.1e} m ({largest[1]})")

@@ -29,8 +29,11 @@ def test_likelihood_changes_with_tau_and_the_true_tau_wins(told):
         got = learned_tau.learn_tau([st], obs.truth_m[None] + 1.0, told, None, told.pixel_px is None, 1e-4, 50)[0]
         assert got is not None
         _, att, lls, _ = got
-        ll = np.array([lls[(t, att, t)] for t in learned_tau.TAU_GRID_S])  # the position error drifting too
-        assert np.ptp(ll) > 1.0
+        # the position error drifting too; a model not admitted (a far tau that fits only with every variance
+        # scaled beyond 9 x) is out of the evidence: -inf
+        ll = np.array([lls.get((t, att, t), -np.inf) for t in learned_tau.TAU_GRID_S])
+        assert np.isfinite(ll[learned_tau.TAU_GRID_S.index(TRUE_TAU_S)])
+        assert np.ptp(ll[np.isfinite(ll)]) > 1.0
         total += ll
     assert learned_tau.TAU_GRID_S[int(np.argmax(total))] == TRUE_TAU_S
 
@@ -162,12 +165,16 @@ def test_the_evidence_tells_drifting_errors_from_white_ones(tau_s):
 
 def test_a_model_that_explains_the_ranges_away_is_not_admitted():
     """A candidate whose fit needs the ranges' variance more than 9 x the stated one (3 x the sigma) is left out
-    of the evidence, as one that needs the attitude error beyond 3 x the stated one."""
+    of the evidence, as one that needs the attitude error beyond 3 x the stated one or whose likelihood scales
+    every variance beyond 9 x."""
     told = PAPER_SIGMA
     drifting = dataclasses.replace(told, attitude_tau_s=20.0, position_tau_s=20.0)
     assert learned_tau.admitted(told, drifting, 1.0, 8.9)
     assert not learned_tau.admitted(told, drifting, 1.0, 9.1)
     assert not learned_tau.admitted(told, drifting, 9.1, 1.0)
+    # the likelihood's overall scale of the covariance, held to the same limit (unseen flight s11/u039)
+    assert learned_tau.admitted(told, drifting, 1.0, 1.0, scale=8.9)
+    assert not learned_tau.admitted(told, drifting, 1.0, 1.0, scale=9.1)
     assert learned_tau.admitted(dataclasses.replace(told, range_m=None), drifting, 1.0, 100.0)  # range unstated
     grid = dataclasses.replace(drifting, attitude_deg=1.0)  # attitude unstated: the grid's sigma, the pixel noise
     assert learned_tau.admitted(dataclasses.replace(told, attitude_deg=None), grid, 8.9, 1.0)

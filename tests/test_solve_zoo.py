@@ -189,6 +189,19 @@ def test_a_misfit_alone_looks_for_a_tracker_slip_only():
     assert e @ np.linalg.solve(est.covariance_m2, e) < 16.27  # chi2_3(0.999)
 
 
+def test_a_bias_alone_stays_in_the_evidence_whatever_its_scale():
+    """s31/z205 (bias family): the likeliest candidate is a boresight bias alone, without the white attitude error
+    the flight also has, which fits only with the likelihood's overall scale k = 11.7. The limit on k keeps a drift
+    or a slip out of the evidence (unseen s11/u039), not a white model, whose evidence keeps the first answer
+    (5.0 m); with the bias alone out, a drift at tau 320 s took its place (35.9 m)."""
+    from pipeline.solve import solve
+
+    f = _zoo().flight("z205", seed=31)
+    est = solve("mle", f.obs)
+    assert "error_model" not in est.extras
+    assert np.linalg.norm(est.position_m - f.obs.truth_m) < 10.0
+
+
 def test_zoo_compare_counts_flight_by_flight(tmp_path, capsys):
     """scripts/zoo_compare.py (the before / after tables of docs/zoo.md) on two hand-made runs: one flight closer and
     no longer a catastrophe, one further, one unchanged; the coverage counts e^T C^-1 e <= 7.81."""

@@ -283,13 +283,18 @@ def fits(sts: list, X0: np.ndarray, sigmas: list, robust: str | None, vce: bool,
     return out
 
 
-def admitted(stated: Sigma, candidate: Sigma, vf_pixel: float, vf_range: float) -> bool:
-    """Whether a candidate's fit, with its variance factors, stays within `starts.MAX_OVER_STATED` times the
-    stated sigmas: the range noise, and the attitude error (the candidate's attitude sigma times the pixel
-    rows' factor; the pixel noise where no attitude sigma is stated). A fit that needs more explains those
-    observations away (zoo flight s0/z162: the position drifting with the attitude, the ranges' variance 121 x
-    the stated, 1,062 m off, the likeliest model)."""
+def admitted(stated: Sigma, candidate: Sigma, vf_pixel: float, vf_range: float, scale: float = 1.0) -> bool:
+    """Whether a candidate's fit stays within `starts.MAX_OVER_STATED` times the stated sigmas: the range noise,
+    the attitude error (the candidate's attitude sigma times the pixel rows' factor; the pixel noise where no
+    attitude sigma is stated) and the likelihood's overall scale k of its covariance (`log_likelihoods`; `_mixture`
+    passes it for the candidates whose answer would replace the first, drifts and slips: a white model's evidence
+    keeps the first answer). A fit that needs more explains those observations away (zoo s0/z162: the ranges'
+    variance 121 x the stated, 1,062 m off, the likeliest model; unseen s11/u039, the laser sigma stated 4-6 x too
+    small: drifts within 9 x by their factors at k 13-22, 11.0 m off; docs/zoo.md, "The likelihood's scale held to
+    the admission rule")."""
     k = _starts.MAX_OVER_STATED
+    if not scale <= k * k:
+        return False
     if stated.range_m and not vf_range <= k * k:
         return False
     if stated.attitude_deg:
@@ -308,11 +313,14 @@ def _mixture(st: Stacked, stated: Sigma, sigmas: list, out: tuple, biases: list)
     vfs = [(float(out[5]["variance_factor_pixel"][k]), float(out[5]["variance_factor_range"][k])) for k in answered]
     lk = log_likelihoods(st, X[answered], [sigmas[k] for k in answered], vfs,
                          [biases[k] for k in answered]) if answered else []
-    for k, (ll, _, _), vf in zip(answered, lk, vfs, strict=True):
+    for k, (ll, chi2, m), vf in zip(answered, lk, vfs, strict=True):
         c, slip = sigmas[k], isinstance(biases[k], _correlated.Slip)
         bias = 0.0 if slip else biases[k] or 0.0
         total = dataclasses.replace(c, attitude_deg=math.hypot(c.attitude_deg or 0.0, bias))
-        if not (np.isfinite(ll) and admitted(stated, total, *vf)):
+        # the covariance's overall scale limits what can replace the first answer (a drift, a slip) only: a bias
+        # alone, without the white attitude error, fits many a bias flight best at k up to 12 (zoo s31/z205)
+        scale = max(chi2 / m, 1.0) if slip or not is_white(c) else 1.0
+        if not (np.isfinite(ll) and admitted(stated, total, *vf, scale=scale)):
             continue
         key = (c.attitude_tau_s, c.attitude_deg, c.position_tau_s) + (("slip",) if slip else (biases[k],) if biases[k]
                                                                       else ())

@@ -163,6 +163,21 @@ def test_an_existing_file_as_the_output_folder_is_refused_before_any_flight_runs
     assert afile.read_text() == "keep me"
 
 
+def test_a_scheduler_without_the_dask_executor_is_refused(tmp_path, capsys, monkeypatch):
+    """--scheduler names a Dask scheduler; without --executor dask it was ignored and the run went on locally."""
+    import pipeline.batch
+
+    def no_flight(*args, **kwargs):
+        raise AssertionError("a flight ran with a scheduler that would be ignored")
+
+    monkeypatch.setattr(pipeline.batch, "run_groups", no_flight)
+    out = tmp_path / "out"
+    assert main(["run", str(SAMPLE), "-o", str(out), "--scheduler", "tcp://127.0.0.1:1", "-q"]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "--executor dask" in err[0]
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("content", [b"", b"a text file, not a video\n",
                                      (REPO / "sample_data" / "fmv" / "flight.ts").read_bytes()[:3072]],
                          ids=["empty", "text", "first-3KB"])

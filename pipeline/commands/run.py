@@ -86,6 +86,8 @@ def group_summary(r, reused: bool = False) -> list[str]:
 
 def main(args) -> int:
     output_folder(args.outdir)  # a file there is refused before any flight runs
+    if args.scheduler is not None and args.executor != "dask":
+        raise InputError("--scheduler names a Dask scheduler: give --executor dask too (it would be ignored)")
     config = _resolve_config(args.config)
     try:
         entries = load_run_config(config)  # a malformed run config is refused before the heavy imports below

@@ -145,13 +145,18 @@ def test_quiet_run_still_says_when_the_mle_model_does_not_fit(tmp_path, capsys, 
     assert capsys.readouterr().out.splitlines() == [f"g: {misfit}", "all 1 flight(s) finished"]
 
 
-def test_an_existing_file_as_the_output_folder_is_refused_before_any_flight_runs(tmp_path, capsys, monkeypatch):
+@pytest.fixture
+def no_flight_runs(monkeypatch):
+    """run_groups replaced by a failure: what a test runs must be refused before any flight runs."""
     import pipeline.batch
 
     def no_flight(*args, **kwargs):
-        raise AssertionError("a flight ran before the output folder was checked")
+        raise AssertionError("a flight ran before its command line was refused")
 
     monkeypatch.setattr(pipeline.batch, "run_groups", no_flight)
+
+
+def test_an_existing_file_as_the_output_folder_is_refused_before_any_flight_runs(tmp_path, capsys, no_flight_runs):
     afile = tmp_path / "afile"
     afile.write_text("keep me")
     assert main(["run", str(SAMPLE), "-o", str(afile), "--no-figures", "-q"]) == 1
@@ -163,14 +168,8 @@ def test_an_existing_file_as_the_output_folder_is_refused_before_any_flight_runs
     assert afile.read_text() == "keep me"
 
 
-def test_a_scheduler_without_the_dask_executor_is_refused(tmp_path, capsys, monkeypatch):
+def test_a_scheduler_without_the_dask_executor_is_refused(tmp_path, capsys, no_flight_runs):
     """--scheduler names a Dask scheduler; without --executor dask it was ignored and the run went on locally."""
-    import pipeline.batch
-
-    def no_flight(*args, **kwargs):
-        raise AssertionError("a flight ran with a scheduler that would be ignored")
-
-    monkeypatch.setattr(pipeline.batch, "run_groups", no_flight)
     out = tmp_path / "out"
     assert main(["run", str(SAMPLE), "-o", str(out), "--scheduler", "tcp://127.0.0.1:1", "-q"]) == 1
     err = capsys.readouterr().err.splitlines()

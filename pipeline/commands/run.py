@@ -120,7 +120,6 @@ def main(args) -> int:
     t0 = time.perf_counter()
     if results:  # when every flight failed, no output at all (as for a flight config that does not load)
         write_run_outputs(args.outdir, results, failures, settings, figures=not args.no_figures)
-        t1 = time.perf_counter()
         md, tab = write_table4(args.outdir, results, failures)
         t2 = time.perf_counter()
     from pipeline.results import per_target, target_failures

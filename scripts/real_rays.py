@@ -9,10 +9,11 @@ CameraOrientationNED, as OpenAthena reads it), the drone's height as WGS84 ellip
 f_x, f_y with the principal point at the image centre and the OpenCV lens (k1, k2, p1, p2, k3), the pixel =
 imageSelectedProportionX/Y x the image size. The CSV has no camera azimuth: OpenAthena adds the pixel's yaw offset
 to the camera's azimuth and casts the ray along the sum, so the camera's azimuth is the azimuth of its answer from
-the drone minus yawOffsetDegSelectedPoint (+180 deg where raySlantAngleDeg > 90: the ray leans back past nadir).
-`adapter_checks` verifies this on the data (rows of one photo give one azimuth; OpenAthena's logged offsets come
-back from the pixel fraction by its formula). Truth: the horizontal position of the point the row was assigned
-to (the field test's rule, README); heights are not judged (the survey's and the drone's differ by tens of metres).
+the drone minus yawOffsetDegSelectedPoint (+180 deg where raySlantAngleDeg > 90: the ray leans back past nadir),
+one per photo (`camera_yaw_deg`). `adapter_checks` verifies this on the data (rows of one photo give one azimuth;
+OpenAthena's logged offsets come back from the pixel fraction by its formula). Truth: the horizontal position of
+the point the row was assigned to (the field test's rule, README); heights are not judged (the survey's and the
+drone's differ by tens of metres).
 
 Prints the fused answer per point, then figures that do not rest on ten points alone: a bootstrap over points,
 leave-one-photo-out, random subsets of 2-8 photos, the compass bias prior fitted on nine points and used on the
@@ -20,6 +21,10 @@ tenth, the rays' error split (within one photo against across photos), and the f
 sight is taken as the drone-to-answer direction (OpenAthena's own ray) instead of the ray through the pixel.
 
     python scripts/real_rays.py [--folder ../shared/real_rays] [--subsets 20] [--bootstrap 2000] [--seed 0]
+                                [--attitude-deg A] [--photo-position-m P] [--bias-prior-deg B]
+
+The last three state the per-photo attitude and position sigmas and the compass bias prior instead of the error
+model's (as a user states them to `ridgeloc locate`).
 """
 
 from __future__ import annotations
@@ -42,11 +47,13 @@ DIST_KEYS = ("k1", "k2", "p1", "p2", "k3")  # OpenCV order (pipeline.geometry.le
 
 @dataclass(frozen=True)
 class RealRays:
-    """n rows of openathena_rays.csv and m surveyed points. Angles in degrees, heights WGS84 ellipsoidal.
+    """n rows of openathena_rays.csv and m surveyed points. Angles in degrees.
 
-    answer_lla, drone_lla (n, 3); slant_deg, roll_deg, ray_slant_deg, yaw_offset_deg, pitch_offset_deg (n,);
+    answer_lla, drone_lla (n, 3) latitude, longitude, WGS84 ellipsoidal height; slant_deg, roll_deg, ray_slant_deg,
+    yaw_offset_deg, pitch_offset_deg (n,);
     fraction_xy (n, 2) the tapped pixel as a fraction of the image; size_px (w, h), f_px (fx, fy), dist (5,) OpenCV;
-    point (n,) index into names / point_lla (m, 3); photo (n,) index of the photo a row came from (rows of one
+    point (n,) index into names / point_lla (m, 3) the survey's latitude, longitude, Elevation (a height on a datum
+    tens of metres from the drone's); photo (n,) index of the photo a row came from (rows of one
     photo share the drone's position and camera angles)."""
 
     answer_lla: np.ndarray
@@ -341,6 +348,10 @@ def main() -> int:
     ap.add_argument("--photo-position-m", type=float, help="per-photo position sigma instead of the error model's")
     ap.add_argument("--bias-prior-deg", type=float, help="compass bias prior instead of the error model's")
     args = ap.parse_args()
+    missing = [n for n in ("openathena_rays.csv", "gcps.csv") if not (Path(args.folder) / n).is_file()]
+    if missing:
+        print(f"{args.folder}: no {' or '.join(missing)} (the real rays of ../shared/real_rays)", file=sys.stderr)
+        return 1
     rr = read_real_rays(args.folder)
     yaw = camera_yaw_deg(rr)
     chk = adapter_checks(rr)

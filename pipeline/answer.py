@@ -234,14 +234,20 @@ def lines_of_sight(obs: Observations) -> LinesOfSight:
     pix = obs.has_pixel
     if pix.sum() < 2:
         return LinesOfSight(int(pix.sum()), 0.0, 0.0)
-    C, a = camera_rays_m(obs.P[pix], obs.pixel[pix])
+    return lines_of_sight_from_rays(*camera_rays_m(obs.P[pix], obs.pixel[pix]))
+
+
+def lines_of_sight_from_rays(C: np.ndarray, a: np.ndarray) -> LinesOfSight:
+    """The spread (`LinesOfSight`) of rays from centres C (n, 3) m along unit directions a (n, 3)."""
+    if len(C) < 2:
+        return LinesOfSight(len(C), 0.0, 0.0)
     mean = a.mean(axis=0)
     mean /= np.linalg.norm(mean)
     cos = np.clip(a @ a.T, -1.0, 1.0)
     span = math.degrees(math.acos(float(cos.min())))
     across = (C - C.mean(axis=0)) - np.outer((C - C.mean(axis=0)) @ mean, mean)
     d = np.linalg.norm(across[:, None, :] - across[None, :, :], axis=-1)
-    return LinesOfSight(int(pix.sum()), span, float(d.max()))
+    return LinesOfSight(len(C), span, float(d.max()))
 
 
 def baseline_problem(los: LinesOfSight, has_range: bool, has_terrain: bool) -> str | None:
@@ -251,11 +257,12 @@ def baseline_problem(los: LinesOfSight, has_range: bool, has_terrain: bool) -> s
         return None
     if los.n < 2:
         return ("the target was seen in fewer than two frames and there is no laser range or terrain model: one "
-                "line of sight fixes a direction, not a point; mark it in more frames, or add a laser range or a DEM")
+                "line of sight fixes a direction, not a point; mark it in more frames, or add a laser range or a "
+                "terrain model (a flight config's terrain:, locate's --dem)")
     return (f"no baseline: the camera moved only {_fmt_m(los.baseline_m)} across its lines of sight, which span "
             f"{los.span_deg:.1f} deg, too little for them to meet, and no laser range or terrain model fixes the "
             "distance along them; fly around the target (lines of sight at least 10-20 deg apart), or add a laser "
-            "range or a DEM (terrain:)")
+            "range or a terrain model (a flight config's terrain:, locate's --dem)")
 
 
 def unsolved_reasons(failures: dict | None) -> dict[str, str]:
@@ -308,9 +315,10 @@ def choose_answer(obs: Observations, estimates: dict[str, Estimate], unsolved: d
         return _located(best, estimates, verdicts, n, f"{best}: {precise}; the MLE is not taken: {why}")
     headline = baseline_problem(lines_of_sight(obs), bool(obs.has_range.any()), "dem" in estimates or ground
                                 is not None)
-    details = "; ".join(f"{m}: {v.reason}" for m, v in verdicts.items())
-    reason = headline or "no method's answer is determined by this flight"
-    return Answer(False, None, None, None, f"{reason} ({details})" if details else reason, n, verdicts)
+    if headline is None:
+        why = f" (mle: {mle.reason})" if mle is not None else ""
+        headline = f"no method's estimate is determined by this flight{why}; estimates.csv says why for each"
+    return Answer(False, None, None, None, headline, n, verdicts)
 
 
 def _located(method: str, estimates: dict[str, Estimate], verdicts: dict[str, Verdict], n: int,

@@ -32,7 +32,7 @@ from pipeline.geometry.rays import camera_rays_m
 from pipeline.solve.estimate import Estimate, Status
 from pipeline.solve.observations import Observations
 from pipeline.solve.propagate import PROPAGATED, ErrorSources, method_solver, propagate
-from pipeline.solve.uncertainty import cep_m
+from pipeline.solve.uncertainty import cep_m, horizontal
 
 #: a method is determined where its 95 % error ellipsoid's largest semi-axis is at most this fraction of its
 #: distance from the cameras
@@ -45,6 +45,8 @@ GROUND_SIGMAS = 3.0
 #: below the lowest dry land (the Dead Sea's shore, about 430 m below sea level): a ground point there is underground
 #: anywhere on Earth
 LOWEST_LAND_MSL_M = -440.0
+#: the 90 % two-sided quantile of the standard normal: LE90 = Z90 sigma_up
+Z90 = 1.6448536269514722
 #: chi-square with 3 degrees of freedom, 95 %: the ellipsoid's semi-axes are sqrt of it times the 1-sigma ones
 _CHI2_3_95 = 7.814727903251178
 #: lines of sight spanning less than this (deg) with the cameras this close (baseline, m) are named as the cause
@@ -121,6 +123,20 @@ class Answer:
                    int(d.get("n_observations", 0)),
                    {m: Verdict.from_dict(m, v) for m, v in (d.get("methods") or {}).items()})
 
+    def summary(self) -> dict:
+        """The answer in the observations' own frame (ENU metres, no geodesy): status, method, position_m, CE90,
+        LE90, CEP50, the 95 % ellipse, the covariance and why (`ridgeloc solve`'s answer)."""
+        d = {"status": self.status, "method": self.method, "reason": self.reason,
+             "position_m": None if self.position_m is None else [float(v) for v in self.position_m]}
+        if self.covariance_m2 is not None and np.isfinite(self.covariance_m2).all():
+            u = horizontal(np.asarray(self.covariance_m2))
+            d.update(ce90_m=u["cep90_m"], le90_m=Z90 * u["sigma_up_m"], cep50_m=u["cep50_m"],
+                     ellipse95_semi_major_m=u["ellipse95_semi_major_m"],
+                     ellipse95_semi_minor_m=u["ellipse95_semi_minor_m"],
+                     ellipse95_azimuth_deg=u["ellipse95_azimuth_deg"],
+                     covariance_m2=np.asarray(self.covariance_m2).tolist(), covariance_source=self.covariance_source)
+        return d
+
     @classmethod
     def none(cls, reason: str, n_observations: int = 0) -> Answer:
         """A target without an answer (e.g. one that could not be tracked at all)."""
@@ -150,11 +166,14 @@ class Ground:
 
 
 def _ground_below(X: np.ndarray, origin_lla, ground: Ground | None) -> tuple[float, float, str]:
-    """(ground height above X's foot in ENU up m, its sigma, its name) at X: the DEM, else the lowest dry land."""
+    """(ground height above X's foot in ENU up m, its sigma, its name) at X: the DEM, else the lowest dry land
+    (-inf where neither is known: observations without their geodetic origin)."""
     if ground is not None:
         up = float(np.asarray(ground.up_m(np.array(X[0]), np.array(X[1])), dtype=np.float64).reshape(-1)[0])
         if np.isfinite(up):
             return up, ground.sigma_m, ground.name
+    if origin_lla is None:
+        return -math.inf, 0.0, "the ground"
     lat, lon, h = lla_from_enu(X, origin_lla)
     msl = h - float(geoid_undulation_m(lat, lon))
     return float(X[2]) + (LOWEST_LAND_MSL_M - msl), 0.0, "the lowest dry land on Earth (440 m below sea level)"
@@ -238,16 +257,21 @@ def lines_of_sight(obs: Observations) -> LinesOfSight:
 
 
 def lines_of_sight_from_rays(C: np.ndarray, a: np.ndarray) -> LinesOfSight:
-    """The spread (`LinesOfSight`) of rays from centres C (n, 3) m along unit directions a (n, 3)."""
-    if len(C) < 2:
-        return LinesOfSight(len(C), 0.0, 0.0)
+    """The spread (`LinesOfSight`) of rays from centres C (n, 3) m along unit directions a (n, 3); of at most 256
+    of them, evenly spaced (the pairwise comparison grows with the square of their number)."""
+    n = len(C)
+    if n < 2:
+        return LinesOfSight(n, 0.0, 0.0)
+    if n > 256:
+        keep = np.unique(np.linspace(0, n - 1, 256).round().astype(int))
+        C, a = C[keep], a[keep]
     mean = a.mean(axis=0)
     mean /= np.linalg.norm(mean)
     cos = np.clip(a @ a.T, -1.0, 1.0)
     span = math.degrees(math.acos(float(cos.min())))
     across = (C - C.mean(axis=0)) - np.outer((C - C.mean(axis=0)) @ mean, mean)
     d = np.linalg.norm(across[:, None, :] - across[None, :, :], axis=-1)
-    return LinesOfSight(len(C), span, float(d.max()))
+    return LinesOfSight(n, span, float(d.max()))
 
 
 def baseline_problem(los: LinesOfSight, has_range: bool, has_terrain: bool) -> str | None:

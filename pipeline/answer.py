@@ -5,7 +5,8 @@ The rule (docs/outputs.md, "The answer") uses only what the flight itself shows,
 1. A method's estimate is a candidate only where the flight determines it (`judge`): it exists and is finite; its
    solver did not find the geometry rank deficient or diverge; it lies in front of the cameras; its 95 % error
    ellipsoid's largest semi-axis is at most DETERMINED_REL of its distance from the cameras (lines of sight too
-   nearly parallel to fix where they meet, no baseline); and it is not below the ground by more than GROUND_SIGMAS
+   nearly parallel to fix where they meet, no baseline; a photo flight's offset shared by every camera, which moves
+   the point with them, left out); and it is not below the ground by more than GROUND_SIGMAS
    of its vertical uncertainty and the ground's allow (the DEM where the flight has one, else the lowest dry land
    on Earth). The uncertainty is the method's own covariance (mle) or its answer's covariance propagated through
    the method under the flight's stated errors (`pipeline.solve.propagate`).
@@ -189,8 +190,11 @@ def _depths_ok(obs: Observations, X: np.ndarray) -> bool:
 
 def judge(method: str, e: Estimate | None, unsolved_reason: str | None, obs: Observations, origin_lla,
           covariance_m2: np.ndarray | None, covariance_source: str, ground: Ground | None = None,
-          covariance_reason: str | None = None) -> Verdict:
-    """The verdict on one method's estimate (rule 1 of the module docstring)."""
+          covariance_reason: str | None = None, shared_offset_m2: np.ndarray | None = None) -> Verdict:
+    """The verdict on one method's estimate (rule 1 of the module docstring). shared_offset_m2 (3, 3): the part of
+    covariance_m2 that is an offset every camera shares (a photo flight's GNSS and altitude datum offset): it moves
+    the point with the cameras and does not make their lines of sight meet any less, so the determination test
+    leaves it out; the ground test keeps it."""
     if e is None:
         why = unsolved_reason or "it gave no estimate"
         return Verdict(method, False, why[len(method) + 2:] if why.startswith(f"{method}: ") else why)
@@ -204,7 +208,8 @@ def judge(method: str, e: Estimate | None, unsolved_reason: str | None, obs: Obs
         return Verdict(method, False, f"the flight does not determine it: {why}")
     cov = np.asarray(covariance_m2, dtype=np.float64)
     ce90 = float(cep_m(cov[:2, :2], 0.9))
-    semi95 = math.sqrt(max(float(np.linalg.eigvalsh(cov).max()), 0.0) * _CHI2_3_95)
+    geometric = cov if shared_offset_m2 is None else cov - np.asarray(shared_offset_m2, dtype=np.float64)
+    semi95 = math.sqrt(max(float(np.linalg.eigvalsh(geometric).max()), 0.0) * _CHI2_3_95)
     dist = float(np.median(np.linalg.norm(obs.platform_m - X, axis=1)))
     rel = semi95 / dist if dist > 0 else math.inf
     v = dict(covariance_m2=cov, covariance_source=covariance_source, ce90_m=ce90, relative_uncertainty=rel)
@@ -298,13 +303,15 @@ def unsolved_reasons(failures: dict | None) -> dict[str, str]:
 def choose_answer(obs: Observations, estimates: dict[str, Estimate], unsolved: dict[str, str], origin_lla, *,
                   sources: ErrorSources | None = None, options: dict | None = None, ground: Ground | None = None,
                   solvers: dict[str, Callable] | None = None,
-                  added_covariance: dict[str, np.ndarray] | None = None) -> Answer:
+                  added_covariance: dict[str, np.ndarray] | None = None,
+                  shared_offset_m2: np.ndarray | None = None) -> Answer:
     """The target's answer (module docstring) from every method's estimate and the reasons of those that gave none
     (`unsolved`, method -> reason). `sources`: the errors to propagate through the methods without a covariance of
     their own (default: the observations' stated sigmas); `options`: method -> the flight's solve options;
     `ground`: the terrain under the answer (a DEM); `solvers`: method -> solver for `propagate` beyond the batched
     methods (e.g. `dem`), `added_covariance`: method -> a covariance added to the propagated one (e.g. the DEM's
-    own error under `dem`)."""
+    own error under `dem`); `shared_offset_m2`: the cameras' shared offset that every estimate's covariance holds
+    (a photo flight's, pipeline.photo_errors), left out of the determination test (`judge`)."""
     sources = sources if sources is not None else ErrorSources.from_sigma(obs.sigma)
     options, solvers, added = options or {}, solvers or {}, added_covariance or {}
     verdicts: dict[str, Verdict] = {}
@@ -323,7 +330,7 @@ def choose_answer(obs: Observations, estimates: dict[str, Estimate], unsolved: d
                 cov, source, why = p.covariance_m2, "propagated", p.reason
                 if cov is not None and m in added:
                     cov = cov + added[m]
-        verdicts[m] = judge(m, e, unsolved.get(m), obs, origin_lla, cov, source, ground, why)
+        verdicts[m] = judge(m, e, unsolved.get(m), obs, origin_lla, cov, source, ground, why, shared_offset_m2)
     n = int(obs.n)
     mle = verdicts.get("mle")
     fit_ok, misfit = mle_fit_passes(estimates["mle"]) if mle is not None and mle.determined else (False, None)

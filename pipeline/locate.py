@@ -194,8 +194,8 @@ def photo_answer(loc: PhotoLocation, dem=None, dem_sigma_m: float | None = None)
 
     unsolved = {m: reason for m, (_, reason) in loc.unsolved.items()}
     return choose_answer(loc.obs, loc.estimates, unsolved, loc.views.origin_lla, sources=error_sources(loc.errors),
-                         **dem_answer_inputs(dem, dem_sigma_m, loc.obs, loc.views.origin_lla,
-                                             loc.estimates.get("dem")))
+                         shared_offset_m2=loc.errors.shared_covariance_m2(),
+                         **dem_answer_inputs(dem, dem_sigma_m, loc.obs, loc.views.origin_lla, loc.estimates.get("dem")))
 
 
 def estimate_row(e: Estimate, views: PhotoViews) -> dict:

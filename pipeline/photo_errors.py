@@ -1,6 +1,6 @@
 """What the MLE is told about a photo flight's errors when the user states nothing: defaults per source type (laser or
-not; RTK fixed, RTK float or a plain GNSS fix) from what the sources are known to do (docs/locate.md, "Error model";
-the figures and where they come from are there).
+not; RTK fixed, RTK float or a plain GNSS fix) from what the sources are known to do, and the photos' time span
+(docs/locate.md, "Error model"; the figures and where they come from are there).
 
 Two parts:
 - per photo, from photo to photo (`Sigma`): the marked pixel, the laser's range, the position's and the recorded
@@ -10,9 +10,12 @@ Two parts:
   moves the estimate by the same vector and shows in no residual, so `pipeline.locate` adds its covariance to the
   MLE's; against a DEM the vertical part is an error of the terrain prior, whose sigma grows by it.
 
-Checked against real lines of sight of a Skydio X2 (scripts/real_rays.py; docs/locate.md, "Real lines of sight"):
-left as they are; the per-photo part is small for photos spread over a long session, whose time span the split
-between the shared and the per-photo GNSS error does not yet take from the photos' times.
+The GNSS position error and the compass heading error wander: over a few minutes each is one offset, between photos
+taken tens of minutes apart (another flight, another battery) they differ. The photos' times split them
+(`shared_fraction`): the part the photos do not share joins the per-photo sigmas; the shared parts are kept whole
+(an error can stay put for a whole session, and the survey's datum never moves). Photos without times are taken as
+far apart. The heading's wander was set on real lines of sight of a Skydio X2 (scripts/real_rays.py;
+docs/locate.md, "Real lines of sight"), leave one point out.
 """
 
 from __future__ import annotations
@@ -37,11 +40,25 @@ LRF_ACCURACY_M = 0.2
 LRF_ACCURACY_PER_M = 0.0015
 #: the recorded gimbal attitude's photo-to-photo noise (deg): the constant part of the error is the bias
 ATTITUDE_NOISE_DEG = 0.3
+#: the part of the pointing error that wanders over a session (deg, 1 sigma): the compass heading changes between
+#: flights (another take-off spot, a recalibration) and with the heading flown; within minutes it is part of the bias.
+#: Set on the real rays (scripts/real_rays.py): the log score of the fused answers' ellipses, leave one point out,
+#: is highest at 0.5 deg on 8 of the 10 folds (flat from 0.5 to 1 deg, lower from 1.5 deg up)
+ATTITUDE_WANDER_DEG = 0.5
+#: the correlation time (s) of the errors that wander (GNSS position, compass heading): a consumer receiver's
+#: horizontal error keeps most of its correlation over a few minutes and loses it over tens of minutes (D. L.
+#: Wilson's autocorrelation of a hand-held receiver's error over 20 days: a bend near one minute, the photo-to-photo
+#: part, then a slow decay); a flight lasts 10-30 minutes, the heading changes between flights. No data here fix
+#: it (the real rays have no times, the zoo's flights last 80 s): docs/locate.md gives the zoo at 10 and 30 minutes
+WANDER_TAU_S = 1800.0
+#: photos compared pairwise for their time span at most (evenly spaced among them, in time order)
+_SPAN_PHOTOS = 512
 #: the compass / gimbal-yaw bias of a consumer drone, constant over a flight: 1-5 deg (magnetic disturbance,
 #: calibration); a zero-mean Gaussian prior of 3 deg puts 9 in 10 biases inside 5 deg. RTK does not help: a
 #: single RTK antenna measures position, not heading
 COMPASS_BIAS_DEG = 3.0
-#: (shared horizontal per axis, shared vertical, photo-to-photo) position sigmas (m) by fix type:
+#: (shared horizontal per axis, shared vertical, photo-to-photo) position sigmas (m) by fix type (the horizontal's
+#: wander over a session is the shared horizontal sigma's size, `photo_error_model`):
 #: plain GNSS: DJI's stated horizontal GNSS hover accuracy +-1.5 m; over a few minutes a single-frequency receiver's
 #: error is mostly an offset; the vertical is the altitude datum offset below (AbsoluteAltitude without RTK is
 #: barometric height above take-off plus the take-off's GNSS altitude: errors of 10-30 m are common)
@@ -57,13 +74,17 @@ GNSS_FIXED_M = (0.05, 0.3, 0.05)
 @dataclass(frozen=True)
 class PhotoErrorModel:
     """The per-photo sigmas, the compass bias prior (deg, 1 sigma) and the shared offset's sigmas (m): horizontal
-    per axis, vertical (GNSS and altitude datum together); `source` says what they were derived from."""
+    per axis, vertical (GNSS and altitude datum together); `source` says what they were derived from; `span_s` the
+    photos' time span (None: a photo without time) and `wander_shared` the share of the wandering errors the photos
+    have in common (`shared_fraction`)."""
 
     sigma: Sigma
     bias_prior_deg: float
     shared_h_m: float
     shared_v_m: float
     source: str
+    span_s: float | None = 0.0
+    wander_shared: float = 1.0
 
     def shared_covariance_m2(self) -> np.ndarray:
         """(3, 3) ENU covariance of the offset shared by every photo."""
@@ -71,7 +92,24 @@ class PhotoErrorModel:
 
     def to_dict(self) -> dict:
         return {"source": self.source, "sigma": self.sigma.to_dict(), "bias_prior_deg": self.bias_prior_deg,
-                "shared_offset_horizontal_m": self.shared_h_m, "shared_offset_vertical_m": self.shared_v_m}
+                "shared_offset_horizontal_m": self.shared_h_m, "shared_offset_vertical_m": self.shared_v_m,
+                "photos_span_s": self.span_s, "wander_shared": self.wander_shared}
+
+
+def shared_fraction(t_ns, tau_s: float = WANDER_TAU_S) -> float:
+    """The share of an error wandering with correlation time tau_s (first-order Gauss-Markov) that photos taken at
+    t_ns (n,) have in common: the mean of exp(-|t_i - t_j| / tau_s) over their pairs (of at most _SPAN_PHOTOS
+    photos evenly spaced in time). 1 for one photo; 0 when a photo's time is unknown (None): such photos are taken
+    as far apart."""
+    if len(t_ns) < 2:
+        return 1.0
+    if any(t is None for t in t_ns):
+        return 0.0
+    t = np.sort(np.asarray(t_ns, dtype=np.float64)) / 1e9
+    if t.size > _SPAN_PHOTOS:
+        t = t[np.unique(np.linspace(0, t.size - 1, _SPAN_PHOTOS).round().astype(int))]
+    i, j = np.triu_indices(t.size, 1)
+    return float(np.exp(-np.abs(t[i] - t[j]) / tau_s).mean())
 
 
 def _position_of(photo) -> tuple[tuple[float, float, float], str]:
@@ -88,12 +126,18 @@ def _position_of(photo) -> tuple[tuple[float, float, float], str]:
     return default, name
 
 
-def photo_error_model(photos, ranges_m=None) -> PhotoErrorModel:
+def photo_error_model(photos, ranges_m=None, attitude_wander_deg: float = ATTITUDE_WANDER_DEG) -> PhotoErrorModel:
     """The default error model of photos (`pipeline.ingest.photo.Photo`): the worst position class among them (a
     flight mixing RTK fixed and plain photos is as good as its plain ones), the laser's sigma at the longest range
-    used (ranges_m: the ranges the MLE gets, NaN where none; default every valid LRF range)."""
+    used (ranges_m: the ranges the MLE gets, NaN where none; default every valid LRF range); the part of the
+    wandering errors (the horizontal GNSS error, of the shared sigma's size, and the heading's attitude_wander_deg)
+    the photos do not share, by their times (`shared_fraction`), added to the per-photo sigmas."""
     pos = [_position_of(p) for p in photos]
     h, v, per = (max(s[k] for s, _ in pos) for k in range(3))
+    times = [p.t_ns for p in photos]
+    rho = shared_fraction(times)
+    apart = math.sqrt(max(1.0 - rho, 0.0))
+    span = None if any(t is None for t in times) else ((max(times) - min(times)) / 1e9 if times else 0.0)
     kinds = sorted({name for _, name in pos})
     if ranges_m is None:
         ranges_m = [p.lrf_range_m for p in photos if p.lrf_valid]
@@ -101,7 +145,8 @@ def photo_error_model(photos, ranges_m=None) -> PhotoErrorModel:
     r = r[np.isfinite(r)]
     laser = r.size > 0
     s_range = LRF_ACCURACY_M + LRF_ACCURACY_PER_M * float(r.max()) if laser else None
-    sigma = Sigma(pixel_px=MARK_SIGMA_PX, range_m=s_range if laser else 1.0, position_m=per,
-                  attitude_deg=ATTITUDE_NOISE_DEG)
+    sigma = Sigma(pixel_px=MARK_SIGMA_PX, range_m=s_range if laser else 1.0, position_m=math.hypot(per, h * apart),
+                  attitude_deg=math.hypot(ATTITUDE_NOISE_DEG, attitude_wander_deg * apart))
     source = f"{' + '.join(kinds)}, {'laser' if laser else 'no laser'}"
-    return PhotoErrorModel(sigma=sigma, bias_prior_deg=COMPASS_BIAS_DEG, shared_h_m=h, shared_v_m=v, source=source)
+    return PhotoErrorModel(sigma=sigma, bias_prior_deg=COMPASS_BIAS_DEG, shared_h_m=h, shared_v_m=v, source=source,
+                           span_s=span, wander_shared=rho)

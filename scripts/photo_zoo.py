@@ -8,9 +8,13 @@ hills with a GeoTIFF DEM), each written as JPEGs, read back and located by
   dji      DJI's one-shot laser target of the first photo (drone-dji:LRFTarget*), as DJI Pilot shows it
   dji-mean the mean of the five one-shot targets
   dem      the ray through the first photo's marked pixel onto the DEM (OpenAthena's method)
+  answer, answer+dem  the target's one answer (`pipeline.locate.photo_answer`, every method run, as `ridgeloc
+           locate` and targets.csv give it: the MLE when its fit checks pass, else the most precise determined
+           method; none where no method is determined), without and with the DEM
 
-Prints horizontal and vertical median errors and, for the MLE rows, the share of flights whose truth lies in the
-95 % horizontal ellipse (chi-square 2 dof) and in the 95 % ellipsoid (3 dof).
+Prints horizontal and vertical median errors and, for the MLE and answer rows, the share of flights whose truth
+lies in the 95 % horizontal ellipse (chi-square 2 dof) and in the 95 % ellipsoid (3 dof); a flight without an
+answer counts as not holding it.
 
     python scripts/photo_zoo.py [--flights 100] [--seed 0] [--bias-prior-deg B] [--dem-sigma-m 5] [--rtk]
                                 [--no-laser]
@@ -34,6 +38,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 CHI2_2DOF_95 = 5.991464547107979
 CHI2_3DOF_95 = 7.814727903251178
 MLE_ROWS = ("mle", "mle+dem")
+ANSWER_ROWS = ("answer", "answer+dem")
 
 
 def run(n_flights: int, seed: int, bias_prior_deg: float | None, dem_sigma_m: float, workdir: Path,
@@ -42,7 +47,7 @@ def run(n_flights: int, seed: int, bias_prior_deg: float | None, dem_sigma_m: fl
 
     from pipeline.geometry.frames import enu_from_lla
     from pipeline.ingest.photo import read_photos
-    from pipeline.locate import locate_photos
+    from pipeline.locate import locate_photos, photo_answer
     from pipeline.photo_errors import photo_error_model
     from pipeline.synth.dem import Hills, write_dem
     from pipeline.synth.photos import RTK_FIXED_ERRORS, PhotoFlightSpec, simulate_photo_flight, write_photo_flight
@@ -52,9 +57,10 @@ def run(n_flights: int, seed: int, bias_prior_deg: float | None, dem_sigma_m: fl
     dem_path = write_dem(workdir / "dem.tif", hills, extent_m=5000.0, post_m=30.0, crs="EPSG:32632")
     dem = Dem.open(dem_path)
     rng = np.random.default_rng(seed)
-    rows = {m: [] for m in ("mle", "mle+dem", "dji", "dji-mean", "dem")}
-    inside = {m: ([], []) for m in MLE_ROWS}
+    rows = {m: [] for m in ("mle", "mle+dem", "answer", "answer+dem", "dji", "dji-mean", "dem")}
+    inside = {m: ([], []) for m in MLE_ROWS + ANSWER_ROWS}
     failed = []
+    methods = {row: {} for row in ANSWER_ROWS}  # how often each method was the answer
     for k in range(n_flights):
         e0, n0 = rng.uniform(-600, 600, 2)
         lat, lon, _ = np.ravel(pymap3d.enu2geodetic(e0, n0, 0.0, 46.5, 7.5, 0.0))
@@ -70,9 +76,10 @@ def run(n_flights: int, seed: int, bias_prior_deg: float | None, dem_sigma_m: fl
         errors = photo_error_model(photos)
         if bias_prior_deg is not None:
             errors = dataclasses.replace(errors, bias_prior_deg=bias_prior_deg)
-        loc = locate_photos(photos, flight.marks_px, errors=errors, methods=["mle", "dji"])
-        with_dem = locate_photos(photos, flight.marks_px, dem=dem, dem_sigma_m=dem_sigma_m, errors=errors,
-                                 methods=["mle"])
+        loc = locate_photos(photos, flight.marks_px, errors=errors)
+        with_dem = locate_photos(photos, flight.marks_px, dem=dem, dem_sigma_m=dem_sigma_m, errors=errors)
+        answers = {"answer": (loc, photo_answer(loc)),
+                   "answer+dem": (with_dem, photo_answer(with_dem, dem, dem_sigma_m))}
         one = locate_photos(photos[:1], flight.marks_px[:1], dem=dem, methods=["dem"])
 
         def err(views, X, truth=truth):
@@ -88,6 +95,17 @@ def run(n_flights: int, seed: int, bias_prior_deg: float | None, dem_sigma_m: fl
             cov = np.asarray(e.covariance_m2)
             inside[row][0].append(float(d[:2] @ np.linalg.solve(cov[:2, :2], d[:2])) <= CHI2_2DOF_95)
             inside[row][1].append(float(d @ np.linalg.solve(cov, d)) <= CHI2_3DOF_95)
+        for row, (res, a) in answers.items():
+            if not a.located:
+                failed.append((k, row, a.reason))
+                inside[row][0].append(False), inside[row][1].append(False)
+                continue
+            d = err(res.views, a.position_m)
+            rows[row].append(d)
+            cov = np.asarray(a.covariance_m2)
+            inside[row][0].append(float(d[:2] @ np.linalg.solve(cov[:2, :2], d[:2])) <= CHI2_2DOF_95)
+            inside[row][1].append(float(d @ np.linalg.solve(cov, d)) <= CHI2_3DOF_95)
+            methods[row][a.method] = methods[row].get(a.method, 0) + 1
         if "dji" in loc.estimates:
             pts = np.array(loc.estimates["dji"].extras["points_m"])
             rows["dji"].append(err(loc.views, pts[0]))
@@ -98,6 +116,7 @@ def run(n_flights: int, seed: int, bias_prior_deg: float | None, dem_sigma_m: fl
             failed.append((k, "dem", one.unsolved.get("dem")))
     return {"rows": {m: np.array(v) for m, v in rows.items()},
             "inside": {m: (np.array(h), np.array(s)) for m, (h, s) in inside.items()}, "failed": failed,
+            "methods": methods,
             "errors": errors}
 
 
@@ -133,6 +152,8 @@ def main() -> int:
                      f"{i3.mean() * 100:5.1f} % ({i3.sum()}/{i3.size})")
         print(f"{m:9s} {len(d):3d}   {np.median(h):13.2f}   {np.percentile(h, 90):11.2f}   "
               f"{np.median(np.abs(d[:, 2])):14.2f}{cover}")
+    for m, counts in res["methods"].items():
+        print(f"{m} from: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items(), key=lambda kv: -kv[1])))
     for f in res["failed"]:
         print("unsolved:", f)
     return 0

@@ -1,30 +1,35 @@
 """Real lines of sight (docs/locate.md, "Real lines of sight"): a Skydio X2's photos of ten RTK-surveyed points from
 a public field test of OpenAthena (../shared/real_rays/, its README), each point's photos located together by
-`pipeline.locate.locate_photos` (the MLE under the photo error model of pipeline/photo_errors.py, no laser, no
-DEM), against OpenAthena's single-photo terrain answers logged for the same photos and pixels.
+`pipeline.locate.locate_photos` (every method under the photo error model of pipeline/photo_errors.py, no laser, no
+DEM) and its one answer chosen as targets.csv gives it (`photo_answer`: the MLE when its fit checks pass, else the
+most precise method the flight determines, else none), against OpenAthena's single-photo terrain answers logged
+for the same photos and pixels.
 
 Adapter (`photo_of_row`): one `Photo` per CSV row, in pipeline/geometry's conventions (gimbal (yaw, pitch, roll)
 ZYX in local NED, as the DJI tags): pitch = -cameraSlantAngleDeg, roll = cameraRollAngleDeg (Skydio's
 CameraOrientationNED, as OpenAthena reads it), the drone's height as WGS84 ellipsoidal (droneElevationHAE), K from
 f_x, f_y with the principal point at the image centre and the OpenCV lens (k1, k2, p1, p2, k3), the pixel =
-imageSelectedProportionX/Y x the image size. The CSV has no camera azimuth: OpenAthena adds the pixel's yaw offset
-to the camera's azimuth and casts the ray along the sum, so the camera's azimuth is the azimuth of its answer from
-the drone minus yawOffsetDegSelectedPoint (+180 deg where raySlantAngleDeg > 90: the ray leans back past nadir),
-one per photo (`camera_yaw_deg`). `adapter_checks` verifies this on the data (rows of one photo give one azimuth;
-OpenAthena's logged offsets come back from the pixel fraction by its formula). Truth: the horizontal position of
-the point the row was assigned to (the field test's rule, README); heights are not judged (the survey's and the
-drone's differ by tens of metres).
+imageSelectedProportionX/Y x the image size, no time (the CSV has none: the error model takes such photos as far
+apart). The CSV has no camera azimuth: OpenAthena adds the pixel's yaw offset to the camera's azimuth and casts the
+ray along the sum, so the camera's azimuth is the azimuth of its answer from the drone minus
+yawOffsetDegSelectedPoint (+180 deg where raySlantAngleDeg > 90: the ray leans back past nadir), one per photo
+(`camera_yaw_deg`). `adapter_checks` verifies this on the data (rows of one photo give one azimuth; OpenAthena's
+logged offsets come back from the pixel fraction by its formula). Truth: the horizontal position of the point the
+row was assigned to (the field test's rule, README); heights are not judged (the survey's and the drone's differ by
+tens of metres).
 
-Prints the fused answer per point, then figures that do not rest on ten points alone: a bootstrap over points,
-leave-one-photo-out, random subsets of 2-8 photos, the compass bias prior fitted on nine points and used on the
-tenth, the rays' error split (within one photo against across photos), and the fused answer when the line of
-sight is taken as the drone-to-answer direction (OpenAthena's own ray) instead of the ray through the pixel.
+Prints the answer per point, then figures that do not rest on ten points alone: a bootstrap over points,
+leave-one-photo-out, the heading's wander (pipeline.photo_errors.ATTITUDE_WANDER_DEG) and the compass bias prior each
+fitted on nine points and used on the tenth, random subsets of 2-8 photos, the rays' error split (within one
+photo, across photos, between consecutive photos), and the answers when the line of sight is taken as the
+drone-to-answer direction (OpenAthena's own ray) instead of the ray through the pixel.
 
-    python scripts/real_rays.py [--folder ../shared/real_rays] [--subsets 20] [--bootstrap 2000] [--seed 0]
+    python scripts/real_rays.py [--folder ../shared/real_rays] [--subsets 10] [--bootstrap 2000] [--seed 0]
                                 [--attitude-deg A] [--photo-position-m P] [--bias-prior-deg B]
 
 The last three state the per-photo attitude and position sigmas and the compass bias prior instead of the error
-model's (as a user states them to `ridgeloc locate`).
+model's (as a user states them to `ridgeloc locate`); `--attitude-deg 0.3 --photo-position-m 0.5` is the model
+before the wander (the photo-to-photo noise alone).
 """
 
 from __future__ import annotations
@@ -155,7 +160,7 @@ def photo_of_row(rr: RealRays, i: int, yaw_deg: float):
     w, h = rr.size_px
     intr = PhotoIntrinsics(rr.f_px[0], rr.f_px[1], w / 2.0, h / 2.0, rr.dist, "openathena_rays.csv f_x, f_y, k1-p2")
     lat, lon, alt = (float(v) for v in rr.drone_lla[i])
-    return Photo(path=f"row{i:03d}.jpg", make="Skydio", model="X2", width_px=w, height_px=h, t_ns=int(i),
+    return Photo(path=f"row{i:03d}.jpg", make="Skydio", model="X2", width_px=w, height_px=h, t_ns=None,
                  time_zone="unknown", lat_deg=lat, lon_deg=lon, alt_m=alt, alt_datum="ellipsoid",
                  alt_source="droneElevationHAE", relative_alt_m=float("nan"), gps_alt_m=float("nan"),
                  gimbal_ypr_deg=(float(yaw_deg), -float(rr.slant_deg[i]), float(rr.roll_deg[i])),
@@ -199,20 +204,40 @@ def adapter_checks(rr: RealRays) -> dict:
 
 @dataclass(frozen=True)
 class Fused:
-    """One fused answer: horizontal error (m, against the surveyed point), m2 = e^T C^-1 e of the horizontal error
-    under the answer's 2x2 covariance (inside the 95 % ellipse when <= 5.991), the MLE's Estimate."""
+    """One point's photos located by `pipeline.locate.locate_photos` (every method) and its one answer
+    (`photo_answer`, as targets.csv gives it: the MLE when its fit checks pass, else the most precise determined
+    method, else none). error_m: the answer's horizontal error against the surveyed point (NaN without an answer);
+    m2 = e^T C^-1 e under the answer's 2x2 horizontal covariance (inside the 95 % ellipse when <= 5.991; inf
+    without an answer); mle_error_m the MLE's horizontal error (NaN where it gave none)."""
 
     error_m: float
     m2: float
-    estimate: object
+    answer: object
+    mle_error_m: float
+    loc: object
+
+    @property
+    def located(self) -> bool:
+        return bool(self.answer.located)
+
+    @property
+    def log_score(self) -> float:
+        """The log density of the horizontal error under the answer's 2x2 covariance (-inf without an answer)."""
+        if not self.located:
+            return -np.inf
+        cov = np.asarray(self.answer.covariance_m2)[:2, :2]
+        return float(-0.5 * (self.m2 + np.log(np.linalg.det(cov))) - np.log(2.0 * np.pi))
 
 
-def fuse(rr: RealRays, idx, yaw_deg: np.ndarray, errors=None, line_of_sight: str = "pixel") -> Fused | None:
-    """The MLE of `locate_photos` on rows idx (one view per row) under `errors` (default: the photos' own error
-    model, pipeline.photo_errors); None when it does not solve. line_of_sight "answer": each view looks along the
-    drone-to-answer direction instead (OpenAthena's ray: no lens, pixel at the centre, roll 0)."""
+def fuse(rr: RealRays, idx, yaw_deg: np.ndarray, errors=None, line_of_sight: str = "pixel",
+         wander_deg: float | None = None) -> Fused:
+    """Rows idx (one view per row) located by `locate_photos` under `errors` (default: the photos' own error model,
+    pipeline.photo_errors, with the heading's wander `wander_deg` when given), and their answer. line_of_sight
+    "answer": each view looks along the drone-to-answer direction instead (OpenAthena's ray: no lens, pixel at the
+    centre, roll 0)."""
     from pipeline.geometry.frames import enu_from_lla
-    from pipeline.locate import locate_photos
+    from pipeline.locate import locate_photos, photo_answer
+    from pipeline.photo_errors import photo_error_model
 
     idx = np.asarray(idx)
     photos = [photo_of_row(rr, int(i), yaw_deg[i]) for i in idx]
@@ -225,14 +250,18 @@ def fuse(rr: RealRays, idx, yaw_deg: np.ndarray, errors=None, line_of_sight: str
                                       intrinsics=dataclasses.replace(p.intrinsics, dist=(0.0,) * 5))
                   for p, z, d in zip(photos, az, dep, strict=True)]
         px = np.tile([rr.size_px[0] / 2.0, rr.size_px[1] / 2.0], (len(idx), 1))
-    loc = locate_photos(photos, px, errors=errors, methods=["mle"])
-    e = loc.estimates.get("mle")
-    if e is None:
-        return None
-    k = int(rr.point[idx[0]])
-    d = (e.position_m - enu_from_lla(*rr.point_lla[k], loc.views.origin_lla))[:2]
-    cov = np.asarray(e.covariance_m2)[:2, :2]
-    return Fused(float(np.hypot(*d)), float(d @ np.linalg.solve(cov, d)), e)
+    if errors is None and wander_deg is not None:
+        errors = photo_error_model(photos, attitude_wander_deg=wander_deg)
+    loc = locate_photos(photos, px, errors=errors)
+    answer = photo_answer(loc)
+    truth = enu_from_lla(*rr.point_lla[int(rr.point[idx[0]])], loc.views.origin_lla)
+    mle = loc.estimates.get("mle")
+    mle_error = float(np.hypot(*(mle.position_m - truth)[:2])) if mle is not None else float("nan")
+    if not answer.located:
+        return Fused(float("nan"), float("inf"), answer, mle_error, loc)
+    d = (answer.position_m - truth)[:2]
+    cov = np.asarray(answer.covariance_m2)[:2, :2]
+    return Fused(float(np.hypot(*d)), float(d @ np.linalg.solve(cov, d)), answer, mle_error, loc)
 
 
 def single_photo_errors_m(rr: RealRays) -> np.ndarray:
@@ -273,8 +302,15 @@ def robust_sd(x) -> float:
     return float(1.4826 * np.median(np.abs(x - np.median(x))))
 
 
-def inside(f: Fused | None) -> bool:
-    return f is not None and f.m2 <= CHI2_2DOF_95
+def inside(f: Fused) -> bool:
+    """The truth lies in the answer's 95 % horizontal ellipse (a point without an answer: no)."""
+    return f.located and f.m2 <= CHI2_2DOF_95
+
+
+def coverage(fs: list) -> tuple[int, int, int, float]:
+    """(fusions, answered, truth inside the 95 % ellipse, median horizontal error of the answers, m)."""
+    err = [f.error_m for f in fs if f.located]
+    return len(fs), len(err), sum(map(inside, fs)), float(np.median(err)) if err else float("nan")
 
 
 def azimuth_span_deg(az_deg) -> float:
@@ -285,11 +321,12 @@ def azimuth_span_deg(az_deg) -> float:
 
 
 def per_point_table(rr: RealRays, yaw: np.ndarray, single: np.ndarray, errors=None) -> list:
-    """Each point's photos fused (under `errors`, default the photos' own error model); prints one line per point
-    (azimuths: the arc the point's photos look from; widened: the factor the MLE's fit check grew the ellipse's axes
-    by, from the residuals' spread); the Fused list."""
-    print("point        rows photos  azimuths  single-photo median m  fused m  95% ellipse m  widened  e'C-1e  "
-          "inside  rows given no weight")
+    """Each point's photos located (under `errors`, default the photos' own error model); prints one line per point
+    (azimuths: the arc the point's photos look from; the answer's method, horizontal error, 95 % ellipse and
+    e'C-1e; the MLE's error and the factor its fit checks grew its ellipse's axes by, and the rows it gave no
+    weight); the Fused list."""
+    print("point        rows photos  azimuths  single-photo median m  answer      m  95% ellipse m  e'C-1e  inside"
+          "  | mle m  widened  rows given no weight")
     fused = []
     for k, name in enumerate(rr.names):
         idx = rr.rows_of(k)
@@ -297,23 +334,27 @@ def per_point_table(rr: RealRays, yaw: np.ndarray, single: np.ndarray, errors=No
         fused.append(f)
         head = (f"{name:11s} {len(idx):4d} {len(np.unique(rr.photo[idx])):6d}  {azimuth_span_deg(yaw[idx]):5.0f} deg  "
                 f"{np.median(single[idx]):21.2f}")
-        if f is None:
-            print(f"{head}  not solved")
+        mle = f.loc.estimates.get("mle")
+        tail = ""
+        if mle is not None:
+            widened = np.sqrt(mle.extras.get("fit", {}).get("covariance_inflation", 1.0))
+            nought = len({r["frame"] for r in mle.extras.get("rejected", [])})
+            tail = f"  | {f.mle_error_m:5.2f}  {widened:5.1f} x  {nought}"
+        if not f.located:
+            print(f"{head}  none: {f.answer.reason[:90]}{tail}")
             continue
-        cov = np.asarray(f.estimate.covariance_m2)[:2, :2]
+        cov = np.asarray(f.answer.covariance_m2)[:2, :2]
         major, minor = np.sqrt(np.maximum(np.linalg.eigvalsh(cov), 0.0) * CHI2_2DOF_95)[::-1]
-        widened = np.sqrt(f.estimate.extras.get("fit", {}).get("covariance_inflation", 1.0))
-        nought = len({r["frame"] for r in f.estimate.extras.get("rejected", [])})
-        print(f"{head}  {f.error_m:7.2f}  {major:5.1f} x {minor:4.1f}  {widened:5.1f} x  {f.m2:6.2f}  "
-              f"{'yes' if inside(f) else 'NO':6s}  {nought}")
+        print(f"{head}  {f.answer.method:7s} {f.error_m:6.2f}  {major:5.1f} x {minor:4.1f}  {f.m2:6.2f}  "
+              f"{'yes' if inside(f) else 'NO':6s}{tail}")
     return fused
 
 
 def photo_subsets(rr: RealRays, yaw: np.ndarray, single: np.ndarray, rows: np.ndarray, sizes, per_point: int,
-                  rng, errors=None) -> list[tuple[int, int, float, float, float]]:
+                  rng, errors=None) -> list[tuple[int, int, float, float, float, float]]:
     """Random subsets of `size` photos of a point (all their rows among `rows`, a boolean mask), per_point draws per
-    point with more photos than that: (size, fusions, median error m, median error over the single-photo median
-    of the same rows, share inside the 95 % ellipse)."""
+    point with more photos than that: (size, fusions, share answered, median error of the answers m, its median
+    over the single-photo median of the same rows, share of the answers whose 95 % ellipse holds the truth)."""
     out = []
     for size in sizes:
         res = []
@@ -325,23 +366,45 @@ def photo_subsets(rr: RealRays, yaw: np.ndarray, single: np.ndarray, rows: np.nd
             for _ in range(per_point):
                 sub = idx[np.isin(rr.photo[idx], rng.choice(photos, size, replace=False))]
                 f = fuse(rr, sub, yaw, errors)
-                if f is not None:
-                    res.append((f.error_m, f.error_m / np.median(single[sub]), inside(f)))
+                res.append((f.error_m, f.error_m / np.median(single[sub]), inside(f), f.located))
         if res:
-            res = np.array(res)
-            out.append((size, len(res), float(np.median(res[:, 0])), float(np.median(res[:, 1])),
-                        float(res[:, 2].mean())))
+            res = np.array(res, dtype=np.float64)
+            got = res[:, 3] == 1
+            out.append((size, len(res), float(got.mean()), float(np.nanmedian(res[:, 0])),
+                        float(np.nanmedian(res[:, 1])), float(res[got, 2].mean()) if got.any() else float("nan")))
     return out
 
 
+#: the heading wander values (deg) the leave-one-point-out fit chooses among
+WANDER_GRID_DEG = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0)
+
+
+def wander_fit(rr: RealRays, yaw: np.ndarray, grid=WANDER_GRID_DEG) -> tuple[list, list]:
+    """The heading's wander (pipeline.photo_errors.ATTITUDE_WANDER_DEG) fitted leave one point out: each point's
+    photos fused under every value of grid; for each point the value whose summed log score (`Fused.log_score`) over
+    the other points is highest (points answered under every value), and that point's answer under it. Returns
+    (picks (m,), the held-out Fused (m,))."""
+    table = {w: [fuse(rr, rr.rows_of(k), yaw, wander_deg=w) for k in range(len(rr.names))] for w in grid}
+    scored = [k for k in range(len(rr.names)) if all(table[w][k].located for w in grid)]
+    picks, held = [], []
+    for k in range(len(rr.names)):
+        score = {w: sum(table[w][j].log_score for j in scored if j != k) for w in grid}
+        best = max(grid, key=lambda w, score=score: score[w])
+        picks.append(best)
+        held.append(table[best][k])
+    return picks, held
+
+
 def main() -> int:
+    from collections import Counter
+
     from scipy.stats import theilslopes
 
-    from pipeline.photo_errors import photo_error_model
+    from pipeline.photo_errors import ATTITUDE_WANDER_DEG, photo_error_model
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--folder", default=str(DEFAULT_FOLDER))
-    ap.add_argument("--subsets", type=int, default=20, help="random photo subsets per point and size")
+    ap.add_argument("--subsets", type=int, default=10, help="random photo subsets per point and size")
     ap.add_argument("--bootstrap", type=int, default=2000, help="bootstrap resamples of the points")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--attitude-deg", type=float, help="per-photo attitude sigma instead of the error model's")
@@ -358,7 +421,7 @@ def main() -> int:
     single = single_photo_errors_m(rr)
     pan, gap, across_m = ray_geometry(rr, yaw)
     m = len(rr.names)
-    model = photo_error_model([photo_of_row(rr, 0, yaw[0])])
+    model = photo_error_model([photo_of_row(rr, i, yaw[i]) for i in range(2)])
     stated = {"attitude_deg": args.attitude_deg, "position_m": args.photo_position_m}
     stated = {k: v for k, v in stated.items() if v is not None}
     errors = None
@@ -373,70 +436,91 @@ def main() -> int:
           f"OpenAthena's ray against the ray through the pixel: median {np.median(gap):.2f} deg, at most "
           f"{gap.max():.1f} deg")
     print(f"error model: {model.source}; compass bias prior {model.bias_prior_deg} deg; per photo "
-          f"{model.sigma.to_dict()}; shared offset {model.shared_h_m} m horizontal per axis\n")
+          f"{model.sigma.to_dict()} (the CSV has no times: the wandering GNSS and heading errors count per photo in "
+          f"full, shared share {model.wander_shared:g}); shared offset {model.shared_h_m} m horizontal per axis\n")
 
     fused = per_point_table(rr, yaw, single, errors)
-    err = np.array([f.error_m if f else np.nan for f in fused])
-    ins = np.array([inside(f) for f in fused])
-    ratio = np.nanmedian(err) / np.median(single)
-    per_point = err / np.array([np.median(single[rr.rows_of(k)]) for k in range(m)])
-    print(f"\nall photos of a point fused: median {np.nanmedian(err):.2f} m against {np.median(single):.2f} m for "
-          f"the {len(single)} single-photo answers: ratio {ratio:.2f}; truth inside the 95 % ellipse on "
-          f"{int(ins.sum())}/{m} points. Per point, fused over its own single-photo median: median "
-          f"{np.nanmedian(per_point):.2f}, at most 0.5 on {int((per_point <= 0.5).sum())}/{m}")
+    n, got, ins, med = coverage(fused)
+    err = np.array([f.error_m for f in fused])
+    ratio = med / np.median(single)
+    halved = int(np.sum(err / np.array([np.median(single[rr.rows_of(k)]) for k in range(m)]) <= 0.5))
+    print(f"\neach point's answer from all its photos: {got}/{m} answered, median {med:.2f} m against "
+          f"{np.median(single):.2f} m for the {len(single)} single-photo answers: ratio {ratio:.2f}; truth inside the "
+          f"95 % ellipse on {ins}/{m} points (a point without an answer counts as outside). Per point, over its own "
+          f"single-photo median: at most 0.5 on {halved}/{m}")
+    mle_err = np.array([f.mle_error_m for f in fused])
+    print(f"the MLE alone (whatever its fit checks say): median {np.nanmedian(mle_err):.2f} m")
     far = [f"{rr.names[k]} {int((np.abs(across_m[rr.rows_of(k)]) > 10.0).sum())}/{len(rr.rows_of(k))}"
            for k in range(m)]
     print(f"rays passing more than 10 m from their point (across the ray): {', '.join(far)}")
 
     rng = np.random.default_rng(args.seed)
+    ins_pt = np.array([inside(f) for f in fused])
     boot = []
     for _ in range(args.bootstrap):
         pick = rng.integers(0, m, m)
         rows = np.concatenate([rr.rows_of(k) for k in pick])
-        boot.append((np.nanmedian(err[pick]) / np.median(single[rows]), ins[pick].mean()))
-    (rlo, clo), (rhi, chi) = np.percentile(boot, [5, 95], axis=0)
+        boot.append((np.nanmedian(err[pick]) / np.median(single[rows]), ins_pt[pick].mean()))
+    (rlo, clo), (rhi, chi) = np.nanpercentile(boot, [5, 95], axis=0)
     print(f"bootstrap over the points ({args.bootstrap}): ratio 90 % interval {rlo:.2f}-{rhi:.2f}, coverage "
           f"{clo * 100:.0f}-{chi * 100:.0f} %")
     jack = [fuse(rr, idx[rr.photo[idx] != p], yaw, errors) for idx in map(rr.rows_of, range(m))
             for p in np.unique(rr.photo[idx])]
-    jack_err = np.array([f.error_m for f in jack if f is not None])
-    print(f"leave one photo out ({len(jack)} fusions): median {np.median(jack_err):.2f} m, truth inside the 95 % "
-          f"ellipse in {np.mean([inside(f) for f in jack]) * 100:.0f} %")
+    n, got, ins, med = coverage(jack)
+    print(f"leave one photo out ({n} fusions): {got / n * 100:.0f} % answered, median {med:.2f} m, truth inside the "
+          f"95 % ellipse in {ins / got * 100:.0f} % of the answers ({ins / n * 100:.0f} % of the fusions)")
+
+    if errors is None:
+        picks, held = wander_fit(rr, yaw)
+        n, got, ins, med = coverage(held)
+        print(f"the heading's wander fitted on the other nine points (the highest summed log score of their answers' "
+              f"ellipses, among {', '.join(f'{w:g}' for w in WANDER_GRID_DEG)} deg): "
+              f"{', '.join(f'{rr.names[k]} {w:g}' for k, w in enumerate(picks))}; the most frequent "
+              f"{Counter(picks).most_common(1)[0][0]:g} deg (the default's {ATTITUDE_WANDER_DEG:g}); each point at its "
+              f"fold's value: {got}/{m} answered, median {med:.2f} m, inside on {ins}/{m}")
 
     bias = np.array([np.median(pan[rr.rows_of(k)]) for k in range(m)])
     priors = [float(np.sqrt(np.mean(np.delete(bias, k) ** 2))) for k in range(m)]
-    loo = [fuse(rr, rr.rows_of(k), yaw, errors=dataclasses.replace(model, bias_prior_deg=priors[k]))
-           for k in range(m)]
+    loo = [fuse(rr, rr.rows_of(k), yaw, errors=dataclasses.replace(
+        photo_error_model([photo_of_row(rr, int(i), yaw[i]) for i in rr.rows_of(k)]) if errors is None else errors,
+        bias_prior_deg=priors[k])) for k in range(m)]
+    n, got, ins, med = coverage(loo)
     print(f"compass bias prior from the other nine points (rms of their rays' median angle to the truth across the "
-          f"ray, {min(priors):.2f}-{max(priors):.2f} deg; instead of {model.bias_prior_deg}): median "
-          f"{np.median([f.error_m for f in loo]):.2f} m, inside on {sum(map(inside, loo))}/{m}")
+          f"ray, {min(priors):.2f}-{max(priors):.2f} deg; instead of {model.bias_prior_deg}): {got}/{m} answered, "
+          f"median {med:.2f} m, inside on {ins}/{m}")
 
     consistent = gap <= 1.0
-    print("random subsets of a point's photos (the rows of a photo kept together): photos, fusions, median m, median "
-          "over the single-photo median of the same rows, inside the 95 % ellipse")
+    print("random subsets of a point's photos (the rows of a photo kept together): photos, fusions, answered, median "
+          "m, median over the single-photo median of the same rows, answers whose 95 % ellipse holds the truth")
     for label, rows in (("all rows", np.ones(len(gap), bool)),
                         (f"the {int(consistent.sum())} rows whose OpenAthena answer lies within 1 deg of the ray "
                          "through the pixel", consistent)):
         print(f"  {label}:")
-        for size, n, med, rel, cov in photo_subsets(rr, yaw, single, rows, (2, 3, 5, 8), args.subsets, rng, errors):
-            print(f"    {size:2d}  {n:4d}  {med:6.2f}  {rel:5.2f}  {cov * 100:4.0f} %")
+        for size, n, share, med, rel, cov in photo_subsets(rr, yaw, single, rows, (2, 3, 5, 8), args.subsets, rng,
+                                                           errors):
+            print(f"    {size:2d}  {n:4d}  {share * 100:4.0f} %  {med:6.2f}  {rel:5.2f}  {cov * 100:4.0f} %")
 
     within = [pan[a] - pan[b] for a in range(len(pan)) for b in range(a + 1, len(pan))
               if rr.photo[a] == rr.photo[b] and rr.point[a] != rr.point[b]]
     across = [pan[a] - pan[b] for a in range(len(pan)) for b in range(a + 1, len(pan))
               if rr.photo[a] != rr.photo[b] and rr.point[a] == rr.point[b]]
+    nxt = [pan[a] - pan[b] for a in range(len(pan)) for b in range(a + 1, len(pan))
+           if rr.photo[b] == rr.photo[a] + 1 and rr.point[a] == rr.point[b] and max(abs(across_m[[a, b]])) < 10.0]
     offset = np.degrees(np.arctan((rr.fraction_xy[:, 0] - 0.5) * rr.size_px[0] / rr.f_px[0]))
     steep = rr.slant_deg >= 50.0
     slopes = [theilslopes(pan[s], offset[s])[0] for s in (~steep, steep)]
     print(f"rays' angle to the truth across the ray: robust sd {robust_sd(pan):.2f} deg; of the difference of two "
           f"rays of one photo to different points (the photo's attitude error cancels) {robust_sd(within):.2f} deg, "
-          f"of two photos of one point {robust_sd(across):.2f} deg; its slope against the pixel's angle from the "
-          f"image centre: {slopes[0]:+.2f} where the camera looks less than 50 deg down, {slopes[1]:+.2f} steeper")
+          f"of two photos of one point {robust_sd(across):.2f} deg, of two consecutive photos of one point (rays "
+          f"within 10 m of it) {robust_sd(nxt):.2f} deg; its slope against the pixel's angle from the image centre: "
+          f"{slopes[0]:+.2f} where the camera looks less than 50 deg down, {slopes[1]:+.2f} steeper")
 
     oa = [fuse(rr, rr.rows_of(k), yaw, errors, line_of_sight="answer") for k in range(m)]
-    print(f"OpenAthena's ray (the drone-to-answer direction) as the line of sight instead: median "
-          f"{np.median([f.error_m for f in oa]):.2f} m, inside on {sum(map(inside, oa))}/{m}")
+    n, got, ins, med = coverage(oa)
+    print(f"OpenAthena's ray (the drone-to-answer direction) as the line of sight instead: {got}/{m} answered, median "
+          f"{med:.2f} m, inside on {ins}/{m}")
     return 0
+
 
 if __name__ == "__main__":
     raise SystemExit(main())

@@ -1,6 +1,7 @@
 """The real Skydio X2 lines of sight of ../shared/real_rays (scripts/real_rays.py; docs/locate.md, "Real lines of
-sight"): the adapter reproduces OpenAthena's own numbers from the CSV's pose and pixel, and each point's photos,
-fused by locate's MLE under the default photo error model, hold the figures docs/locate.md states."""
+sight"): the adapter reproduces OpenAthena's own numbers from the CSV's pose and pixel, and each point's answer
+from its photos (`pipeline.locate.photo_answer` under the default photo error model) holds the figures docs/locate.md
+states."""
 
 import importlib.util
 import sys
@@ -62,18 +63,42 @@ def test_the_adapter_reproduces_openathenas_angles(script, data):
     off_deg = np.degrees(np.hypot(*((rr.fraction_xy - 0.5) * np.array(rr.size_px)).T) / rr.f_px[0])
     assert gap[np.argmin(off_deg)] < 0.3 and np.median(gap) > 2.0
 
+
 def test_each_points_photos_fused(script, data, fused):
+    """Each point's answer (as targets.csv gives it) from all its photos, under the default error model: the CSV has
+    no times, so the wandering GNSS and heading errors count per photo in full (docs/locate.md)."""
+    from pipeline.photo_errors import ATTITUDE_NOISE_DEG, ATTITUDE_WANDER_DEG, GNSS_PLAIN_M
+
     rr, _ = data
     single = script.single_photo_errors_m(rr)
-    err = np.array([f.error_m for f in fused])
-    assert np.median(err) <= 0.5 * np.median(single)  # 3.43 m against 6.95 m
-    # 8 of 10 inside the 95 % ellipse (O8: two of its five rows are taps of O10; Y2: rays from one direction)
-    assert sum(map(script.inside, fused)) >= 8
-    assert sum(f.error_m < np.median(single[rr.rows_of(k)]) for k, f in enumerate(fused)) >= 8
+    errors = fused[0].loc.errors
+    assert errors.wander_shared == 0.0 and errors.span_s is None
+    assert errors.sigma.position_m == pytest.approx(np.hypot(GNSS_PLAIN_M[2], GNSS_PLAIN_M[0]))
+    assert errors.sigma.attitude_deg == pytest.approx(np.hypot(ATTITUDE_NOISE_DEG, ATTITUDE_WANDER_DEG))
+    answered = [f for f in fused if f.located]
+    assert len(answered) >= 8  # O8 and Y9: the flight does not determine them (no DEM, no laser)
+    assert np.median([f.error_m for f in answered]) <= 0.5 * np.median(single)  # 2.52 m against 6.95 m
+    # 7 of 10 inside the 95 % ellipse, the goal's 9 not met (O8: two of its five rows are taps of O10, no answer;
+    # Y9: no answer; Y2: rays from a 47 deg arc)
+    assert sum(map(script.inside, fused)) >= 7
+    assert sum(f.error_m < np.median(single[rr.rows_of(k)]) for k, f in enumerate(fused) if f.located) >= 7
 
 
 def test_the_ray_through_the_pixel_beats_openathenas_ray(script, data, fused):
     rr, yaw = data
     oa = [script.fuse(rr, rr.rows_of(k), yaw, line_of_sight="answer") for k in range(len(rr.names))]
-    assert np.median([f.error_m for f in oa]) > np.median([f.error_m for f in fused])
+    assert np.nanmedian([f.error_m for f in oa]) > np.nanmedian([f.error_m for f in fused])
     assert sum(map(script.inside, oa)) < sum(map(script.inside, fused))
+
+
+def test_the_heading_wander_is_what_the_other_points_choose(script, data):
+    """pipeline.photo_errors.ATTITUDE_WANDER_DEG is the value most folds of the leave-one-point-out log-score fit
+    choose (scripts/real_rays.py: 8 of 10 folds)."""
+    from collections import Counter
+
+    from pipeline.photo_errors import ATTITUDE_WANDER_DEG
+
+    rr, yaw = data
+    picks, held = script.wander_fit(rr, yaw)
+    assert Counter(picks).most_common(1)[0] == (ATTITUDE_WANDER_DEG, 8)
+    assert sum(map(script.inside, held)) >= 7

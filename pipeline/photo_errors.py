@@ -50,6 +50,7 @@ ATTITUDE_WANDER_DEG = 0.5
 #: Wilson's autocorrelation of a hand-held receiver's error over 20 days: a bend near one minute, the photo-to-photo
 #: part, then a slow decay); a flight lasts 10-30 minutes, the heading changes between flights. No data here fix
 #: it (the real rays have no times, the zoo's flights last 80 s): docs/locate.md gives the zoo at 10 and 30 minutes
+#: (scripts/photo_zoo.py --wander-tau-s)
 WANDER_TAU_S = 1800.0
 #: photos compared pairwise for their time span at most (evenly spaced among them, in time order)
 _SPAN_PHOTOS = 512
@@ -126,16 +127,17 @@ def _position_of(photo) -> tuple[tuple[float, float, float], str]:
     return default, name
 
 
-def photo_error_model(photos, ranges_m=None, attitude_wander_deg: float = ATTITUDE_WANDER_DEG) -> PhotoErrorModel:
+def photo_error_model(photos, ranges_m=None, attitude_wander_deg: float = ATTITUDE_WANDER_DEG,
+                      wander_tau_s: float = WANDER_TAU_S) -> PhotoErrorModel:
     """The default error model of photos (`pipeline.ingest.photo.Photo`): the worst position class among them (a
     flight mixing RTK fixed and plain photos is as good as its plain ones), the laser's sigma at the longest range
     used (ranges_m: the ranges the MLE gets, NaN where none; default every valid LRF range); the part of the
     wandering errors (the horizontal GNSS error, of the shared sigma's size, and the heading's attitude_wander_deg)
-    the photos do not share, by their times (`shared_fraction`), added to the per-photo sigmas."""
+    the photos do not share, by their times (`shared_fraction` with wander_tau_s), added to the per-photo sigmas."""
     pos = [_position_of(p) for p in photos]
     h, v, per = (max(s[k] for s, _ in pos) for k in range(3))
     times = [p.t_ns for p in photos]
-    rho = shared_fraction(times)
+    rho = shared_fraction(times, wander_tau_s)
     apart = math.sqrt(max(1.0 - rho, 0.0))
     span = None if any(t is None for t in times) else ((max(times) - min(times)) / 1e9 if times else 0.0)
     kinds = sorted({name for _, name in pos})

@@ -17,7 +17,7 @@ lies in the 95 % horizontal ellipse (chi-square 2 dof) and in the 95 % ellipsoid
 answer counts as not holding it.
 
     python scripts/photo_zoo.py [--flights 100] [--seed 0] [--bias-prior-deg B] [--dem-sigma-m 5] [--rtk]
-                                [--no-laser]
+                                [--no-laser] [--wander-tau-s T]
 
 --no-laser: photos without LRF tags, the target marked up to 150 px from the image centre (no dji rows).
 --rtk: RTK-fixed flights instead (pipeline.synth.photos.RTK_FIXED_ERRORS: GNSS error 1-5 cm, datum offset +-0.3 m).
@@ -42,7 +42,7 @@ ANSWER_ROWS = ("answer", "answer+dem")
 
 
 def run(n_flights: int, seed: int, bias_prior_deg: float | None, dem_sigma_m: float, workdir: Path,
-        rtk: bool = False, laser: bool = True) -> dict:
+        rtk: bool = False, laser: bool = True, wander_tau_s: float | None = None) -> dict:
     import pymap3d
 
     from pipeline.geometry.frames import enu_from_lla
@@ -73,7 +73,7 @@ def run(n_flights: int, seed: int, bias_prior_deg: float | None, dem_sigma_m: fl
         photos, bad = read_photos([folder])
         assert not bad, bad
         truth = tuple(flight.truth["target_lla"])
-        errors = photo_error_model(photos)
+        errors = photo_error_model(photos, **({} if wander_tau_s is None else {"wander_tau_s": wander_tau_s}))
         if bias_prior_deg is not None:
             errors = dataclasses.replace(errors, bias_prior_deg=bias_prior_deg)
         loc = locate_photos(photos, flight.marks_px, errors=errors)
@@ -131,10 +131,13 @@ def main() -> int:
                     help="photos without laser (a consumer drone), the target up to 150 px from the centre")
     ap.add_argument("--rtk", action="store_true",
                     help="RTK-fixed flights (RtkFlag 50, centimetre GNSS, datum known to a decimetre)")
+    ap.add_argument("--wander-tau-s", type=float, default=None,
+                    help="the wandering errors' correlation time instead of the error model's (s; 1e12: all shared, "
+                         "the per-photo sigmas the photo-to-photo noise alone)")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         res = run(args.flights, args.seed, args.bias_prior_deg, args.dem_sigma_m, Path(tmp), rtk=args.rtk,
-                  laser=not args.no_laser)
+                  laser=not args.no_laser, wander_tau_s=args.wander_tau_s)
     e = res["errors"]
     print(f"{args.flights} flights, seed {args.seed}; error model (the last flight's): {e.source}, compass bias prior "
           f"{e.bias_prior_deg} deg, shared offset {e.shared_h_m} m horizontal / {e.shared_v_m} m vertical, "

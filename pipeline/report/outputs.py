@@ -3,6 +3,7 @@
     OUTDIR/
       report.html                  self-contained report (html.py)
       targets.csv / .geojson / .kml  the answer per target (answers.py, exports.py)
+      cot/<target>.cot, targets.zip  the answers as Cursor on Target events and a TAK data package (cot.py)
       estimates.csv / .geojson     every method's estimate, for the comparison (exports.py)
       run.json                     groups done, failures with their messages, settings, clock offsets estimated
                                    (clock.estimate), software versions
@@ -33,6 +34,7 @@ from pipeline.atomic import (
 )
 from pipeline.errors import InputError
 from pipeline.report.answers import answer_rows
+from pipeline.report.cot import CotOptions, write_cot_outputs
 from pipeline.report.exports import (
     estimates_geojson,
     write_estimates_csv,
@@ -103,10 +105,11 @@ def _group_figures(outdir: Path, name: str, target: str | None = None) -> dict[s
 
 
 def write_run_outputs(outdir: str | PathLike, results: Sequence[GroupResult], failures: Sequence[GroupFailure],
-                      settings: Mapping, figures: bool = True) -> dict[str, Path]:
-    """Write the run-level outputs (report.html, targets.csv/.geojson/.kml, run.json) and every group folder that
-    is not written yet. `figures=False` leaves the figures out of new group folders and of the report (fast).
-    Returns name -> path of the run-level files."""
+                      settings: Mapping, figures: bool = True, cot: CotOptions | None = None) -> dict[str, Path]:
+    """Write the run-level outputs (report.html, targets.csv/.geojson/.kml, cot/ and targets.zip, run.json) and
+    every group folder that is not written yet. `figures=False` leaves the figures out of new group folders and
+    of the report (fast); `cot` sets the CoT events' type and stale time. Returns name -> path of the run-level
+    files."""
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(outdir)
@@ -121,12 +124,13 @@ def write_run_outputs(outdir: str | PathLike, results: Sequence[GroupResult], fa
     paths = {k: outdir / f for k, f in (("csv", "targets.csv"), ("geojson", "targets.geojson"),
                                         ("kml", "targets.kml"), ("estimates_csv", "estimates.csv"),
                                         ("estimates_geojson", "estimates.geojson"), ("html", "report.html"),
-                                        ("run", "run.json"))}
+                                        ("run", "run.json"), ("cot", "cot"), ("package", "targets.zip"))}
     write_targets_csv(paths["csv"], results, failures)
     write_targets_geojson(paths["geojson"], results, failures)
     write_targets_kml(paths["kml"], results, failures)
     write_estimates_csv(paths["estimates_csv"], results)
     write_estimates_geojson(paths["estimates_geojson"], results)
+    write_cot_outputs(outdir, results, cot)
     write_report_html(paths["html"], results, failures, settings,
                       {k: v for k, v in pngs.items() if v or not figures})
     atomic_write_text(paths["run"], json.dumps({

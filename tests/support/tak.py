@@ -1,0 +1,216 @@
+"""Loopback TAK listeners for the tests, and reading what they received with TAK libraries ridgeloc did not write:
+PyTAK's receiving worker splits an XML stream into events (`RXWorker.readcot`), takproto parses an event (XML
+or TAK protocol version 1, mesh or stream) into a `TakMessage`.
+
+Listeners bind 127.0.0.1 only, on a port the system picks, and keep what they receive in memory.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import io
+import socket
+import ssl
+import threading
+import time
+import warnings
+
+
+def takproto():
+    import takproto as tp
+
+    return tp
+
+
+def parse_event(data: bytes):
+    """A TakMessage from one event: XML (with or without a declaration), or TAK protocol v1 with mesh (UDP) or
+    stream framing (takproto)."""
+    data = bytes(data).strip()
+    if data[:1] == b"<":
+        from takproto.functions import xml2message
+
+        return xml2message(data)
+    msg = takproto().parse_proto(bytearray(data))
+    if msg is None:
+        raise ValueError(f"not a TAK message: {data[:60]!r}")
+    return msg
+
+
+def split_xml_stream(data: bytes) -> list[bytes]:
+    """The events of an XML CoT stream, split as PyTAK's receiver does (readuntil "</event>")."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        import pytak
+
+    async def read_all():
+        reader = asyncio.StreamReader()
+        reader.feed_data(data)
+        reader.feed_eof()
+        worker = pytak.RXWorker(asyncio.Queue(), {"TAK_PROTO": "0"}, reader)
+        out = []
+        while (event := await worker.readcot()) is not None:
+            out.append(event.strip())
+        return out
+
+    return asyncio.run(read_all())
+
+
+def split_proto_stream(data: bytes) -> list:
+    """The TakMessages of a TAK protocol v1 stream (0xbf, varint length, message), read with takproto."""
+    from takproto import delimited_protobuf
+    from takproto.proto import TakMessage
+
+    bio, out = io.BytesIO(data), []
+    while (head := bio.read(1)) == b"\xbf":
+        out.append(delimited_protobuf.read(bio, TakMessage))
+    if head != b"":
+        raise ValueError(f"not a TAK protocol stream at byte {bio.tell() - 1}: {head!r}")
+    return out
+
+
+class UdpListener:
+    """Datagrams to 127.0.0.1:`port`, kept in `received`."""
+
+    def __init__(self):
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.2)
+        self.port = self.sock.getsockname()[1]
+        self.received: list[bytes] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self):
+        while not self._stop.is_set():
+            try:
+                self.received.append(self.sock.recv(65536))
+            except TimeoutError:
+                continue
+
+    def wait_for(self, n: int, timeout_s: float = 10.0) -> list[bytes]:
+        t_end = time.monotonic() + timeout_s
+        while len(self.received) < n and time.monotonic() < t_end:
+            time.sleep(0.05)
+        return list(self.received)
+
+    def __enter__(self):
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join(5)
+        self.sock.close()
+
+
+class TcpListener:
+    """A stream server on 127.0.0.1:`port` (TLS when `ssl_context` is given): the bytes of each connection, in
+    `connections`, complete once the client has closed it. `handshake=False` accepts TCP connections and then
+    says nothing (a server that never answers)."""
+
+    def __init__(self, ssl_context: ssl.SSLContext | None = None, handshake: bool = True):
+        self.server = socket.create_server(("127.0.0.1", 0))
+        self.server.settimeout(0.2)
+        self.port = self.server.getsockname()[1]
+        self.ssl_context, self.handshake = ssl_context, handshake
+        self.connections: list[bytes] = []
+        self.errors: list[str] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self):
+        held = []
+        while not self._stop.is_set():
+            try:
+                conn, _ = self.server.accept()
+            except TimeoutError:
+                continue
+            if not self.handshake:
+                held.append(conn)
+                continue
+            threading.Thread(target=self._serve, args=(conn,), daemon=True).start()
+        for c in held:
+            c.close()
+
+    def _serve(self, conn):
+        try:
+            if self.ssl_context is not None:
+                conn.settimeout(10)
+                conn = self.ssl_context.wrap_socket(conn, server_side=True)
+            conn.settimeout(10)
+            chunks = []
+            while chunk := conn.recv(65536):
+                chunks.append(chunk)
+            self.connections.append(b"".join(chunks))
+        except (OSError, ssl.SSLError) as exc:
+            self.errors.append(f"{type(exc).__name__}: {exc}")
+        finally:
+            conn.close()
+
+    def wait_for(self, n: int, timeout_s: float = 10.0) -> list[bytes]:
+        t_end = time.monotonic() + timeout_s
+        while len(self.connections) < n and time.monotonic() < t_end:
+            time.sleep(0.05)
+        return list(self.connections)
+
+    def __enter__(self):
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join(5)
+        self.server.close()
+
+
+def free_port() -> int:
+    """A TCP port free on 127.0.0.1 right now (bound and released)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def make_certificates(folder) -> dict:
+    """A CA, a server certificate for 127.0.0.1 / localhost and a client certificate it signed, as PEM files in
+    `folder` (the `cryptography` package, which PyTAK's with-crypto extra installs); paths by name."""
+    import datetime
+
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+
+    now = datetime.datetime.now(datetime.timezone.utc)
+
+    def name(cn):
+        return x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, cn)])
+
+    def cert(subject, key, issuer, issuer_key, *, ca=False, san=None, usage=None):
+        b = (x509.CertificateBuilder().subject_name(name(subject)).issuer_name(name(issuer))
+             .public_key(key.public_key()).serial_number(x509.random_serial_number())
+             .not_valid_before(now - datetime.timedelta(days=1)).not_valid_after(now + datetime.timedelta(days=2))
+             .add_extension(x509.BasicConstraints(ca=ca, path_length=None), critical=True))
+        if san:
+            b = b.add_extension(x509.SubjectAlternativeName(san), critical=False)
+        if usage:
+            b = b.add_extension(x509.ExtendedKeyUsage([usage]), critical=False)
+        return b.sign(issuer_key, hashes.SHA256())
+
+    import ipaddress
+
+    ca_key, server_key, client_key = (ec.generate_private_key(ec.SECP256R1()) for _ in range(3))
+    ca = cert("test TAK CA", ca_key, "test TAK CA", ca_key, ca=True)
+    server = cert("localhost", server_key, "test TAK CA", ca_key,
+                  san=[x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))],
+                  usage=ExtendedKeyUsageOID.SERVER_AUTH)
+    client = cert("ridgeloc test client", client_key, "test TAK CA", ca_key, usage=ExtendedKeyUsageOID.CLIENT_AUTH)
+    paths = {}
+    for label, c, k in (("ca", ca, None), ("server", server, server_key), ("client", client, client_key)):
+        paths[f"{label}_cert"] = folder / f"{label}.pem"
+        paths[f"{label}_cert"].write_bytes(c.public_bytes(serialization.Encoding.PEM))
+        if k is not None:
+            paths[f"{label}_key"] = folder / f"{label}.key"
+            paths[f"{label}_key"].write_bytes(k.private_bytes(serialization.Encoding.PEM,
+                                                              serialization.PrivateFormat.PKCS8,
+                                                              serialization.NoEncryption()))
+    return paths

@@ -18,11 +18,11 @@ from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
 import pytest
-from support.synthetic import synthetic_group
-from support.tak import free_port, parse_event, split_xml_stream
 
 from pipeline.report.cot import write_cot_outputs
 from pipeline.tak.cot import cot_time
+from support.synthetic import synthetic_group
+from support.tak import free_port, parse_event, split_xml_stream
 
 ROOT = Path(__file__).resolve().parents[1]
 FTS_VENV = Path(os.environ.get("RIDGELOC_FTS_VENV", Path.home() / ".cache/ridgeloc/freetakserver-2.2.1"))

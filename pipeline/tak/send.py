@@ -197,12 +197,15 @@ async def _send(payloads: Sequence[bytes], dest: Destination, options: SendOptio
 
 
 def _reason(exc: BaseException) -> str:
+    if isinstance(exc.__cause__, ssl.SSLCertVerificationError):  # PyTAK's SyntaxError names its own settings
+        exc = exc.__cause__
     if isinstance(exc, ConnectionRefusedError):
         return "connection refused (is the server running, and is this its port?)"
     if isinstance(exc, socket.gaierror):
         return f"unknown host ({exc.strerror or exc})"
     if isinstance(exc, ssl.SSLCertVerificationError):
-        return f"the server's certificate was not accepted: {exc.verify_message or exc} (give its CA with --ca)"
+        return (f"the server's certificate was not accepted: {exc.verify_message or exc} (give the CA that signed it "
+                "with --ca; --no-hostname-check if it was issued for another name)")
     if isinstance(exc, ValueError) and exc.__cause__ is not None:  # PyTAK: the certificate or key did not load
         return f"{str(exc).splitlines()[0]}: {str(exc.__cause__).splitlines()[0]}"
     text = str(exc).strip().splitlines()

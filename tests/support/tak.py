@@ -214,3 +214,36 @@ def make_certificates(folder) -> dict:
                                                               serialization.PrivateFormat.PKCS8,
                                                               serialization.NoEncryption()))
     return paths
+
+
+def atak_import(package: bytes) -> dict:
+    """What ATAK's data package import does with `package` (zip bytes), by the rules of its MissionPackageExtractor
+    and MissionPackageManifest (ATAK-CIV): the manifest at MANIFEST/manifest.xml, <MissionPackageManifest
+    version="2">, a Configuration with `name` and `uid` parameters, each Content's zipEntry an entry of the zip,
+    and a ".cot" entry imported as an event when it parses with a uid. Returns {"name", "uid", "events": {uid:
+    TakMessage}, "entries": the zip's names}; AssertionError where ATAK would refuse the package or skip an
+    entry."""
+    import zipfile
+
+    from defusedxml import ElementTree
+
+    with zipfile.ZipFile(io.BytesIO(package)) as z:
+        names = z.namelist()
+        assert "MANIFEST/manifest.xml" in names, "no MANIFEST/manifest.xml"
+        root = ElementTree.fromstring(z.read("MANIFEST/manifest.xml"))
+        assert root.tag == "MissionPackageManifest" and root.get("version") == "2", root.tag
+        params = {p.get("name"): p.get("value") for p in root.find("Configuration").findall("Parameter")}
+        assert params.get("name") and params.get("uid"), params
+        events = {}
+        for content in root.find("Contents").findall("Content"):
+            entry = content.get("zipEntry")
+            assert entry in names, f"manifest lists {entry}, not in the zip"
+            assert content.get("ignore", "false") == "false"
+            assert entry.lower().endswith(".cot"), entry
+            msg = parse_event(z.read(entry))
+            uid = msg.cotEvent.uid
+            assert uid, entry
+            listed = {p.get("name"): p.get("value") for p in content.findall("Parameter")}
+            assert listed.get("uid") in (None, uid), (entry, listed, uid)
+            events[uid] = msg
+    return {"name": params["name"], "uid": params["uid"], "events": events, "entries": names}

@@ -98,14 +98,14 @@ def load_events(files: list[Path], cot_type: str | None, stale: str | None) -> l
     validity they were written with) and, when given, of `cot_type`."""
     from datetime import datetime, timezone
 
-    from pipeline.tak.cot import check_type, parse_duration_s, read_event, restamp, to_bytes
+    from pipeline.tak.cot import check_type, parse_duration_s, read_event_file, restamp, to_bytes
 
     stale_s = None if stale is None else parse_duration_s(stale)
     cot_type = None if cot_type is None else check_type(cot_type)
     now = datetime.now(timezone.utc)
     events = []
     for f in files:
-        event = restamp(read_event(f.read_bytes(), str(f)), now, stale_s)
+        event = restamp(read_event_file(f), now, stale_s)
         if cot_type is not None:
             event.set("type", cot_type)
         events.append(to_bytes(event))

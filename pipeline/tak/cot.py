@@ -46,6 +46,8 @@ XML_DECLARATION = '<?xml version="1.0" encoding="UTF-8" standalone="yes"?>\n'
 #: the namespace of ridgeloc's target uids (uuid5 of a flight's and target's key, `target_uid`)
 UID_NAMESPACE = uuid.UUID("6f1d7c1e-3b0a-5e55-9d6a-2f4c1a7b0c39")
 #: a CoT type as the schema's pattern allows it: dash-separated words, an optional ";" qualifier
+#: a .cot file larger than this is refused unread (an event of ridgeloc's is about 1 KB)
+MAX_EVENT_BYTES = 1 << 20
 _TYPE_RE = re.compile(r"\w+(-\w+)*(;[^;]*)?")
 _DURATION_RE = re.compile(r"\s*(\d+(?:\.\d*)?|\.\d+)\s*([smhd]?)\s*")
 _UNIT_S = {"": 1.0, "s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0}
@@ -159,9 +161,29 @@ def read_event(data: bytes, source: str) -> ET.Element:
     try:
         for key in ("time", "start", "stale"):
             parse_cot_time(root.get(key))
+        point = {k: float(root.find("point").get(k, "nan")) for k in ("lat", "lon", "hae", "ce", "le")}
     except ValueError as exc:
         raise InputError(f"not a CoT event: {exc}", source) from None
+    bad = [k for k, v in point.items() if not math.isfinite(v)]
+    if bad or abs(point["lat"]) > 90 or abs(point["lon"]) > 180:
+        raise InputError(f"not a CoT event: its point's {', '.join(bad) or 'lat/lon'} is missing, not a finite "
+                         "number or out of range", source)
     return root
+
+
+def read_event_file(path) -> ET.Element:
+    """`read_event` of a .cot file (at most MAX_EVENT_BYTES)."""
+    from pathlib import Path
+
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        if size > MAX_EVENT_BYTES:
+            raise InputError(f"not a CoT event: {size} bytes (an event is at most {MAX_EVENT_BYTES})", path)
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror or exc}", path) from None
+    return read_event(data, str(path))
 
 
 def restamp(event: ET.Element, now: datetime, stale_s: float | None = None) -> ET.Element:

@@ -227,7 +227,7 @@ def test_run_on_a_clip_locates_the_crosshair_near_the_frame_centre(name):
     undetermined = {m for m, r in rows.items() if r["determined"] is False}
     assert {"vision", "dlt", "fusion", "ridge"} <= undetermined
     for m in undetermined:
-        assert rows[m]["lat_deg"] is None and "not determined" in rows[m]["reason"] or m in ("range", "mle"), m
+        assert rows[m]["lat_deg"] is None and ("not determined" in rows[m]["reason"] or m in ("range", "mle")), m
     for m, r in rows.items():
         if r["determined"]:
             assert off_centre_m(r) < 300.0, m

@@ -386,8 +386,8 @@ def write_estimates_geojson(path: str | PathLike, results, max_lines_of_sight: i
 _KML_STRING_FIELDS = {"name", "group", "target", "status", "mgrs", "tle_category", "method", "reason", "alt_datum",
                       "alt_msl_datum", "covariance_source"}
 _KML_INT_FIELDS = {"n_observations"}
-TARGET_KML_FIELDS = tuple(c for c in ANSWER_COLUMNS if c not in ("lat_deg", "lon_deg"))
-ELLIPSE_KML_FIELDS = ("name", "group", "target", "method", "confidence", "semi_major_m", "semi_minor_m",
+TARGET_KML_FIELDS = tuple(c for c in ANSWER_COLUMNS if c not in ("name", "lat_deg", "lon_deg"))  # name: <name>
+ELLIPSE_KML_FIELDS = ("group", "target", "method", "confidence", "semi_major_m", "semi_minor_m",
                       "azimuth_deg", "alt_msl_m")
 KML_SCHEMAS = {"target": TARGET_KML_FIELDS, "error_ellipse": ELLIPSE_KML_FIELDS}
 

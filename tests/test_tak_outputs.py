@@ -11,21 +11,15 @@ a disc, not with ridgeloc's code); the package as ATAK's importer reads one (tes
 from __future__ import annotations
 
 import csv
-import json
-import math
 from pathlib import Path
 
-import numpy as np
-import pymap3d
 import pytest
-from scipy import integrate, optimize
 
 from pipeline.cli import main as cli_main
-from support.tak import UdpListener, atak_import, parse_event
+from support.tak import UdpListener, atak_import, compare_run_events, parse_event
 
 ROOT = Path(__file__).resolve().parents[1]
 FLIGHTS = ("group1", "three_targets", "h20_laser")
-Z90 = 1.6448536269514722  # the standard normal's 90 % two-sided quantile
 
 
 @pytest.fixture(scope="module")
@@ -45,40 +39,12 @@ def runs(tmp_path_factory):
 
 
 def _events(out: Path) -> dict:
-    """callsign -> (uid, CotEvent) of OUT/cot/*.cot."""
+    """callsign -> CotEvent of OUT/cot/*.cot."""
     events = {}
     for f in sorted((out / "cot").glob("*.cot")):
         e = parse_event(f.read_bytes()).cotEvent
         events[e.detail.contact.callsign] = e
     return events
-
-
-def _answers(out: Path) -> dict:
-    """target name (targets.csv's `name`) -> (answer dict of result.json, origin_lla)."""
-    answers = {}
-    for flight in FLIGHTS:
-        doc = json.loads((out / flight / "result.json").read_text())
-        for r in doc.get("targets") or [doc]:
-            name = r["name"] if r.get("target") is None else f"{r['name']}:{r['target']}"
-            answers[name] = (r["answer"], r["origin_lla"])
-    return answers
-
-
-def ce90_by_integration(cov2: np.ndarray) -> float:
-    """Radius of the disc holding 90 % of a zero-mean 2-D Gaussian of covariance `cov2`: P(r) = 1 / (2 pi
-    sqrt|C|) * integral over theta of (1 - exp(-r^2 a / 2)) / a, a = u' C^-1 u (polar coordinates)."""
-    inv, det = np.linalg.inv(cov2), np.linalg.det(cov2)
-
-    def a(theta):
-        u = np.array([math.cos(theta), math.sin(theta)])
-        return float(u @ inv @ u)
-
-    def p(r):
-        return integrate.quad(lambda t: (1 - math.exp(-r * r * a(t) / 2)) / a(t), 0, 2 * math.pi,
-                              limit=200)[0] / (2 * math.pi * math.sqrt(det))
-
-    top = 10 * math.sqrt(np.trace(cov2))
-    return optimize.brentq(lambda r: p(r) - 0.9, 1e-9, top, xtol=1e-9)
 
 
 def test_one_event_per_located_answer_at_the_answers_point(runs):
@@ -96,20 +62,15 @@ def test_one_event_per_located_answer_at_the_answers_point(runs):
 
 def test_the_point_is_the_answers_position_and_ce_le_are_ce90_le90_of_its_covariance(runs):
     out, _, _ = runs
-    answers = _answers(out)
-    events = _events(out)
-    for name, e in events.items():
-        answer, origin = answers[name]
-        assert answer["status"] == "located"
-        lat, lon, h = pymap3d.enu2geodetic(*answer["position_m"], *origin)
-        assert abs(e.lat - lat) <= 1e-7 and abs(e.lon - lon) <= 1e-7 and abs(e.hae - h) <= 0.01, name
-        cov = np.asarray(answer["covariance_m2"])
-        ce90 = ce90_by_integration(cov[:2, :2])
-        le90 = Z90 * math.sqrt(cov[2, 2])
-        assert e.ce == pytest.approx(ce90, rel=1e-3, abs=0.01), name
-        assert e.le == pytest.approx(le90, rel=1e-3, abs=0.01), name
+    report = compare_run_events(out)
+    assert len(report) == 7
+    for r in report:
+        assert r["status"] == r["answer_status"] == "located"
+        assert max(r["d_lat_answer_deg"], r["d_lon_answer_deg"]) <= 1e-7 and r["d_hae_answer_m"] <= 0.01, r
+        assert r["ce"] == pytest.approx(r["ce90_m"], rel=1e-3, abs=0.01), r
+        assert r["le"] == pytest.approx(r["le90_m"], rel=1e-3, abs=0.01), r
         # the schema's 1-sigma reading would be smaller: for these ellipses CE90 is about 2.1 x sigma
-        assert e.ce > 1.9 * math.sqrt(np.trace(cov[:2, :2]) / 2), name
+        assert r["ce"] > 1.9 * r["sigma_h_m"], r
 
 
 def test_two_runs_of_the_same_flights_give_the_same_uids(runs):

@@ -247,3 +247,66 @@ def atak_import(package: bytes) -> dict:
             assert listed.get("uid") in (None, uid), (entry, listed, uid)
             events[uid] = msg
     return {"name": params["name"], "uid": params["uid"], "events": events, "entries": names}
+
+
+Z90 = 1.6448536269514722  # the standard normal's 90 % two-sided quantile
+
+
+def ce90_by_integration(cov2) -> float:
+    """Radius of the disc holding 90 % of a zero-mean 2-D Gaussian of covariance `cov2` (2, 2), integrated here
+    (not with ridgeloc's code): P(r) = 1 / (2 pi sqrt|C|) * integral over theta of (1 - exp(-r^2 a / 2)) / a,
+    a = u' C^-1 u, u the unit vector at theta (the density in polar coordinates, integrated along each ray)."""
+    import math
+
+    import numpy as np
+    from scipy import integrate, optimize
+
+    inv, det = np.linalg.inv(cov2), np.linalg.det(cov2)
+
+    def a(theta):
+        u = np.array([math.cos(theta), math.sin(theta)])
+        return float(u @ inv @ u)
+
+    def p(r):
+        return integrate.quad(lambda t: (1 - math.exp(-r * r * a(t) / 2)) / a(t), 0, 2 * math.pi,
+                              limit=200)[0] / (2 * math.pi * math.sqrt(det))
+
+    return optimize.brentq(lambda r: p(r) - 0.9, 1e-9, 10 * math.sqrt(np.trace(cov2)), xtol=1e-9)
+
+
+def compare_run_events(out) -> list[dict]:
+    """Each event of OUT/cot/ beside what it was made from: targets.csv's row (by callsign = `name`) and the
+    answer in OUT/<flight>/result.json (its ENU position converted here with pymap3d, CE90 integrated and LE90
+    computed from its covariance). One dict per event: name, uid, status, and the differences d_* (deg, m)."""
+    import csv
+    import json
+    import math
+    from pathlib import Path
+
+    import numpy as np
+    import pymap3d
+
+    out = Path(out)
+    rows = {r["name"]: r for r in csv.DictReader((out / "targets.csv").open())}
+    answers = {}
+    for f in out.glob("*/result.json"):
+        doc = json.loads(f.read_text())
+        for r in doc.get("targets") or [doc]:
+            if "answer" in r:
+                name = r["name"] if r.get("target") is None else f"{r['name']}:{r['target']}"
+                answers[name] = (r["answer"], r["origin_lla"])
+    report = []
+    for f in sorted((out / "cot").glob("*.cot")):
+        e = parse_event(f.read_bytes()).cotEvent
+        name = e.detail.contact.callsign
+        row, (answer, origin) = rows[name], answers[name]
+        lat, lon, h = pymap3d.enu2geodetic(*answer["position_m"], *origin)
+        cov = np.asarray(answer["covariance_m2"])
+        report.append({
+            "name": name, "uid": e.uid, "status": row["status"], "answer_status": answer["status"],
+            "d_lat_csv_deg": abs(e.lat - float(row["lat_deg"])), "d_lon_csv_deg": abs(e.lon - float(row["lon_deg"])),
+            "d_hae_csv_m": abs(e.hae - float(row["alt_m"])), "d_lat_answer_deg": abs(e.lat - lat),
+            "d_lon_answer_deg": abs(e.lon - lon), "d_hae_answer_m": abs(e.hae - h),
+            "ce": e.ce, "ce90_m": ce90_by_integration(cov[:2, :2]), "le": e.le, "le90_m": Z90 * math.sqrt(cov[2, 2]),
+            "sigma_h_m": math.sqrt(np.trace(cov[:2, :2]) / 2)})
+    return report

@@ -68,12 +68,11 @@ def split_proto_stream(data: bytes) -> list:
     return out
 
 
-class UdpListener:
-    """Datagrams to 127.0.0.1:`port`, kept in `received`."""
+class _Listener:
+    """A socket on 127.0.0.1 served by a thread (`_run`) that keeps what arrives in `received`."""
 
-    def __init__(self):
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
+    def __init__(self, sock: socket.socket):
+        self.sock = sock
         self.sock.settimeout(0.2)
         self.port = self.sock.getsockname()[1]
         self.received: list[bytes] = []
@@ -81,13 +80,10 @@ class UdpListener:
         self._thread = threading.Thread(target=self._run, daemon=True)
 
     def _run(self):
-        while not self._stop.is_set():
-            try:
-                self.received.append(self.sock.recv(65536))
-            except TimeoutError:
-                continue
+        raise NotImplementedError
 
     def wait_for(self, n: int, timeout_s: float = 10.0) -> list[bytes]:
+        """What has arrived once there are `n` items, or when `timeout_s` has passed."""
         t_end = time.monotonic() + timeout_s
         while len(self.received) < n and time.monotonic() < t_end:
             time.sleep(0.05)
@@ -103,26 +99,37 @@ class UdpListener:
         self.sock.close()
 
 
-class TcpListener:
-    """A stream server on 127.0.0.1:`port` (TLS when `ssl_context` is given): the bytes of each connection, in
-    `connections`, complete once the client has closed it. `handshake=False` accepts TCP connections and then
-    says nothing (a server that never answers)."""
+class UdpListener(_Listener):
+    """Datagrams to 127.0.0.1:`port`, one item of `received` each."""
+
+    def __init__(self):
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sock.bind(("127.0.0.1", 0))
+        super().__init__(sock)
+
+    def _run(self):
+        while not self._stop.is_set():
+            try:
+                self.received.append(self.sock.recv(65536))
+            except TimeoutError:
+                continue
+
+
+class TcpListener(_Listener):
+    """A stream server on 127.0.0.1:`port` (TLS when `ssl_context` is given): the bytes of each connection, one
+    item of `received`, complete once the client has closed it. `handshake=False` accepts TCP connections and
+    then says nothing (a server that never answers)."""
 
     def __init__(self, ssl_context: ssl.SSLContext | None = None, handshake: bool = True):
-        self.server = socket.create_server(("127.0.0.1", 0))
-        self.server.settimeout(0.2)
-        self.port = self.server.getsockname()[1]
+        super().__init__(socket.create_server(("127.0.0.1", 0)))
         self.ssl_context, self.handshake = ssl_context, handshake
-        self.connections: list[bytes] = []
         self.errors: list[str] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
 
     def _run(self):
         held = []
         while not self._stop.is_set():
             try:
-                conn, _ = self.server.accept()
+                conn, _ = self.sock.accept()
             except TimeoutError:
                 continue
             if not self.handshake:
@@ -141,26 +148,11 @@ class TcpListener:
             chunks = []
             while chunk := conn.recv(65536):
                 chunks.append(chunk)
-            self.connections.append(b"".join(chunks))
+            self.received.append(b"".join(chunks))
         except (OSError, ssl.SSLError) as exc:
             self.errors.append(f"{type(exc).__name__}: {exc}")
         finally:
             conn.close()
-
-    def wait_for(self, n: int, timeout_s: float = 10.0) -> list[bytes]:
-        t_end = time.monotonic() + timeout_s
-        while len(self.connections) < n and time.monotonic() < t_end:
-            time.sleep(0.05)
-        return list(self.connections)
-
-    def __enter__(self):
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc):
-        self._stop.set()
-        self._thread.join(5)
-        self.server.close()
 
 
 def free_port() -> int:

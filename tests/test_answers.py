@@ -38,7 +38,7 @@ def test_mgrs_matches_geographiclibs_published_square_and_pyprojs_utm():
     rng = np.random.default_rng(1)
     for lat, lon in np.column_stack([rng.uniform(-79, 83, 40), rng.uniform(-179.9, 179.9, 40)]):
         zone = int((lon + 180) // 6) + 1
-        if 56 <= lat < 64 and 3 <= lon < 12 or lat >= 72 and 0 <= lon < 42:
+        if (56 <= lat < 64 and 3 <= lon < 12) or (lat >= 72 and 0 <= lon < 42):
             continue  # Norway's and Svalbard's special zones
         epsg = (32600 if lat >= 0 else 32700) + zone
         e, n = pyproj.Transformer.from_crs("EPSG:4326", f"EPSG:{epsg}", always_xy=True).transform(lon, lat)

@@ -60,7 +60,7 @@ def test_tle_categories_follow_jp_3_09_3_in_feet():
 # ---- the rule ---------------------------------------------------------------------------------------------------
 
 def test_the_mle_is_the_answer_where_its_fit_checks_pass():
-    obs, truth = synthetic_observations(seed=3)
+    obs, _ = synthetic_observations(seed=3)
     est, uns = _solved(obs)
     a = choose_answer(obs, est, uns, ORIGIN)
     assert a.located and a.method == "mle" and a.covariance_source == "estimator"
@@ -164,7 +164,7 @@ def test_the_propagated_covariance_holds_the_truth_as_often_as_it_says():
 
 
 def test_relative_uncertainty_is_the_95_semi_axis_over_the_distance():
-    obs, truth = synthetic_observations(seed=3)
+    obs, _ = synthetic_observations(seed=3)
     est, uns = _solved(obs)
     a = choose_answer(obs, est, uns, ORIGIN)
     v = a.verdicts["mle"]

@@ -307,28 +307,38 @@ def _photo_result(config, photos, pixels, dem, dem_sigma, notes, truth, target):
     """One target of a photo flight located: its GroupResult (target: its name, or None for the single target)."""
     import time
 
-    from pipeline.geometry.rays import intersection_angle_deg
-    from pipeline.results import GroupResult
-
     t0 = time.perf_counter()
     loc = locate_photos(photos, pixels, dem=dem, dem_sigma_m=dem_sigma)
     if not loc.estimates:
         reasons = "; ".join(f"{m}: {r}" for m, (_, r) in loc.unsolved.items())
         raise InputError(f"no method could locate the target from the photos: {reasons}", config.path)
+    return location_result(config.name, config.to_dict(), loc, notes, truth, target, dem, dem_sigma,
+                           time.perf_counter() - t0)
+
+
+def location_result(name: str, settings: dict, loc: PhotoLocation, notes: list[str], truth=None, target=None,
+                    dem=None, dem_sigma_m: float | None = None, elapsed_s: float = 0.0):
+    """A photo location as the GroupResult the outputs take (`ridgeloc run` of a photo flight, `ridgeloc locate
+    -o`): its estimates, the answer (`photo_answer`), the truth (lat, lon, h) where known, the error model in
+    the settings."""
+    from pipeline.geometry.rays import intersection_angle_deg
+    from pipeline.results import GroupResult
+
     truth_m = None if truth is None else enu_from_lla(*truth, origin_lla=loc.views.origin_lla)
-    ref = truth_m if truth_m is not None else next(iter(loc.estimates.values())).position_m
+    answer = photo_answer(loc, dem, dem_sigma_m)
+    ref = truth_m if truth_m is not None else (answer.position_m if answer.located else next(
+        (e.position_m for e in loc.estimates.values()), None))
     seen = loc.obs.has_pixel | loc.obs.has_range
-    gamma = intersection_angle_deg(loc.obs.platform_m[seen], ref) if seen.sum() >= 2 else float("nan")
-    settings = config.to_dict()
+    gamma = intersection_angle_deg(loc.obs.platform_m[seen], ref) if seen.sum() >= 2 and ref is not None else \
+        float("nan")
+    settings = dict(settings)
     settings["notes"] = list(notes)
     settings["solve_failures"] = {m: {"status": s, "reason": r} for m, (s, r) in loc.unsolved.items()}
-    settings["photos"] = [p.path for p in photos]
+    settings["photos"] = [p.path for p in loc.views.photos]
     settings["error_model"] = loc.errors.to_dict()
-    answer = photo_answer(loc, dem, dem_sigma)
-    return GroupResult(name=config.name, origin_lla=loc.views.origin_lla, observations=loc.obs,
+    return GroupResult(name=name, origin_lla=loc.views.origin_lla, observations=loc.obs,
                        estimates=loc.estimates, truth_m=truth_m, intersection_angle_deg=gamma,
-                       timings_s={"locate": time.perf_counter() - t0}, settings=settings, target=target,
-                       answer=answer)
+                       timings_s={"locate": elapsed_s}, settings=settings, target=target, answer=answer)
 
 
 def read_marks(path: str, photos) -> list:

@@ -231,3 +231,47 @@ def test_run_of_a_log_says_it_is_not_a_config(tmp_path, capsys):
     assert main(["run", str(manifest), "-o", str(out), "-q"]) == 1
     assert capsys.readouterr().err.splitlines() == [f"ridgeloc: flight: failed: {log}: {LOG_NOT_CONFIG}"]
     assert not out.exists()
+
+
+def test_a_run_into_another_runs_folder_is_refused_unless_overwrite(tmp_path, capsys, monkeypatch):
+    """Issue 38: OUT holding another run's finished flights is refused before any flight runs (the summary files
+    would describe one run and the folders beside them another); --overwrite removes them, so OUT is one run's."""
+    import pipeline.batch
+    from pipeline.report.outputs import write_group_outputs
+    from support.synthetic import synthetic_group
+
+    out = tmp_path / "out"
+    write_group_outputs(out, synthetic_group("someone_else", seed=1, n_frames=6), "digest", figures=False)
+    flight = SAMPLE  # configs/flights/group6.yaml
+
+    def no_flight(*args, **kwargs):
+        raise AssertionError("a flight ran before its command line was refused")
+
+    monkeypatch.setattr(pipeline.batch, "run_groups", no_flight)
+    assert main(["run", str(flight), "-o", str(out), "--no-figures", "-q"]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"ridgeloc: error: {out}: holds another run's results (someone_else): choose another output folder, or "
+        "give --overwrite to replace them"]
+    assert (out / "someone_else" / "result.json").is_file()
+    r = synthetic_group("group6", seed=2, n_frames=6)
+    monkeypatch.setattr(pipeline.batch, "run_groups", lambda *a, **k: ([r], [], []))
+    assert main(["run", str(flight), "-o", str(out), "--no-figures", "-q", "--overwrite"]) == 0
+    assert sorted(p.name for p in out.iterdir() if p.is_dir()) == ["group6"]  # its flights' folders only
+    assert [row.split(",")[0] for row in (out / "targets.csv").read_text().splitlines()[1:]] == ["group6"]
+
+
+def test_a_failed_flights_folder_from_an_earlier_run_is_removed(tmp_path):
+    """A flight that fails on a re-run loses the folder its earlier success left: targets.csv says it failed, and
+    no folder beside it says otherwise."""
+    from pipeline.report.outputs import write_run_outputs
+    from pipeline.results import GroupFailure
+    from support.synthetic import synthetic_group
+
+    out = tmp_path / "out"
+    a, b = synthetic_group("a", seed=1, n_frames=6), synthetic_group("b", seed=2, n_frames=6)
+    write_run_outputs(out, [a, b], [], {}, figures=False)
+    assert (out / "b" / ".done").is_file()
+    write_run_outputs(out, [a], [GroupFailure("b", "b.yaml", "b.yaml: file not found")], {}, figures=False)
+    assert not (out / "b").exists() and (out / "a" / ".done").is_file()
+    rows = (out / "targets.csv").read_text().splitlines()[1:]
+    assert [r.split(",")[0] for r in rows] == ["a", "b"] and "not_located" in rows[1]

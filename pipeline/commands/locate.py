@@ -34,7 +34,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dem-sigma-m", type=float, default=None,
                         help="the DEM's vertical error at the target, 1 sigma (m): adds the DEM as the MLE's terrain "
                              "prior (default: none, the `dem` method only; docs/terrain.md says what to state)")
-    parser.add_argument("--json", action="store_true", help="print one JSON document")
+    parser.add_argument("-o", "--outdir", default=None,
+                        help="also write the run outputs there: targets.csv/.geojson/.kml (the answer), estimates.csv/"
+                             ".geojson (every method), report.html, run.json (docs/outputs.md)")
+    parser.add_argument("--name", default=None,
+                        help="the target's name in the outputs (default: the first photo's folder name)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace the results of another run in the --outdir folder")
+    parser.add_argument("--json", action="store_true", help="print one JSON document, the answer first")
+    from pipeline.commands.send import add_tak_arguments
+
+    add_tak_arguments(parser)
 
 
 def stated_errors(photos, args):
@@ -59,11 +69,32 @@ def stated_errors(photos, args):
     return errors
 
 
+def _default_name(paths) -> str:
+    """The target's name when --name is not given: the folder of the first photo (or the folder given)."""
+    from pathlib import Path
+
+    first = Path(paths[0]).resolve()
+    return (first if first.is_dir() else first.parent).name or "photos"
+
+
 def main(args) -> int:
+    from pipeline.commands.send import check_send_args, cot_options
     from pipeline.errors import InputError
     from pipeline.ingest.photo import read_photos
     from pipeline.locate import check_pixels, estimate_row, locate_photos, read_marks
+    from pipeline.report.cot import check_flight_name
 
+    cot = cot_options(args)  # a bad CoT type, stale time, URL, certificate or name is refused before any work
+    check_send_args(args, args.send)
+    check_flight_name(args.name or _default_name(args.photos))
+    if args.outdir is not None:  # refused before any work: a file there, or another run's results
+        from pathlib import Path
+
+        from pipeline.commands import output_folder
+        from pipeline.report.outputs import claim_output_folder
+
+        output_folder(args.outdir)
+        claim_output_folder(args.outdir, [args.name or _default_name(args.photos)], args.overwrite)
     terrain = None
     if args.dem_sigma_m is not None and not args.dem:
         raise InputError("--dem-sigma-m is the DEM's vertical error: give the DEM with --dem")
@@ -93,21 +124,37 @@ def main(args) -> int:
     errors = stated_errors(photos, args)
     loc = locate_photos(photos, pixels, dem=dem, rotation_deg=args.image_rotation, errors=errors,
                         dem_sigma_m=args.dem_sigma_m)
+    from pathlib import Path
+
+    from pipeline.locate import location_result
+    from pipeline.report.answers import answer_row, answers_text
+
+    notes = []
+    if dem is not None and args.dem_sigma_m is None:
+        notes.append("the DEM serves the dem method only: state its vertical error with --dem-sigma-m to add it to "
+                     "the mle as a terrain prior (docs/terrain.md)")
+    name = args.name or _default_name(args.photos)
+    result = location_result(name, {"command": "locate", "photos": [p.path for p in photos]}, loc, notes,
+                             dem=dem, dem_sigma_m=args.dem_sigma_m)
+    answer = answer_row(result)
     rows = {m: estimate_row(e, loc.views) for m, e in loc.estimates.items()}
     for m, (status, reason) in loc.unsolved.items():
         rows[m] = {"status": status, "reason": reason}
-    doc = {"photos": [p.path for p in photos], "bad_photos": [{"path": p, "error": e} for p, e in bad],
+    doc = {"answer": answer, "photos": [p.path for p in photos],
+           "bad_photos": [{"path": p, "error": e} for p, e in bad],
            "origin_lla": list(loc.views.origin_lla), "ranges_used": int(loc.obs.has_range.sum()),
-           "error_model": loc.errors.to_dict(),
-           "estimates": rows, "notes": []}
-    if dem is not None and args.dem_sigma_m is None:
-        doc["notes"].append("the DEM serves the dem method only: state its vertical error with --dem-sigma-m to "
-                            "add it to the mle as a terrain prior (docs/terrain.md)")
+           "error_model": loc.errors.to_dict(), "estimates": rows, "notes": notes}
+    if args.outdir is not None:
+        from pipeline.report.outputs import write_run_outputs
+
+        write_run_outputs(args.outdir, [result], [], {"command": "locate", "outdir": str(args.outdir)},
+                          rewrite_groups=True, cot=cot)
     if args.json:
         print(json.dumps(doc, indent=2))
     else:
-        print(f"{len(photos)} photo(s), {doc['ranges_used']} laser range(s) used"
-              + (f", {len(bad)} unreadable" if bad else ""))
+        print(answers_text([answer]))
+        print(f"\n{len(photos)} photo(s), {doc['ranges_used']} laser range(s) used"
+              + (f", {len(bad)} unreadable" if bad else "") + "; every method:")
         for m, r in rows.items():
             if "lat_deg" in r:
                 cep = "" if r["cep50_m"] is None else f"  CEP50 {r['cep50_m']:.2f} m"
@@ -117,8 +164,16 @@ def main(args) -> int:
                 print(f"  {m:10s} {r['status']}: {r['reason']}")
         for note in doc["notes"]:
             print(f"note: {note}")
-    if not loc.estimates:  # like `ridgeloc solve`: exit 0 only when at least one method located the target
-        print("ridgeloc: error: no method located the target from these photos (the reasons above; several "
-              "photos need the target marked in each: --marks or --pixel)", file=sys.stderr)
+        if args.outdir is not None:
+            print(f"wrote {Path(args.outdir) / 'targets.csv'} and the rest of the run outputs in {args.outdir}")
+    sent = 0
+    if args.send:
+        from pipeline.commands.send import send_events_to, send_run_outputs
+        from pipeline.report.cot import cot_entries
+
+        sent = (send_run_outputs(args.outdir, args) if args.outdir is not None
+                else send_events_to([e.xml for e in cot_entries([result], options=cot)], args.send, args))
+    if answer["status"] != "located":  # exit 0 only with an answer
+        print(f"ridgeloc: error: the target is not located: {answer['reason']}", file=sys.stderr)
         return 1
-    return 1 if bad else 0
+    return 1 if bad or sent else 0

@@ -115,9 +115,17 @@ def load_events(files: list[Path], cot_type: str | None, stale: str | None) -> l
 def send_files(files: list[Path], url: str, args, cot_type: str | None = None, stale: str | None = None) -> int:
     """Send the events of `files` (see `load_events`) to `url`; prints one line; returns the exit code (0 sent,
     1 not)."""
+    return send_events_to(load_events(files, cot_type, stale), url, args)
+
+
+def send_events_to(events: list[bytes], url: str, args) -> int:
+    """Send `events` (XML) to `url` with the options of `args`; prints one line; returns the exit code (0 sent,
+    1 not: the files on disk are never touched)."""
     from pipeline.tak.send import SendError, send_events
 
-    events = load_events(files, cot_type, stale)
+    if not events:
+        print(f"ridgeloc: nothing to send to {url}: no target was located", file=sys.stderr)
+        return 0
     try:
         dest = send_events(events, url, send_options(args))
     except SendError as exc:
@@ -132,11 +140,7 @@ def send_files(files: list[Path], url: str, args, cot_type: str | None = None, s
 def send_run_outputs(outdir, args) -> int:
     """`--send URL` of run and locate: the run's fresh events (as written) to the URL; 0 when there is nothing
     located to send (the run's own exit code says so)."""
-    files = sorted((Path(outdir) / "cot").glob("*.cot"))
-    if not files:
-        print(f"ridgeloc: nothing to send to {args.send}: no target was located", file=sys.stderr)
-        return 0
-    return send_files(files, args.send, args)
+    return send_files(sorted((Path(outdir) / "cot").glob("*.cot")), args.send, args)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

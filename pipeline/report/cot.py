@@ -18,6 +18,8 @@ from os import PathLike
 from pathlib import Path
 
 from pipeline.atomic import atomic_dir, atomic_write_bytes
+from pipeline.errors import InputError
+from pipeline.flight_config import RESERVED_FLIGHT_NAMES
 from pipeline.report.answers import answer_row
 from pipeline.results import GroupResult, per_target
 from pipeline.tak import DEFAULT_STALE_S, DEFAULT_TYPE
@@ -42,7 +44,8 @@ def flight_key(r: GroupResult) -> str:
     """A flight's identity for its targets' uids: its name and the (name, size) of each input file (telemetry,
     video, photos; a folder's files), as JSON. A file that is gone counts by its name."""
     files = r.settings.get("files") or {}
-    listed = [*(files.get("telemetry") or []), files.get("video"), *(files.get("photos") or [])]
+    listed = [*(files.get("telemetry") or []), files.get("video"), *(files.get("photos") or []),
+              *(r.settings.get("photos") or [])]  # `ridgeloc locate`'s photos
     items = set()
     for f in listed:
         if not f:
@@ -53,6 +56,14 @@ def flight_key(r: GroupResult) -> str:
         else:
             items.add((p.name, p.stat().st_size if p.is_file() else None))
     return json.dumps({"flight": r.name, "files": sorted(items, key=lambda x: (x[0], x[1] or 0))})
+
+
+def check_flight_name(name: str) -> str:
+    """`name` unless the run's TAK outputs take it (OUTDIR/cot/, targets.zip): InputError."""
+    if name.lower() in RESERVED_FLIGHT_NAMES:
+        raise InputError(f"the name {name!r} is taken by the run's TAK events (OUTDIR/cot/, targets.zip): give "
+                         "the flight another name")
+    return name
 
 
 def mgrs_spaced(mgrs: str) -> str:

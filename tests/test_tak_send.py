@@ -20,6 +20,7 @@ from support.synthetic import synthetic_group
 from support.tak import (
     TcpListener,
     UdpListener,
+    atak_import,
     make_certificates,
     parse_event,
     split_proto_stream,
@@ -173,3 +174,26 @@ def test_send_is_a_command_of_the_cli():
     r = subprocess.run([sys.executable, "-m", "pipeline", "send", "--help"], capture_output=True, text=True,
                        cwd=Path(__file__).resolve().parents[1])
     assert r.returncode == 0 and "239.2.3.1:6969" in r.stdout
+
+
+def test_locate_writes_its_target_for_tak_and_sends_it(tmp_path):
+    photos = Path(__file__).resolve().parents[1] / "sample_data" / "photos" / "h20_laser"
+    with UdpListener() as listener:
+        assert cli_main(["locate", str(photos), "-o", str(tmp_path / "out"), "--send",
+                         f"udp://127.0.0.1:{listener.port}", "--cot-type", "a-h-G"]) == 0
+        assert cli_main(["locate", str(photos), "--name", "spot", "--send", f"udp://127.0.0.1:{listener.port}"]) == 0
+        received = listener.wait_for(2)
+    (written,) = (tmp_path / "out" / "cot").glob("*.cot")
+    e = parse_event(written.read_bytes()).cotEvent
+    assert (written.name, e.detail.contact.callsign, e.type) == ("h20_laser.cot", "h20_laser", "a-h-G")
+    got = [parse_event(d).cotEvent for d in received]
+    assert [g.detail.contact.callsign for g in got] == ["h20_laser", "spot"]  # without -o: sent, nothing written
+    assert got[0].uid == e.uid and got[1].uid != e.uid
+    assert set(atak_import((tmp_path / "out" / "targets.zip").read_bytes())["events"]) == {e.uid}
+
+
+def test_locate_refuses_a_name_the_tak_events_take_before_any_work(tmp_path, capsys):
+    assert cli_main(["locate", str(tmp_path / "no-such-photo.jpg"), "--name", "cot", "-o", str(tmp_path)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["ridgeloc: error: the name 'cot' is taken by the run's TAK events (OUTDIR/cot/, targets.zip): "
+                   "give the flight another name"]

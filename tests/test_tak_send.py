@@ -102,6 +102,19 @@ def test_tls_with_a_client_certificate_the_server_requires(out, tmp_path):
     _same_targets({e.uid: e for e in (parse_event(x).cotEvent for x in split_xml_stream(stream)[1:])}, out)
 
 
+def test_tls_with_a_pkcs12_client_certificate(out, tmp_path):
+    certs = make_certificates(tmp_path)
+    server = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+    server.load_cert_chain(certs["server_cert"], certs["server_key"])
+    server.load_verify_locations(certs["ca_cert"])
+    server.verify_mode = ssl.CERT_REQUIRED
+    with TcpListener(ssl_context=server) as listener:
+        assert cli_main(["send", str(out), "--to", f"tls://127.0.0.1:{listener.port}", "--cert",
+                         str(certs["client_p12"]), "--cert-password", "atakatak", "--ca", str(certs["ca_cert"])]) == 0
+        (stream,) = listener.wait_for(1)
+    _same_targets({e.uid: e for e in (parse_event(x).cotEvent for x in split_xml_stream(stream)[1:])}, out)
+
+
 def test_tls_refuses_a_server_its_ca_did_not_sign(out, tmp_path, capsys):
     certs = make_certificates(tmp_path)
     (tmp_path / "other").mkdir()

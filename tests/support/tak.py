@@ -164,7 +164,8 @@ def free_port() -> int:
 
 def make_certificates(folder) -> dict:
     """A CA, a server certificate for 127.0.0.1 / localhost and a client certificate it signed, as PEM files in
-    `folder` (the `cryptography` package, which PyTAK's with-crypto extra installs); paths by name."""
+    `folder`, and the client's certificate and key as a PKCS#12 file with the password "atakatak", as TAK servers
+    hand them out (the `cryptography` package, which PyTAK's with-crypto extra installs); paths by name."""
     import datetime
 
     from cryptography import x509
@@ -196,7 +197,11 @@ def make_certificates(folder) -> dict:
                   san=[x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))],
                   usage=ExtendedKeyUsageOID.SERVER_AUTH)
     client = cert("ridgeloc test client", client_key, "test TAK CA", ca_key, usage=ExtendedKeyUsageOID.CLIENT_AUTH)
-    paths = {}
+    from cryptography.hazmat.primitives.serialization import pkcs12
+
+    paths = {"client_p12": folder / "client.p12"}
+    paths["client_p12"].write_bytes(pkcs12.serialize_key_and_certificates(
+        b"client", client_key, client, None, serialization.BestAvailableEncryption(b"atakatak")))
     for label, c, k in (("ca", ca, None), ("server", server, server_key), ("client", client, client_key)):
         paths[f"{label}_cert"] = folder / f"{label}.pem"
         paths[f"{label}_cert"].write_bytes(c.public_bytes(serialization.Encoding.PEM))

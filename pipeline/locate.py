@@ -33,9 +33,10 @@ from pipeline.targets import in_image
 LASER_PIXEL_TOLERANCE = 0.01
 #: the rays of two or more marked photos agree under an image rotation when they meet in front of every camera
 #: within this angle (deg) of each ray; one rotation is chosen when only it agrees, or when its worst angle is this
-#: many times smaller than the other's
+#: many times smaller than the other's (angles under ROTATION_FLOOR_DEG, a few pixels of a mark, count as equal)
 ROTATION_AGREEMENT_DEG = 5.0
 ROTATION_MARGIN = 4.0
+ROTATION_FLOOR_DEG = 0.1
 #: the `ground` method's defaults (docs/locate.md, "Answers with less"), 1 sigma: the relief between the take-off
 #: point and the target (the take-off ground stands for the target's), the error of a stated ground height, the
 #: barometric height above the take-off point (RelativeAltitude drifts by about a metre over a flight), and the
@@ -201,7 +202,7 @@ def image_rotations(photos: list[Photo], pixel_px=None, stated: int | None = Non
     good = [h for h in (0, 180) if worst[h] <= ROTATION_AGREEMENT_DEG]
     if len(good) == 2:
         best, other = sorted(good, key=lambda h: worst[h])
-        good = [best] if worst[other] > ROTATION_MARGIN * max(worst[best], 1e-9) else []
+        good = [best] if worst[other] > ROTATION_MARGIN * max(worst[best], ROTATION_FLOOR_DEG) else []
     if len(good) != 1:
         raise InputError(f"{what} (the {int(marked.sum())} marked photos' rays do not tell: worst angle "
                          f"{worst[0]:.1f} deg unturned, {worst[180]:.1f} deg turned by 180)", path=first.path)

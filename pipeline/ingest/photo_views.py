@@ -1,8 +1,9 @@
 """Photos as camera views: each photo's pose in one ENU frame, its projection matrix and its pixel rays.
 
 Chain (pipeline.geometry.pose): R_enu0_from_optical = R_enu0_from_ned(photo lat, lon) * R_ned_from_gimbal *
-R_gimbal_from_optical, with R_ned_from_gimbal the ZYX Euler rotation of DJI's (GimbalYaw, GimbalPitch, GimbalRoll)
-(yaw earth-referenced) and the camera's optical axis along gimbal x. Heights become ellipsoidal with the EGM2008
+R_gimbal_from_optical, with R_ned_from_gimbal the ZYX Euler rotation of the photo's gimbal (yaw, pitch, roll) in DJI's
+convention, whatever the maker wrote (pipeline.ingest.photo_makers; yaw earth-referenced) and the camera's optical
+axis along gimbal x. Heights become ellipsoidal with the EGM2008
 undulation when the photo's altitude is AMSL.
 """
 
@@ -86,8 +87,8 @@ def photo_views(photos: list[Photo], origin_lla: tuple[float, float, float] | No
         raise InputError(f"image rotation must be 0 or 180 degrees, got {sorted(set(rotations))}")
     for p in photos:
         if p.intrinsics is None:
-            raise InputError("no intrinsics (no drone-dji:CalibratedFocalLength or DewarpData, no camera database "
-                             f"entry for {p.make}{p.model}, no EXIF FocalLengthIn35mmFilm)", path=p.path)
+            raise InputError("no intrinsics (no calibrated focal length, DewarpData or stated field of view, no camera "
+                             f"database entry for {p.make}{p.model}, no EXIF FocalLengthIn35mmFilm)", path=p.path)
     lat = np.array([p.lat_deg for p in photos])
     lon = np.array([p.lon_deg for p in photos])
     h = photo_heights_ellipsoid_m(photos)

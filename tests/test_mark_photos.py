@@ -6,12 +6,10 @@ from __future__ import annotations
 
 import json
 import re
-import subprocess
-import tempfile
 
 import numpy as np
 import pytest
-from test_mark_page import CHROMIUM, FLAGS, needs_chromium
+from test_mark_page import needs_chromium, page_result
 
 from pipeline.cli import main as cli_main
 from pipeline.report.mark_page import mark_page
@@ -47,14 +45,7 @@ def test_clicks_on_scaled_photos_are_their_own_pixels_under_one_name(tmp_path):
     page = tmp_path / "marks.html"
     page.write_text(mark_page(images, "photos", sizes={"a.jpg": (300, 200), "b.jpg": (300, 200)})
                     .replace("</body>", _CLICKS + "</body>"))
-    with tempfile.TemporaryDirectory() as profile:
-        out = subprocess.run([CHROMIUM, *FLAGS, f"--user-data-dir={profile}", "--dump-dom", page.as_uri()],
-                             capture_output=True, text=True, timeout=180)
-    m = re.search(r'data-result="([^"]*)"', out.stdout)
-    assert m, (out.stdout[-1500:], out.stderr[-1500:])
-    from html import unescape
-
-    result = json.loads(unescape(m.group(1)))
+    result = page_result(page)
     assert result["labels"] == ["a.jpg", "b.jpg"]
     # CSS (11, 21) on an image drawn at half its size: pixel (11 / 0.5 - 0.5, 21 / 0.5 - 0.5)
     assert result["csv"] == "name,frame_or_image,x_px,y_px\nT1,a.jpg,21.50,41.50\nT1,b.jpg,79.50,81.50\n"

@@ -135,12 +135,6 @@ def xmp_properties(root) -> dict[tuple[str, str], str]:
     return out
 
 
-def parse_xmp(packet: bytes, path) -> dict[tuple[str, str], str]:
-    """{(namespace URI, local name): text} of every property in an XMP packet (xmp_properties). Raises InputError
-    (naming `path`) for a corrupt packet."""
-    return xmp_properties(parse_xmp_tree(packet, path))
-
-
 def _history_agents(root) -> list[str]:
     """The xmpMM:History software agents (stEvt:softwareAgent) of an XMP tree: the programs that saved the file."""
     if root is None:

@@ -132,13 +132,25 @@ def gimbal_from_body_relative(camera_ypr_deg, platform_ypr_deg) -> tuple[float, 
 
 # ---- readers --------------------------------------------------------------------------------------------------
 
+YPR = ("Yaw", "Pitch", "Roll")
+
+
+def _in(xmp: dict, ns: str) -> dict[str, str]:
+    """The properties of one namespace, by local name."""
+    return {name: v for (n, name), v in xmp.items() if n == ns}
+
+
+def _angles(tags: dict, pattern: str = "{}") -> tuple[float, float, float]:
+    """(yaw, pitch, roll) of the tags named pattern.format("Yaw"), ... (NaN where absent or not a number)."""
+    return tuple(number(tags.get(pattern.format(a))) for a in YPR)
+
 
 def _dji(xmp: dict, make: str, model: str) -> MakerPose | None:
-    dji = {name: v for (ns, name), v in xmp.items() if ns == NS_DJI}
-    gimbal = tuple(number(dji.get(f"Gimbal{a}Degree")) for a in ("Yaw", "Pitch", "Roll"))
+    dji = _in(xmp, NS_DJI)
+    gimbal = _angles(dji, "Gimbal{}Degree")
     if not _finite(gimbal):
         return None
-    body = tuple(number(dji.get(f"Flight{a}Degree")) for a in ("Yaw", "Pitch", "Roll"))
+    body = _angles(dji, "Flight{}Degree")
     autel = make.strip().lower().startswith("autel")
     pose = MakerPose(maker="Autel" if autel else "DJI", gimbal_ypr_deg=gimbal,
                      flight_ypr_deg=body if _finite(body) else None,
@@ -186,12 +198,11 @@ def _struct(root, ns: str, name: str) -> dict[str, str]:
 
 def _skydio(xmp: dict, root) -> MakerPose | None:
     cam = _struct(root, NS_SKYDIO, "CameraOrientationNED")
-    gimbal = tuple(number(cam.get(k)) for k in ("Yaw", "Pitch", "Roll"))
+    gimbal = _angles(cam)
     if not _finite(gimbal):
         return None
-    veh = _struct(root, NS_SKYDIO, "VehicleOrientationNED")
-    body = tuple(number(veh.get(k)) for k in ("Yaw", "Pitch", "Roll"))
-    sk = {name: v for (ns, name), v in xmp.items() if ns == NS_SKYDIO}
+    body = _angles(_struct(root, NS_SKYDIO, "VehicleOrientationNED"))
+    sk = _in(xmp, NS_SKYDIO)
     pose = MakerPose(maker="Skydio", gimbal_ypr_deg=gimbal, flight_ypr_deg=body if _finite(body) else None,
                      attitude_source="drone-skydio:CameraOrientationNED/VehicleOrientationNED (earth-referenced)",
                      alt_datum="amsl", lat_deg=number(sk.get("Latitude")), lon_deg=number(sk.get("Longitude")))
@@ -225,11 +236,11 @@ def _skydio(xmp: dict, root) -> MakerPose | None:
 
 
 def _parrot(xmp: dict, model: str) -> MakerPose | None:
-    pa = {name: v for (ns, name), v in xmp.items() if ns == NS_PARROT}
-    gimbal = tuple(number(pa.get(f"Camera{a}Degree")) for a in ("Yaw", "Pitch", "Roll"))
+    pa = _in(xmp, NS_PARROT)
+    gimbal = _angles(pa, "Camera{}Degree")
     if not _finite(gimbal):
         return None
-    body = tuple(number(pa.get(f"Drone{a}Degree")) for a in ("Yaw", "Pitch", "Roll"))
+    body = _angles(pa, "Drone{}Degree")
     anafi_ai = "anafiai" in model.replace(" ", "").lower()
     return MakerPose(maker="Parrot", gimbal_ypr_deg=gimbal, flight_ypr_deg=body if _finite(body) else None,
                      attitude_source="drone-parrot:Camera*/Drone*Degree (earth-referenced)",
@@ -238,8 +249,7 @@ def _parrot(xmp: dict, model: str) -> MakerPose | None:
 
 def _pix4d(xmp: dict, make: str) -> MakerPose | None:
     for ns in (NS_PIX4D, NS_PARROT_CAMERA):
-        cam = {name: v for (n, name), v in xmp.items() if n == ns}
-        ypr = tuple(number(cam.get(k)) for k in ("Yaw", "Pitch", "Roll"))
+        ypr = _angles(_in(xmp, ns))
         if _finite(ypr):
             break
     else:
@@ -257,11 +267,11 @@ def _pix4d(xmp: dict, make: str) -> MakerPose | None:
 
 
 def _teal(xmp: dict, make: str, model: str) -> MakerPose | None:
-    ex = {name: v for (ns, name), v in xmp.items() if ns == NS_EXIF_XMP}
-    cam = tuple(number(ex.get(f"Camera{a}")) for a in ("Yaw", "Pitch", "Roll"))
+    ex = _in(xmp, NS_EXIF_XMP)
+    cam = _angles(ex, "Camera{}")
     if not _finite(cam):
         return None
-    plat = tuple(number(ex.get(f"Platform{a}")) for a in ("Yaw", "Pitch", "Roll"))
+    plat = _angles(ex, "Platform{}")
     if _finite(plat):
         gimbal = gimbal_from_body_relative(cam, plat)
         source = "exif:Camera* relative to exif:Platform* (ZYX, composed)"

@@ -342,13 +342,16 @@ def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: in
 def error_sources(errors: PhotoErrorModel) -> ErrorSources:
     """The errors propagated through the methods without a covariance of their own on a photo flight: the marked
     pixel and the laser per photo, the recorded attitude's photo-to-photo noise, the compass bias constant over the
-    flight, the position offset every photo shares (`pipeline.photo_errors`)."""
+    flight in pan (in tilt, the gimbal's gravity-referenced pitch: as large as its noise), the position offset every
+    photo shares (`pipeline.photo_errors`)."""
     s = errors.sigma
     defaults = ErrorSources.from_sigma(s)
+    # the compass's bias is the pan's; the gimbal's pitch, referenced to gravity, errs by its photo-to-photo noise
     return ErrorSources(pixel_px=defaults.pixel_px, range_m=defaults.range_m,
                         pointing_bias_deg=float(errors.bias_prior_deg), pointing_drift_deg=0.0,
                         pointing_noise_deg=float(s.attitude_deg or 0.0),
-                        shared_covariance_m2=errors.shared_covariance_m2())
+                        shared_covariance_m2=errors.shared_covariance_m2(),
+                        pointing_bias_tilt_deg=min(float(errors.bias_prior_deg), float(s.attitude_deg or 0.0)))
 
 
 def photo_answer(loc: PhotoLocation, dem=None, dem_sigma_m: float | None = None) -> Answer:

@@ -53,13 +53,14 @@ class FillIn:
 class Draft:
     """A flight config in the making: `doc` its values (what the loader reads), `comments` paragraphs above each
     top-level key, `fill_in` the placeholders, `decisions` one line per fact found (key, how), `problems` what
-    the data say is wrong and no line of the config can fix."""
+    the data say is wrong and no line of the config can fix, `warnings` what `check` warns of."""
 
     doc: dict
     comments: dict[str, list[str]] = field(default_factory=dict)
     fill_in: list[FillIn] = field(default_factory=list)
     decisions: list[tuple[str, str]] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
     found: list[str] = field(default_factory=list)
     first_frame: int = 0  # the first observation frame, where the target is marked by default
 
@@ -259,7 +260,7 @@ def _check_with_data(draft: Draft, out_path: Path, camera: Camera | None, size_p
                 draft.decisions.append(("conventions", f"{fixed}: the optical axes meet: {where} (with the "
                                         "readers' defaults they do not)"))
             draft.problems += [p for p in geo.problems if "do not converge" not in p]
-            draft.problems += [w for w in geo.warnings if "nearly parallel" in w]
+            draft.warnings += geo.warnings
             break
         if not geo.alternatives:
             draft.problems += geo.problems

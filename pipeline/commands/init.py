@@ -39,10 +39,12 @@ def main(args) -> int:
         print(f"  file         {line}")
     for key, how in draft.decisions:
         print(f"  {key:<12} {how}")
+    for w in draft.warnings:
+        print(f"  warning      {w}")
     for p in draft.problems:
         print(f"  problem      {p}")
     required = [f for f in draft.fill_in if f.required]
-    print(f"to fill in ({len(required)} line(s) in {out.name}, marked FILL IN):")
+    print(f"to fill in ({len(required)}), marked FILL IN in {out.name}:")
     for f in required:
         print(f"  {f.why}")
     for f in draft.fill_in:

@@ -259,3 +259,18 @@ def test_frames_without_laser_ranges_are_spread_over_the_telemetry(tmp_path):
     assert set(choice.section["frame_indices"]) <= set(np.asarray(log.frames.index)[covered].tolist())
     with pytest.raises(InputError):
         flight_files(read_folder(tmp_path / "nothing"))
+
+
+@pytest.mark.parametrize(("group", "telemetry"), [
+    ("group1", "flight.tlog"), ("group2", "flight.bag"), ("group5", "flight.mcap"), ("hard_outliers", "flight.tlog"),
+    ("angle10", "flight.mcap")])
+def test_sample_flights_bursts_align_within_their_creation_second(group, telemetry):
+    """The committed sample mp4s state no creation time: given its second (the truth's offset truncated), the
+    bursts and the shots give the offset to the nanosecond, lost and outlying shots included (hard_outliers)."""
+    from pipeline.ingest.dispatch import read_file
+
+    folder = ROOT / "sample_data" / group
+    offset = json.loads((folder / "truth.json").read_text())["metadata"]["clock"]["video_to_telemetry_offset_ns"]
+    created = offset // 10**9 * 10**9
+    frames, shots = read_file(folder / "video.mp4").frames.t_ns, read_file(folder / telemetry).range.t_ns
+    assert align_bursts(frames, shots, created, created + 10**9) == offset

@@ -99,6 +99,9 @@ def draft_flight_config(root, out_path) -> Draft:
                "rangefinder: [x, y, z]}); they move the answer by about their own size.")
     if clock.known:
         _check_with_data(draft, out_path, camera, (log.frames.width_px, log.frames.height_px), clock)
+    else:
+        draft.decisions.append(("conventions", "not checked: the frames cannot be put on the telemetry clock yet "
+                                "(`ridgeloc check` checks them once clock.video_start is given)"))
     _target_placeholder(draft)
     flight_config_from_dict(draft.doc, out_path)  # what is written loads
     return draft
@@ -175,9 +178,10 @@ def _clock(draft: Draft, log: FlightLog, video) -> VideoClock:
         draft.decisions.append(("clock", f"video_start {_iso(clock.start_ns)}, from {clock.how}"))
     else:
         draft.fill_in.append(FillIn("clock", [
-            "clock: {video_start: FILL_IN}   # FILL IN: the time of the video's first frame on the telemetry "
-            "clock (ISO 8601, UTC if no zone, or UNIX seconds); `ridgeloc check` then estimates the rest "
-            "(clock: {estimate: true})"], f"clock.video_start: when the video started ({clock.how})"))
+            "clock: {video_start: FILL_IN}   # FILL IN: when the video clock's zero (its first frame, or the time "
+            "a frames CSV counts from) was on the telemetry clock: ISO 8601 (UTC if no zone) or UNIX seconds; "
+            "`ridgeloc check` then estimates the rest (clock: {estimate: true})"],
+            f"clock.video_start: when the video started ({clock.how})"))
     return clock
 
 

@@ -106,7 +106,7 @@ def test_init_then_the_target_then_run(initialised, capsys):
 
 
 def test_what_init_states_for_each_format(initialised):
-    fmt, _folder, truth, out = initialised
+    fmt, folder, truth, out = initialised
     doc = yaml.safe_load(out.read_text())
     meta = truth["metadata"]
     assert "mapping" not in doc  # written in the readers' default conventions: none to fix
@@ -120,6 +120,10 @@ def test_what_init_states_for_each_format(initialised):
         assert doc["sigma"] == {"position_m": round(math.hypot(0.25, 0.15), 3), "attitude_deg": 0.02}
     if fmt == "tlog":  # MAVLink altitudes are AMSL
         assert doc["altitude"] == {"geoid_separation_m": "auto"}
+    if fmt == "ros2-mcap":  # the bag's own folder named: the bag is the flight
+        bag = folder / "flight_ros2"
+        assert draft_flight_config(bag, out.parent / "bag.yaml").doc["files"] == {"telemetry": [
+            str(bag.relative_to(out.parent))]}
 
 
 def test_the_run_command_on_an_init_config(tmp_path, capsys):

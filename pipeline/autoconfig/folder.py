@@ -73,7 +73,7 @@ def read_folder(root) -> Folder:
     if not root.exists():
         raise InputError("no such file or folder", root)
     folder = Folder(root)
-    if root.is_dir():
+    if root.is_dir() and not (root / "metadata.yaml").is_file():  # a flight folder, not a ROS 2 bag's
         children = sorted(c for c in root.iterdir() if not c.name.startswith("."))
         folder.photos = [c for c in children if c.is_file() and c.suffix.lower() in PHOTO_SUFFIXES]
         folder.dems = [c for c in children if c.is_file() and c.suffix.lower() in DEM_SUFFIXES]

@@ -26,7 +26,8 @@ def main(args) -> int:
     from pipeline.errors import InputError
 
     folder = Path(args.folder)
-    default = (folder if folder.is_dir() else folder.parent) / "flight.yaml"
+    flight_folder = folder.is_dir() and not (folder / "metadata.yaml").is_file()  # not a ROS 2 bag's folder
+    default = (folder if flight_folder else folder.parent) / "flight.yaml"
     out = output_file(args.output or default, "flight.yaml")
     if out.exists() and not args.overwrite:
         raise InputError("exists: give another -o, or --overwrite to replace it", out)

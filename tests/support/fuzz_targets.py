@@ -54,12 +54,15 @@ def _read_log(path: Path) -> None:
 
 
 def _read_video(path: Path) -> None:
-    """The video reader (frame times from frames.csv or the container) and decoding the first and last frame."""
+    """The video reader (frame times from frames.csv or the container), decoding the first and last frame, and
+    the container's creation time (`ridgeloc init`: None when absent or unreadable, never an error)."""
     from pipeline.ingest.video import VideoFrames, read_video
+    from pipeline.ingest.video_time import creation_time_ns
 
     frames = read_video(path)
     with VideoFrames(path) as vf:
         vf.read([int(frames.index.min()), int(frames.index.max())])
+    creation_time_ns(path)
 
 
 def _read_frames_csv(path: Path) -> None:

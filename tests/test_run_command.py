@@ -141,11 +141,12 @@ def test_quiet_run_still_says_when_the_mle_model_does_not_fit(tmp_path, capsys, 
 
     r, misfit = _misfit_result()
     monkeypatch.setattr(pipeline.batch, "run_groups", lambda *a, **k: ([r], [], []))
-    assert main(["run", str(SAMPLE), "-o", str(tmp_path / "out"), "--no-figures", "-q"]) == 0
+    # exit 1: this toy flight's one target is not located (its only estimate lies in no camera's view)
+    assert main(["run", str(SAMPLE), "-o", str(tmp_path / "out"), "--no-figures", "-q"]) == 1
     out = capsys.readouterr().out.splitlines()
     assert out[:2] == [f"g: {misfit}", "all 1 flight(s) finished"]
     assert out[3].split() == ["target", "latitude", "longitude", "MSL", "m", "MGRS", "CE90", "m", "category", "method"]
-    assert out[4].startswith("g ") and len(out) == 5  # the answers still end a quiet run: one line per target
+    assert out[4].startswith("g ") and "NOT LOCATED" in out[4] and len(out) == 5  # the answers end a quiet run
 
 
 @pytest.fixture

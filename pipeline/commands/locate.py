@@ -10,7 +10,8 @@ HELP = "locate a target from drone photos: one photo and a pixel (laser or DEM),
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("photos", nargs="+", metavar="PHOTO", help="DJI-style JPEG photos, or folders of them")
+    parser.add_argument("photos", nargs="+", metavar="PHOTO",
+                        help="drone JPEG photos (DJI, Skydio, Parrot, Teal, Autel; docs/ingest.md), or folders of them")
     parser.add_argument("--dem", metavar="DEM.tif", help="a GeoTIFF terrain model: adds the `dem` method")
     where = parser.add_mutually_exclusive_group()
     where.add_argument("--pixel", nargs=2, type=float, metavar=("X", "Y"),
@@ -20,8 +21,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             "not listed have no pixel")
     parser.add_argument("--alt-datum", choices=("amsl", "ellipsoid"), default=None,
                         help="datum of drone-dji:AbsoluteAltitude / EXIF GPSAltitude (default amsl; docs/ingest.md)")
-    parser.add_argument("--image-rotation", type=int, choices=(0, 180), default=0,
-                        help="180 when the files were turned upside down after capture (docs/ingest.md)")
+    parser.add_argument("--image-rotation", type=int, choices=(0, 180), default=None,
+                        help="180 when the files were turned upside down after capture, 0 when not (default: found "
+                             "from two or more marked photos where a desktop program re-saved them; docs/locate.md)")
     parser.add_argument("--bias-prior-deg", type=float, default=None,
                         help="1-sigma prior of the compass/gimbal-yaw bias constant over the flight (default 3; 0: no "
                              "bias state; docs/locate.md, \"Error model\")")
@@ -34,6 +36,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dem-sigma-m", type=float, default=None,
                         help="the DEM's vertical error at the target, 1 sigma (m): adds the DEM as the MLE's terrain "
                              "prior (default: none, the `dem` method only; docs/terrain.md says what to state)")
+    parser.add_argument("--dem-datum", choices=("orthometric", "ellipsoidal"), default=None,
+                        help="the DEM's heights, when its file does not say or says something ridgeloc does not know "
+                             "(docs/terrain.md)")
+    level = parser.add_mutually_exclusive_group()
+    level.add_argument("--ground", choices=("takeoff",), default=None,
+                       help="without laser or DEM: assume the target on level ground at the take-off point's height "
+                            "(altitude minus the height above take-off, where the photo states both): the `ground` "
+                            "method, a weaker answer (docs/locate.md)")
+    level.add_argument("--ground-height-m", type=float, default=None, metavar="H",
+                       help="as --ground, with the ground at H m on the photos' altitude datum (AMSL unless "
+                            "--alt-datum ellipsoid)")
+    parser.add_argument("--ground-sigma-m", type=float, default=None, metavar="S",
+                        help="1-sigma error of the assumed ground at the target (default 5 m for the take-off "
+                             "ground's relief, 2 m for a stated height)")
     parser.add_argument("-o", "--outdir", default=None,
                         help="also write the run outputs there: targets.csv/.geojson/.kml (the answer), estimates.csv/"
                              ".geojson (every method), report.html, run.json (docs/outputs.md)")
@@ -98,11 +114,20 @@ def main(args) -> int:
     terrain = None
     if args.dem_sigma_m is not None and not args.dem:
         raise InputError("--dem-sigma-m is the DEM's vertical error: give the DEM with --dem")
+    if args.dem_datum is not None and not args.dem:
+        raise InputError("--dem-datum is the DEM's vertical datum: give the DEM with --dem")
+    if args.ground_sigma_m is not None and args.ground is None and args.ground_height_m is None:
+        raise InputError("--ground-sigma-m is the assumed ground's error: give --ground takeoff or --ground-height-m")
+    ground = None
+    if args.ground is not None or args.ground_height_m is not None:
+        from pipeline.locate import GroundAssumption
+
+        ground = GroundAssumption("takeoff" if args.ground else "height", args.ground_height_m, args.ground_sigma_m)
     if args.dem:
         from pipeline.flight_config import Terrain
 
         try:
-            terrain = Terrain(dem=args.dem, vertical_sigma_m=args.dem_sigma_m)
+            terrain = Terrain(dem=args.dem, vertical_sigma_m=args.dem_sigma_m, vertical_datum=args.dem_datum)
         except ValueError:
             raise InputError(f"--dem-sigma-m must be a finite number > 0, got {args.dem_sigma_m}") from None
     photos, bad = read_photos(args.photos, alt_datum=args.alt_datum)
@@ -123,13 +148,13 @@ def main(args) -> int:
     dem = open_flight_dem(terrain)
     errors = stated_errors(photos, args)
     loc = locate_photos(photos, pixels, dem=dem, rotation_deg=args.image_rotation, errors=errors,
-                        dem_sigma_m=args.dem_sigma_m)
+                        dem_sigma_m=args.dem_sigma_m, ground=ground)
     from pathlib import Path
 
     from pipeline.locate import location_result
     from pipeline.report.answers import answer_row, answers_text
 
-    notes = []
+    notes = list(loc.notes)
     if dem is not None and args.dem_sigma_m is None:
         notes.append("the DEM serves the dem method only: state its vertical error with --dem-sigma-m to add it to "
                      "the mle as a terrain prior (docs/terrain.md)")

@@ -6,7 +6,8 @@ import argparse
 import json
 import sys
 
-HELP = "locate a target from drone photos: one photo and a pixel (laser or DEM), or several photos (every method)"
+HELP = ("locate a target from drone photos (DJI, Skydio, Parrot, Teal, Autel): one answer from a photo and a pixel "
+        "(laser, DEM or level ground) or from several photos")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -12,7 +12,8 @@ from pipeline.commands.send import add_tak_arguments, check_send_args, cot_optio
 from pipeline.errors import InputError
 from pipeline.flight_config import FlightConfig, load_run_config
 
-HELP = "process flights (video, telemetry, ranges) into target positions, a Table-4-like report and GIS exports"
+HELP = ("process flights (video or photos, telemetry, ranges) into one answer per target (WGS84, MGRS, CE90), a report "
+        "comparing every method, GIS and TAK outputs")
 DEFAULT_CONFIG = Path("configs/sample.yaml")
 STAGES = ("ingest", "track", "sync", "solve")
 

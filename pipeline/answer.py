@@ -5,11 +5,12 @@ The rule (docs/outputs.md, "The answer") uses only what the flight itself shows,
 1. A method's estimate is a candidate only where the flight determines it (`judge`): it exists and is finite; its
    solver did not find the geometry rank deficient or diverge; it lies in front of the cameras; its 95 % error
    ellipsoid's largest semi-axis is at most DETERMINED_REL of its distance from the cameras (lines of sight too
-   nearly parallel to fix where they meet, no baseline; a photo flight's offset shared by every camera, which moves
-   the point with them, left out); and it is not below the ground by more than GROUND_SIGMAS
+   nearly parallel to fix where they meet, no baseline); and it is not below the ground by more than GROUND_SIGMAS
    of its vertical uncertainty and the ground's allow (the DEM where the flight has one, else the lowest dry land
    on Earth). The uncertainty is the method's own covariance (mle) or its answer's covariance propagated through
-   the method under the flight's stated errors (`pipeline.solve.propagate`).
+   the method under the flight's stated errors (`pipeline.solve.propagate`); what moves the answer as a whole (an
+   offset every camera's position shares, the terrain model's own error) counts in its CE90, not in whether the
+   flight's geometry determines the point.
 2. The answer is the MLE when it is a candidate and its fit checks pass: its error model fits the flight, or the
    covariance it inflated to cover the misfit grew at most MAX_FIT_INFLATION times.
 3. Otherwise the candidate with the smallest CE90 (horizontal circle holding 90 %).
@@ -52,8 +53,8 @@ Z90 = 1.6448536269514722
 _CHI2_3_95 = 7.814727903251178
 #: lines of sight spanning less than this (deg) with the cameras this close (baseline, m) are named as the cause
 NARROW_SPAN_DEG = 3.0
-#: the methods an answer may come from (mle first), `dem` where the flight has a terrain model
-ELIGIBLE = ("mle", *PROPAGATED, "dem")
+#: compared, never the answer: the photos' own laser target (nothing states its uncertainty)
+NEVER_THE_ANSWER = ("dji",)
 
 
 @dataclass(frozen=True)
@@ -190,11 +191,10 @@ def _depths_ok(obs: Observations, X: np.ndarray) -> bool:
 
 def judge(method: str, e: Estimate | None, unsolved_reason: str | None, obs: Observations, origin_lla,
           covariance_m2: np.ndarray | None, covariance_source: str, ground: Ground | None = None,
-          covariance_reason: str | None = None, shared_offset_m2: np.ndarray | None = None) -> Verdict:
-    """The verdict on one method's estimate (rule 1 of the module docstring). shared_offset_m2 (3, 3): the part of
-    covariance_m2 that is an offset every camera shares (a photo flight's GNSS and altitude datum offset): it moves
-    the point with the cameras and does not make their lines of sight meet any less, so the determination test
-    leaves it out; the ground test keeps it."""
+          covariance_reason: str | None = None, offsets_m2: np.ndarray | None = None) -> Verdict:
+    """The verdict on one method's estimate (rule 1 of the module docstring). `offsets_m2`: the part of the
+    covariance that moves the answer as a whole (a position offset every camera shares, the terrain model's own
+    error): it counts in the answer's CE90 and LE90, not in whether the flight's geometry determines the point."""
     if e is None:
         why = unsolved_reason or "it gave no estimate"
         return Verdict(method, False, why[len(method) + 2:] if why.startswith(f"{method}: ") else why)
@@ -208,7 +208,7 @@ def judge(method: str, e: Estimate | None, unsolved_reason: str | None, obs: Obs
         return Verdict(method, False, f"the flight does not determine it: {why}")
     cov = np.asarray(covariance_m2, dtype=np.float64)
     ce90 = float(cep_m(cov[:2, :2], 0.9))
-    geometric = cov if shared_offset_m2 is None else cov - np.asarray(shared_offset_m2, dtype=np.float64)
+    geometric = cov if offsets_m2 is None else cov - np.asarray(offsets_m2, dtype=np.float64)
     semi95 = math.sqrt(max(float(np.linalg.eigvalsh(geometric).max()), 0.0) * _CHI2_3_95)
     dist = float(np.median(np.linalg.norm(obs.platform_m - X, axis=1)))
     rel = semi95 / dist if dist > 0 else math.inf
@@ -303,25 +303,24 @@ def unsolved_reasons(failures: dict | None) -> dict[str, str]:
 def choose_answer(obs: Observations, estimates: dict[str, Estimate], unsolved: dict[str, str], origin_lla, *,
                   sources: ErrorSources | None = None, options: dict | None = None, ground: Ground | None = None,
                   solvers: dict[str, Callable] | None = None,
-                  added_covariance: dict[str, np.ndarray] | None = None,
-                  shared_offset_m2: np.ndarray | None = None) -> Answer:
+                  added_covariance: dict[str, np.ndarray] | None = None) -> Answer:
     """The target's answer (module docstring) from every method's estimate and the reasons of those that gave none
     (`unsolved`, method -> reason). `sources`: the errors to propagate through the methods without a covariance of
     their own (default: the observations' stated sigmas); `options`: method -> the flight's solve options;
     `ground`: the terrain under the answer (a DEM); `solvers`: method -> solver for `propagate` beyond the batched
     methods (e.g. `dem`), `added_covariance`: method -> a covariance added to the propagated one (e.g. the DEM's
-    own error under `dem`); `shared_offset_m2`: the cameras' shared offset that every estimate's covariance holds
-    (a photo flight's, pipeline.photo_errors), left out of the determination test (`judge`)."""
+    own error under `dem`)."""
     sources = sources if sources is not None else ErrorSources.from_sigma(obs.sigma)
     options, solvers, added = options or {}, solvers or {}, added_covariance or {}
+    shared = np.asarray(sources.shared_covariance_m2, dtype=np.float64)
     verdicts: dict[str, Verdict] = {}
     for m in [*estimates, *unsolved]:
-        if m in verdicts or m not in ELIGIBLE:
+        if m in verdicts or m in NEVER_THE_ANSWER:
             continue
         e = estimates.get(m)
-        cov, source, why = None, "", None
+        cov, source, why, offsets = None, "", None, shared
         if e is not None and np.isfinite(e.position_m).all():
-            if m == "mle":
+            if e.covariance_m2 is not None:  # the estimator's own (the mle's; a photo's ground method's)
                 cov, source = e.covariance_m2, "estimator"
             elif m in PROPAGATED or m in solvers:
                 solver = solvers.get(m) or method_solver(m, options.get(m))
@@ -329,8 +328,8 @@ def choose_answer(obs: Observations, estimates: dict[str, Estimate], unsolved: d
                     p = propagate(solver, obs, e.position_m, sources)
                 cov, source, why = p.covariance_m2, "propagated", p.reason
                 if cov is not None and m in added:
-                    cov = cov + added[m]
-        verdicts[m] = judge(m, e, unsolved.get(m), obs, origin_lla, cov, source, ground, why, shared_offset_m2)
+                    cov, offsets = cov + added[m], shared + added[m]
+        verdicts[m] = judge(m, e, unsolved.get(m), obs, origin_lla, cov, source, ground, why, offsets)
     n = int(obs.n)
     mle = verdicts.get("mle")
     fit_ok, misfit = mle_fit_passes(estimates["mle"]) if mle is not None and mle.determined else (False, None)

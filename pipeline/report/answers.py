@@ -47,10 +47,12 @@ def tle_category(ce90_m: float | None) -> str | None:
 
 
 def mgrs_of(lat_deg: float, lon_deg: float) -> str:
-    """The MGRS reference of a WGS84 point at 1 m precision (15 characters, no spaces), from the `mgrs` package."""
+    """The MGRS reference of a WGS84 point at 1 m precision, no spaces (e.g. 49SBU9399604341; zones 1-9 without
+    the leading zero the package writes, as NGA's standard does), from the `mgrs` package."""
     import mgrs
 
-    return mgrs.MGRS().toMGRS(float(lat_deg), float(lon_deg), MGRSPrecision=5)
+    ref = mgrs.MGRS().toMGRS(float(lat_deg), float(lon_deg), MGRSPrecision=5)
+    return ref[1:] if ref.startswith("0") else ref
 
 
 def answer_of(r: GroupResult) -> Answer:

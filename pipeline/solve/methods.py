@@ -27,8 +27,8 @@ _USES_PIXELS = {"dlt", "vision", "fusion-raw", "fusion", "ridge", "mle"}
 #: the white fit's boresight bias beyond this many stated attitude sigmas (the bias's largest prior until a misfit
 #: scales it; `mle.DEFAULT_BIAS_PRIOR_DEG` where none is stated) calls the evidence step: under the stated model
 #: that happens on < 5 % of flights per axis (a prior of at most N(0, sigma^2), the posterior mean shrunk); a
-#: drift whose mean over the flight is large (a random walk, a long correlation time) does it (docs/zoo.md,
-#: "A bias beyond its prior")
+#: drift whose mean over the flight is large (a random walk, a long correlation time) does it (docs/validation.md,
+#: "How the MLE got here")
 BIAS_BEYOND_STATED = 2.0
 
 
@@ -343,7 +343,7 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
     correlation time can tell apart) and the configured sigma gives no correlation time; not with a terrain prior
     (the drift model takes none). Where only the chi-square is above its upper CHI2_ALPHA tail (a misfit), the
     evidence's answer is taken only if it is a tracker slip: a drift that absorbs a misfit claims an accuracy the
-    flight lacks where the stated sigmas are simply too small (docs/zoo.md, "A misfit looks for a tracker slip")."""
+    flight lacks where the stated sigmas are simply too small (docs/validation.md, "How the MLE got here")."""
     if st.t_ns is None or not size_unknown or o.get("terrain") is not None:
         return res
     ex, t = res[5], st.t_ns

@@ -65,9 +65,10 @@ class Propagated:
 @dataclass(frozen=True)
 class ErrorSources:
     """The errors propagated, 1 sigma: pixel_px and range_m per observation; pointing_noise_deg per frame
-    (independent, added to the pixel's as f * angle); pointing_bias_deg constant and pointing_drift_deg a linear
-    drift over the flight, each shared by the frames and applied in pan and tilt; shared_covariance_m2 (3, 3) ENU of
-    an offset every camera shares (GNSS), which moves the answer by itself."""
+    (independent, added to the pixel's as f * angle); pointing_bias_deg constant (in tilt pointing_bias_tilt_deg
+    where given: a gravity-referenced pitch knows better than a compass) and pointing_drift_deg a linear drift over
+    the flight, each shared by the frames and applied in pan and tilt; shared_covariance_m2 (3, 3) ENU of an offset
+    every camera shares (GNSS), which moves the answer by itself."""
 
     pixel_px: float
     range_m: float
@@ -75,6 +76,7 @@ class ErrorSources:
     pointing_drift_deg: float
     pointing_noise_deg: float = 0.0
     shared_covariance_m2: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+    pointing_bias_tilt_deg: float | None = None  # the constant error in tilt where it differs from pan
 
     @classmethod
     def from_sigma(cls, sigma: Sigma) -> ErrorSources:
@@ -121,9 +123,11 @@ def _perturbations(obs: Observations, s: ErrorSources, exact: bool, rng: np.rand
             add(rng.standard_normal((n, 2)) * sig_px * has_pix[:, None] / np.sqrt(RANDOM_DRAWS), zero_rg, "pixel")
         for _ in range(RANDOM_DRAWS if has_rng.any() else 0):
             add(zero_px, rng.standard_normal(n) * s.range_m * has_rng / np.sqrt(RANDOM_DRAWS), "range")
-    for deg, shape in ((s.pointing_bias_deg, np.ones(n)), (s.pointing_drift_deg, ramp)):
-        if deg > 0 and has_pix.any() and shape.any():
-            for c in (0, 1):
+    tilt = s.pointing_bias_deg if s.pointing_bias_tilt_deg is None else s.pointing_bias_tilt_deg
+    for pan_tilt, shape in (((s.pointing_bias_deg, tilt), np.ones(n)),
+                            ((s.pointing_drift_deg, s.pointing_drift_deg), ramp)):
+        for c, deg in enumerate(pan_tilt):
+            if deg > 0 and has_pix.any() and shape.any():
                 px = zero_px.copy()
                 px[:, c] = np.where(has_pix, f[:, c] * np.tan(np.deg2rad(deg)) * shape, 0.0)
                 add(px, zero_rg, "pointing")

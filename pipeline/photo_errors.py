@@ -43,7 +43,7 @@ ATTITUDE_NOISE_DEG = 0.3
 #: the part of the pointing error that wanders over a session (deg, 1 sigma): the compass heading changes between
 #: flights (another take-off spot, a recalibration) and with the heading flown; within minutes it is part of the bias.
 #: Set on the real rays (scripts/real_rays.py): the log score of the fused answers' ellipses, leave one point out,
-#: is highest at 0.5 deg on 8 of the 10 folds (flat from 0.5 to 1 deg, lower from 1.5 deg up)
+#: is highest at 0.5 deg on 7 of the 10 folds (flat from 0.25 to 1.25 deg, lower from 1.5 deg up)
 ATTITUDE_WANDER_DEG = 0.5
 #: the correlation time (s) of the errors that wander (GNSS position, compass heading): a consumer receiver's
 #: horizontal error keeps most of its correlation over a few minutes and loses it over tens of minutes (D. L.

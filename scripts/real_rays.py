@@ -379,11 +379,11 @@ def photo_subsets(rr: RealRays, yaw: np.ndarray, single: np.ndarray, rows: np.nd
 WANDER_GRID_DEG = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0)
 
 
-def wander_fit(rr: RealRays, yaw: np.ndarray, grid=WANDER_GRID_DEG) -> tuple[list, list]:
+def wander_fit(rr: RealRays, yaw: np.ndarray, grid=WANDER_GRID_DEG) -> tuple[list, list, dict]:
     """The heading's wander (pipeline.photo_errors.ATTITUDE_WANDER_DEG) fitted leave one point out: each point's
     photos fused under every value of grid; for each point the value whose summed log score (`Fused.log_score`) over
     the other points is highest (points answered under every value), and that point's answer under it. Returns
-    (picks (m,), the held-out Fused (m,))."""
+    (picks (m,), the held-out Fused (m,), {value: (summed log score over every scored point, points inside)})."""
     table = {w: [fuse(rr, rr.rows_of(k), yaw, wander_deg=w) for k in range(len(rr.names))] for w in grid}
     scored = [k for k in range(len(rr.names)) if all(table[w][k].located for w in grid)]
     picks, held = [], []
@@ -392,7 +392,8 @@ def wander_fit(rr: RealRays, yaw: np.ndarray, grid=WANDER_GRID_DEG) -> tuple[lis
         best = max(grid, key=lambda w, score=score: score[w])
         picks.append(best)
         held.append(table[best][k])
-    return picks, held
+    every = {w: (sum(table[w][j].log_score for j in scored), sum(map(inside, table[w]))) for w in grid}
+    return picks, held, every
 
 
 def main() -> int:
@@ -471,13 +472,15 @@ def main() -> int:
           f"95 % ellipse in {ins / got * 100:.0f} % of the answers ({ins / n * 100:.0f} % of the fusions)")
 
     if errors is None:
-        picks, held = wander_fit(rr, yaw)
+        picks, held, every = wander_fit(rr, yaw)
         n, got, ins, med = coverage(held)
         print(f"the heading's wander fitted on the other nine points (the highest summed log score of their answers' "
               f"ellipses, among {', '.join(f'{w:g}' for w in WANDER_GRID_DEG)} deg): "
               f"{', '.join(f'{rr.names[k]} {w:g}' for k, w in enumerate(picks))}; the most frequent "
               f"{Counter(picks).most_common(1)[0][0]:g} deg (the default's {ATTITUDE_WANDER_DEG:g}); each point at its "
-              f"fold's value: {got}/{m} answered, median {med:.2f} m, inside on {ins}/{m}")
+              f"fold's value: {got}/{m} answered, median {med:.2f} m, inside on {ins}/{m}; on all points, the summed "
+              f"log score and the points inside: "
+              f"{', '.join(f'{w:g} deg {sc:.2f} ({k})' for w, (sc, k) in every.items())}")
 
     bias = np.array([np.median(pan[rr.rows_of(k)]) for k in range(m)])
     priors = [float(np.sqrt(np.mean(np.delete(bias, k) ** 2))) for k in range(m)]

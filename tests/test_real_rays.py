@@ -76,11 +76,13 @@ def test_each_points_photos_fused(script, data, fused):
     assert errors.sigma.position_m == pytest.approx(np.hypot(GNSS_PLAIN_M[2], GNSS_PLAIN_M[0]))
     assert errors.sigma.attitude_deg == pytest.approx(np.hypot(ATTITUDE_NOISE_DEG, ATTITUDE_WANDER_DEG))
     answered = [f for f in fused if f.located]
-    assert len(answered) >= 8  # O8 and Y9: the flight does not determine them (no DEM, no laser)
-    assert np.median([f.error_m for f in answered]) <= 0.5 * np.median(single)  # 2.52 m against 6.95 m
-    # 7 of 10 inside the 95 % ellipse, the goal's 9 not met (O8: two of its five rows are taps of O10, no answer;
-    # Y9: no answer; Y2: rays from a 47 deg arc)
-    assert sum(map(script.inside, fused)) >= 7
+    assert len(answered) >= 9  # O8: the flight does not determine it (no DEM, no laser)
+    assert np.median([f.error_m for f in answered]) <= 0.5 * np.median(single)  # 2.61 m against 6.95 m
+    # the MLE's fit checks pass wherever it answers (the model fits these flights)
+    assert all(f.answer.method != "mle" or f.answer.reason.startswith("weighted MLE: determined") for f in answered)
+    # 8 of 10 inside the 95 % ellipse, the goal's 9 not met (O8: two of its five rows are taps of O10, no answer;
+    # Y2: rays from a 47 deg arc, six consecutive photos sharing one pointing error)
+    assert sum(map(script.inside, fused)) >= 8
     assert sum(f.error_m < np.median(single[rr.rows_of(k)]) for k, f in enumerate(fused) if f.located) >= 7
 
 
@@ -93,12 +95,13 @@ def test_the_ray_through_the_pixel_beats_openathenas_ray(script, data, fused):
 
 def test_the_heading_wander_is_what_the_other_points_choose(script, data):
     """pipeline.photo_errors.ATTITUDE_WANDER_DEG is the value most folds of the leave-one-point-out log-score fit
-    choose (scripts/real_rays.py: 8 of 10 folds)."""
+    choose (scripts/real_rays.py: 7 of 10 folds)."""
     from collections import Counter
 
     from pipeline.photo_errors import ATTITUDE_WANDER_DEG
 
     rr, yaw = data
-    picks, held = script.wander_fit(rr, yaw)
-    assert Counter(picks).most_common(1)[0] == (ATTITUDE_WANDER_DEG, 8)
-    assert sum(map(script.inside, held)) >= 7
+    picks, held, _ = script.wander_fit(rr, yaw)
+    value, folds = Counter(picks).most_common(1)[0]
+    assert value == ATTITUDE_WANDER_DEG and folds >= 7
+    assert sum(map(script.inside, held)) >= 8

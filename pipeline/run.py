@@ -61,8 +61,9 @@ def process_group(config: FlightConfig) -> GroupResult | FlightResult:
         notes += flight.notes + plan.notes
         notes += [r.line() for _, r in frame_centre_checks(flight.log)]  # the payload's own fix
         with times("track", flight.decoder):
-            fp = FlightPass(flight, plan, None, SiftTracker(config.tracking), ViewCache(share_matches=named),
-                            notes=notes, times=times)
+            # the cache serves frames decoded for one track to another: named targets, the clock estimate's
+            cache = ViewCache(share_matches=named) if named or config.clock.estimate else None
+            fp = FlightPass(flight, plan, None, SiftTracker(config.tracking), cache, notes=notes, times=times)
             first = [fp.acquire(m, notes) for m in (targets[0].marks if targets else [None])]
             fp.origin = flight.require_origin()
             if config.altitude.geoid_separation_m == "auto" and flight.log.position.alt_datum == "amsl":

@@ -135,6 +135,25 @@ def decode_eg0104(packet: bytes) -> dict | None:
     return out
 
 
+def _klv_packet(packet: bytes):
+    """One whole KLV packet (16-byte key, minimal BER length, value) -> the library's `KLVPacket`; raises the
+    library's errors when the length is malformed or does not end the packet.
+
+    Built here rather than by `decode_uas_local_set(bytes)`: its one-packet parser is a streaming parser over a
+    bytearray that it shrinks after reading a length through a memoryview of it. Where something holds the frame
+    that read the length (a sampling profiler, as every Dask worker runs, keeps other threads' frames and with
+    them their locals), the shrink raises "BufferError: Existing exports of data: object cannot be re-sized"
+    (tests/test_batch_dask_cluster.py). Immutable bytes have no such failure."""
+    from stanag4609.errors import DecodeError
+    from stanag4609.klv import KLVPacket, decode_ber_length
+
+    packet = bytes(packet)
+    length, used = decode_ber_length(packet, 16, canonical=True, max_value=MAX_PACKET_BYTES)
+    if 16 + used + length != len(packet):
+        raise DecodeError("the BER length does not end the packet")
+    return KLVPacket(packet[:16], packet[16 + used:], packet[16:16 + used], 0)
+
+
 def decode_packet(packet: bytes) -> dict[str, float] | None:
     """One ST 0601 packet -> {"t_us": int, column: value (NaN for reserved/out-of-range values)}, or None when
     the packet fails its checksum or does not decode (the library's checks: structure, tag 2 first, lengths)."""
@@ -142,7 +161,7 @@ def decode_packet(packet: bytes) -> dict[str, float] | None:
     from stanag4609.errors import Stanag4609Error
 
     try:
-        ls = st.decode_uas_local_set(packet, verify_checksum=True, require_version=False,
+        ls = st.decode_uas_local_set(_klv_packet(packet), verify_checksum=True, require_version=False,
                                      field_decoding=st.FieldDecodingMode.PRESERVE)
     except (Stanag4609Error, ValueError, TypeError, OverflowError):
         return None

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.answer import Answer, choose_answer
 from pipeline.errors import InputError, RidgelocError
 from pipeline.geometry.frames import enu_from_lla
 from pipeline.ingest.photo import Photo
@@ -27,6 +28,7 @@ from pipeline.ingest.photo_views import PhotoViews, photo_heights_ellipsoid_m, p
 from pipeline.photo_errors import PhotoErrorModel, photo_error_model
 from pipeline.solve import METHODS, Estimate, Status, solve, unsolved_status
 from pipeline.solve.observations import Observations, Sigma
+from pipeline.solve.propagate import ErrorSources
 from pipeline.targets import in_image
 
 #: a pixel within this fraction of the image width from the centre is taken to be where the laser points
@@ -174,6 +176,28 @@ def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: in
     return out
 
 
+def error_sources(errors: PhotoErrorModel) -> ErrorSources:
+    """The errors propagated through the methods without a covariance of their own on a photo flight: the marked
+    pixel and the laser per photo, the recorded attitude's photo-to-photo noise, the compass bias constant over the
+    flight, the position offset every photo shares (`pipeline.photo_errors`)."""
+    s = errors.sigma
+    defaults = ErrorSources.from_sigma(s)
+    return ErrorSources(pixel_px=defaults.pixel_px, range_m=defaults.range_m,
+                        pointing_bias_deg=float(errors.bias_prior_deg), pointing_drift_deg=0.0,
+                        pointing_noise_deg=float(s.attitude_deg or 0.0),
+                        shared_covariance_m2=errors.shared_covariance_m2())
+
+
+def photo_answer(loc: PhotoLocation, dem=None, dem_sigma_m: float | None = None) -> Answer:
+    """The target's one answer from every method's estimate on the photos (`pipeline.answer`)."""
+    from pipeline.terrain.flight import dem_answer_inputs
+
+    unsolved = {m: reason for m, (_, reason) in loc.unsolved.items()}
+    return choose_answer(loc.obs, loc.estimates, unsolved, loc.views.origin_lla, sources=error_sources(loc.errors),
+                         **dem_answer_inputs(dem, dem_sigma_m, loc.obs, loc.views.origin_lla,
+                                             loc.estimates.get("dem")))
+
+
 def estimate_row(e: Estimate, views: PhotoViews) -> dict:
     """lat_deg, lon_deg, h_m (WGS84 ellipsoidal), alt_msl_m (EGM2008), cep50_m (None where undefined), the 95 %
     horizontal ellipse where there is a covariance, status, and the method's own extras that are small."""
@@ -300,9 +324,11 @@ def _photo_result(config, photos, pixels, dem, dem_sigma, notes, truth, target):
     settings["solve_failures"] = {m: {"status": s, "reason": r} for m, (s, r) in loc.unsolved.items()}
     settings["photos"] = [p.path for p in photos]
     settings["error_model"] = loc.errors.to_dict()
+    answer = photo_answer(loc, dem, dem_sigma)
     return GroupResult(name=config.name, origin_lla=loc.views.origin_lla, observations=loc.obs,
                        estimates=loc.estimates, truth_m=truth_m, intersection_angle_deg=gamma,
-                       timings_s={"locate": time.perf_counter() - t0}, settings=settings, target=target)
+                       timings_s={"locate": time.perf_counter() - t0}, settings=settings, target=target,
+                       answer=answer)
 
 
 def read_marks(path: str, photos) -> list:

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline import observation_file
+from pipeline.answer import Answer
 from pipeline.solve.estimate import Estimate
 from pipeline.solve.observations import Observations
 
@@ -28,6 +29,7 @@ class GroupResult:
         settings: the flight's resolved configuration, JSON-serialisable, for the report.
         tracking: optional per-frame tracking quality (name -> (n,) list), JSON-serialisable.
         target: the target's name when the flight names its targets (`targets:`, issue 21), else None.
+        answer: the target's one answer (`pipeline.answer`), chosen from the estimates by the documented rule.
     """
 
     name: str
@@ -40,6 +42,7 @@ class GroupResult:
     settings: dict = field(default_factory=dict)
     tracking: dict = field(default_factory=dict)
     target: str | None = None
+    answer: Answer | None = None
 
     @property
     def n_observations(self) -> int:

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pipeline.answer import choose_answer, unsolved_reasons
 from pipeline.check.flight import outside_telemetry, run_checks
 from pipeline.clock_estimate import ClockEstimate
 from pipeline.errors import ConfigError, InputError, RidgelocError
@@ -37,7 +38,7 @@ from pipeline.solve.observations import Observations, Sigma
 from pipeline.sync.assemble import assemble_observations
 from pipeline.sync.select import ObservationPlan
 from pipeline.targets import Mark, NamedTarget, read_truth_file
-from pipeline.terrain.flight import add_dem_estimate, terrain_solve_options
+from pipeline.terrain.flight import add_dem_estimate, dem_answer_inputs, terrain_solve_options
 from pipeline.track.sift import SiftTracker, TrackResult, ViewCache
 
 
@@ -307,6 +308,11 @@ def _result(fp: FlightPass, t: _Tracked, estimates: dict[str, Estimate], failure
         raise InputError(f"no estimator could solve the flight: {reasons}", config.path)
     if "mle" in estimates:  # its fit message, boresight bias and rejected observations
         notes.extend(mle_outputs.notes(estimates["mle"].extras, obs.t_ns, plan.frame_index[useful]))
+    with t.times("answer"):
+        answer = choose_answer(obs, estimates, unsolved_reasons(failures), fp.origin, options=config.solve.options,
+                               **dem_answer_inputs(fp.dem, None if config.terrain is None else
+                                                   config.terrain.vertical_sigma_m, obs, fp.origin,
+                                                   estimates.get("dem")))
 
     reference = t.truth_m
     if reference is None:
@@ -341,7 +347,7 @@ def _result(fp: FlightPass, t: _Tracked, estimates: dict[str, Estimate], failure
     settings["cpu_s"] = total.cpu
     return GroupResult(name=config.name, origin_lla=fp.origin, observations=obs, estimates=estimates,
                        truth_m=t.truth_m, intersection_angle_deg=gamma, timings_s=total.wall, settings=settings,
-                       tracking=tracking, target=None if t.target is None else t.target.name)
+                       tracking=tracking, target=None if t.target is None else t.target.name, answer=answer)
 
 
 def locate_target(fp: FlightPass, target: NamedTarget | None, marks: list[TargetMark] | None = None

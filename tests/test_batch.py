@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import csv
+import io
+
 import json
 import multiprocessing
 import os
@@ -81,7 +84,10 @@ def test_twenty_flights_two_broken(tmp_path):
     write_run_outputs(out, results, failures, {"workers": 2}, figures=False)
     assert sorted(p.name for p in out.iterdir() if p.is_dir()) == [r.name for r in results]
     assert all((out / r.name / ".done").is_file() for r in results)
-    csv_rows = (out / "targets.csv").read_text().strip().splitlines()
+    answers = list(csv.DictReader(io.StringIO((out / "targets.csv").read_text())))
+    assert [a["name"] for a in answers] == [*(r.name for r in results), "flight04", "flight13"]  # one per flight
+    assert [a["status"] for a in answers[-2:]] == ["not_located"] * 2 and "not valid JSON" in answers[-2]["reason"]
+    csv_rows = (out / "estimates.csv").read_text().strip().splitlines()
     assert len(csv_rows) == 1 + sum(len(r.estimates) for r in results)
     html = (out / "report.html").read_text()
     assert "Failed groups (2)" in html and "not valid JSON" in html

@@ -1,4 +1,5 @@
-"""targets.csv against its documented columns, targets.kml as KML 2.2, and the uncertainty numbers in them."""
+"""targets.csv and estimates.csv against their documented columns, targets.kml as KML 2.2, and the uncertainty
+numbers in them."""
 
 from __future__ import annotations
 
@@ -15,10 +16,12 @@ import pytest
 from test_export_geojson import ORIGIN, hand_group, rotated_cov
 
 from pipeline.geometry.geoid import geoid_undulation_m
+from pipeline.report.answers import ANSWER_COLUMNS
 from pipeline.report.exports import (
+    ESTIMATES_CSV_COLUMNS,
     KML_SCHEMAS,
-    TARGETS_CSV_COLUMNS,
     kml_field_type,
+    write_estimates_csv,
     write_targets_csv,
     write_targets_geojson,
     write_targets_kml,
@@ -30,10 +33,10 @@ DOCS = Path(__file__).resolve().parent.parent / "docs" / "outputs.md"
 KML = "{http://www.opengis.net/kml/2.2}"
 
 
-def documented_csv_columns() -> list[str]:
-    """The first column of the table under '## `targets.csv`' in docs/outputs.md."""
+def documented_csv_columns(name: str = "targets.csv") -> list[str]:
+    """The first column of the table under '## `<name>`' in docs/outputs.md."""
     text = DOCS.read_text()
-    section = text.split("## `targets.csv`", 1)[1].split("\n## ", 1)[0]
+    section = text.split(f"## `{name}`", 1)[1].split("\n## ", 1)[0]
     return re.findall(r"^\| `([a-z0-9_]+)` \|", section, flags=re.M)
 
 
@@ -43,20 +46,21 @@ def groups():
 
 
 def test_csv_columns_are_the_documented_ones(tmp_path, groups):
-    path = tmp_path / "targets.csv"
-    write_targets_csv(path, groups)
-    with path.open(newline="") as f:
-        rows = list(csv.DictReader(f))
-    documented = documented_csv_columns()
-    assert len(documented) > 20
-    assert list(rows[0].keys()) == documented == list(TARGETS_CSV_COLUMNS)
-    assert len(rows) == 8  # 2 groups x 4 methods, the diverged one included
-    assert {r["alt_datum"] for r in rows} == {"WGS84 ellipsoidal height (EPSG:4979)"}
+    write_targets_csv(tmp_path / "targets.csv", groups)
+    write_estimates_csv(tmp_path / "estimates.csv", groups)
+    for name, columns, n in (("targets.csv", ANSWER_COLUMNS, 2), ("estimates.csv", ESTIMATES_CSV_COLUMNS, 8)):
+        with (tmp_path / name).open(newline="") as f:
+            rows = list(csv.DictReader(f))
+        documented = documented_csv_columns(name)
+        assert len(documented) > 20
+        assert list(rows[0].keys()) == documented == list(columns)
+        assert len(rows) == n  # one per target; 2 groups x 4 methods, the diverged one included
+        assert {r["alt_datum"] for r in rows} == {"WGS84 ellipsoidal height (EPSG:4979)"}
 
 
 def test_csv_values(tmp_path, groups):
-    path = tmp_path / "targets.csv"
-    write_targets_csv(path, groups)
+    path = tmp_path / "estimates.csv"
+    write_estimates_csv(path, groups)
     with path.open(newline="") as f:
         rows = {(r["group"], r["method"]): r for r in csv.DictReader(f)}
     g1 = groups[0]
@@ -76,7 +80,9 @@ def test_csv_values(tmp_path, groups):
     assert float(mle["sigma_up_m"]) == pytest.approx(3.0)
     assert float(mle["ellipse95_azimuth_deg"]) == pytest.approx(30.0, abs=0.01)
     assert float(mle["cep50_m"]) < float(mle["cep90_m"])
-    assert rows[("g1", "vision")]["cep50_m"] == ""  # no covariance: undefined, not zero
+    # vision states no covariance: the one propagated through it under the stated errors, said so
+    assert rows[("g1", "vision")]["covariance_source"] == "propagated" and float(rows[("g1", "vision")]["cep50_m"]) > 0
+    assert mle["covariance_source"] == "estimator" and mle["answer"] == "true" and mle["determined"] == "true"
     rng = rows[("g1", "range")]
     assert rng["lat_deg"] == "" and rng["error_m"] == "" and rng["status"] == "diverged"
     assert rng["converged"] == "false"
@@ -90,8 +96,8 @@ def test_geometry_warnings_reach_every_estimates_reason(tmp_path, groups):
     warned = hand_group("g1")
     warned.settings["geometry_warnings"] = ["the lines of sight are nearly parallel"]
     warned.estimates["mle"].extras["fit"] = {"message": "mle: the error model does not fit this flight"}
-    path = tmp_path / "targets.csv"
-    write_targets_csv(path, [warned, groups[1]])
+    path = tmp_path / "estimates.csv"
+    write_estimates_csv(path, [warned, groups[1]])
     with path.open(newline="") as f:
         rows = {(r["group"], r["method"]): r for r in csv.DictReader(f)}
     parallel = "the lines of sight are nearly parallel"
@@ -102,43 +108,42 @@ def test_geometry_warnings_reach_every_estimates_reason(tmp_path, groups):
     assert all(r["reason"] == "" for (g, m), r in rows.items() if g == "g2" and m != "range")
 
 
-def test_kml_is_kml22_and_agrees_with_geojson(tmp_path, groups):
+def test_kml_is_kml22_and_agrees_with_geojson_and_csv(tmp_path, groups):
     import json
 
     write_targets_kml(tmp_path / "t.kml", groups)
     write_targets_geojson(tmp_path / "t.geojson", groups)
+    write_targets_csv(tmp_path / "t.csv", groups)
     root = ET.parse(tmp_path / "t.kml").getroot()
     assert root.tag == f"{KML}kml"
-    folders = root.findall(f"{KML}Document/{KML}Folder")
-    assert [f.findtext(f"{KML}name") for f in folders] == ["g1", "g2"]
-    gj = json.loads((tmp_path / "t.geojson").read_text())
-    for folder in folders:
-        group = folder.findtext(f"{KML}name")
-        pts = {}
-        for pm in folder.findall(f"{KML}Placemark"):
-            c = pm.findtext(f"{KML}Point/{KML}coordinates")
-            if c is not None:
-                data = {d.get("name"): d.text for d in pm.iter(f"{KML}SimpleData")}
-                pts[data.get("method", "truth")] = [float(v) for v in c.split(",")]
-                assert pm.findtext(f"{KML}Point/{KML}altitudeMode") == "absolute"
-            ring = pm.findtext(f".//{KML}LinearRing/{KML}coordinates")
-            if ring is not None:
-                coords = [tuple(map(float, p.split(","))) for p in ring.split()]
-                assert coords[0] == coords[-1] and len(coords) >= 4
-        for f in gj["features"]:
-            p = f["properties"]
-            if p["group"] == group and p["kind"] == "estimate":
-                assert pts[p["method"]][:2] == pytest.approx(f["geometry"]["coordinates"][:2], abs=1e-7)
-                # KML height = GeoJSON (ellipsoidal) height - the geoid undulation at the point
-                lon, lat, h = f["geometry"]["coordinates"]
-                n_m = float(geoid_undulation_m(lat, lon))
-                assert abs(n_m) > 1.0  # Zurich: ~47-48 m; a KML still in ellipsoidal heights would fail here
-                assert pts[p["method"]][2] == pytest.approx(h - n_m, abs=0.011)
-                assert p["alt_msl_m"] == pytest.approx(h - n_m, abs=0.011)
-        # every Placemark style refers to a defined Style
-        styles = {s.get("id") for s in root.iter(f"{KML}Style")}
-        for pm in folder.iter(f"{KML}Placemark"):
-            assert pm.findtext(f"{KML}styleUrl").lstrip("#") in styles
+    placemarks = root.findall(f"{KML}Document/{KML}Placemark")
+    # one placemark per located target and one for its ellipse
+    assert [pm.findtext(f"{KML}name") for pm in placemarks] == ["g1", "g1: 95 % error ellipse", "g2",
+                                                                "g2: 95 % error ellipse"]
+    gj = {f["properties"]["name"]: f for f in json.loads((tmp_path / "t.geojson").read_text())["features"]
+          if f["properties"]["kind"] == "target"}
+    with (tmp_path / "t.csv").open(newline="") as f:
+        rows = {r["name"]: r for r in csv.DictReader(f)}
+    styles = {s.get("id") for s in root.iter(f"{KML}Style")}
+    for pm in placemarks:
+        assert pm.findtext(f"{KML}styleUrl").lstrip("#") in styles
+        ring = pm.findtext(f".//{KML}LinearRing/{KML}coordinates")
+        if ring is not None:
+            coords = [tuple(map(float, p.split(","))) for p in ring.split()]
+            assert coords[0] == coords[-1] and len(coords) >= 4
+            continue
+        name = pm.findtext(f"{KML}name")
+        c = [float(v) for v in pm.findtext(f"{KML}Point/{KML}coordinates").split(",")]
+        assert pm.findtext(f"{KML}Point/{KML}altitudeMode") == "absolute"
+        lon, lat, h = gj[name]["geometry"]["coordinates"]
+        assert c[:2] == pytest.approx([lon, lat], abs=1e-7)
+        assert [float(rows[name]["lon_deg"]), float(rows[name]["lat_deg"])] == pytest.approx([lon, lat], abs=1e-7)
+        # KML height = GeoJSON (ellipsoidal) height - the geoid undulation at the point
+        n_m = float(geoid_undulation_m(lat, lon))
+        assert abs(n_m) > 1.0  # Zurich: ~47-48 m; a KML still in ellipsoidal heights would fail here
+        assert c[2] == pytest.approx(h - n_m, abs=0.011) and float(rows[name]["alt_msl_m"]) == pytest.approx(
+            h - n_m, abs=0.011)
+        assert rows[name]["mgrs"] in pm.findtext(f"{KML}description")
 
 
 def test_kml_attributes_are_typed_by_a_schema(tmp_path, groups):
@@ -149,17 +154,17 @@ def test_kml_attributes_are_typed_by_a_schema(tmp_path, groups):
     schemas = {s.get("id"): {f.get("name"): f.get("type") for f in s.findall(f"{KML}SimpleField")}
                for s in root.iter(f"{KML}Schema")}
     assert set(schemas) == set(KML_SCHEMAS)
-    assert schemas["estimate"]["error_m"] == "double" and schemas["estimate"]["iterations"] == "int"
-    assert schemas["estimate"]["converged"] == "bool" and schemas["estimate"]["method"] == "string"
-    assert schemas["estimate"]["alt_msl_m"] == "double"
-    parse = {"double": float, "int": int, "bool": {"true": True, "false": False}.__getitem__, "string": str}
+    assert schemas["target"]["error_m"] == "double" and schemas["target"]["n_observations"] == "int"
+    assert schemas["target"]["mgrs"] == "string" and schemas["target"]["method"] == "string"
+    assert schemas["target"]["alt_msl_m"] == "double" and schemas["target"]["ce90_m"] == "double"
+    parse = {"double": float, "int": int, "string": str}
     n = 0
     for sd in root.iter(f"{KML}SchemaData"):
         fields = schemas[sd.get("schemaUrl").lstrip("#")]
         for d in sd.findall(f"{KML}SimpleData"):
             parse[fields[d.get("name")]](d.text)
             n += 1
-    assert n > 50
+    assert n > 30
     assert not list(root.iter(f"{KML}Data"))  # no untyped attributes left
     assert kml_field_type("reason") == "string" and kml_field_type("cep50_m") == "double"
 
@@ -171,8 +176,8 @@ def test_ogrinfo_reads_typed_kml_fields(tmp_path, groups):
     write_targets_kml(tmp_path / "t.kml", groups)
     out = subprocess.run(["ogrinfo", "-al", "-so", str(tmp_path / "t.kml")], capture_output=True, text=True,
                          check=True).stdout
-    for field, kind in (("error_m", "Real"), ("alt_msl_m", "Real"), ("cep50_m", "Real"), ("iterations", "Integer"),
-                        ("method", "String")):
+    for field, kind in (("error_m", "Real"), ("alt_msl_m", "Real"), ("ce90_m", "Real"), ("n_observations", "Integer"),
+                        ("mgrs", "String")):
         assert re.search(rf"^{field}: {kind}", out, flags=re.M), (field, kind, out[:2000])
 
 

@@ -1,4 +1,5 @@
-"""targets.geojson against the rules of RFC 7946, and its positions against closed-form geodesy."""
+"""targets.geojson (the answers) and estimates.geojson (every method) against the rules of RFC 7946, and their
+positions against closed-form geodesy."""
 
 from __future__ import annotations
 
@@ -8,7 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.report.exports import targets_geojson, write_targets_geojson
+from pipeline.answer import Answer, Verdict
+from pipeline.report.exports import estimates_geojson, targets_geojson, write_estimates_geojson
 from pipeline.results import GroupResult
 from pipeline.solve.estimate import Estimate, Status
 from support.synthetic import synthetic_observations
@@ -143,20 +145,20 @@ def hand_group(name="g1", truth=True, seed=3) -> GroupResult:
 
 @pytest.fixture(scope="module")
 def doc(tmp_path_factory):
-    path = tmp_path_factory.mktemp("geojson") / "targets.geojson"
-    write_targets_geojson(path, [hand_group("g1"), hand_group("g2", truth=False, seed=4)])
+    path = tmp_path_factory.mktemp("geojson") / "estimates.geojson"
+    write_estimates_geojson(path, [hand_group("g1"), hand_group("g2", truth=False, seed=4)])
     return strict_json(path.read_text())
 
 
 def test_export_is_valid_rfc7946(doc):
     assert rfc7946_problems(doc) == []
     kinds = [f["properties"]["kind"] for f in doc["features"]]
-    # per group: 3 finite estimates (range diverged: no feature), 1 ellipse (only mle has a covariance),
-    # a flight path, one line of sight per frame (12); the truth only where known
+    # per group: 3 finite estimates (range diverged: no feature), each with its ellipse (mle's own covariance, the
+    # others' propagated through the method), a flight path, one line of sight per frame (12); the truth where known
     for g, truth in (("g1", 1), ("g2", 0)):
         k = [f["properties"]["kind"] for f in doc["features"] if f["properties"]["group"] == g]
         assert k.count("estimate") == 3
-        assert k.count("error_ellipse") == 1
+        assert k.count("error_ellipse") == 3
         assert k.count("flight_path") == 1
         assert k.count("line_of_sight") == 12
         assert k.count("truth") == truth
@@ -199,8 +201,11 @@ def test_positions_match_closed_form_geodesy():
     obs, _ = synthetic_observations(seed=1, n_frames=4)
     east = Estimate("vision", np.array([1000.0, 0.0, 0.0]), 1, Status.CONVERGED)
     north = Estimate("mle", np.array([0.0, 1000.0, 0.0]), 1, Status.CONVERGED)
-    r = GroupResult("geo", ORIGIN, obs, {"vision": east, "mle": north})
-    doc = targets_geojson([r])
+    # both taken as determined by the flight (the answer rule's verdicts), so both are exported as points
+    verdicts = {m: Verdict(m, True) for m in ("vision", "mle")}
+    r = GroupResult("geo", ORIGIN, obs, {"vision": east, "mle": north},
+                    answer=Answer(True, "mle", north.position_m, None, "", 4, verdicts))
+    doc = estimates_geojson([r])
     pts = {f["properties"]["method"]: f["geometry"]["coordinates"] for f in doc["features"]
            if f["properties"]["kind"] == "estimate"}
     a, f = 6378137.0, 1 / 298.257223563
@@ -225,7 +230,7 @@ def test_ellipse_polygon_shape_and_orientation(doc):
     """The 95 % ellipse of a covariance with 1-sigma axes 4 m x 2 m at azimuth 30 deg: semi-axes sqrt(5.991) times
     those, the major axis pointing 30 deg east of north."""
     f = next(f for f in doc["features"] if f["properties"]["kind"] == "error_ellipse"
-             and f["properties"]["group"] == "g1")
+             and f["properties"]["group"] == "g1" and f["properties"]["method"] == "mle")
     p = f["properties"]
     k = math.sqrt(5.991464547107979)
     assert p["confidence"] == 0.95
@@ -265,3 +270,18 @@ def test_lines_of_sight_pass_through_target_without_noise():
         assert np.linalg.norm(off) < 1e-6
         # as long as the (noise-free) range: it ends on the target
         assert np.linalg.norm(s[1] - target) < 1e-6
+
+
+def test_the_answers_are_valid_rfc7946_one_point_per_located_target():
+    """targets.geojson: a Point and its 95 % ellipse per located target, a null geometry (RFC 7946 3.2) with the
+    reason for a target without an answer."""
+    located = hand_group("g1")
+    lost = hand_group("g2", seed=4)
+    lost.estimates = {"range": lost.estimates["range"]}
+    doc = strict_json(json.dumps(targets_geojson([located, lost])))
+    assert rfc7946_problems(doc) == []
+    kinds = [(f["properties"]["kind"], f["properties"]["name"], f["geometry"] and f["geometry"]["type"])
+             for f in doc["features"]]
+    assert kinds == [("target", "g1", "Point"), ("error_ellipse", "g1", "Polygon"), ("target", "g2", None)]
+    assert doc["features"][0]["properties"]["method"] == "mle"
+    assert doc["features"][2]["properties"]["status"] == "not_located"

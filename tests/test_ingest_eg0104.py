@@ -225,12 +225,34 @@ def test_run_on_a_clip_locates_the_crosshair_near_the_frame_centre(name):
     (warning,) = result.settings["geometry_warnings"]
     assert warning in result.settings["notes"]
     assert re.search(r"nearly parallel \(first to last \d+\.\d deg\): where they meet is undetermined", warning)
-    from pipeline.report.exports import target_rows
+    from pipeline.report.answers import answer_row
+    from pipeline.report.exports import estimate_rows
 
-    rows = {r["method"]: r for r in target_rows([result])}
+    rows = {r["method"]: r for r in estimate_rows([result])}
     assert "vision" in result.estimates and "dlt" in result.estimates
-    for m in result.estimates:
-        assert warning in rows[m]["reason"], m
+    for m, e in result.estimates.items():
+        if np.isfinite(e.position_m).all():
+            assert warning in rows[m]["reason"], m
+    # one answer, the laser's point, at the platform's own frame centre (within the grid-azimuth offset)
+    answer = answer_row(result)
+    assert answer["status"] == "located" and answer["method"] == "los"
+
+    def off_centre_m(row):
+        return np.hypot((log.frame_centre.lat_deg - row["lat_deg"]) * 111_000,
+                        (log.frame_centre.lon_deg - row["lon_deg"]) * 111_000 * np.cos(np.radians(lat))).min()
+
+    assert off_centre_m(answer) < 100.0
+    # the methods the nearly parallel lines of sight do not determine are no point anywhere: estimates.csv lists
+    # them without coordinates and says why; every point exported is near the frame centre and not below the
+    # laser's ground point by more than its own uncertainty
+    undetermined = {m for m, r in rows.items() if r["determined"] is False}
+    assert {"vision", "dlt", "fusion", "ridge"} <= undetermined
+    for m in undetermined:
+        assert rows[m]["lat_deg"] is None and ("not determined" in rows[m]["reason"] or m in ("range", "mle")), m
+    for m, r in rows.items():
+        if r["determined"]:
+            assert off_centre_m(r) < 300.0, m
+            assert r["alt_m"] > answer["alt_m"] - 3 * max(r["sigma_up_m"] or 0.0, 10.0), m
 
 
 # ---- the synth's ST 0601 writer ------------------------------------------------------------------------

@@ -25,6 +25,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("geometry", ("geometry",)),
     ("readers and pure stages", ("ingest", "track", "solve")),
     ("observation file", ("observation_file",)),
+    ("the answer rule", ("answer",)),
     ("synchronisation and results", ("intrinsics", "sync", "results", "simulate", "synth", "terrain")),
     ("flight", ("flight",)),
     ("clock estimate", ("clock_estimate",)),

@@ -107,7 +107,12 @@ def test_outputs_one_feature_per_target_and_method(runs, tmp_path):
     assert [t.target for t in again.targets] == ["panel", "small_grey", "far_north"]
     assert again.failed == flight.failed
     paths = write_run_outputs(tmp_path / "out", [flight], [], {"config": "x"}, figures=False)
-    rows = list(csv.DictReader(paths["csv"].open()))
+    answers = list(csv.DictReader(paths["csv"].open()))  # targets.csv: one answer per target
+    assert [(a["name"], a["status"]) for a in answers] == [
+        ("three_targets:panel", "located"), ("three_targets:small_grey", "located"),
+        ("three_targets:far_north", "located"), ("three_targets:edge", "not_located")]
+    assert "is not inside frame 4" in answers[-1]["reason"]
+    rows = list(csv.DictReader(paths["estimates_csv"].open()))
     assert list(rows[0])[:3] == ["group", "target", "method"]
     keys = [(r["group"], r["target"], r["method"]) for r in rows]
     assert len(keys) == len(set(keys))
@@ -115,7 +120,7 @@ def test_outputs_one_feature_per_target_and_method(runs, tmp_path):
     assert edge and all(r["status"] == "not_located" and "is not inside frame 4" in r["reason"] for r in edge)
     solved = {(r["target"], r["method"]) for r in rows if r["lat_deg"]}
     assert {t for t, _ in solved} == {"panel", "small_grey", "far_north"}
-    doc = json.loads(paths["geojson"].read_text())
+    doc = json.loads(paths["estimates_geojson"].read_text())
     est = [f for f in doc["features"] if f["properties"]["kind"] == "estimate"]
     assert sorted((f["properties"]["target"], f["properties"]["method"]) for f in est) == sorted(solved)
     assert all(f["properties"]["name"] == f"three_targets:{f['properties']['target']}" for f in est)
@@ -131,19 +136,15 @@ def test_outputs_one_feature_per_target_and_method(runs, tmp_path):
     ogrinfo = shutil.which("ogrinfo")
     if ogrinfo is None:
         pytest.skip("GDAL's ogrinfo not installed")
-    for name in ("geojson", "kml"):
-        out = subprocess.run([ogrinfo, "-ro", "-al", "-q", str(paths[name]), "-where", "kind = 'estimate'"]
-                             if name == "geojson" else [ogrinfo, "-ro", "-al", "-q", str(paths[name])],
-                             capture_output=True, text=True, timeout=60)
-        assert out.returncode == 0, out.stderr
-        if name == "geojson":
-            assert out.stdout.count("OGRFeature(") == len(solved)
-        else:
-            placemarks = [ln for ln in out.stdout.splitlines() if ln.strip().startswith("Name (String) =")]
-            est_names = {f"three_targets:{t}: " for t, _ in solved}
-            assert sum(any(p.split("= ", 1)[1].startswith(n) for n in est_names) and "ellipse" not in p
-                       and "truth" not in p and "path" not in p and "lines of sight" not in p
-                       for p in placemarks) == len(solved)
+    # GDAL reads the estimates (one per solved target and method) and the answers (a placemark per located target)
+    out = subprocess.run([ogrinfo, "-ro", "-al", "-q", str(paths["estimates_geojson"]), "-where", "kind = 'estimate'"],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.count("OGRFeature(") == len(solved)
+    out = subprocess.run([ogrinfo, "-ro", "-al", "-q", str(paths["kml"])], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    placemarks = [ln.split("= ", 1)[1] for ln in out.stdout.splitlines() if ln.strip().startswith("Name (String) =")]
+    assert [p for p in placemarks if "ellipse" not in p] == [a["name"] for a in answers[:3]]
 
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")

@@ -35,19 +35,21 @@ def png_size(png: bytes) -> tuple[int, int]:
 
 def test_run_folder_has_every_output(run):
     out, results, paths = run
-    assert sorted(p.name for p in paths.values()) == ["report.html", "run.json", "targets.csv", "targets.geojson",
-                                                      "targets.kml"]
+    assert sorted(p.name for p in paths.values()) == ["estimates.csv", "estimates.geojson", "report.html", "run.json",
+                                                      "targets.csv", "targets.geojson", "targets.kml"]
     for p in paths.values():
         assert p.parent == out and p.is_file() and p.stat().st_size > 0
     for r in results:
         folder = out / r.name
         assert is_done(folder)
-        for f in ("result.json", "map.png", "view3d.png", "residuals.png", "targets.geojson"):
+        for f in ("result.json", "map.png", "view3d.png", "residuals.png", "estimates.geojson"):
             assert (folder / f).is_file()
         w, h = png_size((folder / "map.png").read_bytes())
         assert w >= 1000 and h >= 500
     assert not list(out.glob(".tmp-*"))
     doc = json.loads((out / "run.json").read_text())
+    assert [a["name"] for a in doc["answers"]] == ["group1", "group2", "group3"]  # the answers first
+    assert [a["status"] for a in doc["answers"]] == ["located", "located", "not_located"]
     assert doc["groups"] == ["group1", "group2"]
     assert doc["failures"][0]["name"] == "group3"
     assert doc["software"]["numpy"] == np.__version__

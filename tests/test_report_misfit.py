@@ -1,6 +1,6 @@
 """Issue 12, item 4: when the mle's error model does not fit a flight, every output says so, not only the
-console and the notes: targets.csv (and so GeoJSON and KML) give the fit message as the row's `reason`, and
-report.html marks the estimate; an unsolved method shows its status in report.html."""
+console and the notes: estimates.csv (and estimates.geojson) give the fit message as the row's `reason`, the answer
+in targets.kml says it, and report.html marks the estimate; an unsolved method shows its status in report.html."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import io
 
 import numpy as np
 
-from pipeline.report.exports import targets_csv_text, targets_geojson, targets_kml
+from pipeline.report.exports import estimates_csv_text, estimates_geojson, targets_kml
 from pipeline.report.html import report_html
 from pipeline.results import GroupResult
 from pipeline.solve.estimate import Estimate, Status
@@ -41,11 +41,14 @@ def _group(name: str, consistent: bool) -> GroupResult:
 
 def test_a_misfit_mle_row_says_why_in_targets_csv_geojson_and_kml():
     bad, good = _group("misfit", consistent=False), _group("fits", consistent=True)
-    rows = {(t["group"], t["method"]): t for t in csv.DictReader(io.StringIO(targets_csv_text([bad, good])))}
+    rows = {(t["group"], t["method"]): t for t in csv.DictReader(io.StringIO(estimates_csv_text([bad, good])))}
     assert rows[("misfit", "mle")]["reason"] == MISFIT and rows[("misfit", "mle")]["status"] == "converged"
     assert rows[("misfit", "mle")]["cep50_m"] != ""  # the inflated covariance is still given
-    assert rows[("fits", "mle")]["reason"] == "" and rows[("misfit", "vision")]["reason"] == ""
-    feats = [f["properties"] for f in targets_geojson([bad])["features"]
+    assert rows[("fits", "mle")]["reason"] == ""
+    # vision on these three toy frames: its answer is not determined, so it is no point, and says why
+    assert rows[("misfit", "vision")]["reason"].startswith("not determined: ")
+    assert rows[("misfit", "vision")]["lat_deg"] == "" and rows[("misfit", "vision")]["determined"] == "false"
+    feats = [f["properties"] for f in estimates_geojson([bad])["features"]
              if f["properties"]["kind"] == "estimate" and f["properties"]["method"] == "mle"]
     assert feats[0]["reason"] == MISFIT
     assert b"does not fit this flight" in targets_kml([bad])
@@ -68,6 +71,6 @@ def test_geojson_lines_of_sight_mark_the_observations_the_mle_rejected():
         {"frame": 1, "t_ns": 1, "residual": "range", "value": 400.0, "sigmas": 80.0},
         {"frame": 2, "t_ns": 2, "residual": "u", "value": 60.0, "sigmas": 17.0},
         {"frame": 2, "t_ns": 2, "residual": "v", "value": 50.0, "sigmas": 14.0}]
-    lines = {f["properties"]["frame"]: f["properties"] for f in targets_geojson([r])["features"]
+    lines = {f["properties"]["frame"]: f["properties"] for f in estimates_geojson([r])["features"]
              if f["properties"]["kind"] == "line_of_sight"}
     assert [lines[i]["mle_rejected"] for i in (0, 1, 2)] == [None, "range", "u, v"]

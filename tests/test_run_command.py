@@ -142,7 +142,10 @@ def test_quiet_run_still_says_when_the_mle_model_does_not_fit(tmp_path, capsys, 
     r, misfit = _misfit_result()
     monkeypatch.setattr(pipeline.batch, "run_groups", lambda *a, **k: ([r], [], []))
     assert main(["run", str(SAMPLE), "-o", str(tmp_path / "out"), "--no-figures", "-q"]) == 0
-    assert capsys.readouterr().out.splitlines() == [f"g: {misfit}", "all 1 flight(s) finished"]
+    out = capsys.readouterr().out.splitlines()
+    assert out[:2] == [f"g: {misfit}", "all 1 flight(s) finished"]
+    assert out[3].split() == ["target", "latitude", "longitude", "MSL", "m", "MGRS", "CE90", "m", "category", "method"]
+    assert out[4].startswith("g ") and len(out) == 5  # the answers still end a quiet run: one line per target
 
 
 @pytest.fixture

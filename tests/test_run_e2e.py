@@ -83,7 +83,7 @@ def test_every_stage_locates_the_target_within_the_noise_bound(tiny_flight):
     errors = r.errors_m()
     assert errors["mle"] < BOUND_M, errors
     assert errors["ridge"] < BOUND_M, errors
-    assert set(r.timings_s) == {"ingest", "decode", "track", "sync", "solve"}
+    assert set(r.timings_s) == {"ingest", "decode", "track", "sync", "solve", "answer"}
 
 
 def test_run_command_writes_the_report_and_skips_a_bad_group(tiny_flight, capsys):

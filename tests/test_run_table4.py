@@ -15,7 +15,8 @@ def _result(name, truth, positions, angle=30.0):
     obs = Observations(P=P, pixel=np.array([[0.1, 0.2], [np.nan, np.nan], [0.3, 0.1]]),
                        platform_m=np.array([[0.0, -1000, 500], [500, -1000, 500], [1000, -900, 500]]),
                        range_m=np.array([1200.0, np.nan, 1300.0]), truth_m=truth)
-    ests = {m: Estimate(m, np.asarray(p, float), 3, Status.CONVERGED) for m, p in positions.items()}
+    ests = {m: Estimate(m, np.asarray(p, float), 3, Status.CONVERGED, covariance_m2=np.eye(3) if m == "mle" else None)
+            for m, p in positions.items()}
     return GroupResult(name=name, origin_lla=(34.0, 108.0, 400.0), observations=obs, estimates=ests,
                        truth_m=None if truth is None else np.asarray(truth, float), intersection_angle_deg=angle,
                        timings_s={"ingest": 0.1, "track": 0.2, "sync": 0.01, "solve": 0.02},
@@ -48,10 +49,10 @@ def test_markdown_has_paper_beside_ours_estimates_and_failures(tmp_path):
     assert not list((tmp_path / "out").glob(".tmp-*"))
 
 
-def test_a_failed_method_keeps_its_row_in_table4_and_targets_csv():
-    """docs/outputs.md promises one row per (group, method): a method asked for that could not run keeps it,
-    with empty values, status `failed` and its reason."""
-    from pipeline.report.exports import targets_csv_text
+def test_a_failed_method_keeps_its_row_in_table4_and_estimates_csv():
+    """docs/outputs.md promises one row per (group, method) in estimates.csv: a method asked for that could not run
+    keeps it, with empty values, status `failed` and its reason."""
+    from pipeline.report.exports import estimates_csv_text
 
     a = _result("group1", [0.0, 0.0, 0.0], {"mle": [3.0, 4.0, 0.0]})
     a.settings["solve_failures"] = {"range": "degenerate geometry: the ranges are collinear"}
@@ -59,7 +60,7 @@ def test_a_failed_method_keeps_its_row_in_table4_and_targets_csv():
     rows = list(csv.reader(io.StringIO(table4_csv_text([a, b]))))
     body = {r[0]: r[1:] for r in rows[1:]}
     assert body["range"] == ["", "2.000"] and body["mle"] == ["5.000", "1.000"]
-    targets = list(csv.DictReader(io.StringIO(targets_csv_text([a, b]))))
+    targets = list(csv.DictReader(io.StringIO(estimates_csv_text([a, b]))))
     assert [(t["group"], t["method"]) for t in targets] == [("group1", "range"), ("group1", "mle"),
                                                              ("group2", "range"), ("group2", "mle")]
     failed = targets[0]
@@ -82,11 +83,11 @@ def test_tracking_lost_count_counts_dropped_frames_too():
 
 def test_a_failure_given_as_status_and_reason_keeps_both():
     """`ridgeloc solve --json` lists unsolved methods as {status, reason}: the exports take either form."""
-    from pipeline.report.exports import targets_csv_text
+    from pipeline.report.exports import estimates_csv_text
 
     a = _result("group1", [0.0, 0.0, 0.0], {"mle": [3.0, 4.0, 0.0]})
     a.settings["solve_failures"] = {"range": {"status": "degenerate", "reason": "ranges collinear"}}
-    targets = list(csv.DictReader(io.StringIO(targets_csv_text([a]))))
+    targets = list(csv.DictReader(io.StringIO(estimates_csv_text([a]))))
     assert (targets[0]["method"], targets[0]["status"], targets[0]["reason"]) == ("range", "degenerate",
                                                                                   "ranges collinear")
     assert "| range | — | — | — | — |  | degenerate | — |" in report_markdown([a])

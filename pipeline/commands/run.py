@@ -120,7 +120,6 @@ def main(args) -> int:
     t0 = time.perf_counter()
     if results:  # when every flight failed, no output at all (as for a flight config that does not load)
         write_run_outputs(args.outdir, results, failures, settings, figures=not args.no_figures)
-        t1 = time.perf_counter()
         md, tab = write_table4(args.outdir, results, failures)
         t2 = time.perf_counter()
     from pipeline.results import per_target, target_failures
@@ -139,8 +138,11 @@ def main(args) -> int:
     for f in failures:  # one line each on stderr; the count and the names go to stdout with the rest of the summary
         print(f"ridgeloc: {f.name}: failed: {f.message}", file=sys.stderr)
     if results and not args.quiet:
-        print(f"wrote {md}, {tab}, {Path(args.outdir) / 'report.html'} and targets.csv/.geojson/.kml in "
-              f"{t2 - t0:.2f} s (report.html, targets.*, run.json {t1 - t0:.2f}; report.md, table4.csv "
-              f"{t2 - t1:.2f} s)")
+        print(f"wrote {Path(args.outdir) / 'report.html'}, targets.csv/.geojson/.kml, estimates.csv/.geojson, {md} "
+              f"and {tab} in {t2 - t0:.2f} s")
     print(summarize_failures(failures, len(entries)).splitlines()[0])
+    if results:
+        from pipeline.report.answers import answer_rows, answers_text
+
+        print("\n" + answers_text(answer_rows(results, failures)))
     return 1 if failures or not_located else 0

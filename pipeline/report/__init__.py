@@ -1,7 +1,8 @@
 """Outputs people use: the run report (HTML), per-group figures and GIS exports (CSV, GeoJSON, KML).
 
 Modules:
-    exports: targets.csv / targets.geojson / targets.kml from `GroupResult`s (ENU -> WGS84 via pymap3d).
+    answers: each target's one answer as the outputs write it (MGRS, CE90/LE90, TLE category).
+    exports: targets.csv / .geojson / .kml (the answers) and estimates.csv / .geojson (every method).
     figures: per-group figures like the paper's Fig. 7 (map view, 3D view, residuals per frame).
     html: the self-contained `report.html` (figures embedded, Table-4-like summary, settings, versions).
     store: a `GroupResult` to and from JSON, so finished groups are reused on a re-run.
@@ -17,7 +18,8 @@ import importlib
 _EXPORTS = {
     "write_run_outputs": "outputs", "write_group_outputs": "outputs", "load_finished_group": "outputs",
     "write_targets_csv": "exports", "write_targets_geojson": "exports", "write_targets_kml": "exports",
-    "TARGETS_CSV_COLUMNS": "exports", "write_report_html": "html", "render_group_figures": "figures",
+    "ESTIMATES_CSV_COLUMNS": "exports", "ANSWER_COLUMNS": "answers", "write_report_html": "html",
+    "render_group_figures": "figures",
 }
 __all__ = sorted(_EXPORTS)
 

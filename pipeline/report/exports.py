@@ -1,4 +1,7 @@
-"""GIS exports of a run: `targets.csv`, `targets.geojson` (RFC 7946) and `targets.kml` (KML 2.2).
+"""GIS exports of a run: the answers (`targets.csv`, `targets.geojson` (RFC 7946), `targets.kml` (KML 2.2): one row,
+feature or placemark per target, `pipeline.report.answers`), and every method's estimate for the comparison
+(`estimates.csv`, `estimates.geojson`: the estimates the flight determines, the truth, 95 % ellipses, flight paths
+and lines of sight).
 
 Every position is converted from the group's local ENU frame to WGS84 with pymap3d. Heights: `alt_m` is above
 the WGS84 ellipsoid (EPSG:4979), which is what RFC 7946 prescribes for GeoJSON coordinates; `alt_msl_m` is above
@@ -18,7 +21,15 @@ from os import PathLike
 import numpy as np
 
 from pipeline.atomic import atomic_write_bytes, atomic_write_text
-from pipeline.geometry.geoid import GEOID_MODEL_LONG, geoid_undulation_m
+from pipeline.geometry.geoid import geoid_undulation_m
+from pipeline.report.answers import (
+    ALT_MSL_DATUM,
+    ANSWER_COLUMNS,
+    answer_of,
+    answer_rows,
+    determined_estimates,
+    shown_covariance,
+)
 from pipeline.report.geometry import (
     ALT_DATUM,
     best_reference_m,
@@ -26,21 +37,20 @@ from pipeline.report.geometry import (
     lines_of_sight_m,
     uncertainty,
 )
-from pipeline.report.labels import METHOD_COLORS, method_label, ordered_methods
-from pipeline.results import FlightResult, GroupResult, per_target
-from pipeline.solve.uncertainty import ELLIPSE_CONFIDENCE, ellipse_points_en_m
+from pipeline.report.labels import method_label, ordered_methods
+from pipeline.results import FlightResult, GroupFailure, GroupResult, per_target
+from pipeline.solve.uncertainty import ELLIPSE_CONFIDENCE, ellipse_points_en_m, horizontal
 
-# The documented columns of targets.csv, in order (docs/outputs.md describes each).
-TARGETS_CSV_COLUMNS = (
-    "group", "method", "method_label",
+# The documented columns of estimates.csv, in order (docs/outputs.md describes each).
+ESTIMATES_CSV_COLUMNS = (
+    "group", "target", "method", "method_label", "answer", "determined",
     "lat_deg", "lon_deg", "alt_m", "alt_datum", "alt_msl_m", "geoid_undulation_m", "alt_msl_datum",
     "e_m", "n_m", "u_m", "origin_lat_deg", "origin_lon_deg", "origin_alt_m",
     "error_m", "error_horizontal_m", "error_up_m",
     "cep50_m", "cep90_m", "sigma_up_m",
-    "ellipse95_semi_major_m", "ellipse95_semi_minor_m", "ellipse95_azimuth_deg",
+    "ellipse95_semi_major_m", "ellipse95_semi_minor_m", "ellipse95_azimuth_deg", "covariance_source",
     "converged", "status", "reason", "iterations", "n_observations", "intersection_angle_deg",
 )
-ALT_MSL_DATUM = f"height above the {GEOID_MODEL_LONG}"
 
 DEG_DECIMALS = 8  # ~1 mm: more than any estimate's accuracy, so rounding never shows
 GEOJSON_DEG_DECIMALS = 7  # ~1 cm, the precision RFC 7946 section 11.2 suggests is plenty
@@ -107,6 +117,7 @@ def group_methods(r: GroupResult) -> list[str]:
                                             if m not in r.estimates]])
 
 
+
 def _units(results) -> list:
     """GroupResults (one per located target) and (flight name, TargetFailure) of the targets not located, in the
     run's order: a flight's located targets, then its failed ones."""
@@ -119,33 +130,29 @@ def _units(results) -> list:
     return out
 
 
-def has_named_targets(results) -> bool:
-    """Whether any flight names its targets: the outputs then carry a `target` column/property (absent
-    otherwise, so single-target runs keep their files as they were)."""
-    return any(isinstance(r, FlightResult) or getattr(r, "target", None) is not None for r in results)
-
-
 def _failed_rows(name: str, f) -> list[dict]:
     """A target that could not be located: one row per method asked for, status `not_located`, the reason."""
-    return [{**dict.fromkeys(TARGETS_CSV_COLUMNS), "group": name, "target": f.target, "method": m,
-             "method_label": method_label(m), "alt_datum": ALT_DATUM, "alt_msl_datum": ALT_MSL_DATUM,
-             "status": "not_located", "reason": f.message, "n_observations": 0} for m in f.methods]
+    return [{**dict.fromkeys(ESTIMATES_CSV_COLUMNS), "group": name, "target": f.target, "method": m,
+             "method_label": method_label(m), "answer": False, "determined": False, "alt_datum": ALT_DATUM,
+             "alt_msl_datum": ALT_MSL_DATUM, "status": "not_located", "reason": f.message, "n_observations": 0}
+            for m in f.methods]
 
 
-def target_rows(results: Iterable[GroupResult | FlightResult]) -> list[dict]:
-    """One dict per group (target) and method with the keys of TARGETS_CSV_COLUMNS (None where undefined), and
-    `target` after `group` for a named target. A method that could not run, or gave no finite position, keeps
-    its row: empty values, its status and reason; so does a target that could not be located."""
+def estimate_rows(results: Iterable[GroupResult | FlightResult]) -> list[dict]:
+    """One dict per target and method with the keys of ESTIMATES_CSV_COLUMNS (None where undefined). A method that
+    could not run, gave no finite position, or whose estimate the flight does not determine keeps its row with empty
+    values, its status and the reason; so does a target that could not be located."""
     rows = []
     for r in _units(results):
         if isinstance(r, tuple):
             rows.extend(_failed_rows(*r))
             continue
         lat0, lon0, alt0 = r.origin_lla
+        answer, shown = answer_of(r), determined_estimates(r)
         methods = group_methods(r)
-        positions = np.full((len(methods), 3), np.nan)  # every method's position converted at once
+        positions = np.full((len(methods), 3), np.nan)  # every shown method's position converted at once
         for i, method in enumerate(methods):
-            if r.estimates.get(method) is not None:
+            if method in shown:
                 positions[i] = r.estimates[method].position_m
         ok = np.isfinite(positions).all(axis=1)
         llas = np.full(positions.shape, np.nan)
@@ -154,15 +161,24 @@ def target_rows(results: Iterable[GroupResult | FlightResult]) -> list[dict]:
         for method, pos, finite, lla, n_m in zip(methods, positions, ok, llas, undulations, strict=True):
             e = r.estimates.get(method)
             status, reason = _status_reason(r, method)
+            verdict = answer.verdicts.get(method)
+            if verdict is not None and not verdict.determined and e is not None:
+                reason = "; ".join(x for x in (f"not determined: {verdict.reason}", reason) if x)
             n_m = float(n_m) if finite else None
-            err = None if e is None else e.error_m(r.truth_m)
+            err = None if (e is None or not finite) else e.error_m(r.truth_m)
             d = None if (err is None or r.truth_m is None) else pos - r.truth_m
-            u = uncertainty(e) if e is not None else dict.fromkeys(
-                ("cep50_m", "cep90_m", "sigma_up_m", "ellipse95_semi_major_m", "ellipse95_semi_minor_m",
-                 "ellipse95_azimuth_deg"))
+            u = dict.fromkeys(("cep50_m", "cep90_m", "sigma_up_m", "ellipse95_semi_major_m",
+                               "ellipse95_semi_minor_m", "ellipse95_azimuth_deg"))
+            source = None
+            if e is not None and finite:  # the estimator's own covariance, else the one the answer rule propagated
+                if verdict is not None and verdict.covariance_m2 is not None:
+                    u, source = horizontal(verdict.covariance_m2), verdict.covariance_source
+                else:
+                    u = uncertainty(e)
+                    source = "estimator" if e.covariance_m2 is not None else None
             rows.append({
-                "group": r.name, **({} if r.target is None else {"target": r.target}),
-                "method": method, "method_label": method_label(method),
+                "group": r.name, "target": r.target, "method": method, "method_label": method_label(method),
+                "answer": method == answer.method, "determined": bool(finite),
                 "lat_deg": _num(lla[0], DEG_DECIMALS), "lon_deg": _num(lla[1], DEG_DECIMALS),
                 "alt_m": _num(lla[2]), "alt_datum": ALT_DATUM,
                 "alt_msl_m": None if n_m is None else _num(lla[2] - n_m),
@@ -176,7 +192,7 @@ def target_rows(results: Iterable[GroupResult | FlightResult]) -> list[dict]:
                 "cep50_m": _num(u["cep50_m"]), "cep90_m": _num(u["cep90_m"]), "sigma_up_m": _num(u["sigma_up_m"]),
                 "ellipse95_semi_major_m": _num(u["ellipse95_semi_major_m"]),
                 "ellipse95_semi_minor_m": _num(u["ellipse95_semi_minor_m"]),
-                "ellipse95_azimuth_deg": _num(u["ellipse95_azimuth_deg"], 2),
+                "ellipse95_azimuth_deg": _num(u["ellipse95_azimuth_deg"], 2), "covariance_source": source,
                 "converged": None if e is None else bool(e.converged), "status": status, "reason": reason,
                 "iterations": None if e is None else int(e.iterations),
                 "n_observations": int(r.n_observations), "intersection_angle_deg": _num(r.intersection_angle_deg, 2),
@@ -186,26 +202,32 @@ def target_rows(results: Iterable[GroupResult | FlightResult]) -> list[dict]:
 
 # ---- CSV -------------------------------------------------------------------------------------------------------
 
-def csv_columns(named: bool) -> tuple[str, ...]:
-    """TARGETS_CSV_COLUMNS, with `target` after `group` when a flight names its targets."""
-    return ("group", "target", *TARGETS_CSV_COLUMNS[1:]) if named else TARGETS_CSV_COLUMNS
-
-
-def targets_csv_text(results: Iterable[GroupResult | FlightResult]) -> str:
-    results = list(results)
-    columns = csv_columns(has_named_targets(results))
+def _csv_text(rows: list[dict], columns: tuple[str, ...]) -> str:
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=columns, lineterminator="\n")
     w.writeheader()
-    for row in target_rows(results):
+    for row in rows:
         w.writerow({k: ("" if row.get(k) is None else
                         ("true" if row[k] is True else "false" if row[k] is False else row[k])) for k in columns})
     return buf.getvalue()
 
 
-def write_targets_csv(path: str | PathLike, results: Iterable[GroupResult]) -> None:
-    """targets.csv: one row per group and method, columns TARGETS_CSV_COLUMNS; empty cell = undefined."""
-    atomic_write_text(path, targets_csv_text(results))
+def targets_csv_text(results: Iterable[GroupResult | FlightResult], failures: Iterable[GroupFailure] = ()) -> str:
+    """targets.csv: one row per target, the answer (`pipeline.report.answers`, columns ANSWER_COLUMNS)."""
+    return _csv_text(answer_rows(list(results), list(failures)), ANSWER_COLUMNS)
+
+
+def write_targets_csv(path: str | PathLike, results: Iterable[GroupResult], failures=()) -> None:
+    atomic_write_text(path, targets_csv_text(results, failures))
+
+
+def estimates_csv_text(results: Iterable[GroupResult | FlightResult]) -> str:
+    """estimates.csv: one row per target and method, columns ESTIMATES_CSV_COLUMNS; empty cell = undefined."""
+    return _csv_text(estimate_rows(list(results)), ESTIMATES_CSV_COLUMNS)
+
+
+def write_estimates_csv(path: str | PathLike, results: Iterable[GroupResult]) -> None:
+    atomic_write_text(path, estimates_csv_text(results))
 
 
 # ---- GeoJSON (RFC 7946) -------------------------------------------------------------------------------------
@@ -225,11 +247,12 @@ def group_features(r: GroupResult, max_lines_of_sight: int | None = 200) -> list
     """The GeoJSON Features of one group: estimates (Point), truth (Point), 95 % ellipses (Polygon), flight path
     and lines of sight (LineString). Each has a `kind` and a `group` property."""
     feats = []
-    rows = {row["method"]: row for row in target_rows([r])}
+    rows = {row["method"]: row for row in estimate_rows([r])}
+    shown = determined_estimates(r)
     for method in ordered_methods(r.estimates):
         e = r.estimates[method]
-        if not np.isfinite(e.position_m).all():
-            continue  # no position to draw; targets.csv still lists it with its status
+        if method not in shown:
+            continue  # no position to draw, or not determined: estimates.csv lists it with its status and reason
         lla = geodetic_from_enu(e.position_m, r.origin_lla)
         props = {"kind": "estimate", **{k: v for k, v in rows[method].items()
                                         if k not in ("lat_deg", "lon_deg", "origin_lat_deg", "origin_lon_deg",
@@ -237,7 +260,7 @@ def group_features(r: GroupResult, max_lines_of_sight: int | None = 200) -> list
         feats.append(_feature({"type": "Point", "coordinates": _positions(lla)[0]}, props))
         row = rows[method]
         if row["ellipse95_semi_major_m"] is not None and row["ellipse95_semi_major_m"] >= MIN_ELLIPSE_M:
-            ring_en = ellipse_points_en_m(np.asarray(e.covariance_m2)[:2, :2], ELLIPSE_CONFIDENCE)
+            ring_en = ellipse_points_en_m(shown_covariance(r, method)[:2, :2], ELLIPSE_CONFIDENCE)
             ring_enu = np.column_stack([ring_en + e.position_m[:2], np.full(len(ring_en), e.position_m[2])])
             ring = _positions(geodetic_from_enu(ring_enu, r.origin_lla))
             ring[-1] = ring[0]  # closed exactly, whatever the rounding
@@ -245,7 +268,7 @@ def group_features(r: GroupResult, max_lines_of_sight: int | None = 200) -> list
                 "kind": "error_ellipse", "group": r.name, "method": method, "method_label": method_label(method),
                 "confidence": ELLIPSE_CONFIDENCE, "semi_major_m": row["ellipse95_semi_major_m"],
                 "semi_minor_m": row["ellipse95_semi_minor_m"], "azimuth_deg": row["ellipse95_azimuth_deg"],
-                "alt_datum": ALT_DATUM}))
+                "covariance_source": row["covariance_source"], "alt_datum": ALT_DATUM}))
     if r.truth_m is not None:
         lla = geodetic_from_enu(r.truth_m, r.origin_lla)
         feats.append(_feature({"type": "Point", "coordinates": _positions(lla)[0]}, _truth_props(r, lla)))
@@ -255,7 +278,8 @@ def group_features(r: GroupResult, max_lines_of_sight: int | None = 200) -> list
         feats.append(_feature({"type": "LineString", "coordinates": path}, {
             "kind": "flight_path", "group": r.name, "n_positions": obs.n, "alt_datum": ALT_DATUM,
             "t_start_ns": int(obs.t_ns[0]), "t_end_ns": int(obs.t_ns[-1])}))
-    seg, idx = lines_of_sight_m(obs, best_reference_m(r), max_lines_of_sight)
+    a = answer_of(r)
+    seg, idx = lines_of_sight_m(obs, a.position_m if a.located else best_reference_m(r), max_lines_of_sight)
     rejected = _mle_rejected(r)
     for s, i in zip(seg, idx, strict=True):
         feats.append(_feature({"type": "LineString", "coordinates": _positions(geodetic_from_enu(s, r.origin_lla))},
@@ -289,35 +313,83 @@ def _truth_props(r: GroupResult, lla: np.ndarray) -> dict:
             "e_m": _num(r.truth_m[0]), "n_m": _num(r.truth_m[1]), "u_m": _num(r.truth_m[2])}
 
 
-def targets_geojson(results: Iterable[GroupResult], max_lines_of_sight: int | None = 200) -> dict:
-    """A GeoJSON FeatureCollection (RFC 7946: WGS84 lon/lat, ellipsoidal height, no `crs` member)."""
+def estimates_geojson(results: Iterable[GroupResult], max_lines_of_sight: int | None = 200) -> dict:
+    """Every target's `group_features` as a GeoJSON FeatureCollection (RFC 7946: WGS84 lon/lat, ellipsoidal
+    height, no `crs` member)."""
     feats = []
     for r in per_target(results):
         feats.extend(group_features(r, max_lines_of_sight))
     return {"type": "FeatureCollection", "features": feats}
 
 
-def write_targets_geojson(path: str | PathLike, results: Iterable[GroupResult],
-                          max_lines_of_sight: int | None = 200) -> None:
-    """targets.geojson: see `targets_geojson`."""
-    doc = targets_geojson(results, max_lines_of_sight)
+def _answer_ring_lla(r: GroupResult) -> np.ndarray | None:
+    """(k, 3) lat, lon, ellipsoidal h of the answer's 95 % horizontal ellipse (a closed ring at the answer's height),
+    None without one."""
+    a = answer_of(r)
+    if not a.located or a.covariance_m2 is None or not np.isfinite(a.covariance_m2).all():
+        return None
+    ring_en = ellipse_points_en_m(np.asarray(a.covariance_m2)[:2, :2], ELLIPSE_CONFIDENCE)
+    if np.abs(ring_en).max() < MIN_ELLIPSE_M:
+        return None
+    ring_enu = np.column_stack([ring_en + a.position_m[:2], np.full(len(ring_en), a.position_m[2])])
+    ring = geodetic_from_enu(ring_enu, r.origin_lla)
+    ring[-1] = ring[0]
+    return ring
+
+
+def targets_geojson(results: Iterable[GroupResult | FlightResult], failures: Iterable[GroupFailure] = ()) -> dict:
+    """The answers as a GeoJSON FeatureCollection (RFC 7946): per located target a Point (`kind` "target", the
+    properties of its targets.csv row) and its 95 % ellipse (Polygon, `kind` "error_ellipse"); a target without an
+    answer is a feature with a null geometry, its status and reason."""
+    results = list(results)
+    by_name = {t.label: t for t in per_target(results)}
+    feats = []
+    for row in answer_rows(results, list(failures)):
+        props = {"kind": "target", **{k: v for k, v in row.items() if k not in ("lat_deg", "lon_deg")}}
+        r = by_name.get(row["name"])
+        if row["status"] != "located" or r is None:
+            feats.append(_feature(None, props))
+            continue
+        a = answer_of(r)
+        lla = geodetic_from_enu(a.position_m, r.origin_lla)
+        feats.append(_feature({"type": "Point", "coordinates": _positions(lla)[0]}, props))
+        ring = _answer_ring_lla(r)
+        if ring is not None:
+            pos = _positions(ring)
+            pos[-1] = pos[0]
+            feats.append(_feature({"type": "Polygon", "coordinates": [pos]}, {
+                "kind": "error_ellipse", "name": row["name"], "group": row["group"], "target": row["target"],
+                "method": row["method"], "confidence": ELLIPSE_CONFIDENCE,
+                "semi_major_m": row["ellipse95_semi_major_m"], "semi_minor_m": row["ellipse95_semi_minor_m"],
+                "azimuth_deg": row["ellipse95_azimuth_deg"], "alt_datum": ALT_DATUM}))
+    return {"type": "FeatureCollection", "features": feats}
+
+
+def _write_json(path, doc) -> None:
     atomic_write_text(path, json.dumps(doc, allow_nan=False, separators=(",", ":")) + "\n")
+
+
+def write_targets_geojson(path: str | PathLike, results, failures=()) -> None:
+    """targets.geojson: see `targets_geojson`."""
+    _write_json(path, targets_geojson(results, failures))
+
+
+def write_estimates_geojson(path: str | PathLike, results, max_lines_of_sight: int | None = 200) -> None:
+    """estimates.geojson: see `estimates_geojson`."""
+    _write_json(path, estimates_geojson(results, max_lines_of_sight))
 
 
 # ---- KML 2.2 --------------------------------------------------------------------------------------------------
 
 # KML SimpleField types of the attributes (KML 2.2 section 9.9: string, int, uint, short, ushort, float, double,
 # bool); GIS clients (GDAL's LIBKML driver, Google Earth) read the typed <Schema> instead of treating all as text.
-_KML_STRING_FIELDS = {"group", "target", "method", "method_label", "alt_datum", "alt_msl_datum", "status", "reason",
-                      "kind"}
-_KML_INT_FIELDS = {"iterations", "n_observations", "n_positions", "frame_count"}
-_KML_BOOL_FIELDS = {"converged"}
-ESTIMATE_KML_FIELDS = tuple(c for c in TARGETS_CSV_COLUMNS if c not in ("lat_deg", "lon_deg"))
-TRUTH_KML_FIELDS = ("group", "alt_m", "alt_datum", "alt_msl_m", "geoid_undulation_m", "alt_msl_datum",
-                    "e_m", "n_m", "u_m")
-ELLIPSE_KML_FIELDS = ("group", "method", "method_label", "confidence", "semi_major_m", "semi_minor_m",
+_KML_STRING_FIELDS = {"name", "group", "target", "status", "mgrs", "tle_category", "method", "reason", "alt_datum",
+                      "alt_msl_datum", "covariance_source"}
+_KML_INT_FIELDS = {"n_observations"}
+TARGET_KML_FIELDS = tuple(c for c in ANSWER_COLUMNS if c not in ("name", "lat_deg", "lon_deg"))  # name: <name>
+ELLIPSE_KML_FIELDS = ("group", "target", "method", "confidence", "semi_major_m", "semi_minor_m",
                       "azimuth_deg", "alt_msl_m")
-KML_SCHEMAS = {"estimate": ESTIMATE_KML_FIELDS, "truth": TRUTH_KML_FIELDS, "error_ellipse": ELLIPSE_KML_FIELDS}
+KML_SCHEMAS = {"target": TARGET_KML_FIELDS, "error_ellipse": ELLIPSE_KML_FIELDS}
 
 
 def kml_field_type(name: str) -> str:
@@ -326,8 +398,6 @@ def kml_field_type(name: str) -> str:
         return "string"
     if name in _KML_INT_FIELDS:
         return "int"
-    if name in _KML_BOOL_FIELDS:
-        return "bool"
     return "double"
 
 
@@ -357,116 +427,76 @@ def _geometry(parent: ET.Element, tag: str, lla_msl: np.ndarray) -> ET.Element:
     return g
 
 
-def kml_schemas(named: bool) -> dict[str, tuple[str, ...]]:
-    """KML_SCHEMAS, each with `target` after `group` when a flight names its targets."""
-    if not named:
-        return KML_SCHEMAS
-    return {k: tuple(x for f in v for x in ((f, "target") if f == "group" else (f,))) for k, v in KML_SCHEMAS.items()}
 
-
-def _schema_data(pm: ET.Element, schema: str, props: dict, schemas=KML_SCHEMAS) -> None:
+def _schema_data(pm: ET.Element, schema: str, props: dict) -> None:
     sd = _sub(_sub(pm, "ExtendedData"), "SchemaData", schemaUrl=f"#{schema}")
-    for k in schemas[schema]:
+    for k in KML_SCHEMAS[schema]:
         v = props.get(k)
         if v is None:
             continue  # an absent SimpleData is a null attribute
         _sub(sd, "SimpleData", str(v).lower() if isinstance(v, bool) else str(v), name=k)
 
 
-def _placemark(folder: ET.Element, name: str, style: str, schema: str | None = None,
-               props: dict | None = None, schemas=KML_SCHEMAS) -> ET.Element:
-    pm = _sub(folder, "Placemark")
+def _placemark(parent: ET.Element, name: str, style: str, schema: str, props: dict) -> ET.Element:
+    pm = _sub(parent, "Placemark")
     _sub(pm, "name", name)
     _sub(pm, "styleUrl", f"#{style}")
-    if schema is not None:
-        _schema_data(pm, schema, props or {}, schemas)
+    _schema_data(pm, schema, props)
     return pm
 
 
-def targets_kml(results: Iterable[GroupResult], max_lines_of_sight: int | None = 200) -> bytes:
-    """A KML 2.2 document: one Folder per group with the estimates, truth, 95 % ellipses, flight path and lines of
-    sight. Coordinates are absolute altitudes: heights above the EGM2008 geoid (ellipsoidal height minus the
-    geoid undulation), as KML defines altitude (above sea level). Attributes are typed by a <Schema> per kind
-    of placemark (estimate, truth, error_ellipse); the ellipsoidal height is kept in `alt_m`."""
+def _description(row: dict) -> str:
+    """The balloon text of a target's placemark: the answer as a user reads it."""
+    return (f"{row['mgrs']}; {row['alt_msl_m']:.1f} m above sea level (EGM2008), {row['alt_m']:.1f} m WGS84 "
+            f"ellipsoidal; CE90 {row['ce90_m']} m, LE90 {row['le90_m']} m ({row['tle_category']}); method "
+            f"{row['method']}, {row['n_observations']} observations")
+
+
+def targets_kml(results: Iterable[GroupResult | FlightResult], failures: Iterable[GroupFailure] = ()) -> bytes:
+    """The answers as a KML 2.2 document: one placemark per located target and its 95 % ellipse. Coordinates are
+    absolute altitudes: heights above the EGM2008 geoid (ellipsoidal height minus the geoid undulation), as KML
+    defines altitude (above sea level); the ellipsoidal height is kept in `alt_m`. Attributes are typed by a
+    <Schema> per kind of placemark (target, error_ellipse)."""
     results = list(results)
-    schemas = kml_schemas(has_named_targets(results))
-    results = per_target(results)
+    by_name = {t.label: t for t in per_target(results)}
     ET.register_namespace("", KML_NS)
     root = ET.Element(f"{{{KML_NS}}}kml")
     doc = _sub(root, "Document")
     _sub(doc, "name", "ridgeloc targets")
-    _sub(doc, "description", f"Target estimates per flight group and method. Coordinates: {ALT_MSL_DATUM} "
-                             f"(altitudeMode absolute); attribute alt_m: {ALT_DATUM}.")
-    for sid, fields in schemas.items():
+    _sub(doc, "description", f"One answer per target. Coordinates: {ALT_MSL_DATUM} (altitudeMode absolute); "
+                             f"attribute alt_m: {ALT_DATUM}.")
+    for sid, fields in KML_SCHEMAS.items():
         schema = _sub(doc, "Schema", name=sid, id=sid)
         for f in fields:
             _sub(schema, "SimpleField", name=f, type=kml_field_type(f))
-    for method, color in METHOD_COLORS.items():
-        st = _sub(doc, "Style", id=f"est-{method}")
-        icon = _sub(st, "IconStyle")
-        _sub(icon, "color", _kml_color(color))
-        _sub(_sub(icon, "Icon"), "href", "http://maps.google.com/mapfiles/kml/shapes/placemark_circle.png")
-        ls = _sub(st, "LineStyle")
-        _sub(ls, "color", _kml_color(color))
-        _sub(ls, "width", "2")
-        _sub(_sub(st, "PolyStyle"), "color", _kml_color(color, 0x40))
-    for sid, color, width in (("truth", "#000000", "2"), ("path", "#1F77B4", "3"), ("los", "#7F7F7F", "1")):
-        st = _sub(doc, "Style", id=sid)
-        icon = _sub(st, "IconStyle")
-        _sub(icon, "color", _kml_color(color))
-        _sub(_sub(icon, "Icon"), "href", "http://maps.google.com/mapfiles/kml/shapes/star.png")
-        ls = _sub(st, "LineStyle")
-        _sub(ls, "color", _kml_color(color, 0xC0 if sid == "los" else 0xFF))
-        _sub(ls, "width", width)
-    for r in results:
-        folder = _sub(doc, "Folder")
-        _sub(folder, "name", r.label)
-        tgt = {} if r.target is None else {"target": r.target}
-        rows = {row["method"]: row for row in target_rows([r])}
-        for method in ordered_methods(r.estimates):
-            e = r.estimates[method]
-            if not np.isfinite(e.position_m).all():
-                continue  # targets.csv keeps its row, with its status and reason
-            row = rows[method]
-            style = f"est-{method}" if method in METHOD_COLORS else "truth"
-            pm = _placemark(folder, f"{r.label}: {method_label(method)}", style, "estimate", row, schemas)
-            _geometry(pm, "Point", msl_lla(geodetic_from_enu(e.position_m, r.origin_lla)))
-            if row["ellipse95_semi_major_m"] is not None and row["ellipse95_semi_major_m"] >= MIN_ELLIPSE_M:
-                ring_en = ellipse_points_en_m(np.asarray(e.covariance_m2)[:2, :2], ELLIPSE_CONFIDENCE)
-                ring_enu = np.column_stack([ring_en + e.position_m[:2], np.full(len(ring_en), e.position_m[2])])
-                ring_msl = msl_lla(geodetic_from_enu(ring_enu, r.origin_lla))
-                ring_msl[-1] = ring_msl[0]
-                pm = _placemark(folder, f"{r.label}: {method_label(method)} 95 % error ellipse", style,
-                                "error_ellipse", {
-                                    "group": r.name, **tgt, "method": method, "method_label": method_label(method),
-                                    "confidence": ELLIPSE_CONFIDENCE, "semi_major_m": row["ellipse95_semi_major_m"],
-                                    "semi_minor_m": row["ellipse95_semi_minor_m"],
-                                    "azimuth_deg": row["ellipse95_azimuth_deg"], "alt_msl_m": row["alt_msl_m"]},
-                                schemas)
-                poly = _sub(pm, "Polygon")
-                _sub(poly, "altitudeMode", "absolute")
-                ring = _sub(_sub(poly, "outerBoundaryIs"), "LinearRing")
-                _sub(ring, "coordinates", _kml_coords(ring_msl))
-        if r.truth_m is not None:
-            lla = geodetic_from_enu(r.truth_m, r.origin_lla)
-            pm = _placemark(folder, f"{r.label}: truth", "truth", "truth", {**_truth_props(r, lla), **tgt}, schemas)
-            _geometry(pm, "Point", msl_lla(lla))
-        obs = r.observations
-        if obs.n >= 2:
-            pm = _placemark(folder, f"{r.label}: flight path", "path")
-            _geometry(pm, "LineString", msl_lla(geodetic_from_enu(obs.platform_m, r.origin_lla)))
-        seg, _ = lines_of_sight_m(obs, best_reference_m(r), max_lines_of_sight)
-        if len(seg):
-            pm = _placemark(folder, f"{r.label}: lines of sight", "los")
-            multi = _sub(pm, "MultiGeometry")
-            seg_msl = msl_lla(geodetic_from_enu(seg, r.origin_lla))
-            for s in seg_msl:
-                _geometry(multi, "LineString", s)
+    st = _sub(doc, "Style", id="target")
+    icon = _sub(st, "IconStyle")
+    _sub(icon, "color", _kml_color("#D55E00"))
+    _sub(_sub(icon, "Icon"), "href", "http://maps.google.com/mapfiles/kml/shapes/target.png")
+    _sub(_sub(st, "LineStyle"), "color", _kml_color("#D55E00"))
+    _sub(_sub(st, "PolyStyle"), "color", _kml_color("#D55E00", 0x40))
+    for row in answer_rows(results, list(failures)):
+        r = by_name.get(row["name"])
+        if row["status"] != "located" or r is None:
+            continue  # targets.csv and targets.geojson list it with its reason
+        a = answer_of(r)
+        pm = _placemark(doc, row["name"], "target", "target", row)
+        _sub(pm, "description", _description(row))
+        _geometry(pm, "Point", msl_lla(geodetic_from_enu(a.position_m, r.origin_lla)))
+        ring = _answer_ring_lla(r)
+        if ring is not None:
+            pm = _placemark(doc, f"{row['name']}: 95 % error ellipse", "target", "error_ellipse", {
+                "name": row["name"], "group": row["group"], "target": row["target"], "method": row["method"],
+                "confidence": ELLIPSE_CONFIDENCE, "semi_major_m": row["ellipse95_semi_major_m"],
+                "semi_minor_m": row["ellipse95_semi_minor_m"], "azimuth_deg": row["ellipse95_azimuth_deg"],
+                "alt_msl_m": row["alt_msl_m"]})
+            poly = _sub(pm, "Polygon")
+            _sub(poly, "altitudeMode", "absolute")
+            _sub(_sub(_sub(poly, "outerBoundaryIs"), "LinearRing"), "coordinates", _kml_coords(msl_lla(ring)))
     ET.indent(root)
     return ET.tostring(root, encoding="utf-8", xml_declaration=True)
 
 
-def write_targets_kml(path: str | PathLike, results: Iterable[GroupResult],
-                      max_lines_of_sight: int | None = 200) -> None:
+def write_targets_kml(path: str | PathLike, results, failures=()) -> None:
     """targets.kml: see `targets_kml`."""
-    atomic_write_bytes(path, targets_kml(results, max_lines_of_sight))
+    atomic_write_bytes(path, targets_kml(results, failures))

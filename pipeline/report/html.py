@@ -19,7 +19,7 @@ from os import PathLike
 import numpy as np
 
 from pipeline.atomic import atomic_write_text
-from pipeline.report.exports import ALT_MSL_DATUM, failure_status_reason, target_rows
+from pipeline.report.exports import ALT_MSL_DATUM, estimate_rows, failure_status_reason
 from pipeline.report.geometry import ALT_DATUM
 from pipeline.report.labels import METHOD_COLORS, method_label, ordered_methods
 from pipeline.report.versions import software_versions
@@ -144,7 +144,7 @@ def _estimates_table(r: GroupResult) -> str:
             ("CEP90 /m", "cep90_m", ""), ("σ up /m", "sigma_up_m", ""), ("Status", "status", "l"))
     head = "".join(f'<th class="{c}">{escape(t)}</th>' for t, _, c in cols)
     body = []
-    for row in target_rows([r]):
+    for row in estimate_rows([r]):
         cells = []
         for _, key, c in cols:
             v = row[key]

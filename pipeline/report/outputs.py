@@ -2,13 +2,14 @@
 
     OUTDIR/
       report.html                  self-contained report (html.py)
-      targets.csv / .geojson / .kml  GIS exports of every group (exports.py)
+      targets.csv / .geojson / .kml  the answer per target (answers.py, exports.py)
+      estimates.csv / .geojson     every method's estimate, for the comparison (exports.py)
       run.json                     groups done, failures with their messages, settings, clock offsets estimated
                                    (clock.estimate), software versions
       <group>/                     one folder per group, written atomically, then marked finished:
         result.json                the GroupResult (store.py), reused by a re-run
         map.png view3d.png residuals.png
-        targets.geojson            this group's features alone
+        estimates.geojson          this group's features alone
         .done                      hash of the configuration that produced the folder
 
 Every file and folder is written atomically (pipeline.atomic): after a crash or Ctrl-C a file is either the old
@@ -31,7 +32,15 @@ from pipeline.atomic import (
     write_done_marker,
 )
 from pipeline.errors import InputError
-from pipeline.report.exports import targets_geojson, write_targets_csv, write_targets_geojson, write_targets_kml
+from pipeline.report.answers import answer_rows
+from pipeline.report.exports import (
+    estimates_geojson,
+    write_estimates_csv,
+    write_estimates_geojson,
+    write_targets_csv,
+    write_targets_geojson,
+    write_targets_kml,
+)
 from pipeline.report.html import write_report_html
 from pipeline.report.store import load_group_result, save_group_result
 from pipeline.report.versions import software_versions
@@ -56,14 +65,14 @@ def write_group_outputs(outdir: str | PathLike, r: GroupResult, config_digest: s
     for t in per_target([r]):  # a flight with named targets: <target>/map.png ... per target
         prefix = "" if t.target is None else f"{t.target}/"
         pngs.update({f"{prefix}{k}": v for k, v in (render_group_figures(t) if figures else {}).items()})
-    geojson = json.dumps(targets_geojson([r]), allow_nan=False) + "\n"
+    geojson = json.dumps(estimates_geojson([r]), allow_nan=False) + "\n"
     r.timings_s["report"] = time.perf_counter() - t0  # the group's figures and GeoJSON, itemised with the stages
     with atomic_dir(final) as tmp:
         save_group_result(tmp / RESULT_FILE, r)
         for name, png in pngs.items():
             (tmp / f"{name}.png").parent.mkdir(parents=True, exist_ok=True)
             (tmp / f"{name}.png").write_bytes(png)
-        (tmp / "targets.geojson").write_text(geojson)
+        (tmp / "estimates.geojson").write_text(geojson)
         for name, content in (extra_files or {}).items():
             p = tmp / name
             p.parent.mkdir(parents=True, exist_ok=True)
@@ -110,13 +119,18 @@ def write_run_outputs(outdir: str | PathLike, results: Sequence[GroupResult], fa
         for t in per_target([r]):
             pngs[t.label] = _group_figures(outdir, t.name, t.target) if figures else {}
     paths = {k: outdir / f for k, f in (("csv", "targets.csv"), ("geojson", "targets.geojson"),
-                                        ("kml", "targets.kml"), ("html", "report.html"), ("run", "run.json"))}
-    write_targets_csv(paths["csv"], results)
-    write_targets_geojson(paths["geojson"], results)
-    write_targets_kml(paths["kml"], results)
+                                        ("kml", "targets.kml"), ("estimates_csv", "estimates.csv"),
+                                        ("estimates_geojson", "estimates.geojson"), ("html", "report.html"),
+                                        ("run", "run.json"))}
+    write_targets_csv(paths["csv"], results, failures)
+    write_targets_geojson(paths["geojson"], results, failures)
+    write_targets_kml(paths["kml"], results, failures)
+    write_estimates_csv(paths["estimates_csv"], results)
+    write_estimates_geojson(paths["estimates_geojson"], results)
     write_report_html(paths["html"], results, failures, settings,
                       {k: v for k, v in pngs.items() if v or not figures})
     atomic_write_text(paths["run"], json.dumps({
+        "answers": answer_rows(results, failures),
         "groups": [r.name for r in results],
         "failures": [{"name": f.name, "source": f.source, "message": f.message,
                       **({"traceback": f.detail} if getattr(f, "detail", "") else {})} for f in failures],

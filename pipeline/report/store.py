@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline import observation_file
+from pipeline.answer import Answer
 from pipeline.atomic import atomic_write_text
 from pipeline.errors import InputError
 from pipeline.results import FlightResult, GroupResult, TargetFailure
@@ -68,6 +69,7 @@ def group_result_to_json(r: GroupResult) -> dict:
         "settings": r.settings,
         "tracking": r.tracking,
         **({} if r.target is None else {"target": r.target}),
+        **({} if r.answer is None else {"answer": r.answer.to_dict()}),
     }
 
 
@@ -107,6 +109,7 @@ def group_result_from_json(doc: dict) -> GroupResult | FlightResult:
         settings=doc.get("settings", {}),
         tracking=doc.get("tracking", {}),
         target=doc.get("target"),
+        answer=None if doc.get("answer") is None else Answer.from_dict(doc["answer"]),
     )
 
 

@@ -200,7 +200,16 @@ def draw_frame(image: np.ndarray, scale: float, k: int, targets: Sequence[Overla
     def seen(px):  # an ideal pinhole pixel -> where the lens put it
         return distort_pixels(px[None], K, dist)[0] if lens else px
 
-    range_text = "no laser range"
+    # the frame's camera: every target's observations of it share it (a target dropped here borrows another's)
+    P = origin = None
+    rng = math.nan
+    for t in targets:
+        used = t.tracking.get("used") or [True] * len(t.tracking["frame_index"])
+        if used[k]:
+            j = int(sum(1 for u in used[:k] if u))  # the frame's row in this target's observations
+            P, origin, rng = t.observations.P[j], t.observations.platform_m[j], float(t.observations.range_m[j])
+            break
+    range_text = f"laser range {rng:.1f} m" if np.isfinite(rng) else "no laser range"
     status = []
     for n, t in enumerate(targets):
         colour = COLOURS_BGR[n % len(COLOURS_BGR)]
@@ -216,15 +225,8 @@ def draw_frame(image: np.ndarray, scale: float, k: int, targets: Sequence[Overla
                 canvas.cross(np.asarray(pred, dtype=float), LOST_BGR)
                 canvas.text(np.asarray(pred, dtype=float), f"{t.label}: LOST", LOST_BGR)
             status.append(f"{t.label}: LOST ({tr['via'][k]})")
-        used = tr.get("used") or [True] * len(tr["frame_index"])
-        if not used[k]:
+        if P is None:
             continue
-        j = int(sum(1 for u in used[:k] if u))  # the frame's row in the observations
-        obs = t.observations
-        P = obs.P[j]
-        rng = float(obs.range_m[j])
-        if np.isfinite(rng):
-            range_text = f"laser range {rng:.1f} m"
         if t.position_m is not None:
             uv, J = _project(P, np.asarray(t.position_m, dtype=float))
             if uv is not None:
@@ -234,7 +236,6 @@ def draw_frame(image: np.ndarray, scale: float, k: int, targets: Sequence[Overla
                     if e is not None:
                         canvas.ellipse(seen(uv), *e, ANSWER_BGR)
         # the laser's spot: the rangefinder's axis (the image centre's ray) at the target's distance
-        origin = obs.platform_m[j]
         dist_m = float(np.linalg.norm(np.asarray(t.position_m) - origin)) if t.position_m is not None else rng
         if np.isfinite(dist_m):
             _, axis = camera_rays_m(P[None], np.array([[camera["cx_px"], camera["cy_px"]]]))

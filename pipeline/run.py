@@ -4,7 +4,8 @@
 run groups in worker processes. It returns a `GroupResult` (a `FlightResult` of one per target for a flight with
 named targets, issue 21) with the wall time of each stage:
   ingest  reading telemetry and the frame index (no pixels decoded): the `pipeline.flight.Flight`,
-  decode  decoding the frames the tracker asked for,
+  decode  waiting for the frames the tracker asked for (a video's are decoded ahead on worker threads while
+          the tracker works: their decoding overlaps track, and its CPU counts there),
   track   the target mark, the clock estimate (clock.estimate), SIFT, matching, homographies and refinement,
   sync    interpolation of the vehicle state, poses, projection matrices, undistortion, the geometry check,
   solve   every estimator.

@@ -8,7 +8,9 @@ The rule (docs/outputs.md, "The answer") uses only what the flight itself shows,
    nearly parallel to fix where they meet, no baseline); and it is not below the ground by more than GROUND_SIGMAS
    of its vertical uncertainty and the ground's allow (the DEM where the flight has one, else the lowest dry land
    on Earth). The uncertainty is the method's own covariance (mle) or its answer's covariance propagated through
-   the method under the flight's stated errors (`pipeline.solve.propagate`).
+   the method under the flight's stated errors (`pipeline.solve.propagate`); what moves the answer as a whole (an
+   offset every camera's position shares, the terrain model's own error) counts in its CE90, not in whether the
+   flight's geometry determines the point.
 2. The answer is the MLE when it is a candidate and its fit checks pass: its error model fits the flight, or the
    covariance it inflated to cover the misfit grew at most MAX_FIT_INFLATION times.
 3. Otherwise the candidate with the smallest CE90 (horizontal circle holding 90 %).
@@ -32,7 +34,7 @@ from pipeline.geometry.rays import camera_rays_m
 from pipeline.solve.estimate import Estimate, Status
 from pipeline.solve.observations import Observations
 from pipeline.solve.propagate import PROPAGATED, ErrorSources, method_solver, propagate
-from pipeline.solve.uncertainty import cep_m
+from pipeline.solve.uncertainty import cep_m, horizontal
 
 #: a method is determined where its 95 % error ellipsoid's largest semi-axis is at most this fraction of its
 #: distance from the cameras
@@ -45,12 +47,14 @@ GROUND_SIGMAS = 3.0
 #: below the lowest dry land (the Dead Sea's shore, about 430 m below sea level): a ground point there is underground
 #: anywhere on Earth
 LOWEST_LAND_MSL_M = -440.0
+#: the 90 % two-sided quantile of the standard normal: LE90 = Z90 sigma_up
+Z90 = 1.6448536269514722
 #: chi-square with 3 degrees of freedom, 95 %: the ellipsoid's semi-axes are sqrt of it times the 1-sigma ones
 _CHI2_3_95 = 7.814727903251178
 #: lines of sight spanning less than this (deg) with the cameras this close (baseline, m) are named as the cause
 NARROW_SPAN_DEG = 3.0
-#: the methods an answer may come from (mle first), `dem` where the flight has a terrain model
-ELIGIBLE = ("mle", *PROPAGATED, "dem")
+#: compared, never the answer: the photos' own laser target (nothing states its uncertainty)
+NEVER_THE_ANSWER = ("dji",)
 
 
 @dataclass(frozen=True)
@@ -121,6 +125,20 @@ class Answer:
                    int(d.get("n_observations", 0)),
                    {m: Verdict.from_dict(m, v) for m, v in (d.get("methods") or {}).items()})
 
+    def summary(self) -> dict:
+        """The answer in the observations' own frame (ENU metres, no geodesy): status, method, position_m, CE90,
+        LE90, CEP50, the 95 % ellipse, the covariance and why (`ridgeloc solve`'s answer)."""
+        d = {"status": self.status, "method": self.method, "reason": self.reason,
+             "position_m": None if self.position_m is None else [float(v) for v in self.position_m]}
+        if self.covariance_m2 is not None and np.isfinite(self.covariance_m2).all():
+            u = horizontal(np.asarray(self.covariance_m2))
+            d.update(ce90_m=u["cep90_m"], le90_m=Z90 * u["sigma_up_m"], cep50_m=u["cep50_m"],
+                     ellipse95_semi_major_m=u["ellipse95_semi_major_m"],
+                     ellipse95_semi_minor_m=u["ellipse95_semi_minor_m"],
+                     ellipse95_azimuth_deg=u["ellipse95_azimuth_deg"],
+                     covariance_m2=np.asarray(self.covariance_m2).tolist(), covariance_source=self.covariance_source)
+        return d
+
     @classmethod
     def none(cls, reason: str, n_observations: int = 0) -> Answer:
         """A target without an answer (e.g. one that could not be tracked at all)."""
@@ -150,11 +168,14 @@ class Ground:
 
 
 def _ground_below(X: np.ndarray, origin_lla, ground: Ground | None) -> tuple[float, float, str]:
-    """(ground height above X's foot in ENU up m, its sigma, its name) at X: the DEM, else the lowest dry land."""
+    """(ground height above X's foot in ENU up m, its sigma, its name) at X: the DEM, else the lowest dry land
+    (-inf where neither is known: observations without their geodetic origin)."""
     if ground is not None:
         up = float(np.asarray(ground.up_m(np.array(X[0]), np.array(X[1])), dtype=np.float64).reshape(-1)[0])
         if np.isfinite(up):
             return up, ground.sigma_m, ground.name
+    if origin_lla is None:
+        return -math.inf, 0.0, "the ground"
     lat, lon, h = lla_from_enu(X, origin_lla)
     msl = h - float(geoid_undulation_m(lat, lon))
     return float(X[2]) + (LOWEST_LAND_MSL_M - msl), 0.0, "the lowest dry land on Earth (440 m below sea level)"
@@ -170,8 +191,10 @@ def _depths_ok(obs: Observations, X: np.ndarray) -> bool:
 
 def judge(method: str, e: Estimate | None, unsolved_reason: str | None, obs: Observations, origin_lla,
           covariance_m2: np.ndarray | None, covariance_source: str, ground: Ground | None = None,
-          covariance_reason: str | None = None) -> Verdict:
-    """The verdict on one method's estimate (rule 1 of the module docstring)."""
+          covariance_reason: str | None = None, offsets_m2: np.ndarray | None = None) -> Verdict:
+    """The verdict on one method's estimate (rule 1 of the module docstring). `offsets_m2`: the part of the
+    covariance that moves the answer as a whole (a position offset every camera shares, the terrain model's own
+    error): it counts in the answer's CE90 and LE90, not in whether the flight's geometry determines the point."""
     if e is None:
         why = unsolved_reason or "it gave no estimate"
         return Verdict(method, False, why[len(method) + 2:] if why.startswith(f"{method}: ") else why)
@@ -185,7 +208,8 @@ def judge(method: str, e: Estimate | None, unsolved_reason: str | None, obs: Obs
         return Verdict(method, False, f"the flight does not determine it: {why}")
     cov = np.asarray(covariance_m2, dtype=np.float64)
     ce90 = float(cep_m(cov[:2, :2], 0.9))
-    semi95 = math.sqrt(max(float(np.linalg.eigvalsh(cov).max()), 0.0) * _CHI2_3_95)
+    geometric = cov if offsets_m2 is None else cov - np.asarray(offsets_m2, dtype=np.float64)
+    semi95 = math.sqrt(max(float(np.linalg.eigvalsh(geometric).max()), 0.0) * _CHI2_3_95)
     dist = float(np.median(np.linalg.norm(obs.platform_m - X, axis=1)))
     rel = semi95 / dist if dist > 0 else math.inf
     v = dict(covariance_m2=cov, covariance_source=covariance_source, ce90_m=ce90, relative_uncertainty=rel)
@@ -234,14 +258,25 @@ def lines_of_sight(obs: Observations) -> LinesOfSight:
     pix = obs.has_pixel
     if pix.sum() < 2:
         return LinesOfSight(int(pix.sum()), 0.0, 0.0)
-    C, a = camera_rays_m(obs.P[pix], obs.pixel[pix])
+    return lines_of_sight_from_rays(*camera_rays_m(obs.P[pix], obs.pixel[pix]))
+
+
+def lines_of_sight_from_rays(C: np.ndarray, a: np.ndarray) -> LinesOfSight:
+    """The spread (`LinesOfSight`) of rays from centres C (n, 3) m along unit directions a (n, 3); of at most 256
+    of them, evenly spaced (the pairwise comparison grows with the square of their number)."""
+    n = len(C)
+    if n < 2:
+        return LinesOfSight(n, 0.0, 0.0)
+    if n > 256:
+        keep = np.unique(np.linspace(0, n - 1, 256).round().astype(int))
+        C, a = C[keep], a[keep]
     mean = a.mean(axis=0)
     mean /= np.linalg.norm(mean)
     cos = np.clip(a @ a.T, -1.0, 1.0)
     span = math.degrees(math.acos(float(cos.min())))
     across = (C - C.mean(axis=0)) - np.outer((C - C.mean(axis=0)) @ mean, mean)
     d = np.linalg.norm(across[:, None, :] - across[None, :, :], axis=-1)
-    return LinesOfSight(int(pix.sum()), span, float(d.max()))
+    return LinesOfSight(n, span, float(d.max()))
 
 
 def baseline_problem(los: LinesOfSight, has_range: bool, has_terrain: bool) -> str | None:
@@ -251,11 +286,12 @@ def baseline_problem(los: LinesOfSight, has_range: bool, has_terrain: bool) -> s
         return None
     if los.n < 2:
         return ("the target was seen in fewer than two frames and there is no laser range or terrain model: one "
-                "line of sight fixes a direction, not a point; mark it in more frames, or add a laser range or a DEM")
+                "line of sight fixes a direction, not a point; mark it in more frames, or add a laser range or a "
+                "terrain model (a flight config's terrain:, locate's --dem)")
     return (f"no baseline: the camera moved only {_fmt_m(los.baseline_m)} across its lines of sight, which span "
             f"{los.span_deg:.1f} deg, too little for them to meet, and no laser range or terrain model fixes the "
             "distance along them; fly around the target (lines of sight at least 10-20 deg apart), or add a laser "
-            "range or a DEM (terrain:)")
+            "range or a terrain model (a flight config's terrain:, locate's --dem)")
 
 
 def unsolved_reasons(failures: dict | None) -> dict[str, str]:
@@ -276,14 +312,15 @@ def choose_answer(obs: Observations, estimates: dict[str, Estimate], unsolved: d
     own error under `dem`)."""
     sources = sources if sources is not None else ErrorSources.from_sigma(obs.sigma)
     options, solvers, added = options or {}, solvers or {}, added_covariance or {}
+    shared = np.asarray(sources.shared_covariance_m2, dtype=np.float64)
     verdicts: dict[str, Verdict] = {}
     for m in [*estimates, *unsolved]:
-        if m in verdicts or m not in ELIGIBLE:
+        if m in verdicts or m in NEVER_THE_ANSWER:
             continue
         e = estimates.get(m)
-        cov, source, why = None, "", None
+        cov, source, why, offsets = None, "", None, shared
         if e is not None and np.isfinite(e.position_m).all():
-            if m == "mle":
+            if e.covariance_m2 is not None:  # the estimator's own (the mle's; a photo's ground method's)
                 cov, source = e.covariance_m2, "estimator"
             elif m in PROPAGATED or m in solvers:
                 solver = solvers.get(m) or method_solver(m, options.get(m))
@@ -291,8 +328,8 @@ def choose_answer(obs: Observations, estimates: dict[str, Estimate], unsolved: d
                     p = propagate(solver, obs, e.position_m, sources)
                 cov, source, why = p.covariance_m2, "propagated", p.reason
                 if cov is not None and m in added:
-                    cov = cov + added[m]
-        verdicts[m] = judge(m, e, unsolved.get(m), obs, origin_lla, cov, source, ground, why)
+                    cov, offsets = cov + added[m], shared + added[m]
+        verdicts[m] = judge(m, e, unsolved.get(m), obs, origin_lla, cov, source, ground, why, offsets)
     n = int(obs.n)
     mle = verdicts.get("mle")
     fit_ok, misfit = mle_fit_passes(estimates["mle"]) if mle is not None and mle.determined else (False, None)
@@ -308,9 +345,10 @@ def choose_answer(obs: Observations, estimates: dict[str, Estimate], unsolved: d
         return _located(best, estimates, verdicts, n, f"{best}: {precise}; the MLE is not taken: {why}")
     headline = baseline_problem(lines_of_sight(obs), bool(obs.has_range.any()), "dem" in estimates or ground
                                 is not None)
-    details = "; ".join(f"{m}: {v.reason}" for m, v in verdicts.items())
-    reason = headline or "no method's answer is determined by this flight"
-    return Answer(False, None, None, None, f"{reason} ({details})" if details else reason, n, verdicts)
+    if headline is None:
+        why = f" (mle: {mle.reason})" if mle is not None else ""
+        headline = f"no method's estimate is determined by this flight{why}; estimates.csv says why for each"
+    return Answer(False, None, None, None, headline, n, verdicts)
 
 
 def _located(method: str, estimates: dict[str, Estimate], verdicts: dict[str, Verdict], n: int,

@@ -33,18 +33,43 @@ from pipeline.targets import in_image
 
 #: a pixel within this fraction of the image width from the centre is taken to be where the laser points
 LASER_PIXEL_TOLERANCE = 0.01
+#: the rays of two or more marked photos agree under an image rotation when they meet in front of every camera
+#: within this angle (deg) of each ray; one rotation is chosen when only it agrees, or when its worst angle is this
+#: many times smaller than the other's (angles under ROTATION_FLOOR_DEG, a few pixels of a mark, count as equal)
+ROTATION_AGREEMENT_DEG = 5.0
+ROTATION_MARGIN = 4.0
+ROTATION_FLOOR_DEG = 0.1
+#: the `ground` method's defaults (docs/locate.md, "Answers with less"), 1 sigma: the relief between the take-off
+#: point and the target (the take-off ground stands for the target's), the error of a stated ground height, the
+#: barometric height above the take-off point (RelativeAltitude drifts by about a metre over a flight), and the
+#: gimbal's tilt and roll (gravity-referenced: a few tenths of a degree; the heading's error is the compass bias)
+GROUND_RELIEF_SIGMA_M = 5.0
+GROUND_STATED_SIGMA_M = 2.0
+RELATIVE_ALT_SIGMA_M = 1.0
+GROUND_TILT_SIGMA_DEG = 0.5
+
+
+@dataclass(frozen=True)
+class GroundAssumption:
+    """The level ground of the `ground` method: "takeoff" (each photo's alt_m - relative_alt_m) or "height"
+    (`height_m` on the photos' altitude datum); `sigma_m` its 1-sigma error at the target (None: the default)."""
+
+    kind: str
+    height_m: float | None = None
+    sigma_m: float | None = None
 
 
 @dataclass
 class PhotoLocation:
     """Every method's answer: estimates {method: Estimate} in ENU at views.origin_lla; unsolved {method: (status,
-    reason)}; the observations built."""
+    reason)}; the observations built; notes (how the image rotation was found, the weaker flat-ground answer)."""
 
     views: PhotoViews
     obs: Observations
     errors: PhotoErrorModel
     estimates: dict[str, Estimate] = field(default_factory=dict)
     unsolved: dict[str, tuple[str, str]] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
 
 
 def photo_observations(views: PhotoViews, pixel_px=None, sigma: Sigma | None = None) -> Observations:
@@ -128,25 +153,163 @@ def _with_alt(p: Photo, lat, lon, alt) -> Photo:
     return dataclasses.replace(p, lat_deg=lat, lon_deg=lon, alt_m=alt)
 
 
-def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: int = 0,
+def _ray_disagreement_deg(views: PhotoViews, pixel_px, marked: np.ndarray) -> float:
+    """The worst angle (deg) between a marked photo's ray and the direction from its camera to the rays'
+    least-squares meeting point, inf when that point lies behind a camera or the rays are parallel."""
+    from pipeline.geometry.rays import camera_rays_m, meeting_point
+
+    idx = np.flatnonzero(marked)
+    C, d = camera_rays_m(views.P[idx], views.pinhole_pixels(np.asarray(pixel_px)[idx], idx))
+    X, _, _ = meeting_point(C, d)
+    if not np.isfinite(X).all():
+        return float("inf")
+    to_x = X - C
+    depth = np.einsum("ij,ij->i", to_x, d)
+    if (depth <= 0).any():
+        return float("inf")
+    cos = depth / np.linalg.norm(to_x, axis=1)
+    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).max())
+
+
+def image_rotations(photos: list[Photo], pixel_px=None, stated: int | None = None) -> tuple[np.ndarray, str | None]:
+    """(n,) the rotation (0 or 180 deg) of each photo's stored pixels against its camera's, and a note saying how it
+    was found (None when nothing was in doubt). `stated` applies to every photo. Otherwise a photo re-saved by a
+    desktop program (Photo.resaved_by) whose pixel is off its centre is in doubt: with two or more marked photos the
+    rotation (one for all re-saved photos) is the one under which their rays meet in front of every camera
+    (ROTATION_AGREEMENT_DEG, ROTATION_MARGIN); InputError naming the photo when that cannot tell, or when it is the
+    only marked photo."""
+    n = len(photos)
+    if stated is not None:
+        if stated not in (0, 180):
+            raise InputError(f"image rotation must be 0 or 180 degrees, got {stated}")
+        return np.full(n, int(stated)), None
+    zeros = np.zeros(n, dtype=int)
+    if pixel_px is None:
+        return zeros, None
+    px = _file_pixels(photos, pixel_px)
+    marked = np.isfinite(px).all(axis=1)
+    resaved = np.array([bool(p.resaved_by) for p in photos])
+    doubt = resaved & marked & ~at_laser_pixel(photos, np.where(marked[:, None], px, 0.0))
+    if not doubt.any():
+        return zeros, None
+    first = photos[int(np.flatnonzero(doubt)[0])]
+    what = (f"re-saved after capture by {first.resaved_by!r}, which may have turned its pixels against the pose: "
+            "mark the target in a second overlapping photo (the rotation is then found from the rays), or state "
+            "--image-rotation 0 or 180")
+    if marked.sum() < 2 or any(p.intrinsics is None for p in photos):
+        raise InputError(what, path=first.path)
+    worst = {}
+    for h in (0, 180):
+        worst[h] = _ray_disagreement_deg(photo_views(photos, rotation_deg=np.where(resaved, h, 0)), px, marked)
+    good = [h for h in (0, 180) if worst[h] <= ROTATION_AGREEMENT_DEG]
+    if len(good) == 2:
+        best, other = sorted(good, key=lambda h: worst[h])
+        good = [best] if worst[other] > ROTATION_MARGIN * max(worst[best], ROTATION_FLOOR_DEG) else []
+    if len(good) != 1:
+        raise InputError(f"{what} (the {int(marked.sum())} marked photos' rays do not tell: worst angle "
+                         f"{worst[0]:.1f} deg unturned, {worst[180]:.1f} deg turned by 180)", path=first.path)
+    h = good[0]
+    names = ", ".join(p.name for p, r in zip(photos, resaved, strict=True) if r)
+    other = "behind a camera" if not np.isfinite(worst[180 - h]) else f"{worst[180 - h]:.1f} deg"
+    return np.where(resaved, h, 0), (f"image rotation {h} deg for the photos re-saved by a desktop program ({names}), "
+                                     f"found from the marked photos' rays (they meet within {worst[h]:.2f} deg; "
+                                     f"{other} under {180 - h}); state --image-rotation to override")
+
+
+def level_ground(photos: list[Photo], ground: GroundAssumption, errors: PhotoErrorModel):
+    """(FlatGround at an ellipsoidal height, sigma of the ground against the cameras, sigma of its absolute height,
+    a phrase describing it). The take-off ground is the median over the photos of alt_m - relative_alt_m (InputError
+    naming a photo that does not state its height above the take-off point)."""
+    from pipeline.terrain.flat import FlatGround
+
+    if ground.kind == "takeoff":
+        missing = [p for p in photos if not np.isfinite(p.takeoff_ground_m)]
+        if missing:
+            raise InputError("--ground takeoff needs the photo's height above the take-off point (drone-dji:"
+                             "RelativeAltitude), which it does not state: give the ground's height with "
+                             "--ground-height-m", path=missing[0].path)
+        h = photo_heights_ellipsoid_m([_with_alt(p, p.lat_deg, p.lon_deg, p.takeoff_ground_m) for p in photos])
+        relief = GROUND_RELIEF_SIGMA_M if ground.sigma_m is None else ground.sigma_m
+        rel = float(np.hypot(RELATIVE_ALT_SIGMA_M, relief))
+        ab = float(np.sqrt(errors.shared_v_m ** 2 + rel ** 2))
+        p0 = photos[0]
+        what = (f"level ground at the take-off point's height ({np.median([p.takeoff_ground_m for p in photos]):.1f} "
+                f"m {p0.alt_datum}: {p0.alt_source.split(' (')[0]} - {p0.relative_alt_source.split(' (')[0]}), "
+                f"the target's ground assumed within {relief:g} m (1 sigma) of it")
+    elif ground.kind == "height":
+        if ground.height_m is None or not np.isfinite(ground.height_m) or abs(ground.height_m) > 20_000:
+            raise InputError(f"--ground-height-m must be a height in metres, got {ground.height_m}")
+        p0 = photos[0]
+        h = photo_heights_ellipsoid_m([_with_alt(p0, p0.lat_deg, p0.lon_deg, float(ground.height_m))])
+        stated = GROUND_STATED_SIGMA_M if ground.sigma_m is None else ground.sigma_m
+        rel, ab = float(np.hypot(stated, errors.shared_v_m)), float(stated)
+        what = (f"level ground at the stated {ground.height_m:g} m ({p0.alt_datum}, as the photos' altitude), within "
+                f"{stated:g} m (1 sigma)")
+    else:
+        raise InputError(f"unknown ground {ground.kind!r} (takeoff, or a height with --ground-height-m)")
+    if ground.sigma_m is not None and not (0 <= ground.sigma_m < float("inf")):
+        raise InputError(f"--ground-sigma-m must be a finite number >= 0, got {ground.sigma_m}")
+    return FlatGround(float(np.median(h)), what), rel, ab, what
+
+
+def ground_estimate(obs: Observations, views: PhotoViews, photos: list[Photo], ground, errors: PhotoErrorModel,
+                    pixel_px) -> Estimate:
+    """The `ground` method: the rays cast onto level ground (as `dem` onto a DEM), with a covariance from the
+    assumed ground's error and the pose's (pipeline.terrain.flat.ground_covariance_m2): per photo, the mean of the
+    photos' covariances for several (their errors are mostly shared, so averaging photos shrinks little of it)."""
+    import dataclasses
+
+    from pipeline.terrain import ground_covariance_m2, locate_dem
+
+    flat, rel, ab, what = ground
+    e = locate_dem(obs, flat, views.origin_lla, labels=[p.name for p in photos],
+                   pixels_shown=_file_pixels(photos, pixel_px))
+    covs = []
+    for i, pt in enumerate(e.extras["points_m"]):
+        if pt is None:
+            continue
+        covs.append(ground_covariance_m2(
+            views.camera_m[i], views.R_enu0_from_optical[i], obs.pixel[i], views.K[i], np.asarray(pt),
+            sigma_relative_m=rel, sigma_absolute_m=ab, sigma_h_m=errors.shared_h_m,
+            sigma_yaw_deg=float(np.hypot(errors.bias_prior_deg, errors.sigma.attitude_deg)),
+            sigma_tilt_deg=float(np.hypot(GROUND_TILT_SIGMA_DEG, errors.sigma.attitude_deg)),
+            sigma_px=errors.sigma.pixel_px))
+    extras = dict(e.extras, assumption=f"a weaker answer: {what}")
+    return dataclasses.replace(e, method="ground", covariance_m2=np.mean(covs, axis=0), extras=extras)
+
+
+def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: int | None = None,
                   errors: PhotoErrorModel | None = None, dem_sigma_m: float | None = None,
-                  methods=None) -> PhotoLocation:
+                  methods=None, ground: GroundAssumption | None = None) -> PhotoLocation:
     """Run every method (or `methods`) on the photos and one pixel per photo (see photo_observations), under the
     error model `errors` (default: the source's, pipeline.photo_errors). `dem` (pipeline.terrain.Dem) adds the
     `dem` method, and the MLE's terrain prior when its vertical sigma `dem_sigma_m` is stated (as a video flight's
-    `terrain.vertical_sigma_m`: no stated sigma, no prior; docs/locate.md says why)."""
-    views = photo_views(photos, rotation_deg=rotation_deg)
+    `terrain.vertical_sigma_m`: no stated sigma, no prior; docs/locate.md says why). rotation_deg: the files' pixels
+    against the cameras' (0 or 180 for all), None to find it (image_rotations; its note in out.notes). `ground`
+    (GroundAssumption) adds the `ground` method: the weaker answer on assumed level ground, with its note."""
+    rotations, note = image_rotations(photos, pixel_px, rotation_deg)
+    views = photo_views(photos, rotation_deg=rotations)
     obs = photo_observations(views, pixel_px, None if errors is None else errors.sigma)
     if errors is None:
         errors = photo_error_model(photos, obs.range_m)
-    out = PhotoLocation(views, obs, errors)
-    wanted = list(methods) if methods is not None else [*METHODS, "dem", "dji"]
+    out = PhotoLocation(views, obs, errors, notes=[note] if note else [])
+    wanted = list(methods) if methods is not None else [*METHODS, "dem", "dji", *(["ground"] if ground else [])]
     from pipeline.terrain.flight import terrain_prior
 
     terrain = terrain_prior(dem, dem_sigma_m, views.origin_lla)
+    flat = level_ground(photos, ground, errors) if ground is not None else None
+    if flat is not None:
+        out.notes.append(f"ground: {flat[3]}; a weaker answer than a laser's or a DEM's, its uncertainty includes "
+                         "the assumed ground's (docs/locate.md)")
     for m in wanted:
         try:
-            if m == "dji":
+            if m == "ground":
+                if flat is None:
+                    out.unsolved[m] = ("insufficient_data", "no ground assumed (--ground takeoff or "
+                                                            "--ground-height-m)")
+                    continue
+                e = ground_estimate(obs, views, photos, flat, errors, pixel_px)
+            elif m == "dji":
                 e = dji_estimate(views, at_laser_pixel(photos, pixel_px))
                 if e is None:
                     out.unsolved[m] = ("insufficient_data", "no photo with the target where its laser points has "
@@ -179,13 +342,16 @@ def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: in
 def error_sources(errors: PhotoErrorModel) -> ErrorSources:
     """The errors propagated through the methods without a covariance of their own on a photo flight: the marked
     pixel and the laser per photo, the recorded attitude's photo-to-photo noise, the compass bias constant over the
-    flight, the position offset every photo shares (`pipeline.photo_errors`)."""
+    flight in pan (in tilt, the gimbal's gravity-referenced pitch: as large as its noise), the position offset every
+    photo shares (`pipeline.photo_errors`)."""
     s = errors.sigma
     defaults = ErrorSources.from_sigma(s)
+    # the compass's bias is the pan's; the gimbal's pitch, referenced to gravity, errs by its photo-to-photo noise
     return ErrorSources(pixel_px=defaults.pixel_px, range_m=defaults.range_m,
                         pointing_bias_deg=float(errors.bias_prior_deg), pointing_drift_deg=0.0,
                         pointing_noise_deg=float(s.attitude_deg or 0.0),
-                        shared_covariance_m2=errors.shared_covariance_m2())
+                        shared_covariance_m2=errors.shared_covariance_m2(),
+                        pointing_bias_tilt_deg=min(float(errors.bias_prior_deg), float(s.attitude_deg or 0.0)))
 
 
 def photo_answer(loc: PhotoLocation, dem=None, dem_sigma_m: float | None = None) -> Answer:
@@ -213,7 +379,7 @@ def estimate_row(e: Estimate, views: PhotoViews) -> dict:
     if u["ellipse95_semi_major_m"] is not None:
         row.update({k: u[k] for k in ("cep90_m", "sigma_up_m", "ellipse95_semi_major_m", "ellipse95_semi_minor_m",
                                       "ellipse95_azimuth_deg")})
-    for key in ("n_points", "missed"):
+    for key in ("n_points", "missed", "assumption"):
         if key in e.extras:
             row[key] = e.extras[key]
     bias = e.extras.get("boresight_bias")
@@ -307,32 +473,57 @@ def _photo_result(config, photos, pixels, dem, dem_sigma, notes, truth, target):
     """One target of a photo flight located: its GroupResult (target: its name, or None for the single target)."""
     import time
 
-    from pipeline.geometry.rays import intersection_angle_deg
-    from pipeline.results import GroupResult
-
     t0 = time.perf_counter()
     loc = locate_photos(photos, pixels, dem=dem, dem_sigma_m=dem_sigma)
     if not loc.estimates:
         reasons = "; ".join(f"{m}: {r}" for m, (_, r) in loc.unsolved.items())
         raise InputError(f"no method could locate the target from the photos: {reasons}", config.path)
+    return location_result(config.name, config.to_dict(), loc, notes, truth, target, dem, dem_sigma,
+                           time.perf_counter() - t0)
+
+
+def location_result(name: str, settings: dict, loc: PhotoLocation, notes: list[str], truth=None, target=None,
+                    dem=None, dem_sigma_m: float | None = None, elapsed_s: float = 0.0):
+    """A photo location as the GroupResult the outputs take (`ridgeloc run` of a photo flight, `ridgeloc locate
+    -o`): its estimates, the answer (`photo_answer`), the truth (lat, lon, h) where known, the error model in
+    the settings."""
+    from pipeline.geometry.rays import intersection_angle_deg
+    from pipeline.results import GroupResult
+
     truth_m = None if truth is None else enu_from_lla(*truth, origin_lla=loc.views.origin_lla)
-    ref = truth_m if truth_m is not None else next(iter(loc.estimates.values())).position_m
+    answer = photo_answer(loc, dem, dem_sigma_m)
+    ref = truth_m if truth_m is not None else (answer.position_m if answer.located else next(
+        (e.position_m for e in loc.estimates.values()), None))
     seen = loc.obs.has_pixel | loc.obs.has_range
-    gamma = intersection_angle_deg(loc.obs.platform_m[seen], ref) if seen.sum() >= 2 else float("nan")
-    settings = config.to_dict()
+    gamma = intersection_angle_deg(loc.obs.platform_m[seen], ref) if seen.sum() >= 2 and ref is not None else \
+        float("nan")
+    settings = dict(settings)
     settings["notes"] = list(notes)
     settings["solve_failures"] = {m: {"status": s, "reason": r} for m, (s, r) in loc.unsolved.items()}
-    settings["photos"] = [p.path for p in photos]
+    settings["photos"] = [p.path for p in loc.views.photos]
     settings["error_model"] = loc.errors.to_dict()
-    answer = photo_answer(loc, dem, dem_sigma)
-    return GroupResult(name=config.name, origin_lla=loc.views.origin_lla, observations=loc.obs,
+    return GroupResult(name=name, origin_lla=loc.views.origin_lla, observations=loc.obs,
                        estimates=loc.estimates, truth_m=truth_m, intersection_angle_deg=gamma,
-                       timings_s={"locate": time.perf_counter() - t0}, settings=settings, target=target,
-                       answer=answer)
+                       timings_s={"locate": elapsed_s}, settings=settings, target=target, answer=answer)
 
 
 def read_marks(path: str, photos) -> list:
-    """(n, 2) pixels (NaN where a photo is not listed) from a marks CSV `photo,x_px,y_px`."""
+    """(n, 2) pixels (NaN where a photo is not listed) from a marks CSV `photo,x_px,y_px`, or from the marks CSV of
+    `ridgeloc mark` (`name,frame_or_image,x_px,y_px`, pipeline.targets) holding one target."""
+    try:
+        with open(path, encoding="utf-8-sig") as f:
+            first = f.readline()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read marks: {exc}", path=path) from None
+    if first.strip().startswith("name,"):
+        from pipeline.targets import read_marks_csv
+
+        targets = read_marks_csv(path)
+        if len(targets) != 1:
+            names = ", ".join(t.name for t in targets[:5])
+            raise InputError(f"holds {len(targets)} targets ({names}): locate takes one; keep one target's rows, or "
+                             "name the file in a photo flight config's marks_file: and use `ridgeloc run`", path=path)
+        return target_pixels(targets[0], photos)
     try:
         with open(path, newline="") as f:
             rows = list(csv.DictReader(f))

@@ -9,6 +9,10 @@ Two parts:
   the GNSS offset (horizontal per axis, vertical) and the altitude datum offset. An offset shared by every camera
   moves the estimate by the same vector and shows in no residual, so `pipeline.locate` adds its covariance to the
   MLE's; against a DEM the vertical part is an error of the terrain prior, whose sigma grows by it.
+
+Checked against real lines of sight of a Skydio X2 (scripts/real_rays.py; docs/locate.md, "Real lines of sight"):
+left as they are; the per-photo part is small for photos spread over a long session, whose time span the split
+between the shared and the per-photo GNSS error does not yet take from the photos' times.
 """
 
 from __future__ import annotations

@@ -299,13 +299,10 @@ def _solve_tracked(fp: FlightPass, tracked: list[_Tracked]) -> list[tuple[dict[s
 
 
 def _result(fp: FlightPass, t: _Tracked, estimates: dict[str, Estimate], failures: dict) -> GroupResult:
-    """One target's result with the flight's settings, notes and times added. Raises an InputError when no
-    estimator could solve it."""
+    """One target's result with the flight's settings, notes and times added; where no estimator could solve it,
+    its answer says why (`not_located`)."""
     flight, plan, config = fp.flight, fp.plan, fp.flight.config
     obs, useful, inside, track, marks, notes = t.obs, t.useful, t.inside, t.track, t.marks, t.notes
-    if not estimates:
-        reasons = "; ".join(f"{m}: {f['reason']}" for m, f in failures.items())
-        raise InputError(f"no estimator could solve the flight: {reasons}", config.path)
     if "mle" in estimates:  # its fit message, boresight bias and rejected observations
         notes.extend(mle_outputs.notes(estimates["mle"].extras, obs.t_ns, plan.frame_index[useful]))
     with t.times("answer"):
@@ -316,8 +313,7 @@ def _result(fp: FlightPass, t: _Tracked, estimates: dict[str, Estimate], failure
 
     reference = t.truth_m
     if reference is None:
-        best = estimates.get("mle") or next(iter(estimates.values()))
-        reference = best.position_m
+        reference = answer.position_m if answer.located else np.full(3, np.nan)
     gamma = intersection_angle_deg(obs.platform_m, reference) if obs.n >= 2 and np.isfinite(reference).all() else \
         float("nan")
     tracking = track.to_dict()  # every planned observation frame, the dropped ones included

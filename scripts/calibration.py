@@ -1,5 +1,5 @@
 """Is the `mle` 95 % ellipsoid honest when nobody tells it the error model? Monte Carlo over error families
-the estimator is not told about (docs/solvers.md, "Calibration").
+the estimator is not told about (docs/validation.md, "Calibration").
 
 Every problem: a platform on an arc around the target (intersection angle 20-90 deg) or on a straight pass,
 slant range 2-10 km, n = 5, 10, 20 or 50 frames over a 60 s segment, f = 1000 px. The estimator is told only

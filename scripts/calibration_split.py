@@ -1,5 +1,5 @@
 """Where does the `mle` 95 % ellipsoid's width come from? The default's coverage per error family of
-scripts/calibration.py with each term of its covariance removed or scaled (docs/solvers.md, "Calibration: the
+scripts/calibration.py with each term of its covariance removed or scaled (docs/validation.md, "Calibration: the
 width per term").
 
 The terms (`pipeline.solve.mle`, the bias-size-unknown path of `solve_batch`):

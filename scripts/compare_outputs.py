@@ -7,13 +7,18 @@
 
 from __future__ import annotations
 
+import argparse
 import csv
 import sys
 from pathlib import Path
 
 
 def main(argv=None) -> int:
-    base, new = (Path(a) for a in (argv or sys.argv[1:]))
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("baseline", type=Path, help="the baseline run's output folder")
+    ap.add_argument("new", type=Path, help="the new run's output folder")
+    args = ap.parse_args(argv)
+    base, new = args.baseline, args.new
     ok = True
     b_rows = list(csv.reader((base / "table4.csv").open()))
     n_rows = list(csv.reader((new / "table4.csv").open()))

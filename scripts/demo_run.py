@@ -6,6 +6,7 @@ estimator (the generator is test support: tests/support/synthetic.py).
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -15,4 +16,6 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # this checkout's pipeline; tes
 from support.synthetic import demo_run  # noqa: E402
 
 if __name__ == "__main__":
-    demo_run(sys.argv[1] if len(sys.argv) > 1 else "out/demo")
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("outdir", nargs="?", default="out/demo", help="the run folder to write (default out/demo)")
+    demo_run(ap.parse_args().outdir)

@@ -1,6 +1,6 @@
 #!/usr/bin/env python
 """How far the learned correlation time's answer (`learned_tau.learn_tau`) moves when its start (the first,
-independent-error fit's answer) moves by 1e-6 m (docs/solvers.md, "The learned model's fit was chaotic").
+independent-error fit's answer) moves by 1e-6 m (docs/solvers.md, "Three more rules of the first fit").
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py z029 z073 z087
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/learned_tau_stability.py z029 --candidates

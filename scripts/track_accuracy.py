@@ -60,7 +60,8 @@ def true_pose_errors(cfg, truth: dict) -> tuple[dict, dict]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("config", nargs="?", default="configs/sample.yaml")
-    ap.add_argument("--true-poses", action="store_true", help="also solve with the true camera poses")
+    ap.add_argument("--true-poses", action="store_true", help="also solve with the true camera poses (the groups "
+                    "whose config gives the camera's intrinsics)")
     args = ap.parse_args(argv)
     pose_rows = []
     pooled = []
@@ -88,7 +89,7 @@ def main(argv=None) -> int:
             errs.append(float(np.hypot(*(np.array(ft.pixel_px) - np.array(t["true_target_pixel"])))))
         e = np.array(errs)
         pooled.extend(errs)
-        if args.true_poses:
+        if args.true_poses and cfg.camera.has_intrinsics:  # a field of view's K changes with the zoom: not rebuilt
             pose_rows.append((cfg.name, *true_pose_errors(cfg, truth)))
         fmt = (lambda v: f"{v:.3f}") if e.size else (lambda v: "-")
         print(f"{cfg.name:<14} {len(res.frames):>6} {e.size:>7} {lost_visible:>9} {false_reports:>5} "

@@ -501,7 +501,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--flights", type=int, default=210, help="flights, the 3 named ones included (default 210)")
     ap.add_argument("--seed", default="0", help="a seed, or several comma-separated (flights named s1/z019): mle was "
-                    "developed on seed 0, the evidence step of 2026-11-24 on seeds 1-7 (docs/zoo.md)")
+                    "developed on seed 0, the evidence step on seeds 1-7 (docs/validation.md)")
     ap.add_argument("--timeout", type=float, default=120.0, help="seconds per solve before it counts as unsolved "
                     "(an unsolved mle counts as a catastrophe; timeouts are also counted apart, they depend on the "
                     "machine's load)")

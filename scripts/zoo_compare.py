@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Two runs of the zoo side by side, flight by flight: the before / after figures of docs/zoo.md.
+"""Two runs of the zoo side by side, flight by flight: the before / after figures of docs/validation.md.
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/zoo.py --seed 0,2,4,6 --json A0.json    # at the old commit
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python scripts/zoo.py --seed 0,2,4,6 --json B0.json    # at the new one

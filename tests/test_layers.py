@@ -30,6 +30,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("flight", ("flight",)),
     ("clock estimate", ("clock_estimate",)),
     ("check", ("check",)),
+    ("flight config from files", ("autoconfig",)),
     ("per-target stages", ("target_stage",)),
     ("report", ("report",)),
     ("photo error model", ("photo_errors",)),

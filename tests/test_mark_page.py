@@ -67,18 +67,23 @@ def test_the_page_is_self_contained():
     assert not re.search(r"""(src|href)=["']https?://""", html)  # nothing from the network
 
 
-@needs_chromium
-def test_clicks_become_the_marks_csv(tmp_path):
-    page = tmp_path / "marks.html"
-    page.write_text(mark_page(_frames(), "test").replace("</body>", _CLICKS + "</body>"))
+def page_result(page: Path) -> dict:
+    """The JSON a page's test script leaves in body[data-result], after headless Chromium ran it."""
+    import json
+
     with tempfile.TemporaryDirectory() as profile:
         out = subprocess.run([CHROMIUM, *FLAGS, f"--user-data-dir={profile}", "--dump-dom", page.as_uri()],
                              capture_output=True, text=True, timeout=180)
     m = re.search(r'data-result="([^"]*)"', out.stdout)
     assert m, (out.stdout[-1500:], out.stderr[-1500:])
-    import json
+    return json.loads(unescape(m.group(1)))
 
-    res = json.loads(unescape(m.group(1)))
+
+@needs_chromium
+def test_clicks_become_the_marks_csv(tmp_path):
+    page = tmp_path / "marks.html"
+    page.write_text(mark_page(_frames(), "test").replace("</body>", _CLICKS + "</body>"))
+    res = page_result(page)
     assert res["img"] == "300x120" and res["css"] == 300  # drawn at natural size: offsets are pixels + 0.5
     assert all(float(v).is_integer() for v in res["corner"])
     assert res["dup"].startswith("duplicate name mast on frame 4")

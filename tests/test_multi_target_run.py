@@ -160,13 +160,14 @@ def test_the_report_map_shows_every_target_with_a_label_and_a_layer_per_method(r
     flight, *_ = runs
     html = report_html([flight], [], {"config": "x"}, {r.label: {} for r in flight.targets})
     probe = """<script>window.addEventListener('load', function () { setTimeout(function () {
-      var map = document.querySelector('.webmap');
+      var map = document.querySelector('.webmap:not([data-group="answers"])');
       var labels = Array.prototype.map.call(map.querySelectorAll('.leaflet-tooltip.ridgeloc-target-label'),
                                             function (t) { return t.textContent.trim(); });
       var layers = Array.prototype.map.call(map.querySelectorAll('.leaflet-control-layers-overlays label'),
                                             function (l) { return l.textContent.trim(); });
-      document.body.setAttribute('data-probe', JSON.stringify({maps: document.querySelectorAll('.webmap').length,
-                                                               labels: labels, layers: layers}));
+      document.body.setAttribute('data-probe', JSON.stringify({
+        maps: document.querySelectorAll('.webmap:not([data-group="answers"])').length, labels: labels,
+        layers: layers}));
     }, 1500); });</script>"""
     (tmp_path / "report.html").write_text(html.replace("</body>", probe + "</body>"))
     flags = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",

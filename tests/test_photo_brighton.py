@@ -87,3 +87,60 @@ def test_without_the_rotation_the_pairs_do_not_locate(photos):
         except GeometryError:
             continue
         assert np.linalg.norm(a - b) > 10.0 or a[2] > views.camera_m[i, 2]
+
+
+def _marks_csv(path, photos, rows):
+    path.write_text("photo,x_px,y_px\n" + "".join(f"{photos[i].name},{u},{v}\n" for i, (u, v) in rows))
+    return str(path)
+
+
+def test_pairs_locate_a_point_with_no_flag_and_agree(photos, tmp_path, capsys):
+    """`ridgeloc locate` of a pair with the point marked in both, no flag: the rotation is found from the two rays
+    (they meet in front of both cameras only with the files turned by 180 degrees), and the two pairs of each
+    triple agree within a few metres."""
+    import json
+
+    from pipeline.cli import main as cli_main
+    from pipeline.geometry.frames import enu_from_lla
+
+    for n, (i, px) in enumerate(MARKS):
+        answers = []
+        for pair in ((i, i + 1), (i + 1, i + 2)):
+            marks = _marks_csv(tmp_path / f"m{n}-{pair[0]}.csv", photos, [(k, px[k - i]) for k in pair])
+            cli_main(["locate", *(photos[k].path for k in pair), "--marks", marks, "--json"])
+            doc = json.loads(capsys.readouterr().out)
+            assert any("image rotation 180 deg" in note for note in doc["notes"])
+            answers.append([doc["estimates"]["dlt"][k] for k in ("lat_deg", "lon_deg", "h_m")])
+        e = enu_from_lla(*answers[1], answers[0])
+        assert np.hypot(e[0], e[1]) < 3.0 and abs(e[2]) < 5.0, (n, e)
+
+
+def test_one_re_saved_photo_off_its_centre_is_refused_in_one_line(photos, capsys):
+    from pipeline.cli import main as cli_main
+
+    assert cli_main(["locate", photos[1].path, "--pixel", "1404.2", "1340.6", "--ground", "takeoff"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Windows Photo Viewer" in err[0] and "--image-rotation 0 or 180" in err[0]
+
+
+def test_take_off_ground_answers_cover_their_error_against_the_pairs(photos):
+    """One photo, no laser, no DEM, `--ground takeoff` (the rotation stated, as the pairs found it): the weaker
+    answer's 95 % horizontal ellipse holds the two-photo answer, for every photo of every marked point."""
+    from pipeline.geometry.frames import enu_from_lla
+    from pipeline.locate import GroundAssumption, locate_photos
+
+    chi2_2_95 = 5.991
+    worst = 0.0
+    for i, px in MARKS:
+        px = np.array(px)
+        pair = locate_photos(photos[i:i + 2], px[:2], methods=["dlt"])
+        truth = pair.views.lla(pair.estimates["dlt"].position_m)
+        for k in range(3):
+            one = locate_photos([photos[i + k]], px[k:k + 1], rotation_deg=180, methods=["ground"],
+                                ground=GroundAssumption("takeoff"))
+            e = one.estimates["ground"]
+            assert "a weaker answer" in e.extras["assumption"] and any("ground:" in n for n in one.notes)
+            d = enu_from_lla(*truth, one.views.origin_lla)[:2] - e.position_m[:2]
+            worst = max(worst, float(d @ np.linalg.solve(e.covariance_m2[:2, :2], d)))
+            assert np.hypot(*d) < 6.0
+    assert worst < chi2_2_95

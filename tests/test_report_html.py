@@ -79,14 +79,14 @@ def test_report_is_self_contained_and_complete(run):
 def test_summary_highlights_the_smallest_error(run):
     out, results, _ = run
     html = (out / "report.html").read_text()
-    table = html.split("as the paper's Table 4", 1)[1].split("</table>", 1)[0]
+    table = html.split("(the paper's Table 4)", 1)[1].split("</table>", 1)[0]
     g1 = results[0]
     errors = {m: float(np.linalg.norm(e.position_m - g1.truth_m)) for m, e in g1.estimates.items()}
     best = min(errors, key=errors.get)
     cells = re.findall(r'<td class="best">([0-9.,]+)', table)
     assert cells == [f"{errors[best]:,.2f}"]  # one group with a truth, one highlighted cell
     assert table.count("no truth") == len(results[1].estimates)
-    assert "Intersection angle" in table and "<td>14<" in table  # Table 3 rows
+    assert "Angle /°" in table and "<td>14<" in table  # Table 3's columns
     # beside ours, the paper's values for a group of the same name (group1: Table 3 and the ridge row of Table 4)
     assert '<div class="paper">paper 16</div>' in table and '<div class="paper">paper 8.68</div>' in table
 

@@ -57,11 +57,11 @@ def test_a_misfit_mle_row_says_why_in_targets_csv_geojson_and_kml():
 def test_report_html_marks_a_misfit_mle_and_names_an_unsolved_methods_status():
     html = report_html([_group("misfit", consistent=False), _group("fits", consistent=True)], [], {},
                        figures={"misfit": {}, "fits": {}}, interactive=False)
-    summary = html.split("<h2>Localization error per group")[1].split("</table>")[0]
+    summary = html.split("(the paper's Table 4)</h2>")[1].split("</table>")[0]
     assert summary.count(" ‡") == 1 and f'title="{MISFIT}"' in summary
-    assert summary.count("no estimate (degenerate)") == 2
+    assert summary.count('">degenerate</td>') == 2  # the unsolved range, with its reason as the cell's title
     misfit, fits = html.split('id="group-misfit"')[1].split('id="group-fits"')
-    assert "converged ‡ (model does not fit)" in misfit and "‡" not in fits.split("<h2>Run settings")[0]
+    assert "converged ‡" in misfit and "‡" not in fits.split("<h2>Run settings")[0].split("</table>")[0]
     assert "<b>Laser ranging algorithm</b> (degenerate): range: the ranges are collinear" in misfit
 
 

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from pipeline.report.answers import determined_estimates, shown_covariance
 from pipeline.report.html import report_html
 from pipeline.report.labels import METHOD_COLORS, method_label, ordered_methods
 from pipeline.report.webmap import ASSETS, MAX_LINES_OF_SIGHT, leaflet_head, map_fragment
@@ -62,7 +63,7 @@ def _chromium(args: list[str], cwd: str) -> subprocess.CompletedProcess:
 _TOGGLE = """<script>
 window.addEventListener('load', function () {
   setTimeout(function () {
-    var map = document.querySelector('.webmap');
+    var map = document.querySelector('.webmap:not([data-group="answers"])');
     var count = function () { return map.querySelectorAll('path.leaflet-interactive').length; };
     var before = count();
     var labels = Array.prototype.slice.call(map.querySelectorAll('.leaflet-control-layers-overlays label'));
@@ -84,13 +85,14 @@ def test_chromium_draws_every_layer_and_toggles_a_method(groups, tmp_path):
     m = re.search(r'data-toggle="(\d+),(\d+),(\d+),(\d+)"', out.stdout)
     assert m, (out.stdout[-2000:], out.stderr[-2000:])
     before, after, n_labels, n_canvas = map(int, m.groups())
-    n_methods = len([e for e in g.estimates.values() if np.isfinite(e.position_m).all()])
-    n_ellipses = len([e for e in g.estimates.values() if e.covariance_m2 is not None])
+    shown = determined_estimates(g)  # the estimates the flight determines: a point each, and their ellipses
+    n_methods = len(shown)
+    n_ellipses = len([m for m in shown if shown_covariance(g, m) is not None])
     n_los = min(MAX_LINES_OF_SIGHT, g.observations.n)
     # path + start + lines of sight + a marker per method + ellipses + truth, each an SVG path
     assert before == 2 + n_los + n_methods + n_ellipses + 1, (before, n_los, n_methods, n_ellipses)
     assert n_labels == len(_layer_names(g))
-    assert after == before - 1 - ("mle" in g.estimates and g.estimates["mle"].covariance_m2 is not None)
+    assert after == before - 1 - ("mle" in shown and shown_covariance(g, "mle") is not None)
     assert n_canvas > 0  # the offline grid's tiles
 
 

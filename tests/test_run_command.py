@@ -141,11 +141,12 @@ def test_quiet_run_still_says_when_the_mle_model_does_not_fit(tmp_path, capsys, 
 
     r, misfit = _misfit_result()
     monkeypatch.setattr(pipeline.batch, "run_groups", lambda *a, **k: ([r], [], []))
-    assert main(["run", str(SAMPLE), "-o", str(tmp_path / "out"), "--no-figures", "-q"]) == 0
+    # exit 1: this toy flight's one target is not located (its only estimate lies in no camera's view)
+    assert main(["run", str(SAMPLE), "-o", str(tmp_path / "out"), "--no-figures", "-q"]) == 1
     out = capsys.readouterr().out.splitlines()
     assert out[:2] == [f"g: {misfit}", "all 1 flight(s) finished"]
     assert out[3].split() == ["target", "latitude", "longitude", "MSL", "m", "MGRS", "CE90", "m", "category", "method"]
-    assert out[4].startswith("g ") and len(out) == 5  # the answers still end a quiet run: one line per target
+    assert out[4].startswith("g ") and "NOT LOCATED" in out[4] and len(out) == 5  # the answers end a quiet run
 
 
 @pytest.fixture
@@ -231,3 +232,47 @@ def test_run_of_a_log_says_it_is_not_a_config(tmp_path, capsys):
     assert main(["run", str(manifest), "-o", str(out), "-q"]) == 1
     assert capsys.readouterr().err.splitlines() == [f"ridgeloc: flight: failed: {log}: {LOG_NOT_CONFIG}"]
     assert not out.exists()
+
+
+def test_a_run_into_another_runs_folder_is_refused_unless_overwrite(tmp_path, capsys, monkeypatch):
+    """Issue 38: OUT holding another run's finished flights is refused before any flight runs (the summary files
+    would describe one run and the folders beside them another); --overwrite removes them, so OUT is one run's."""
+    import pipeline.batch
+    from pipeline.report.outputs import write_group_outputs
+    from support.synthetic import synthetic_group
+
+    out = tmp_path / "out"
+    write_group_outputs(out, synthetic_group("someone_else", seed=1, n_frames=6), "digest", figures=False)
+    flight = SAMPLE  # configs/flights/group6.yaml
+
+    def no_flight(*args, **kwargs):
+        raise AssertionError("a flight ran before its command line was refused")
+
+    monkeypatch.setattr(pipeline.batch, "run_groups", no_flight)
+    assert main(["run", str(flight), "-o", str(out), "--no-figures", "-q"]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"ridgeloc: error: {out}: holds another run's results (someone_else): choose another output folder, or "
+        "give --overwrite to replace them"]
+    assert (out / "someone_else" / "result.json").is_file()
+    r = synthetic_group("group6", seed=2, n_frames=6)
+    monkeypatch.setattr(pipeline.batch, "run_groups", lambda *a, **k: ([r], [], []))
+    assert main(["run", str(flight), "-o", str(out), "--no-figures", "-q", "--overwrite"]) == 0
+    assert sorted(p.name for p in out.iterdir() if p.is_dir()) == ["group6"]  # its flights' folders only
+    assert [row.split(",")[0] for row in (out / "targets.csv").read_text().splitlines()[1:]] == ["group6"]
+
+
+def test_a_failed_flights_folder_from_an_earlier_run_is_removed(tmp_path):
+    """A flight that fails on a re-run loses the folder its earlier success left: targets.csv says it failed, and
+    no folder beside it says otherwise."""
+    from pipeline.report.outputs import write_run_outputs
+    from pipeline.results import GroupFailure
+    from support.synthetic import synthetic_group
+
+    out = tmp_path / "out"
+    a, b = synthetic_group("a", seed=1, n_frames=6), synthetic_group("b", seed=2, n_frames=6)
+    write_run_outputs(out, [a, b], [], {}, figures=False)
+    assert (out / "b" / ".done").is_file()
+    write_run_outputs(out, [a], [GroupFailure("b", "b.yaml", "b.yaml: file not found")], {}, figures=False)
+    assert not (out / "b").exists() and (out / "a" / ".done").is_file()
+    rows = (out / "targets.csv").read_text().splitlines()[1:]
+    assert [r.split(",")[0] for r in rows] == ["a", "b"] and "not_located" in rows[1]

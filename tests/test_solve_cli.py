@@ -63,8 +63,10 @@ def test_solve_table_and_selected_methods(capsys):
     assert main(["solve", str(EXAMPLE), "--method", "vision", "--method", "mle"]) == 0
     out = capsys.readouterr().out
     lines = out.splitlines()
-    assert lines[0].split()[:4] == ["method", "x_m", "y_m", "z_m"]
-    assert lines[1].startswith("vision") and lines[2].startswith("mle")
+    # the answer first (the weighted MLE: its fit checks pass here), then every method
+    assert lines[0].startswith("answer: mle at (") and "CE90" in lines[0] and lines[1] == ""
+    assert lines[2].split()[:4] == ["method", "x_m", "y_m", "z_m"]
+    assert lines[3].startswith("vision") and lines[4].startswith("mle")
     assert "CEP50" in out
 
 

@@ -113,7 +113,9 @@ def test_gauss_newton_matches_scipy_least_squares(method):
     # compare the costs, which ours must not exceed
     cost = 0.5 * float(residual(est.position_m) @ residual(est.position_m))
     assert cost <= 0.5 * float(residual(ref) @ residual(ref)) * (1 + 1e-12)
-    np.testing.assert_allclose(est.position_m, ref, atol=1e-3 if method == "range" else 1e-6)
+    # scipy stops where its ftol / xtol tests say (within a few 1e-6 m of the minimum, by its version and the BLAS
+    # kernel); ours must match it to 1e-5 m and, above, cost no more
+    np.testing.assert_allclose(est.position_m, ref, atol=1e-3 if method == "range" else 1e-5)
 
 
 def test_dlt_is_the_algebraic_least_squares_of_the_normalised_rows():

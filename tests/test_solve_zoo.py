@@ -1,12 +1,12 @@
 """`mle` on flights it was not written for (issue 19): a handful of scripts/zoo.py's flights, each asserting the
 no-catastrophe rule, mle error <= 2 x median(the other methods' errors) + 5 m (methods that cannot solve a flight
 are left out of the median). The full zoo (210 flights, coverage, the median rule) is `python scripts/zoo.py`;
-docs/zoo.md has its figures.
+docs/validation.md has its figures.
 
 The flights: the issue's named shapes (the continuous-video arc, the straight pass with two laser returns and a
 1.5 s occlusion, the observation file) and zoo flights of every family, among them the ones where commit c9d7636's
 mle was far beyond the bound (z020: 27.7 km, here every third observation: 26.0 m against 11.3 m; z038: 6.3 km;
-z104, z132: 1.6-1.7 x the bound; docs/zoo.md)."""
+z104, z132: 1.6-1.7 x the bound; docs/validation.md)."""
 
 from __future__ import annotations
 
@@ -40,7 +40,7 @@ def test_mle_is_no_catastrophe(name):
 
 
 # flights of other seeds (mle was developed on seed 0's, the evidence step on seeds 0-7's; `python scripts/zoo.py
-# --seed 0,1,...`, docs/zoo.md, "Flights of other seeds"), each mle's error before 2026-11-24 -> now: where the
+# --seed 0,1,...`, docs/validation.md, "How the MLE got here"), each mle's error before 2026-11-24 -> now: where the
 # first answer with a boresight bias missed and a drift model the evidence chose (outside the first answer's 99.9 %
 # ellipsoid) did not (z150 32.1 -> 1.6 m, z024 74.5 -> 1.8 m); where a drift model inside that ellipsoid missed that
 # needs the ranges' variance 1,560-2,000 x the stated, now not admitted (z019 28.4 -> 4.0 m); where the likeliest
@@ -203,8 +203,8 @@ def test_a_bias_alone_stays_in_the_evidence_whatever_its_scale():
 
 
 def test_zoo_compare_counts_flight_by_flight(tmp_path, capsys):
-    """scripts/zoo_compare.py (the before / after tables of docs/zoo.md) on two hand-made runs: one flight closer and
-    no longer a catastrophe, one further, one unchanged; the coverage counts e^T C^-1 e <= 7.81."""
+    """scripts/zoo_compare.py (the before / after tables of docs/validation.md) on two hand-made runs: one flight
+    closer and no longer a catastrophe, one further, one unchanged; the coverage counts e^T C^-1 e <= 7.81."""
     from support.zoo import script
 
     def flight(name, mle, nees, cat):

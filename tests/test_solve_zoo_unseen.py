@@ -1,4 +1,4 @@
-"""`mle` on scripts/zoo_unseen.py's flights (docs/zoo.md, "Unseen families"): the no-catastrophe rule, mle error
+"""`mle` on scripts/zoo_unseen.py's flights (docs/zoo.md, docs/validation.md): the no-catastrophe rule, mle error
 <= 2 x median(the other methods' errors) + 5 m, on lag flights (a pose stamped 150-300 ms late while the gimbal
 slews the target across the image: the pixel residuals spread 5-17 x the stated sigma). Before the boresight
 bias prior stopped growing with that spread (2026-11-24), mle put the target where the ranges pulled: s6/u018
@@ -25,7 +25,7 @@ def test_mle_is_no_catastrophe_on_a_gnss_step(seed, index):
     """A GNSS multipath jump of 3-10 m held to the end of the flight under a steady attitude: the evidence step
     weighs a drifting GNSS error with a white attitude error since 2026-11-24 (`learned_tau.candidates`); before,
     it could only tie the position's drift to the attitude's or take it white, and mle was a catastrophe on
-    these three (docs/zoo.md, "A GNSS drift under a steady attitude")."""
+    these three (docs/validation.md, "How the MLE got here")."""
     f = script("zoo_unseen").make_flight(seed, index)
     assert f.effects == ("gnss_step",)
     mle, bound, solved = catastrophe_bound(f.obs)

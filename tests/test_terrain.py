@@ -160,11 +160,11 @@ def _tiny(path, crs=None, shape=(3, 4), values=None, **kw):
     (lambda p: (p.write_bytes(b"II*\x00garbage" * 10), p)[1], "not a readable GeoTIFF DEM"),
     (lambda p: _tiny(p), "has no coordinate reference system"),
     (lambda p: _tiny(p, 'LOCAL_CS["site grid",UNIT["metre",1]]'), "unknown CRS 'site grid'"),
-    (lambda p: _tiny(p, "EPSG:4326+5703"), "unknown vertical datum 'NAVD88 height'"),
+    (lambda p: _tiny(p, "EPSG:4326+5783"), "unknown vertical datum 'DHHN92 height'"),
     (lambda p: _tiny(p, "EPSG:4326", shape=(1, 5)), "at least 2 x 2"),
     (lambda p: _tiny(p, "EPSG:4326", values=np.full((3, 4), -9999, np.float32), nodata=-9999),
      "no height data"),
-], ids=["missing", "directory", "garbage", "no-crs", "local-crs", "navd88", "one-row", "all-nodata"])
+], ids=["missing", "directory", "garbage", "no-crs", "local-crs", "dhhn92", "one-row", "all-nodata"])
 def test_unusable_dems_are_refused_in_one_line_naming_the_file(tmp_path, make, match):
     path = make(tmp_path / "bad.tif")
     with pytest.raises(InputError, match=match) as exc:
@@ -173,7 +173,7 @@ def test_unusable_dems_are_refused_in_one_line_naming_the_file(tmp_path, make, m
 
 
 def test_a_stated_vertical_datum_overrides_an_unknown_one(tmp_path):
-    path = _tiny(tmp_path / "navd.tif", "EPSG:4326+5703")
+    path = _tiny(tmp_path / "dhhn.tif", "EPSG:4326+5783")
     assert Dem.open(path, vertical_datum="orthometric").vertical.source == "stated by the user"
     with pytest.raises(InputError, match="vertical datum must be one of"):
         Dem.open(path, vertical_datum="navd88")

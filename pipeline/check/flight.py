@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.answer import baseline_problem, lines_of_sight_from_rays
 from pipeline.check.conventions import (
     Convention,
     Reading,
@@ -163,7 +164,7 @@ def try_alternatives(r: Flight, now: Reading, t_ns, pixel_px, ranges_m, configur
         except RidgelocError:
             continue
         c = cluster(o, d, ranges_m)
-        if c is None or not c.consistent:
+        if c is None or not c.consistent or c.no_baseline:  # lines of sight meeting by noise fix nothing
             continue
         if configured is not None and configured.ahead and c.spread_m >= 0.5 * configured.spread_m:
             continue
@@ -282,7 +283,9 @@ def geometry_checks(r: Flight, pixel_px: np.ndarray | None = None, t_ns: np.ndar
         warnings.append("fewer than 3 observations with a line of sight: the geometry cannot be checked")
         return GeometryResult(None, [], problems, warnings, what)
     alts: list[Alternative] = []
-    if not c.consistent:
+    if c.no_baseline and not r.config.terrain:
+        problems.append(_no_baseline(o, d))  # not a convention: nothing fixes where these lines of sight meet
+    elif not c.consistent:
         alts = try_alternatives(r, now, t_ns, pixel_px, ranges_m, c)
         where = c.describe()
         if alts:
@@ -297,7 +300,7 @@ def geometry_checks(r: Flight, pixel_px: np.ndarray | None = None, t_ns: np.ndar
         else:
             warnings.append(f"the {what} converge loosely ({where}): more than the attitude errors explain")
     rb = range_bias_problem(c)
-    if rb and not alts:
+    if rb and not alts and not c.no_baseline:
         problems.append(rb)
     warnings += cluster_warnings(c)
     if marks_ok and (c.consistent or alts):  # the first mark's line of sight against where the others meet
@@ -322,8 +325,17 @@ def run_checks(r: Flight, t_ns, pixel_px, ranges_m) -> tuple[str | None, list[st
     return _refusal(r, t_ns, pixel_px, ranges_m, c), ([] if c is None else cluster_warnings(c))
 
 
+def _no_baseline(o: np.ndarray, d: np.ndarray) -> str:
+    """The one line naming a missing baseline (`pipeline.answer.baseline_problem`, as a target's answer says it)."""
+    ok = np.isfinite(o).all(axis=1) & np.isfinite(d).all(axis=1)
+    return baseline_problem(lines_of_sight_from_rays(o[ok], d[ok]), False, False)
+
+
 def _refusal(r: Flight, t_ns, pixel_px, ranges_m, c: Cluster | None) -> str | None:
-    """`run_checks`' refusal, from the cluster c of its lines of sight."""
+    """`run_checks`' refusal, from the cluster c of its lines of sight. None without a baseline: no convention
+    can be judged, and the target's answer says why it has none."""
+    if c is not None and c.no_baseline:
+        return None
     if c is None or not c.inconsistent:
         # consistent lines of sight through a wrong mark: the gimbal (and the laser) track something else
         oa, da, _ = rays(r, t_ns)

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.answer import NARROW_SPAN_DEG
 from pipeline.geometry.rays import meeting_point
 
 # A spread above this fraction of the distance (2.9 deg) is beyond any attitude, tracking or clock error a flight
@@ -53,6 +54,12 @@ class Cluster:
     range_bias_sigma_m: float
     gamma_deg: float = math.nan
     meet_along_sigma_m: float = math.nan
+
+    @property
+    def no_baseline(self) -> bool:
+        """No laser ranges and lines of sight spanning less than NARROW_SPAN_DEG: where they meet is noise (a
+        hover, a short clip of a distant target), and no convention can be judged by it."""
+        return self.n_ranged < MIN_RAYS and not self.gamma_deg >= NARROW_SPAN_DEG
 
     @property
     def meet_undetermined(self) -> bool:

@@ -69,6 +69,15 @@ def _estimate_clock(r: Flight) -> ClockEstimate:
     return estimate_clock(r, tracker, mark)  # the first target's first mark, as `run` takes it
 
 
+def verdict_line(result: CheckResult) -> str:
+    """check's last line: the problems' count, else consistent, saying so when warnings stand above it."""
+    if result.problems:
+        return f"{len(result.problems)} problem(s)"
+    n = len(result.warnings)
+    return "consistent" if not n else f"consistent conventions, but {n} warning(s) above: read them before trusting " \
+                                      "an answer"
+
+
 def format_check(result: CheckResult) -> str:
     lines = list(result.mapping)
     g = result.geometry
@@ -76,7 +85,7 @@ def format_check(result: CheckResult) -> str:
     lines.append("geometry")
     if c is not None:
         lines.append(f"  {g.what} at {c.n} observations ({c.n_ranged} with a range): {c.describe()}"
-                     + ("" if c.consistent else "  << not converging"))
+                     + ("  << no baseline" if c.no_baseline else "" if c.consistent else "  << not converging"))
         if c.consistent and c.range_bias_m == c.range_bias_m:  # not NaN
             lines.append(f"  laser range - distance to where the lines of sight meet: {c.range_bias_m:+.1f} m "
                          f"(+-{c.range_bias_sigma_m:.1f} m)")
@@ -90,5 +99,5 @@ def format_check(result: CheckResult) -> str:
     lines += [f"  {r.line()}" for _, r in result.frame_centre]
     lines += [f"warning: {w}" for w in result.warnings]
     lines += [f"problem: {p}" for p in result.problems]
-    lines.append("consistent" if not result.problems else f"{len(result.problems)} problem(s)")
+    lines.append(verdict_line(result))
     return "\n".join(lines)

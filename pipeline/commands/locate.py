@@ -10,7 +10,8 @@ HELP = "locate a target from drone photos: one photo and a pixel (laser or DEM),
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("photos", nargs="+", metavar="PHOTO", help="DJI-style JPEG photos, or folders of them")
+    parser.add_argument("photos", nargs="+", metavar="PHOTO",
+                        help="drone JPEG photos (DJI, Skydio, Parrot, Teal, Autel; docs/ingest.md), or folders of them")
     parser.add_argument("--dem", metavar="DEM.tif", help="a GeoTIFF terrain model: adds the `dem` method")
     where = parser.add_mutually_exclusive_group()
     where.add_argument("--pixel", nargs=2, type=float, metavar=("X", "Y"),
@@ -20,8 +21,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             "not listed have no pixel")
     parser.add_argument("--alt-datum", choices=("amsl", "ellipsoid"), default=None,
                         help="datum of drone-dji:AbsoluteAltitude / EXIF GPSAltitude (default amsl; docs/ingest.md)")
-    parser.add_argument("--image-rotation", type=int, choices=(0, 180), default=0,
-                        help="180 when the files were turned upside down after capture (docs/ingest.md)")
+    parser.add_argument("--image-rotation", type=int, choices=(0, 180), default=None,
+                        help="180 when the files were turned upside down after capture, 0 when not (default: found "
+                             "from two or more marked photos where a desktop program re-saved them; docs/locate.md)")
     parser.add_argument("--bias-prior-deg", type=float, default=None,
                         help="1-sigma prior of the compass/gimbal-yaw bias constant over the flight (default 3; 0: no "
                              "bias state; docs/locate.md, \"Error model\")")
@@ -34,7 +36,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dem-sigma-m", type=float, default=None,
                         help="the DEM's vertical error at the target, 1 sigma (m): adds the DEM as the MLE's terrain "
                              "prior (default: none, the `dem` method only; docs/terrain.md says what to state)")
-    parser.add_argument("--json", action="store_true", help="print one JSON document")
+    parser.add_argument("--dem-datum", choices=("orthometric", "ellipsoidal"), default=None,
+                        help="the DEM's heights, when its file does not say or says something ridgeloc does not know "
+                             "(docs/terrain.md)")
+    level = parser.add_mutually_exclusive_group()
+    level.add_argument("--ground", choices=("takeoff",), default=None,
+                       help="without laser or DEM: assume the target on level ground at the take-off point's height "
+                            "(altitude minus the height above take-off, where the photo states both): the `ground` "
+                            "method, a weaker answer (docs/locate.md)")
+    level.add_argument("--ground-height-m", type=float, default=None, metavar="H",
+                       help="as --ground, with the ground at H m on the photos' altitude datum (AMSL unless "
+                            "--alt-datum ellipsoid)")
+    parser.add_argument("--ground-sigma-m", type=float, default=None, metavar="S",
+                        help="1-sigma error of the assumed ground at the target (default 5 m for the take-off "
+                             "ground's relief, 2 m for a stated height)")
+    parser.add_argument("-o", "--outdir", default=None,
+                        help="also write the run outputs there: targets.csv/.geojson/.kml (the answer), estimates.csv/"
+                             ".geojson (every method), report.html, run.json (docs/outputs.md)")
+    parser.add_argument("--name", default=None,
+                        help="the target's name in the outputs (default: the first photo's folder name)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace the results of another run in the --outdir folder")
+    parser.add_argument("--json", action="store_true", help="print one JSON document, the answer first")
 
 
 def stated_errors(photos, args):
@@ -59,19 +82,44 @@ def stated_errors(photos, args):
     return errors
 
 
+def _default_name(paths) -> str:
+    """The target's name when --name is not given: the folder of the first photo (or the folder given)."""
+    from pathlib import Path
+
+    first = Path(paths[0]).resolve()
+    return (first if first.is_dir() else first.parent).name or "photos"
+
+
 def main(args) -> int:
     from pipeline.errors import InputError
     from pipeline.ingest.photo import read_photos
     from pipeline.locate import check_pixels, estimate_row, locate_photos, read_marks
 
+    if args.outdir is not None:  # refused before any work: a file there, or another run's results
+        from pathlib import Path
+
+        from pipeline.commands import output_folder
+        from pipeline.report.outputs import claim_output_folder
+
+        output_folder(args.outdir)
+        claim_output_folder(args.outdir, [args.name or _default_name(args.photos)], args.overwrite)
     terrain = None
     if args.dem_sigma_m is not None and not args.dem:
         raise InputError("--dem-sigma-m is the DEM's vertical error: give the DEM with --dem")
+    if args.dem_datum is not None and not args.dem:
+        raise InputError("--dem-datum is the DEM's vertical datum: give the DEM with --dem")
+    if args.ground_sigma_m is not None and args.ground is None and args.ground_height_m is None:
+        raise InputError("--ground-sigma-m is the assumed ground's error: give --ground takeoff or --ground-height-m")
+    ground = None
+    if args.ground is not None or args.ground_height_m is not None:
+        from pipeline.locate import GroundAssumption
+
+        ground = GroundAssumption("takeoff" if args.ground else "height", args.ground_height_m, args.ground_sigma_m)
     if args.dem:
         from pipeline.flight_config import Terrain
 
         try:
-            terrain = Terrain(dem=args.dem, vertical_sigma_m=args.dem_sigma_m)
+            terrain = Terrain(dem=args.dem, vertical_sigma_m=args.dem_sigma_m, vertical_datum=args.dem_datum)
         except ValueError:
             raise InputError(f"--dem-sigma-m must be a finite number > 0, got {args.dem_sigma_m}") from None
     photos, bad = read_photos(args.photos, alt_datum=args.alt_datum)
@@ -92,22 +140,38 @@ def main(args) -> int:
     dem = open_flight_dem(terrain)
     errors = stated_errors(photos, args)
     loc = locate_photos(photos, pixels, dem=dem, rotation_deg=args.image_rotation, errors=errors,
-                        dem_sigma_m=args.dem_sigma_m)
+                        dem_sigma_m=args.dem_sigma_m, ground=ground)
+    from pathlib import Path
+
+    from pipeline.locate import location_result
+    from pipeline.report.answers import answer_row, answers_text
+
+    notes = list(loc.notes)
+    if dem is not None and args.dem_sigma_m is None:
+        notes.append("the DEM serves the dem method only: state its vertical error with --dem-sigma-m to add it to "
+                     "the mle as a terrain prior (docs/terrain.md)")
+    name = args.name or _default_name(args.photos)
+    result = location_result(name, {"command": "locate", "photos": [p.path for p in photos]}, loc, notes,
+                             dem=dem, dem_sigma_m=args.dem_sigma_m)
+    answer = answer_row(result)
     rows = {m: estimate_row(e, loc.views) for m, e in loc.estimates.items()}
     for m, (status, reason) in loc.unsolved.items():
         rows[m] = {"status": status, "reason": reason}
-    doc = {"photos": [p.path for p in photos], "bad_photos": [{"path": p, "error": e} for p, e in bad],
+    doc = {"answer": answer, "photos": [p.path for p in photos],
+           "bad_photos": [{"path": p, "error": e} for p, e in bad],
            "origin_lla": list(loc.views.origin_lla), "ranges_used": int(loc.obs.has_range.sum()),
-           "error_model": loc.errors.to_dict(),
-           "estimates": rows, "notes": []}
-    if dem is not None and args.dem_sigma_m is None:
-        doc["notes"].append("the DEM serves the dem method only: state its vertical error with --dem-sigma-m to "
-                            "add it to the mle as a terrain prior (docs/terrain.md)")
+           "error_model": loc.errors.to_dict(), "estimates": rows, "notes": notes}
+    if args.outdir is not None:
+        from pipeline.report.outputs import write_run_outputs
+
+        write_run_outputs(args.outdir, [result], [], {"command": "locate", "outdir": str(args.outdir)},
+                          rewrite_groups=True)
     if args.json:
         print(json.dumps(doc, indent=2))
     else:
-        print(f"{len(photos)} photo(s), {doc['ranges_used']} laser range(s) used"
-              + (f", {len(bad)} unreadable" if bad else ""))
+        print(answers_text([answer]))
+        print(f"\n{len(photos)} photo(s), {doc['ranges_used']} laser range(s) used"
+              + (f", {len(bad)} unreadable" if bad else "") + "; every method:")
         for m, r in rows.items():
             if "lat_deg" in r:
                 cep = "" if r["cep50_m"] is None else f"  CEP50 {r['cep50_m']:.2f} m"
@@ -117,8 +181,9 @@ def main(args) -> int:
                 print(f"  {m:10s} {r['status']}: {r['reason']}")
         for note in doc["notes"]:
             print(f"note: {note}")
-    if not loc.estimates:  # like `ridgeloc solve`: exit 0 only when at least one method located the target
-        print("ridgeloc: error: no method located the target from these photos (the reasons above; several "
-              "photos need the target marked in each: --marks or --pixel)", file=sys.stderr)
+        if args.outdir is not None:
+            print(f"wrote {Path(args.outdir) / 'targets.csv'} and the rest of the run outputs in {args.outdir}")
+    if answer["status"] != "located":  # exit 0 only with an answer
+        print(f"ridgeloc: error: the target is not located: {answer['reason']}", file=sys.stderr)
         return 1
     return 1 if bad else 0

@@ -30,6 +30,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scheduler", default=None,
                         help="Dask scheduler address, e.g. tcp://host:8786 (default: a local Dask cluster)")
     parser.add_argument("--force", action="store_true", help="redo flights whose outputs are already finished")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="the output folder holds another run's results: replace them (else refused)")
     parser.add_argument("--no-figures", action="store_true", help="skip the per-group figures (faster)")
     parser.add_argument("--overlay", action="store_true",
                         help="also write overlay.mp4 per video flight: the observation frames with the tracked "
@@ -112,6 +114,9 @@ def main(args) -> int:
         else:
             loaded.append((entry.source, entry.config))
     jobs = [Job(cfg.name, source, cfg) for source, cfg in loaded]
+    from pipeline.report.outputs import claim_output_folder
+
+    claim_output_folder(args.outdir, [j.name for j in jobs] + [f.name for f in config_failures], args.overwrite)
     # an overlay asked for is part of what a finished folder must hold
     digests = {cfg.name: job_digest({**cfg.to_dict(), **({"overlay": True} if args.overlay else {})},
                                     _input_files(cfg)) for _, cfg in loaded}
@@ -147,8 +152,11 @@ def main(args) -> int:
         print(f"wrote {Path(args.outdir) / 'report.html'}, targets.csv/.geojson/.kml, estimates.csv/.geojson, {md} "
               f"and {tab} in {t2 - t0:.2f} s")
     print(summarize_failures(failures, len(entries)).splitlines()[0])
+    located = True
     if results:
         from pipeline.report.answers import answer_rows, answers_text
 
-        print("\n" + answers_text(answer_rows(results, failures)))
-    return 1 if failures or not_located else 0
+        rows = answer_rows(results, failures)
+        located = all(row["status"] == "located" for row in rows)
+        print("\n" + answers_text(rows))
+    return 1 if failures or not_located or not located else 0

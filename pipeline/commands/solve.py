@@ -64,12 +64,22 @@ def _table(results: dict, failures: dict, truth, t_ns=None) -> str:
     return "\n".join(lines + notes)
 
 
+def _answer_line(a: dict) -> str:
+    """The answer in one line (docs/outputs.md, "The answer")."""
+    if a["status"] != "located":
+        return f"answer: not located: {a['reason']}"
+    x, y, z = a["position_m"]
+    acc = "" if "ce90_m" not in a else f", CE90 {a['ce90_m']:.2f} m, LE90 {a['le90_m']:.2f} m"
+    return f"answer: {a['method']} at ({x:.3f}, {y:.3f}, {z:.3f}) m{acc} ({a['reason']})"
+
+
 def main(args) -> int:
     from pipeline.observation_file import load
     from pipeline.solve import solve, unsolved_status  # the CLI builds every command's parser: solve loads scipy
 
     obs = load(args.observations)
     results: dict = {}
+    estimates: dict = {}
     failures: dict = {}
     every = not args.method or "all" in args.method
     for name in _methods(args.method):
@@ -79,12 +89,18 @@ def main(args) -> int:
             failures[name] = {"status": unsolved_status(exc), "reason": str(exc)}
             continue
         results[name] = est.to_dict(obs.truth_m)
+        estimates[name] = est
+    from pipeline.answer import choose_answer
+
+    # the answer in the file's own frame: an observations file has no geodetic origin, so no ground below it
+    answer = choose_answer(obs, estimates, {m: f["reason"] for m, f in failures.items()}, None).summary()
     if args.json:
-        doc: dict = {"estimates": results}
+        doc: dict = {"answer": answer, "estimates": results}
         if failures:
             doc["unsolved"] = failures
         print(json.dumps(doc, indent=1, default=_json_default))
     else:
+        print(_answer_line(answer) + "\n")
         print(_table(results, failures, obs.truth_m, obs.t_ns))
     sys.stdout.flush()
     if failures and (not every or not results):

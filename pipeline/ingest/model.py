@@ -35,7 +35,8 @@ def _check_series(name: str, t_ns: np.ndarray, **columns: np.ndarray) -> None:
 
 @dataclass(frozen=True)
 class PositionSeries:
-    """Platform position: t_ns (n,), lat_deg (n,), lon_deg (n,), alt_m (n,) on `alt_datum`."""
+    """Platform position: t_ns (n,), lat_deg (n,), lon_deg (n,), alt_m (n,) on `alt_datum`. sigma_m: the standard
+    deviation per axis the source states for its fixes (ROS NavSatFix covariance), None where it states none."""
 
     t_ns: np.ndarray
     lat_deg: np.ndarray
@@ -44,6 +45,7 @@ class PositionSeries:
     alt_datum: str
     source: str = ""
     clock: str = "unknown"
+    sigma_m: float | None = None
 
     def __post_init__(self):
         if self.alt_datum not in ALT_DATUMS:
@@ -54,12 +56,14 @@ class PositionSeries:
 
 @dataclass(frozen=True)
 class AttitudeSeries:
-    """Vehicle attitude: t_ns (n,), quat_wxyz (n, 4) rotating body FRD -> local level NED."""
+    """Vehicle attitude: t_ns (n,), quat_wxyz (n, 4) rotating body FRD -> local level NED. sigma_deg: the
+    standard deviation per axis the source states (ROS Imu orientation covariance), None where it states none."""
 
     t_ns: np.ndarray
     quat_wxyz: np.ndarray
     source: str = ""
     clock: str = "unknown"
+    sigma_deg: float | None = None
 
     def __post_init__(self):
         _check_series(f"attitude series {self.source!r}", self.t_ns, quat=self.quat_wxyz)
@@ -68,13 +72,14 @@ class AttitudeSeries:
 @dataclass(frozen=True)
 class GimbalSeries:
     """Gimbal attitude: t_ns (n,), quat_wxyz (n, 4) rotating gimbal FRD -> local level NED (yaw possibly
-    relative to the vehicle heading: yaw_in_vehicle_frame (n,) bool)."""
+    relative to the vehicle heading: yaw_in_vehicle_frame (n,) bool). sigma_deg as AttitudeSeries'."""
 
     t_ns: np.ndarray
     quat_wxyz: np.ndarray
     yaw_in_vehicle_frame: np.ndarray
     source: str = ""
     clock: str = "unknown"
+    sigma_deg: float | None = None
 
     def __post_init__(self):
         _check_series(f"gimbal series {self.source!r}", self.t_ns, quat=self.quat_wxyz,

@@ -6,9 +6,13 @@ Libraries: Pillow reads the image size, the EXIF and GPS IFDs and the raw XMP pa
 getxmp uses it); exifread decodes the DJI MakerNote (older DJI photos carry the attitude only there). All three
 are pure Python wheels (Pillow's C code is in its wheel); no system binary (exiftool) is needed.
 
-Conventions (DJI): Gimbal*/Flight* Yaw, Pitch, Roll degrees are the ZYX (yaw-pitch-roll) Euler angles of the
-gimbal / body FRD frame in the local NED frame at the aircraft, yaw from true north, gimbal yaw earth-referenced;
-pitch -90 looks straight down.
+Conventions: every maker's pose tags (pipeline.ingest.photo_makers) are read into DJI's: Gimbal*/Flight* Yaw,
+Pitch, Roll degrees are the ZYX (yaw-pitch-roll) Euler angles of the gimbal / body FRD frame in the local NED frame
+at the aircraft, yaw from true north, gimbal yaw earth-referenced; pitch -90 looks straight down.
+
+Pixels are those of the stored image (its pixel grid as the file holds it, whatever EXIF Orientation says), which is
+the camera's unless a desktop program re-saved the file (`resaved_by`): such a program may have turned the pixels
+(pipeline.locate decides 0 or 180 degrees from two or more marked photos, or the user states it).
 """
 
 from __future__ import annotations
@@ -23,17 +27,18 @@ import numpy as np
 
 from pipeline.errors import InputError
 from pipeline.ingest.boundary import reader_boundary
-from pipeline.ingest.photo_camera import PhotoIntrinsics, photo_intrinsics
+from pipeline.ingest.photo_camera import PhotoIntrinsics, database_entry, dji_calibration, photo_intrinsics
+from pipeline.ingest.photo_makers import NS_DJI, NS_RDF, POSE_TAGS_LOOKED_FOR, MakerPose, read_maker_pose
 
 PHOTO_SUFFIXES = (".jpg", ".jpeg")
-NS_DJI = "http://www.dji.com/drone-dji/1.0/"
-NS_RDF = "http://www.w3.org/1999/02/22-rdf-syntax-ns#"
-# Namespaces of other makers whose pose tags this reader recognises but does not read (conventions unverified).
-OTHER_MAKER_NAMESPACES = {
-    "http://www.parrot.com/drone-parrot/1.0/": "Parrot (drone-parrot)",
-    "https://www.skydio.com/drone-skydio/1.0/": "Skydio (drone-skydio)",
-    "http://pix4d.com/camera/1.0/": "Autel / Pix4D camera (Camera:)",
-}
+NS_XMP_MM = "http://ns.adobe.com/xap/1.0/mm/"
+NS_ST_EVT = "http://ns.adobe.com/xap/1.0/sType/ResourceEvent#"
+#: desktop programs (lower case, matched as substrings of EXIF Software, xmp:CreatorTool and the xmpMM:History
+#: software agents) that re-save photos and may turn their pixels; a camera's firmware name is not among them
+DESKTOP_PROGRAMS = ("photoshop", "lightroom", "camera raw", "windows photo", "microsoft photos", "gimp", "picasa",
+                    "paint", "preview", "iphoto", "apple photos", "acdsee", "irfanview", "xnview", "faststone",
+                    "snapseed", "digikam", "shotwell", "darktable", "rawtherapee", "capture one", "affinity",
+                    "pixelmator", "luminar", "google photos", "photos app", "imagemagick")
 LRF_VALID_STATUS = "normal"
 ALT_DATUMS_PHOTO = ("amsl", "ellipsoid")
 MAX_XMP_BYTES = 1 << 20  # DJI packets are ~10-20 kB; a larger one is refused rather than parsed
@@ -75,6 +80,10 @@ class Photo:
     rtk_std_m: tuple[float, float, float] | None = None  # RtkStdLon, RtkStdLat, RtkStdHgt
     gps_t_ns: int | None = None  # EXIF GPSDateStamp + GPSTimeStamp (UTC)
     warnings: tuple[str, ...] = field(default_factory=tuple)
+    maker: str = "DJI"  # whose pose tags were read (pipeline.ingest.photo_makers)
+    relative_alt_source: str = ""  # the tag of relative_alt_m (height above the take-off point)
+    resaved_by: str = ""  # the desktop program that re-saved the file ("": none named; its pixels are the camera's)
+    orientation: int = 1  # EXIF Orientation as written (pixels are always the stored image's)
 
     @property
     def lrf_valid(self) -> bool:
@@ -84,10 +93,15 @@ class Photo:
     def name(self) -> str:
         return Path(self.path).name
 
+    @property
+    def takeoff_ground_m(self) -> float:
+        """The take-off point's height on `alt_datum`: alt_m - relative_alt_m (NaN where the photo does not state
+        both)."""
+        return self.alt_m - self.relative_alt_m
 
-def parse_xmp(packet: bytes, path) -> dict[tuple[str, str], str]:
-    """{(namespace URI, local name): text} of every property in an XMP packet, written as attributes of
-    rdf:Description or as simple child elements. Raises InputError (naming `path`) for a corrupt packet."""
+
+def parse_xmp_tree(packet: bytes, path):
+    """The root element of an XMP packet (defusedxml). Raises InputError (naming `path`) for a corrupt packet."""
     import defusedxml.ElementTree as DET
     from defusedxml import DefusedXmlException
 
@@ -95,12 +109,18 @@ def parse_xmp(packet: bytes, path) -> dict[tuple[str, str], str]:
         raise InputError(f"XMP packet of {len(packet)} bytes (more than {MAX_XMP_BYTES}): refused", path=path)
     text = packet.strip(b"\x00 \t\r\n")
     try:
-        root = DET.fromstring(text)
+        return DET.fromstring(text)
     except DefusedXmlException as exc:
         raise InputError(f"corrupt XMP packet (forbidden XML construct: {type(exc).__name__})", path=path) from None
     except Exception as exc:  # xml.etree.ElementTree.ParseError and friends
         raise InputError(f"corrupt XMP packet ({str(exc).splitlines()[0][:120] if str(exc) else type(exc).__name__})",
                          path=path) from None
+
+
+def xmp_properties(root) -> dict[tuple[str, str], str]:
+    """{(namespace URI, local name): text} of every property of an XMP tree written as an attribute of any element or
+    as a simple child element (the first occurrence of a name wins; structs with repeated field names, as
+    Skydio's, are read from the tree itself)."""
     out: dict[tuple[str, str], str] = {}
     for el in root.iter():
         for key, value in el.attrib.items():
@@ -113,6 +133,29 @@ def parse_xmp(packet: bytes, path) -> dict[tuple[str, str], str]:
             if ns != NS_RDF:
                 out.setdefault((ns, name), el.text.strip())
     return out
+
+
+def _history_agents(root) -> list[str]:
+    """The xmpMM:History software agents (stEvt:softwareAgent) of an XMP tree: the programs that saved the file."""
+    if root is None:
+        return []
+    agents = []
+    for el in root.iter():
+        agent = el.attrib.get(f"{{{NS_ST_EVT}}}softwareAgent")
+        if agent is None and isinstance(el.tag, str) and el.tag == f"{{{NS_ST_EVT}}}softwareAgent" and el.text:
+            agent = el.text
+        if agent and agent.strip() not in agents:
+            agents.append(agent.strip())
+    return agents
+
+
+def desktop_program(names) -> str:
+    """The first of `names` (EXIF Software, xmp:CreatorTool, history agents) that is a desktop program
+    (DESKTOP_PROGRAMS), "" when none is."""
+    for n in names:
+        if n and any(p in n.lower() for p in DESKTOP_PROGRAMS):
+            return n.strip()
+    return ""
 
 
 def _float(value) -> float:
@@ -236,17 +279,47 @@ def _maker_note_attitude(path) -> tuple[tuple[float, float, float] | None, tuple
     return (gimbal if ok(gimbal) else None), (body if ok(body) else None)
 
 
-def _is_camera_firmware(text: str, make: str) -> bool:
-    """True for an EXIF Software value a camera writes (DJI: a firmware version such as 'v01.02.5318' or the
-    model), False for a desktop program's name."""
-    t = text.strip().lower()
-    return bool(t) and (t[0] in "v0123456789" or (make and t.startswith(make.strip().lower())))
+def _maker_note_pose(path) -> MakerPose | None:
+    gimbal, body = _maker_note_attitude(path)
+    if gimbal is None:
+        return None
+    return MakerPose(maker="DJI", gimbal_ypr_deg=gimbal, flight_ypr_deg=body,
+                     attitude_source="DJI MakerNote CameraYaw/Pitch/Roll, Yaw/Pitch/Roll", alt_datum="amsl")
+
+
+def _camera_size(exif_ifd: dict, width: int, height: int, resaved_by: str, p: Path,
+                 warnings: list[str]) -> tuple[int, int] | None:
+    """The camera's frame (EXIF PixelXDimension/PixelYDimension, 40962/40963) when the stored image was resized
+    from it; None when they agree or are not stated. InputError when the stored image is the camera's turned by 90
+    degrees, or cropped by the program that re-saved it (its pixels cannot be mapped back)."""
+    try:
+        cw, ch = int(exif_ifd.get(40962, 0) or 0), int(exif_ifd.get(40963, 0) or 0)
+    except (TypeError, ValueError):
+        return None
+    if cw <= 0 or ch <= 0 or (cw, ch) == (width, height):
+        return None
+    if (cw, ch) == (height, width):
+        raise InputError(f"stored {width}x{height} px, but the camera wrote {cw}x{ch} (EXIF PixelXDimension/"
+                         "PixelYDimension): the image was turned by 90 degrees after capture; use the camera's "
+                         "original file", path=p)
+    if abs(width / cw * ch - height) <= 1.0:
+        warnings.append(f"resized after capture from {cw}x{ch} to {width}x{height} px: intrinsics scaled by "
+                        f"{width / cw:.4g}")
+        return cw, ch
+    if resaved_by:
+        raise InputError(f"stored {width}x{height} px is not the camera's {cw}x{ch} (EXIF PixelXDimension/"
+                         f"PixelYDimension) scaled: cropped by {resaved_by!r} after capture?; use the camera's "
+                         "original file", path=p)
+    warnings.append(f"EXIF PixelXDimension/PixelYDimension {cw}x{ch} differ from the stored {width}x{height} px: "
+                    "ignored")
+    return None
 
 
 def read_photo(path, alt_datum: str | None = None) -> Photo:
-    """One photo's metadata. alt_datum overrides the datum of AbsoluteAltitude / GPSAltitude ("amsl" by default:
-    see docs/ingest.md). Raises InputError naming the file when it is not a readable JPEG, has no GPS position,
-    no gimbal attitude, a corrupt XMP packet, or a position or angle out of range."""
+    """One photo's metadata. alt_datum overrides the datum of the altitude tag (default: the maker's, see
+    docs/ingest.md). Raises InputError naming the file when it is not a readable JPEG, has no GPS position,
+    no camera attitude of any maker ridgeloc reads, a corrupt XMP packet, a position or angle out of range, or
+    pixels that cannot be mapped to the camera's (turned by 90 degrees, or cropped, after capture)."""
     from PIL import Image, UnidentifiedImageError
 
     p = Path(path)
@@ -273,56 +346,74 @@ def read_photo(path, alt_datum: str | None = None) -> Photo:
         packet = packet.encode()
     warnings: list[str] = [f"Pillow: {str(w.message).strip()[:160]}" for w in caught
                            if issubclass(w.category, UserWarning)]  # e.g. "Corrupt EXIF data"
-    xmp = parse_xmp(packet, p) if packet else {}
+    root = parse_xmp_tree(packet, p) if packet else None
+    xmp = xmp_properties(root) if root is not None else {}
     dji = {name: v for (ns, name), v in xmp.items() if ns == NS_DJI}
-    others = sorted({OTHER_MAKER_NAMESPACES[ns] for ns, _ in xmp if ns in OTHER_MAKER_NAMESPACES})
     make = _text(base.get(271, "")) or xmp.get(("http://ns.adobe.com/tiff/1.0/", "Make"), "")
     model = _text(base.get(272, "")) or xmp.get(("http://ns.adobe.com/tiff/1.0/", "Model"), "")
 
-    lat = _dms(gps.get(2), gps.get(1), "N") if 2 in gps else _float(dji.get("GpsLatitude"))
-    lon = _dms(gps.get(4), gps.get(3), "E") if 4 in gps else _float(dji.get("GpsLongitude", dji.get("GpsLongtitude")))
+    pose = read_maker_pose(xmp, root, make, model)
+    if pose is None and make.upper().startswith("DJI"):
+        pose = _maker_note_pose(p)
+    if pose is None:
+        raise InputError(f"no gimbal attitude (none of {POSE_TAGS_LOOKED_FOR})", path=p)
+    warnings += pose.notes
+
+    lat = _dms(gps.get(2), gps.get(1), "N") if 2 in gps else pose.lat_deg
+    lon = _dms(gps.get(4), gps.get(3), "E") if 4 in gps else pose.lon_deg
     if not (math.isfinite(lat) and math.isfinite(lon)):
-        raise InputError("no GPS position (EXIF GPSLatitude/GPSLongitude, drone-dji:GpsLatitude/GpsLongitude)", path=p)
+        raise InputError("no GPS position (EXIF GPSLatitude/GPSLongitude, drone-dji:GpsLatitude/GpsLongitude, "
+                         "drone-skydio:Latitude/Longitude)", path=p)
     if not (-90 <= lat <= 90 and -180 <= lon <= 180) or (lat == 0 and lon == 0):
         raise InputError(f"GPS position out of range or unset ({lat:.6f}, {lon:.6f})", path=p)
     gps_alt = _rational(gps.get(6)) if 6 in gps else math.nan
     if math.isfinite(gps_alt) and _text(gps.get(5, b"\x00")) in ("\x01", "1"):
         gps_alt = -gps_alt  # GPSAltitudeRef 1: below sea level
-    abs_alt = _float(dji.get("AbsoluteAltitude"))
-    if math.isfinite(abs_alt):
-        alt, alt_source = abs_alt, "drone-dji:AbsoluteAltitude"
+    if math.isfinite(pose.alt_m):
+        alt, alt_source = pose.alt_m, pose.alt_source
     elif math.isfinite(gps_alt):
         alt, alt_source = gps_alt, "EXIF GPSAltitude"
     else:
-        raise InputError("no altitude (drone-dji:AbsoluteAltitude, EXIF GPSAltitude)", path=p)
+        raise InputError("no altitude (drone-dji:AbsoluteAltitude, drone-skydio:AbsoluteAltitude, EXIF GPSAltitude)",
+                         path=p)
     if not -1000.0 < alt < 20000.0:
         raise InputError(f"altitude {alt} m out of range ({alt_source})", path=p)
 
-    gimbal = tuple(_float(dji.get(f"Gimbal{a}Degree")) for a in ("Yaw", "Pitch", "Roll"))
-    body = tuple(_float(dji.get(f"Flight{a}Degree")) for a in ("Yaw", "Pitch", "Roll"))
-    attitude_source = "drone-dji XMP Gimbal*/Flight*Degree"
-    if not all(math.isfinite(v) for v in gimbal):
-        mn_gimbal, mn_body = _maker_note_attitude(p) if make.upper().startswith("DJI") else (None, None)
-        if mn_gimbal is None:
-            extra = f"; {', '.join(others)} pose tags are not read (conventions unverified)" if others else ""
-            raise InputError("no gimbal attitude (drone-dji:GimbalYawDegree/GimbalPitchDegree/GimbalRollDegree, "
-                             f"DJI MakerNote CameraYaw/CameraPitch/CameraRoll){extra}", path=p)
-        gimbal, attitude_source = mn_gimbal, "DJI MakerNote CameraYaw/Pitch/Roll, Yaw/Pitch/Roll"
-        body = mn_body if mn_body is not None else (math.nan,) * 3
+    gimbal = pose.gimbal_ypr_deg
     if not (-360 <= gimbal[0] <= 360 and -180 <= gimbal[1] <= 180 and -180 <= gimbal[2] <= 180):
         raise InputError(f"gimbal angles out of range (yaw, pitch, roll = {gimbal})", path=p)
-    flight = body if all(math.isfinite(v) and abs(v) <= 360 for v in body) else None
+    body = pose.flight_ypr_deg
+    flight = body if body is not None and all(math.isfinite(v) and abs(v) <= 360 for v in body) else None
+
+    software = _text(base.get(305, ""))
+    creator = xmp.get(("http://ns.adobe.com/xap/1.0/", "CreatorTool"), "")
+    resaved_by = desktop_program([software, creator, *_history_agents(root)])
+    if resaved_by:
+        warnings.append(f"re-saved after capture by {resaved_by!r} (EXIF Software / xmp:CreatorTool / xmpMM:History):"
+                        " it may have turned the pixels against the pose; locate finds out from two or more photos "
+                        "marked, else state --image-rotation (docs/locate.md)")
+    orientation = base.get(274, 1)
+    orientation = orientation if isinstance(orientation, int) and 1 <= orientation <= 8 else 1
+    if orientation != 1:
+        warnings.append(f"EXIF Orientation {orientation}: viewers show this photo turned or mirrored; its pixels here "
+                        "(and in `ridgeloc mark`) are the stored image's, which are the camera's")
+    camera_size = _camera_size(exif_ifd, width, height, resaved_by, p, warnings)
 
     focal_mm = _rational(exif_ifd.get(37386))
     f35 = _rational(exif_ifd.get(41989))
-    intr = photo_intrinsics(width, height, make, model, dji, focal_mm if math.isfinite(focal_mm) else None,
-                            f35 if math.isfinite(f35) else None, warnings)
-    software = _text(base.get(305, ""))
-    creator = xmp.get(("http://ns.adobe.com/xap/1.0/", "CreatorTool"), "")
-    editor = next((t for t in (software, creator) if t and not _is_camera_firmware(t, make)), "")
-    if editor:
-        warnings.append(f"re-saved after capture by {editor!r} (EXIF Software / xmp:CreatorTool): an editor may "
-                        "have rotated the pixels against the recorded pose (see locate --image-rotation)")
+    calibration = pose.calibration
+    if pose.maker in ("DJI", "Autel") and dji:
+        calibration = dji_calibration(dji, camera_size or (width, height), warnings)
+    elif calibration is not None and pose.maker == "Skydio":
+        entry = database_entry(make, model)  # Skydio's optical centre is in the full sensor's pixels
+        if entry is not None:
+            import dataclasses
+
+            calibration = dataclasses.replace(calibration, ref_size_px=(int(entry["widthPixels"]),
+                                                                        int(entry["heightPixels"])))
+    intr = photo_intrinsics(width, height, make, model, calibration, pose.fov_deg,
+                            focal_mm if math.isfinite(focal_mm) else None, f35 if math.isfinite(f35) else None,
+                            warnings, camera_size, pose.thermal)
     t_ns, zone, gps_t_ns, time_warning = _photo_time(exif_ifd, gps)
     if t_ns is None:
         warnings.append("no EXIF DateTimeOriginal or GPSDateStamp/GPSTimeStamp: photos are ordered by name")
@@ -340,13 +431,14 @@ def read_photo(path, alt_datum: str | None = None) -> Photo:
     rtk_std = tuple(_float(dji.get(k)) for k in ("RtkStdLon", "RtkStdLat", "RtkStdHgt"))
     return Photo(
         path=str(p), make=make, model=model, width_px=int(width), height_px=int(height), t_ns=t_ns, time_zone=zone,
-        lat_deg=float(lat), lon_deg=float(lon), alt_m=float(alt), alt_datum=alt_datum or "amsl",
-        alt_source=alt_source, relative_alt_m=_float(dji.get("RelativeAltitude")), gps_alt_m=float(gps_alt),
-        gimbal_ypr_deg=tuple(float(v) for v in gimbal), flight_ypr_deg=flight, attitude_source=attitude_source,
+        lat_deg=float(lat), lon_deg=float(lon), alt_m=float(alt), alt_datum=alt_datum or pose.alt_datum,
+        alt_source=alt_source, relative_alt_m=float(pose.relative_alt_m), gps_alt_m=float(gps_alt),
+        gimbal_ypr_deg=tuple(float(v) for v in gimbal), flight_ypr_deg=flight, attitude_source=pose.attitude_source,
         intrinsics=intr, lrf_range_m=lrf_range, lrf_status=lrf_status, dji_target_lla=target,
-        rtk_flag=int(rtk_flag) if math.isfinite(rtk_flag) else None,
+        rtk_flag=int(rtk_flag) if math.isfinite(rtk_flag) and abs(rtk_flag) < 2**31 else None,
         rtk_std_m=rtk_std if all(math.isfinite(v) for v in rtk_std) else None, gps_t_ns=gps_t_ns,
-        warnings=tuple(warnings))
+        warnings=tuple(warnings), maker=pose.maker, relative_alt_source=pose.relative_alt_source,
+        resaved_by=resaved_by, orientation=int(orientation))
 
 
 def expand_photo_paths(paths) -> list[Path]:

@@ -50,13 +50,17 @@ def _num(v: float, fmt: str = ".2f") -> str:
 
 
 def format_photo(p: Photo) -> str:
-    lines = [f"{p.path}  [photo {p.make} {p.model} {p.width_px}x{p.height_px}]", f"  time: {_time_text(p)}",
+    rel = (f"{p.relative_alt_m:.2f} m above the take-off point ({p.relative_alt_source.split(' (')[0]}), take-off "
+           f"ground {p.takeoff_ground_m:.2f} m {p.alt_datum}" if math.isfinite(p.relative_alt_m)
+           else "no height above the take-off point")
+    lines = [f"{p.path}  [photo {p.make} {p.model} {p.width_px}x{p.height_px}]",
+             f"  time: {_time_text(p)}",
              f"  position: {p.lat_deg:.7f} {p.lon_deg:.7f}, altitude {p.alt_m:.2f} m {p.alt_datum} ({p.alt_source}; "
-             f"EXIF GPSAltitude {_num(p.gps_alt_m)} m, drone-dji:RelativeAltitude {_num(p.relative_alt_m)} m)"]
+             f"EXIF GPSAltitude {_num(p.gps_alt_m)} m; {rel})"]
     g, f = p.gimbal_ypr_deg, p.flight_ypr_deg
     body = "aircraft -" if f is None else f"aircraft {f[0]:.2f} {f[1]:.2f} {f[2]:.2f}"
     lines.append(f"  attitude (yaw pitch roll deg, NED): gimbal {g[0]:.2f} {g[1]:.2f} {g[2]:.2f}; {body} "
-                 f"({p.attitude_source})")
+                 f"({p.maker} tags: {p.attitude_source})")
     k = p.intrinsics
     if k is None:
         lines.append("  intrinsics: none (no calibrated tags, database entry or 35 mm focal length)")
@@ -86,8 +90,10 @@ def photo_as_dict(p: Photo) -> dict:
     return {"path": p.path, "format": "photo", "make": p.make, "model": p.model, "width_px": p.width_px,
             "height_px": p.height_px, "t_ns": p.t_ns, "time_zone": p.time_zone, "gps_t_ns": p.gps_t_ns,
             "lat_deg": p.lat_deg, "lon_deg": p.lon_deg, "alt_m": p.alt_m, "alt_datum": p.alt_datum,
-            "alt_source": p.alt_source,
-            "relative_alt_m": clean(p.relative_alt_m), "gps_alt_m": clean(p.gps_alt_m),
+            "alt_source": p.alt_source, "maker": p.maker,
+            "relative_alt_m": clean(p.relative_alt_m), "relative_alt_source": p.relative_alt_source,
+            "takeoff_ground_m": clean(p.takeoff_ground_m), "gps_alt_m": clean(p.gps_alt_m),
+            "resaved_by": p.resaved_by, "exif_orientation": p.orientation,
             "gimbal_ypr_deg": list(p.gimbal_ypr_deg),
             "flight_ypr_deg": None if p.flight_ypr_deg is None else list(p.flight_ypr_deg),
             "attitude_source": p.attitude_source,

@@ -1,8 +1,9 @@
 """Photos as camera views: each photo's pose in one ENU frame, its projection matrix and its pixel rays.
 
 Chain (pipeline.geometry.pose): R_enu0_from_optical = R_enu0_from_ned(photo lat, lon) * R_ned_from_gimbal *
-R_gimbal_from_optical, with R_ned_from_gimbal the ZYX Euler rotation of DJI's (GimbalYaw, GimbalPitch, GimbalRoll)
-(yaw earth-referenced) and the camera's optical axis along gimbal x. Heights become ellipsoidal with the EGM2008
+R_gimbal_from_optical, with R_ned_from_gimbal the ZYX Euler rotation of the photo's gimbal (yaw, pitch, roll) in DJI's
+convention, whatever the maker wrote (pipeline.ingest.photo_makers; yaw earth-referenced) and the camera's optical
+axis along gimbal x. Heights become ellipsoidal with the EGM2008
 undulation when the photo's altitude is AMSL.
 """
 
@@ -50,17 +51,18 @@ class PhotoViews:
     R_enu0_from_optical: np.ndarray
     camera_m: np.ndarray
     P: np.ndarray
-    rotation_deg: int = 0
+    rotations_deg: tuple[int, ...] = ()
 
     def file_to_camera_pixels(self, pixel_px, idx=None) -> np.ndarray:
-        """(m, 2) camera pixels of (m, 2) pixels of the files: the same unless the files were rotated by 180
-        degrees after capture (rotation_deg 180: u -> w - 1 - u, v -> h - 1 - v)."""
+        """(m, 2) camera pixels of (m, 2) pixels of the files of photos idx (m,) (default: all n): the same unless a
+        file was turned by 180 degrees after capture (its rotation 180: u -> w - 1 - u, v -> h - 1 - v)."""
         px = np.asarray(pixel_px, dtype=np.float64).reshape(-1, 2)
-        if self.rotation_deg == 0:
-            return px
         idx = np.arange(len(self.photos)) if idx is None else np.asarray(idx)
+        turned = np.array([self.rotations_deg[i] == 180 for i in idx]) if self.rotations_deg else np.zeros(0, bool)
+        if not turned.any():
+            return px
         wh = np.array([[self.photos[i].width_px - 1, self.photos[i].height_px - 1] for i in idx], dtype=np.float64)
-        return wh - px
+        return np.where(turned[:, None], wh - px, px)
 
     def pinhole_pixels(self, pixel_px, idx=None) -> np.ndarray:
         """(m, 2) ideal pinhole pixels of (m, 2) pixels of the files of photos idx (m,) (default: all n), lens
@@ -74,18 +76,19 @@ class PhotoViews:
 
 
 def photo_views(photos: list[Photo], origin_lla: tuple[float, float, float] | None = None,
-                rotation_deg: int = 0) -> PhotoViews:
+                rotation_deg=0) -> PhotoViews:
     """Views of photos that all have intrinsics (InputError naming the first that has none). The origin defaults
-    to the first photo's position. rotation_deg 180: the files' pixels were turned upside down after capture (an
-    image viewer's lossless rotation; see docs/ingest.md, the Brighton photos)."""
-    if rotation_deg not in (0, 180):
-        raise InputError(f"image rotation must be 0 or 180 degrees, got {rotation_deg}")
+    to the first photo's position. rotation_deg (one for all, or one per photo) 180: the file's pixels were turned
+    upside down after capture (an image viewer's lossless rotation; see docs/ingest.md, the Brighton photos)."""
     if not photos:
         raise InputError("no photos")
+    rotations = tuple(int(r) for r in np.broadcast_to(np.asarray(rotation_deg), (len(photos),)))
+    if any(r not in (0, 180) for r in rotations):
+        raise InputError(f"image rotation must be 0 or 180 degrees, got {sorted(set(rotations))}")
     for p in photos:
         if p.intrinsics is None:
-            raise InputError("no intrinsics (no drone-dji:CalibratedFocalLength or DewarpData, no camera database "
-                             f"entry for {p.make}{p.model}, no EXIF FocalLengthIn35mmFilm)", path=p.path)
+            raise InputError("no intrinsics (no calibrated focal length, DewarpData or stated field of view, no camera "
+                             f"database entry for {p.make}{p.model}, no EXIF FocalLengthIn35mmFilm)", path=p.path)
     lat = np.array([p.lat_deg for p in photos])
     lon = np.array([p.lon_deg for p in photos])
     h = photo_heights_ellipsoid_m(photos)
@@ -97,4 +100,4 @@ def photo_views(photos: list[Photo], origin_lla: tuple[float, float, float] | No
     K = np.stack([p.intrinsics.K for p in photos])
     dist = np.array([p.intrinsics.dist for p in photos], dtype=np.float64)
     return PhotoViews(tuple(photos), tuple(float(v) for v in origin_lla), K, dist, poses.R_enu0_from_optical,
-                      poses.camera_m, poses.projection_matrices(K), rotation_deg)
+                      poses.camera_m, poses.projection_matrices(K), rotations)

@@ -62,6 +62,16 @@ def stamp_ns(msg, record_ns: int, mode: str) -> int:
     return ns if ns > 0 else record_ns
 
 
+def _stated_sigma(cov) -> float | None:
+    """The standard deviation per axis a ROS covariance (3x3, row-major) states: the root of
+    its diagonal's mean, or None when the diagonal is not positive and finite (unknown, -1: no estimate)."""
+    try:
+        diag = np.asarray(cov, dtype=float)[[0, 4, 8]]
+    except (IndexError, TypeError, ValueError):
+        return None
+    return float(np.sqrt(diag.mean())) if np.isfinite(diag).all() and (diag > 0).all() else None
+
+
 def _orientation(msg, msgtype: str):
     if msgtype.endswith("Imu"):
         cov = msg.orientation_covariance
@@ -93,6 +103,9 @@ class RosAccumulator:
         else:
             self.cols = Columns(t="q", i="q")
         self.n = 0
+        self.sigma: float | None = None  # the first stated standard deviation (m or rad), position and Imu only
+        self._want_sigma = quantity == "position" or (quantity in ("attitude", "gimbal") and
+                                                      self.msgtype.endswith("Imu"))
         self._header_stamp = stamp_mode == "header"
         if stamp_mode not in ("header", "record"):
             raise ConfigError(f"ros mapping: stamp must be 'header' or 'record', not {stamp_mode!r}")
@@ -124,6 +137,9 @@ class RosAccumulator:
             self.dropped += 1  # STATUS_NO_FIX
             return
         t, alt = self._t(msg, record_ns), float(msg.altitude)  # every field read before any column grows
+        if self._want_sigma and getattr(msg, "position_covariance_type", 0) > 0:
+            self.sigma = _stated_sigma(msg.position_covariance)
+            self._want_sigma = self.sigma is None
         at, alat, alon, aalt = self._append
         at(t)
         alat(lat)
@@ -137,6 +153,9 @@ class RosAccumulator:
             self.dropped += 1
             return
         t, o = self._t(msg, record_ns), [float(v) for v in o]
+        if self._want_sigma:
+            self.sigma = _stated_sigma(msg.orientation_covariance)
+            self._want_sigma = self.sigma is None
         at, aw, ax, ay, az = self._append
         at(t)
         aw(o[0])
@@ -189,7 +208,7 @@ class RosAccumulator:
             return None
         if q == "position":
             t, lat, lon, alt = sort_by_time(a["t"], a["lat"], a["lon"], a["alt"])
-            return PositionSeries(t, lat, lon, alt, "ellipsoid", source=src, clock="unix")
+            return PositionSeries(t, lat, lon, alt, "ellipsoid", source=src, clock="unix", sigma_m=self.sigma)
         if q in ("attitude", "gimbal"):
             raw = np.column_stack([a["w"], a["x"], a["y"], a["z"]])
             frame = self.cfg.get("frame", "flu_enu")
@@ -198,10 +217,11 @@ class RosAccumulator:
                                   f"(body axes _ world axes; optical = REP-103 camera optical), not {frame!r}")
             quat = quat_ned_frd_from_frame(raw, frame)
             t, quat = sort_by_time(a["t"], quat)
+            sigma_deg = None if self.sigma is None else math.degrees(self.sigma)
             if q == "attitude":
-                return AttitudeSeries(t, quat, source=src, clock="unix")
+                return AttitudeSeries(t, quat, source=src, clock="unix", sigma_deg=sigma_deg)
             veh = np.full(t.shape, bool(self.cfg.get("yaw_in_vehicle_frame", False)))
-            return GimbalSeries(t, quat, veh, source=src, clock="unix")
+            return GimbalSeries(t, quat, veh, source=src, clock="unix", sigma_deg=sigma_deg)
         if q == "range":
             r = a["r"]
             with np.errstate(invalid="ignore"):

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from pipeline.answer import Answer, choose_answer, unsolved_reasons
+from pipeline.answer import Z90, Answer, choose_answer, unsolved_reasons
 from pipeline.geometry.geoid import GEOID_MODEL_LONG, geoid_undulation_m
 from pipeline.report.geometry import ALT_DATUM, geodetic_from_enu
 from pipeline.results import FlightResult, GroupFailure, GroupResult
@@ -28,8 +28,6 @@ ALT_MSL_DATUM = f"height above the {GEOID_MODEL_LONG}"
 #: JP 3-09.3 target location error categories: (name, largest CE90 in metres), from the feet the publication gives
 TLE_CATEGORIES = (("CAT I", 20 * 0.3048), ("CAT II", 50 * 0.3048), ("CAT III", 100 * 0.3048),
                   ("CAT IV", 300 * 0.3048), ("CAT V", 1000 * 0.3048), ("CAT VI", math.inf))
-#: the 90 % two-sided quantile of the standard normal: LE90 = Z90 sigma_up
-Z90 = 1.6448536269514722
 
 #: targets.csv's columns, in order: the answer first (docs/outputs.md describes each)
 ANSWER_COLUMNS = (
@@ -49,10 +47,12 @@ def tle_category(ce90_m: float | None) -> str | None:
 
 
 def mgrs_of(lat_deg: float, lon_deg: float) -> str:
-    """The MGRS reference of a WGS84 point at 1 m precision (15 characters, no spaces), from the `mgrs` package."""
+    """The MGRS reference of a WGS84 point at 1 m precision, no spaces (e.g. 49SBU9399604341; zones 1-9 without
+    the leading zero the package writes, as NGA's standard does), from the `mgrs` package."""
     import mgrs
 
-    return mgrs.MGRS().toMGRS(float(lat_deg), float(lon_deg), MGRSPrecision=5)
+    ref = mgrs.MGRS().toMGRS(float(lat_deg), float(lon_deg), MGRSPrecision=5)
+    return ref[1:] if ref.startswith("0") else ref
 
 
 def answer_of(r: GroupResult) -> Answer:

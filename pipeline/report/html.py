@@ -20,6 +20,7 @@ from urllib.parse import quote
 import numpy as np
 
 from pipeline.atomic import atomic_write_text
+from pipeline.report.answers import answer_of, answer_rows
 from pipeline.report.exports import ALT_MSL_DATUM, estimate_rows, failure_status_reason
 from pipeline.report.geometry import ALT_DATUM
 from pipeline.report.labels import METHOD_COLORS, method_label, ordered_methods
@@ -29,7 +30,7 @@ from pipeline.results import FlightResult, GroupFailure, GroupResult, per_target
 _CSS = """
 body { font-family: -apple-system, "Segoe UI", Roboto, "Helvetica Neue", Arial, sans-serif; margin: 0;
        color: #1d1d1f; background: #fafafa; line-height: 1.45; }
-main { max-width: 1240px; margin: 0 auto; padding: 24px 28px 60px; }
+main { max-width: 1340px; margin: 0 auto; padding: 24px 28px 60px; }
 h1 { font-size: 26px; margin: 8px 0 4px; }
 h2 { font-size: 21px; margin: 34px 0 10px; padding-top: 10px; border-top: 2px solid #ddd; }
 h3 { font-size: 16px; margin: 20px 0 8px; }
@@ -43,6 +44,9 @@ th { background: #f0f0f3; font-weight: 600; }
 td.l, th.l { text-align: left; }
 td.best { background: #d9f2e1; font-weight: 700; }
 td.na { color: #999; }
+td.wrap, th.wrap { white-space: normal; min-width: 220px; max-width: 420px; text-align: left; font-size: 12px; }
+table.answers { font-size: 13px; }
+table.compare { font-size: 12px; } table.compare td, table.compare th { padding: 3px 5px; }
 .paper { color: #8a8a8a; font-size: 11px; font-weight: 400; }
 .swatch { display: inline-block; width: 11px; height: 11px; border-radius: 2px; margin-right: 6px;
           vertical-align: -1px; border: 1px solid #0003; }
@@ -82,34 +86,80 @@ def _paper(group: str, table: dict, key: str, decimals: int = 2) -> str:
     return f'<div class="paper">paper {_fmt(float(v), decimals) if decimals else v}</div>'
 
 
+def _answers_table(rows: list[dict], results: Sequence[GroupResult]) -> str:
+    """The answers: one row per target (targets.csv's), the reason wrapped in the last column."""
+    truth = any(r.truth_m is not None for r in results)
+    cols = [("Target", "name", "l"), ("Latitude /°", "lat_deg", ""), ("Longitude /°", "lon_deg", ""),
+            ("Height MSL /m", "alt_msl_m", ""), ("MGRS", "mgrs", "l"), ("CE90 /m", "ce90_m", ""),
+            ("LE90 /m", "le90_m", ""), ("Category", "tle_category", "l"), ("Method", "method", "l"),
+            ("Obs.", "n_observations", ""), *((("Error /m", "error_m", ""),) if truth else ()),
+            ("Why", "reason", "l wrap")]
+    head = "".join(f'<th class="{c}">{escape(t)}</th>' for t, _, c in cols)
+    body = []
+    for row in rows:
+        if row["status"] != "located":
+            body.append(f'<tr class="fail"><td class="l">{escape(row["name"])}</td><td class="l" '
+                        f'colspan="{len(cols) - 2}">not located</td><td class="l wrap">'
+                        f'{escape(str(row["reason"]))}</td></tr>')
+            continue
+        cells = []
+        for _, key, c in cols:
+            v = row[key]
+            cells.append(f'<td class="{c}">{_fmt(v, 7) if key in ("lat_deg", "lon_deg") else _fmt(v, 1)}</td>')
+        body.append("<tr>" + "".join(cells) + "</tr>")
+    return f'<table class="answers"><tr>{head}</tr>{"".join(body)}</table>'
+
+
+def _answers_section(results: Sequence[GroupResult], rows: list[dict], interactive: bool) -> str:
+    """The report's top: the answers on a map (a map per site) and in a table."""
+    parts = ["<h2 id=\"answers\">Answers: one per target</h2>"]
+    if interactive:
+        from pipeline.report.webmap import answer_sites, answers_fragment
+
+        sites = answer_sites(results)
+        for site in sites:
+            where = "" if len(sites) == 1 else f"<h3>{escape(', '.join(t.label for t in site))}</h3>"
+            parts.append(where + answers_fragment(site))
+    parts.append(_answers_table(rows, results))
+    parts.append('<p class="note">Each answer is chosen by one rule from what the flight shows (docs/outputs.md, '
+                 '"The answer"): the weighted MLE when the flight determines it and its fit checks pass, else the '
+                 "most precise method the flight determines; a target no method locates is not located, and why. "
+                 "CE90: the circle around the answer holding 90 % of the horizontal error; LE90: 90 % of the "
+                 "height's; category: target location error category (JP 3-09.3) of CE90. Heights above mean sea "
+                 "level (EGM2008); targets.csv also gives WGS84 ellipsoidal heights. The shaded ellipse on the map "
+                 "holds the answer with 95 % probability.</p>")
+    return "\n".join(parts)
+
+
 def _summary_table(results: Sequence[GroupResult]) -> str:
+    """The paper's Table 4, a row per target and a column per method (so it fits a page whatever the number of
+    targets): the 3D error of each method's estimate, with the paper's value for a group of the same name."""
     from pipeline.report.table4 import PAPER_TABLE3, PAPER_TABLE4_M
 
     methods = ordered_methods(dict.fromkeys(m for r in results
                                             for m in (*r.estimates, *(r.settings.get("solve_failures") or {}))))
-    head = "".join(f'<th>{escape(r.label)}</th>' for r in results)
-    rows = [f'<tr><th class="l">Group</th>{head}</tr>']
-    rows.append('<tr><td class="l">Intersection angle /°</td>'
-                + "".join(f"<td>{_fmt(float(r.intersection_angle_deg))}"
-                          f"{_paper(r.name, PAPER_TABLE3, 'intersection_angle_deg')}</td>" for r in results) + "</tr>")
-    rows.append('<tr><td class="l">Observations</td>'
-                + "".join(f"<td>{r.n_observations}{_paper(r.name, PAPER_TABLE3, 'observations', 0)}</td>"
-                          for r in results) + "</tr>")
-    errors = {r.label: r.errors_m() for r in results}
-    best = {}
+    head = "".join(f'<th><span class="swatch" style="background:{METHOD_COLORS.get(m, "#000")}"></span>'
+                   f'{escape(m)}</th>' for m in methods)
+    rows = [f'<tr><th class="l">Target</th><th>Angle /°</th><th>Obs.</th>{head}</tr>']
     for r in results:
-        finite = {m: e for m, e in errors[r.label].items() if e is not None and np.isfinite(e)}
-        best[r.label] = min(finite, key=finite.get) if finite else None
-    for m in methods:
-        color = METHOD_COLORS.get(m, "#000")
-        cells = []
-        for r in results:
+        errors = r.errors_m()
+        verdicts = answer_of(r).verdicts
+        finite = {m: e for m, e in errors.items() if e is not None and np.isfinite(e)}
+        best = min(finite, key=finite.get) if finite else None
+        failures = r.settings.get("solve_failures") or {}
+        cells = [f'<td class="l"><a href="#group-{escape(r.label)}">{escape(r.label)}</a></td>',
+                 f"<td>{_fmt(float(r.intersection_angle_deg))}{_paper(r.name, PAPER_TABLE3, 'intersection_angle_deg')}"
+                 "</td>",
+                 f"<td>{r.n_observations}{_paper(r.name, PAPER_TABLE3, 'observations', 0)}</td>"]
+        for m in methods:
             if m not in r.estimates:
-                status, why = failure_status_reason((r.settings.get("solve_failures") or {}).get(
-                    m, "the estimator gave no answer"))
-                cells.append(f'<td class="na" title="{escape(why)}">no estimate ({escape(status)})</td>')
+                if m not in failures:  # a method this flight does not have (dem without a DEM, dji on video)
+                    cells.append('<td class="na" title="does not apply to this flight">n/a</td>')
+                    continue
+                status, why = failure_status_reason(failures[m])
+                cells.append(f'<td class="na" title="{escape(why)}">{escape(status.replace("_", " "))}</td>')
                 continue
-            e = errors[r.label][m]
+            e = errors[m]
             if r.truth_m is None:
                 cells.append('<td class="na">no truth</td>')
             elif e is None:
@@ -119,17 +169,24 @@ def _summary_table(results: Sequence[GroupResult]) -> str:
                 misfit = _misfit(r.estimates[m])
                 if misfit:
                     flag += " ‡"
-                cls = ' class="best"' if best[r.label] == m else ""
-                title = f' title="{escape(misfit)}"' if misfit else ""
+                v = verdicts.get(m)
+                title = misfit or ""
+                if v is not None and not v.determined:
+                    flag += " §"
+                    title = f"not determined: {v.reason}"
+                cls = ' class="best"' if best == m else ""
+                title = f' title="{escape(title)}"' if title else ""
                 cells.append(f"<td{cls}{title}>{_fmt(e)}{flag}{_paper(r.name, PAPER_TABLE4_M, m)}</td>")
-        rows.append(f'<tr><td class="l"><span class="swatch" style="background:{color}"></span>'
-                    f'{escape(method_label(m))} /m</td>{"".join(cells)}</tr>')
-    return ("<table>" + "".join(rows) + "</table>"
-            '<p class="note">3D localization error against the known target position (m); the lowest per group is '
-            "highlighted. † the estimator stopped without converging (iteration limit or divergence). ‡ its error "
+        rows.append("<tr>" + "".join(cells) + "</tr>")
+    legend = " ".join(f"<b>{escape(m)}</b>: {escape(method_label(m))}." for m in methods)
+    return ('<table class="compare">' + "".join(rows) + "</table>"
+            '<p class="note">3D localization error against the known target position (m); the lowest per target '
+            "is highlighted. † the estimator stopped without converging (iteration limit or divergence). ‡ its error "
             "model does not fit the flight (the group's notes say how): its covariance was inflated and its ellipse "
-            "is less reliable. In grey, the paper's value for the group of the same name (its Tables 3 and 4), "
-            "where there is one.</p>")
+            "is less reliable. § the flight does not determine this estimate (hover for why): it is no answer and no "
+            "exported point. n/a: the method does not apply to the flight (dem needs a terrain model, dji a DJI "
+            "photo's own laser target). In grey, the paper's value for the group of the same name (its Tables 3 "
+            f"and 4), where there is one. {legend}</p>")
 
 
 def _misfit(e) -> str | None:
@@ -139,10 +196,12 @@ def _misfit(e) -> str | None:
 
 
 def _estimates_table(r: GroupResult) -> str:
+    """Every method's estimate of one target (estimates.csv's rows): the answer marked, an undetermined one without
+    coordinates, the status, and why in the last column."""
     cols = (("Method", "method_label", "l"), ("Latitude /°", "lat_deg", ""), ("Longitude /°", "lon_deg", ""),
-            ("Height /m", "alt_m", ""), ("Height MSL /m", "alt_msl_m", ""), ("E /m", "e_m", ""),
-            ("N /m", "n_m", ""), ("U /m", "u_m", ""), ("Error /m", "error_m", ""), ("CEP50 /m", "cep50_m", ""),
-            ("CEP90 /m", "cep90_m", ""), ("σ up /m", "sigma_up_m", ""), ("Status", "status", "l"))
+            ("Height /m", "alt_m", ""), ("Height MSL /m", "alt_msl_m", ""), ("Error /m", "error_m", ""),
+            ("CE90 /m", "cep90_m", ""), ("σ up /m", "sigma_up_m", ""), ("Status", "status", "l"),
+            ("Why", "reason", "l wrap"))
     head = "".join(f'<th class="{c}">{escape(t)}</th>' for t, _, c in cols)
     body = []
     for row in estimate_rows([r]):
@@ -150,15 +209,19 @@ def _estimates_table(r: GroupResult) -> str:
         for _, key, c in cols:
             v = row[key]
             text = _fmt(v, 7) if key in ("lat_deg", "lon_deg") else _fmt(v)
-            title = f' title="{escape(row["reason"])}"' if key == "status" and row.get("reason") else ""
+            if key == "method_label" and row["answer"]:
+                text = f"<b>{text}</b> (the answer)"
             if key == "status" and row["method"] in r.estimates and _misfit(r.estimates[row["method"]]):
-                text += " ‡ (model does not fit)"
-            cells.append(f'<td class="{c}"{title}>{text}</td>')
+                text += " ‡"
+            cells.append(f'<td class="{c}">{text}</td>')
         body.append("<tr>" + "".join(cells) + "</tr>")
-    return (f"<div class=\"scroll\"><table style=\"font-size: 13px\"><tr>{head}</tr>{''.join(body)}</table></div>"
-            f'<p class="note">Height: {escape(ALT_DATUM)}; height MSL: {escape(ALT_MSL_DATUM)}. E, N, U: '
-            'metres in the local frame at '
-            f"{_fmt(r.origin_lla[0], 7)}°, {_fmt(r.origin_lla[1], 7)}°, {_fmt(r.origin_lla[2])} m.</p>")
+    return (f"<table style=\"font-size: 13px\"><tr>{head}</tr>{''.join(body)}</table>"
+            f'<p class="note">Height: {escape(ALT_DATUM)}; height MSL: {escape(ALT_MSL_DATUM)}. CE90 and σ up from '
+            "each method's covariance: the MLE's own, the others' propagated through the method under the flight's "
+            "stated errors (estimates.csv's covariance_source). ‡ the MLE's error model does not fit the flight. "
+            "E, N, U in the local frame at "
+            f"{_fmt(r.origin_lla[0], 7)}°, {_fmt(r.origin_lla[1], 7)}°, {_fmt(r.origin_lla[2])} m: estimates.csv."
+            "</p>")
 
 
 def _kv_table(d: Mapping, decimals: int = 2) -> str:
@@ -260,6 +323,7 @@ def report_html(results: Sequence[GroupResult], failures: Sequence[GroupFailure]
     from pipeline.report.figures import render_group_figures  # matplotlib only when a page is made
 
     n_groups = len(results)
+    all_results = list(results)
     not_located = target_failures(results)
     by_flight = {r.name: r.targets for r in results if isinstance(r, FlightResult)}
     results = per_target(results)  # a section and a column per target of a flight with named targets
@@ -275,9 +339,7 @@ def report_html(results: Sequence[GroupResult], failures: Sequence[GroupFailure]
            + (_leaflet_head() if interactive and results else "") + "</head>"
            f"<body><main><h1>{escape(title)}</h1><p class=\"meta\">Generated {now}. {status}</p>"]
     if results:
-        nav = " · ".join(f'<a href="#group-{escape(r.label)}">{escape(r.label)}</a>' for r in results)
-        out.append(f'<p class="meta">Groups: {nav}</p>')
-        out.append("<h2>Localization error per group (as the paper's Table 4)</h2>" + _summary_table(results))
+        out.append(_answers_section(results, answer_rows(all_results, failures), interactive))
     if failures:
         rows = "".join(f'<tr><td class="l">{escape(f.name)}</td><td class="l">{escape(f.source)}</td>'
                        f'<td class="l">{escape(f.message)}{_traceback(f)}</td></tr>' for f in failures)
@@ -290,6 +352,10 @@ def report_html(results: Sequence[GroupResult], failures: Sequence[GroupFailure]
         out.append(f"<h2>Targets not located ({len(not_located)})</h2><p class=\"note\">The other targets of "
                    'these flights are complete.</p><table class="fail"><tr><th class="l">Group</th>'
                    f'<th class="l">Target</th><th class="l">Reason</th></tr>{rows}</table>')
+    if results:
+        out.append("<h2 id=\"comparison\">Comparison of methods (the paper's Table 4)</h2>" + _summary_table(results))
+        nav = " · ".join(f'<a href="#group-{escape(r.label)}">{escape(r.label)}</a>' for r in results)
+        out.append(f'<p class="meta">Each flight in detail: {nav}</p>')
     for r in results:
         flight = by_flight.get(r.name)
         fm = None if flight is None else (flight if r is flight[0] else [])

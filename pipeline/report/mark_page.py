@@ -1,6 +1,10 @@
 """The marking page of `ridgeloc mark`: one self-contained HTML file (frames inline as JPEG data URIs, plain
-JavaScript, no network) that shows frames of a flight, lets the user click points, name them, and download the
-marks CSV (`name,frame_or_image,x_px,y_px`, pipeline/targets.py) for the flight config's `marks_file:`.
+JavaScript, no network) that shows frames of a flight, or drone photos, lets the user click points, name them,
+and download the marks CSV (`name,frame_or_image,x_px,y_px`, pipeline/targets.py) for the flight config's
+`marks_file:` or `ridgeloc locate --marks` (photos: `frame_or_image` is the photo's path relative to the CSV).
+
+A photo is shown as its stored pixels (the camera's, whatever EXIF Orientation says: pipeline.ingest.photo), scaled
+down for the page where it is large; clicks are mapped to the photo's own pixels (its full width and height).
 
 Pixel convention (as everywhere in ridgeloc): (0, 0) is the centre of the top-left pixel, so a click at
 CSS offset (ox, oy) on an image drawn s times its natural size is the pixel (ox / s - 0.5, oy / s - 0.5).
@@ -22,6 +26,7 @@ _CSS = """
 body { font: 14px system-ui, sans-serif; margin: 1em; color: #222; }
 #wrap { position: relative; display: inline-block; border: 1px solid #888; cursor: crosshair; }
 #frame { display: block; max-width: 100%; image-rendering: pixelated; }
+#frame.full { max-width: none; }
 .pin { position: absolute; width: 11px; height: 11px; margin: -6px 0 0 -6px; border: 2px solid #ff0;
        border-radius: 50%; box-shadow: 0 0 0 1px #000; pointer-events: none; }
 .pin span { position: absolute; left: 12px; top: -6px; color: #ff0; font-weight: bold; text-shadow: 0 0 2px #000;
@@ -32,14 +37,15 @@ textarea { width: 40em; height: 8em; font: 12px monospace; }
 
 _JS = r"""
 (function () {
-  var FRAMES = %(frames)s;            // [{index, src, width, height}]
+  var FRAMES = %(frames)s;            // [{index, label, src, width, height}]: width, height of the frame itself
   var marks = %(marks)s;              // [{name, frame, x, y}]
-  var current = 0;
+  var PHOTOS = %(photos)s;            // one target in many photos: the next click keeps the last name
+  var current = 0, lastName = '';
   var img = document.getElementById('frame'), wrap = document.getElementById('wrap');
   var sel = document.getElementById('frames'), nameBox = document.getElementById('name');
   var csvBox = document.getElementById('csv'), err = document.getElementById('error');
   FRAMES.forEach(function (f, i) {
-    var o = document.createElement('option'); o.value = i; o.textContent = 'frame ' + f.index; sel.appendChild(o);
+    var o = document.createElement('option'); o.value = i; o.textContent = f.label; sel.appendChild(o);
   });
   function csvText() {
     var lines = [%(header)s];
@@ -62,7 +68,8 @@ _JS = r"""
         m.y.toFixed(2) + '</td><td><button data-i="' + i + '">remove</button></td></tr>';
     });
     document.getElementById('list').innerHTML =
-      '<tr><th>name</th><th>frame</th><th>x_px</th><th>y_px</th><th></th></tr>' + rows.join('');
+      '<tr><th>name</th><th>' + (PHOTOS ? 'photo' : 'frame') + '</th><th>x_px</th><th>y_px</th><th></th></tr>' +
+      rows.join('');
     csvBox.value = csvText();
     document.body.setAttribute('data-marks', String(marks.length));
   }
@@ -75,7 +82,8 @@ _JS = r"""
   // A click: the image pixel under it (pixel centres at integers); the name from the box, else T<n>.
   window.ridgelocMark = function (x, y, name) {
     var f = FRAMES[current];
-    name = (name || '').trim() || nextName();
+    var keep = PHOTOS && lastName && !marks.some(function (m) { return m.name === lastName && m.frame === f.index; });
+    name = (name || '').trim() || (keep ? lastName : nextName());
     if (/[,\/\\:\n\r\t]|^\./.test(name)) {  // as pipeline.targets.check_name
       err.textContent = 'a name must not contain , / \\ : or a tab, nor start with a dot'; return false;
     }
@@ -83,10 +91,10 @@ _JS = r"""
       err.textContent = 'outside the image'; return false;
     }
     if (marks.some(function (m) { return m.name === name && m.frame === f.index; })) {
-      err.textContent = 'duplicate name ' + name + ' on frame ' + f.index; return false;
+      err.textContent = 'duplicate name ' + name + ' on ' + f.label; return false;
     }
     err.textContent = '';
-    marks.push({name: name, frame: f.index, x: x, y: y}); nameBox.value = ''; draw(); return true;
+    marks.push({name: name, frame: f.index, x: x, y: y}); nameBox.value = ''; lastName = name; draw(); return true;
   };
   img.addEventListener('click', function (ev) {
     var r = img.getBoundingClientRect(), f = FRAMES[current], s = r.width / f.width;
@@ -97,6 +105,9 @@ _JS = r"""
     if (i !== null) { marks.splice(Number(i), 1); draw(); }
   });
   sel.addEventListener('change', function () { current = Number(sel.value); draw(); });
+  document.getElementById('full').addEventListener('change', function (ev) {
+    img.classList.toggle('full', ev.target.checked); draw();
+  });
   img.addEventListener('load', draw);
   window.addEventListener('resize', draw);
   document.getElementById('save').addEventListener('click', function () {
@@ -116,22 +127,36 @@ def jpeg_data_uri(image: np.ndarray, quality: int = 92) -> str:
     return "data:image/jpeg;base64," + base64.b64encode(buf.tobytes()).decode("ascii")
 
 
-def mark_page(frames: Mapping[int, np.ndarray], title: str, marks: Sequence[dict] = (),
-              csv_name: str = "marks.csv") -> str:
-    """The page: `frames` {frame index: image (gray or BGR)}, `marks` already known ({name, frame, x, y})."""
-    items = [{"index": int(i), "src": jpeg_data_uri(img), "width": int(img.shape[1]), "height": int(img.shape[0])}
-             for i, img in sorted(frames.items())]
+def mark_page(frames: Mapping[int | str, np.ndarray], title: str, marks: Sequence[dict] = (),
+              csv_name: str = "marks.csv", sizes: Mapping[int | str, tuple[int, int]] | None = None) -> str:
+    """The page: `frames` {frame index: image (gray or BGR)} of a video, or {photo path as the CSV names it:
+    image} of photos (keys are str; one target is then marked in many photos under one name), `marks` already
+    known ({name, frame, x, y}, frame the index or the photo's key). `sizes` {key: (width, height)} of an image
+    shown scaled down: clicks are pixels of that size."""
+    photos = any(isinstance(k, str) for k in frames)
+    items = []
+    for key, img in sorted(frames.items(), key=lambda kv: (str(kv[0]) if photos else kv[0])):
+        w, h = (sizes or {}).get(key, (int(img.shape[1]), int(img.shape[0])))
+        items.append({"index": key if photos else int(key), "label": str(key) if photos else f"frame {key}",
+                      "src": jpeg_data_uri(img), "width": int(w), "height": int(h)})
     if not items:
         raise ValueError("no frame to mark")
     js = _JS % {"header": json.dumps(",".join(MARKS_CSV_HEADER)), "frames": json.dumps(items),
-                "marks": json.dumps(list(marks)), "csv_name": json.dumps(csv_name)}
+                "marks": json.dumps(list(marks)), "csv_name": json.dumps(csv_name),
+                "photos": "true" if photos else "false"}
+    what = "photo" if photos else "frame"
+    how = ("Choose a photo, type the target's name (or leave it empty: T1, and the same name in the next photo) and "
+           "click it; mark it in every photo that shows it. Then save the marks CSV beside this page and give it to "
+           "<code>ridgeloc locate --marks</code> or a photo flight config's <code>marks_file:</code>." if photos else
+           "Choose a frame, type a name (or leave it empty for T1, T2 ...) and click the point. A target may be "
+           "marked in several frames under the same name. Then save the marks CSV and set <code>marks_file:</code> "
+           "in the flight config to it.")
     return (f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>{escape(title)}</title>"
             f"<style>{_CSS}</style></head><body><h1>{escape(title)}</h1>"
-            "<p>Choose a frame, type a name (or leave it empty for T1, T2 ...) and click the point. A target may be "
-            "marked in several frames under the same name. Then save the marks CSV and set <code>marks_file:</code> "
-            "in the flight config to it.</p>"
-            "<p><label>Frame <select id=\"frames\"></select></label> "
+            f"<p>{how}</p>"
+            f"<p><label>{what.capitalize()} <select id=\"frames\"></select></label> "
             "<label>Name <input id=\"name\" size=\"16\"></label> "
+            "<label><input type=\"checkbox\" id=\"full\"> full size</label> "
             f"<button id=\"save\">Save {escape(csv_name)}</button> <span id=\"error\" style=\"color:#b00\"></span></p>"
             "<div id=\"wrap\"><img id=\"frame\" alt=\"frame\"></div>"
             "<table id=\"list\"></table>"

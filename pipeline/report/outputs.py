@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import time
 from collections.abc import Mapping, Sequence
 from os import PathLike
@@ -127,18 +128,47 @@ def _group_figures(outdir: Path, name: str, target: str | None = None) -> dict[s
     return out
 
 
+def foreign_results(outdir: str | PathLike, names) -> list[str]:
+    """The finished group folders in `outdir` that are not among `names`: another run's results."""
+    outdir = Path(outdir)
+    if not outdir.is_dir():
+        return []
+    names = set(names)
+    return sorted(p.name for p in outdir.iterdir() if p.is_dir() and p.name not in names and is_done(p))
+
+
+def claim_output_folder(outdir: str | PathLike, names, overwrite: bool = False) -> list[str]:
+    """Make `outdir` this run's, for the flights `names`, before any work: InputError naming the folder when it
+    holds another run's results (finished group folders of other flights), unless `overwrite`, which removes
+    them, so that the run-level files and the folders beside them are always one run's. Returns what was
+    removed."""
+    foreign = foreign_results(outdir, names)
+    if foreign and not overwrite:
+        shown = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
+        raise InputError(f"holds another run's results ({shown}): choose another output folder, or give --overwrite "
+                         "to replace them", outdir)
+    for name in foreign:
+        shutil.rmtree(group_dir(outdir, name))
+    return foreign
+
+
 def write_run_outputs(outdir: str | PathLike, results: Sequence[GroupResult], failures: Sequence[GroupFailure],
-                      settings: Mapping, figures: bool = True) -> dict[str, Path]:
-    """Write the run-level outputs (report.html, targets.csv/.geojson/.kml, run.json) and every group folder that
-    is not written yet. `figures=False` leaves the figures out of new group folders and of the report (fast).
-    Returns name -> path of the run-level files."""
+                      settings: Mapping, figures: bool = True, rewrite_groups: bool = False) -> dict[str, Path]:
+    """Write the run-level outputs (targets.csv/.geojson/.kml, estimates.csv/.geojson, report.html, run.json) and
+    every group folder that is not written yet (`rewrite_groups`: each result's folder written again). A failed
+    flight's folder left by an earlier run is removed: it no longer describes the flight. `figures=False` leaves
+    the figures out of new group folders and of the report (fast). Returns name -> path of the run-level files."""
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(outdir)
     results, failures = list(results), list(failures)  # in the run's order (the run config's)
+    for f in failures:
+        stale = group_dir(outdir, f.name)
+        if stale.is_dir() and f.name not in {r.name for r in results}:
+            shutil.rmtree(stale)
     pngs = {}
     for r in results:
-        if not is_done(group_dir(outdir, r.name)):
+        if rewrite_groups or not is_done(group_dir(outdir, r.name)):
             write_group_outputs(outdir, r, figures=figures)
         # figures missing from a folder are rendered by the page itself
         for t in per_target([r]):

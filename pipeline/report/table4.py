@@ -99,8 +99,28 @@ def _best(values: list[float | None]) -> float | None:
     return min(finite) if finite else None
 
 
+def _answers_markdown(results, failures) -> list[str]:
+    """The answers (targets.csv's) as the report's first table."""
+    from pipeline.report.answers import answer_rows
+
+    rows = []
+    for a in answer_rows(results, failures):
+        if a["status"] != "located":
+            rows.append([a["name"], "not located", "", "", "", "", "", "", a["reason"]])
+            continue
+        rows.append([a["name"], f"{a['lat_deg']:.7f}", f"{a['lon_deg']:.7f}", f"{a['alt_msl_m']:.1f}", a["mgrs"],
+                     _fmt(a["ce90_m"]) or "—", a["tle_category"] or "—", a["method"], _fmt(a["error_m"]) or "—"])
+    return ["## Answers: one per target", "",
+            _md_table(["Target", "Latitude", "Longitude", "MSL m", "MGRS", "CE90 m", "Category", "Method",
+                       "Error m / why not located"], rows), "",
+            "The rule that chooses each answer, and the columns: docs/outputs.md (\"The answer\"); every method's "
+            "estimate below and in estimates.csv.", ""]
+
+
 def report_markdown(results: Sequence[GroupResult | FlightResult], failures: Sequence[GroupFailure] = ()) -> str:
     out = ["# ridgeloc run report", ""]
+    if results:
+        out += _answers_markdown(results, failures)
     not_located = target_failures(results)
     results = per_target(results)  # a column per target of a flight with named targets (label group:target)
     if results:

@@ -2,6 +2,11 @@
 
     group_map(r) -> folium.Map       flight path, lines of sight, a video flight's camera footprints and frame-centre
                                      tracks (ridgeloc's, the payload's KLV), truth, each method's estimate and 95 %
+
+
+    answers_map(targets) -> folium.Map  the targets' answers with their 95 % ellipses and names (the report's top)
+    answer_sites(results)            located targets grouped by site (a map each)
+    group_map(r) -> folium.Map       flight path, lines of sight, truth, each determined method's estimate and 95 %
                                      ellipse, one layer per method (toggled in the layer control)
     map_fragment(r) -> str           the map's <div> and <script> for a page that already loads Leaflet
     leaflet_head() -> str            Leaflet's CSS and JS inline (once per page)
@@ -23,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.report.answers import answer_of, answer_row, determined_estimates, shown_covariance
 from pipeline.report.geometry import (
     best_reference_m,
     geodetic_from_enu,
@@ -125,24 +131,26 @@ def group_map(r: GroupResult | Sequence[GroupResult], tiles: bool = True):
             bounds += _latlon(lla)
         layer.add_to(m)
 
-    for method in ordered_methods(dict.fromkeys(k for t in targets for k in t.estimates)):
+    shown = {id(t): determined_estimates(t) for t in targets}  # an undetermined estimate is no point
+    for method in ordered_methods(dict.fromkeys(k for t in targets for k in shown[id(t)])):
         color = METHOD_COLORS.get(method, "#000000")
         swatch = (f'<span style="display:inline-block;width:10px;height:10px;border-radius:50%;background:{color};'
                   'border:1px solid #000;margin-right:4px"></span>')
         layer = folium.FeatureGroup(name=f"{swatch}{escape(method_label(method))}", show=True)
         drawn = False
         for t in targets:
-            e = t.estimates.get(method)
-            if e is None or not np.isfinite(e.position_m).all():
+            e = shown[id(t)].get(method)
+            if e is None:
                 continue
             lla = geodetic_from_enu(e.position_m, t.origin_lla)
             err = e.error_m(t.truth_m)
             who = "" if t.target is None else f"{escape(t.target)}: "
-            tip = (f"{who}{escape(method_label(method))} ({method}): {lla[0]:.7f}°, {lla[1]:.7f}°"
+            answer = " (the answer)" if answer_of(t).method == method else ""
+            tip = (f"{who}{escape(method_label(method))} ({method}){answer}: {lla[0]:.7f}°, {lla[1]:.7f}°"
                    + ("" if err is None else f", error {err:.2f} m") + f", {e.status.name.lower()}")
             folium.CircleMarker(_latlon(lla)[0], radius=8 if method == "mle" else 6, color="#000000", weight=1,
                                 fill=True, fill_color=color, fill_opacity=0.95, tooltip=tip).add_to(layer)
-            cov = e.covariance_m2
+            cov = shown_covariance(t, method)
             if cov is not None and np.isfinite(cov).all():
                 ring_en = ellipse_points_en_m(np.asarray(cov)[:2, :2], ELLIPSE_CONFIDENCE) + e.position_m[:2]
                 ring = geodetic_from_enu(np.column_stack([ring_en, np.full(len(ring_en), e.position_m[2])]),
@@ -156,14 +164,14 @@ def group_map(r: GroupResult | Sequence[GroupResult], tiles: bool = True):
             layer.add_to(m)
 
     named = [t for t in targets if t.target is not None]
-    if named:  # a label per target, always shown, at its mle (else its first finite estimate)
+    if named:  # a label per target, always shown, at its answer (else its first estimate shown)
         layer = folium.FeatureGroup(name="Target names", show=True)
         for t in named:
-            finite = [e for k, e in sorted(t.estimates.items(), key=lambda kv: kv[0] != "mle")
-                      if np.isfinite(e.position_m).all()]
+            a = answer_of(t)
+            finite = [a.position_m] if a.located else [e.position_m for e in shown[id(t)].values()]
             if not finite:
                 continue
-            lla = geodetic_from_enu(finite[0].position_m, t.origin_lla)
+            lla = geodetic_from_enu(finite[0], t.origin_lla)
             folium.CircleMarker(_latlon(lla)[0], radius=1, opacity=0, fill=False,
                                 tooltip=folium.Tooltip(escape(t.target), permanent=True, direction="right",
                                                        class_name="ridgeloc-target-label")).add_to(layer)
@@ -207,15 +215,91 @@ def _footprint_layers(m, r: GroupResult) -> None:
         layer.add_to(m)
 
 
+#: answers farther apart than this (km) get maps of their own: one map of targets on two continents shows neither
+SITE_KM = 50.0
+ANSWER_COLOR = "#D55E00"
+
+
+def answer_sites(results: Sequence[GroupResult]) -> list[list[GroupResult]]:
+    """The located targets grouped by site: each joins the first site whose first target is within SITE_KM."""
+    sites: list[list[GroupResult]] = []
+    for t in results:
+        a = answer_of(t)
+        if not a.located:
+            continue
+        lat, lon, _ = geodetic_from_enu(a.position_m, t.origin_lla)
+        for site in sites:
+            lat0, lon0, _ = geodetic_from_enu(answer_of(site[0]).position_m, site[0].origin_lla)
+            if np.hypot(lat - lat0, (lon - lon0) * np.cos(np.radians(lat))) * 111.2 < SITE_KM:
+                site.append(t)
+                break
+        else:
+            sites.append([t])
+    return sites
+
+
+def answers_map(targets: Sequence[GroupResult], tiles: bool = True):
+    """A folium.Map of located targets' answers: each a marker with its name always shown, its 95 % ellipse, and
+    the truth where a flight config gives it (a small black ring)."""
+    import folium
+
+    first = answer_of(targets[0])
+    lat0, lon0, _ = geodetic_from_enu(first.position_m, targets[0].origin_lla)
+    m = folium.Map(location=[float(lat0), float(lon0)], zoom_start=15, tiles=None, control_scale=True, max_zoom=22,
+                   prefer_canvas=False)
+    m.default_js, m.default_css = [], []
+    if tiles:
+        folium.TileLayer(OSM_TILES, attr=OSM_ATTRIBUTION, name="OpenStreetMap", max_zoom=22, max_native_zoom=19,
+                         control=False).add_to(m)
+    bounds = []
+    for t in targets:
+        a, row = answer_of(t), answer_row(t)
+        lla = geodetic_from_enu(a.position_m, t.origin_lla)
+        if a.covariance_m2 is not None and np.isfinite(a.covariance_m2).all():
+            ring_en = ellipse_points_en_m(np.asarray(a.covariance_m2)[:2, :2], ELLIPSE_CONFIDENCE) + a.position_m[:2]
+            ring = geodetic_from_enu(np.column_stack([ring_en, np.full(len(ring_en), a.position_m[2])]), t.origin_lla)
+            folium.Polygon(_latlon(ring), color=ANSWER_COLOR, weight=2, fill=True, fill_opacity=0.12,
+                           tooltip=f"{escape(t.label)}: 95 % error ellipse").add_to(m)
+            bounds += _latlon(ring)
+        if t.truth_m is not None:
+            tl = geodetic_from_enu(t.truth_m, t.origin_lla)
+            folium.CircleMarker(_latlon(tl)[0], radius=4, color="#000000", weight=2, fill=False,
+                                tooltip=f"{escape(t.label)}: truth").add_to(m)
+            bounds += _latlon(tl)
+        ce90 = "" if row["ce90_m"] is None else f", CE90 {row['ce90_m']:.1f} m ({row['tle_category']})"
+        folium.CircleMarker(_latlon(lla)[0], radius=7, color="#000000", weight=1, fill=True, fill_color=ANSWER_COLOR,
+                            fill_opacity=1.0,
+                            tooltip=f"<b>{escape(t.label)}</b><br>{lla[0]:.7f}°, {lla[1]:.7f}°<br>"
+                                    f"{escape(row['mgrs'])}<br>{row['alt_msl_m']:.1f} m MSL{ce90}<br>"
+                                    f"method {escape(str(row['method']))}").add_to(m)
+        folium.CircleMarker(_latlon(lla)[0], radius=1, opacity=0, fill=False,  # its name, always shown
+                            tooltip=folium.Tooltip(escape(t.label), permanent=True, direction="right",
+                                                   class_name="ridgeloc-target-label")).add_to(m)
+        bounds += _latlon(lla)
+    b = np.array(bounds)
+    m.fit_bounds([b.min(axis=0).tolist(), b.max(axis=0).tolist()], padding_top_left=(30, 30),
+                 padding_bottom_right=(120, 30), max_zoom=19)
+    return m
+
+
+def _fragment(m, label: str, height_px: int) -> str:
+    root = m.get_root()
+    root.render()
+    name = m.get_name()
+    return (f'<div class="webmap" data-group="{escape(label)}">'
+            f"<style>#{name} {{ position: relative; width: 100%; height: {int(height_px)}px; }}</style>"
+            f"{root.html.render()}</div>\n"
+            f"<script>\n{root.script.render()}\n{_GRID_JS % name}</script>")
+
+
+def answers_fragment(targets: Sequence[GroupResult], height_px: int = 460, tiles: bool = True) -> str:
+    """The <div> and <script> of `answers_map(targets)` (see `map_fragment`)."""
+    return _fragment(answers_map(targets, tiles=tiles), "answers", height_px)
+
+
 def map_fragment(r: GroupResult | Sequence[GroupResult], height_px: int = 520, tiles: bool = True) -> str:
     """The <div> and <script> of `group_map(r)` for a page whose <head> has `leaflet_head()` (folium's page-wide
     header, which restyles html and body, is left out: only the map's own size is kept)."""
     m = group_map(r, tiles=tiles)
     r = r if isinstance(r, GroupResult) else r[0]
-    root = m.get_root()
-    root.render()
-    name = m.get_name()
-    return (f'<div class="webmap" data-group="{escape(r.name)}">'
-            f"<style>#{name} {{ position: relative; width: 100%; height: {int(height_px)}px; }}</style>"
-            f"{root.html.render()}</div>\n"
-            f"<script>\n{root.script.render()}\n{_GRID_JS % name}</script>")
+    return _fragment(m, r.name, height_px)

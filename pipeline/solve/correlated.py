@@ -261,7 +261,7 @@ class Correlated(_iterate.Model):
     step must not raise r^T C_w^-1 r) with fixed robust weights w (a row's variance C_ii / w, the rest of C
     unchanged): every row at weight 1, or a first fit's weights. The weights are never updated from the rows'
     marginal residuals under the correlated C: that update descends no objective and, where many rows sit near
-    the loss's corners, wanders without converging (docs/solvers.md, "The learned model's fit was chaotic"). The
+    the loss's corners, wanders without converging (docs/solvers.md, "Three more rules of the first fit"). The
     drift is modelled (no autocorrelation inflation in `mle.finish`)."""
 
     drift_modelled = True

@@ -290,8 +290,8 @@ def admitted(stated: Sigma, candidate: Sigma, vf_pixel: float, vf_range: float, 
     passes it for the candidates whose answer would replace the first, drifts and slips: a white model's evidence
     keeps the first answer). A fit that needs more explains those observations away (zoo s0/z162: the ranges'
     variance 121 x the stated, 1,062 m off, the likeliest model; unseen s11/u039, the laser sigma stated 4-6 x too
-    small: drifts within 9 x by their factors at k 13-22, 11.0 m off; docs/zoo.md, "The likelihood's scale held to
-    the admission rule")."""
+    small: drifts within 9 x by their factors at k 13-22, 11.0 m off; docs/validation.md, "How the MLE
+    got here")."""
     k = _starts.MAX_OVER_STATED
     if not scale <= k * k:
         return False

@@ -27,8 +27,8 @@ _USES_PIXELS = {"dlt", "vision", "fusion-raw", "fusion", "ridge", "mle"}
 #: the white fit's boresight bias beyond this many stated attitude sigmas (the bias's largest prior until a misfit
 #: scales it; `mle.DEFAULT_BIAS_PRIOR_DEG` where none is stated) calls the evidence step: under the stated model
 #: that happens on < 5 % of flights per axis (a prior of at most N(0, sigma^2), the posterior mean shrunk); a
-#: drift whose mean over the flight is large (a random walk, a long correlation time) does it (docs/zoo.md,
-#: "A bias beyond its prior")
+#: drift whose mean over the flight is large (a random walk, a long correlation time) does it (docs/validation.md,
+#: "How the MLE got here")
 BIAS_BEYOND_STATED = 2.0
 
 
@@ -339,10 +339,11 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
     beyond `starts.MAX_OVER_STATED` times (the rule every candidate is held to, `learned_tau.admitted`: a white
     fit that puts the ranges' sigma at 17 x the stated explains them away) or its boresight bias came out beyond
     BIAS_BEYOND_STATED x the stated attitude sigma (beyond (B,) bool: the mean of a drift larger than the stated
-    attitude error), it has real timestamps and the configured sigma gives no correlation time; not with a terrain prior
+    attitude error), it has real and distinct timestamps (frames that repeat a time are at one instant, which no
+    correlation time can tell apart) and the configured sigma gives no correlation time; not with a terrain prior
     (the drift model takes none). Where only the chi-square is above its upper CHI2_ALPHA tail (a misfit), the
     evidence's answer is taken only if it is a tracker slip: a drift that absorbs a misfit claims an accuracy the
-    flight lacks where the stated sigmas are simply too small (docs/zoo.md, "A misfit looks for a tracker slip")."""
+    flight lacks where the stated sigmas are simply too small (docs/validation.md, "How the MLE got here")."""
     if st.t_ns is None or not size_unknown or o.get("terrain") is not None:
         return res
     ex, t = res[5], st.t_ns
@@ -353,7 +354,8 @@ def _with_learned_tau(st: Stacked, o: dict, res: tuple, sigma, vce: bool, size_u
                              zip(ex["variance_factor_pixel"], ex["variance_factor_range"], strict=True)])
     flagged = (ex["drift_pixel"] | ex["drift_range"] | ex["block_drift_pixel"] | ex["block_drift_range"] | too_small
                | inadmissible | beyond)
-    need = np.flatnonzero(np.isfinite(res[0]).all(axis=1) & (span >= REAL_TIMES_NS) & (flagged | too_large))
+    distinct = (np.diff(np.sort(t, axis=1), axis=1) > 0).all(axis=1)  # a drift has no time between repeated times
+    need = np.flatnonzero(np.isfinite(res[0]).all(axis=1) & (span >= REAL_TIMES_NS) & distinct & (flagged | too_large))
     if not need.size:
         return res
     sts = [_learned.without_rejected(st.take(np.array([b])), ex["rejected"][b]) for b in need]
@@ -552,6 +554,11 @@ def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
             raise ObservationError(f"mle: the sigma gives correlation times (attitude_tau_s, position_tau_s) but "
                                    f"the frames' t_ns span only {span_ns} ns: they need real timestamps (without "
                                    "t_ns the frames are numbered 0, 1, 2, ... ns)")
+        if span_ns is not None and len(np.unique(obs.t_ns)) < obs.n:
+            raise ObservationError(f"mle: the sigma gives correlation times (attitude_tau_s, position_tau_s) but "
+                                   f"{obs.n - len(np.unique(obs.t_ns))} frame(s) repeat another's t_ns: errors "
+                                   "correlated in time need one time per frame (remove the repeated rows, or the "
+                                   "correlation times)")
         terrain = int(o.get("terrain") is not None)
         if not has_init and npix < 2 and nboth == 0 and not (terrain and npix):
             # ranges alone do fix a point (range does), but so poorly along one axis that the problem is far from

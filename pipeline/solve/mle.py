@@ -552,7 +552,7 @@ class White(_iterate.Model):
         # prior by the chi-square's factor only (the bias columns scaled by s, the rows by s / sqrt(vf_chi)): the
         # guard measures the frame-to-frame spread (a late pose under a slewing gimbal: 5-17 x), which says nothing
         # of the constant part of the attitude error, and a prior grown with it let the bias turn every line of
-        # sight to where the ranges pull (docs/zoo.md, "Unseen families")
+        # sight to where the ranges pull (docs/validation.md, "Unseen families")
         s, g = self._rows(infl), self._rows(1.0 / self.guard)
         mix, cov_stated, E_report = self._mixture(s / np.sqrt(vf_chi), s, g, failed, drift_pix)
         self.mix = mix

@@ -17,7 +17,8 @@ Where a method's own residuals are larger than the stated sigmas say (robust sca
 removing the shared pointing error's constant and drift), its independent pixel or range terms are scaled by that
 ratio: the stated model understates its errors there. With more than EXACT_FRAMES frames
 the independent terms come from RANDOM_DRAWS draws of all of them at once (a fixed seed) instead of one column per
-observation, so the cost stays linear in the number of frames.
+observation, and a flight of more than MAX_FRAMES frames is thinned evenly to that many, its independent terms
+scaled by the ratio, so the cost is bounded whatever the flight's length.
 
 `ErrorSources.from_sigma` takes a video flight's stated sigmas, with the defaults below where it states none. A
 perturbed answer that is not finite means the flight does not determine the method's answer (one sigma of one
@@ -40,7 +41,10 @@ DEFAULT_PIXEL_PX = 1.0
 DEFAULT_RANGE_M = 5.0
 DEFAULT_ATTITUDE_DEG = 0.5  # the mle's boresight bias prior where no attitude accuracy is stated
 EXACT_FRAMES = 64
-RANDOM_DRAWS = 96
+RANDOM_DRAWS = 48
+#: frames the propagation runs on at most: a longer flight is thinned evenly to these, its independent terms scaled
+#: by the ratio (independent errors average as 1 / frames; the shared pointing error's effect does not change)
+MAX_FRAMES = 256
 #: the methods whose answer can be re-run on perturbed observations (`solve_batch`)
 PROPAGATED = ("dlt", "vision", "range", "los", "fusion-raw", "fusion", "ridge")
 #: chi-square(1)'s median: the robust scale of normalised residuals is sqrt(median(z^2) / this)
@@ -61,9 +65,10 @@ class Propagated:
 @dataclass(frozen=True)
 class ErrorSources:
     """The errors propagated, 1 sigma: pixel_px and range_m per observation; pointing_noise_deg per frame
-    (independent, added to the pixel's as f * angle); pointing_bias_deg constant and pointing_drift_deg a linear
-    drift over the flight, each shared by the frames and applied in pan and tilt; shared_covariance_m2 (3, 3) ENU of
-    an offset every camera shares (GNSS), which moves the answer by itself."""
+    (independent, added to the pixel's as f * angle); pointing_bias_deg constant (in tilt pointing_bias_tilt_deg
+    where given: a gravity-referenced pitch knows better than a compass) and pointing_drift_deg a linear drift over
+    the flight, each shared by the frames and applied in pan and tilt; shared_covariance_m2 (3, 3) ENU of an offset
+    every camera shares (GNSS), which moves the answer by itself."""
 
     pixel_px: float
     range_m: float
@@ -71,6 +76,7 @@ class ErrorSources:
     pointing_drift_deg: float
     pointing_noise_deg: float = 0.0
     shared_covariance_m2: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+    pointing_bias_tilt_deg: float | None = None  # the constant error in tilt where it differs from pan
 
     @classmethod
     def from_sigma(cls, sigma: Sigma) -> ErrorSources:
@@ -117,9 +123,11 @@ def _perturbations(obs: Observations, s: ErrorSources, exact: bool, rng: np.rand
             add(rng.standard_normal((n, 2)) * sig_px * has_pix[:, None] / np.sqrt(RANDOM_DRAWS), zero_rg, "pixel")
         for _ in range(RANDOM_DRAWS if has_rng.any() else 0):
             add(zero_px, rng.standard_normal(n) * s.range_m * has_rng / np.sqrt(RANDOM_DRAWS), "range")
-    for deg, shape in ((s.pointing_bias_deg, np.ones(n)), (s.pointing_drift_deg, ramp)):
-        if deg > 0 and has_pix.any() and shape.any():
-            for c in (0, 1):
+    tilt = s.pointing_bias_deg if s.pointing_bias_tilt_deg is None else s.pointing_bias_tilt_deg
+    for pan_tilt, shape in (((s.pointing_bias_deg, tilt), np.ones(n)),
+                            ((s.pointing_drift_deg, s.pointing_drift_deg), ramp)):
+        for c, deg in enumerate(pan_tilt):
+            if deg > 0 and has_pix.any() and shape.any():
                 px = zero_px.copy()
                 px[:, c] = np.where(has_pix, f[:, c] * np.tan(np.deg2rad(deg)) * shape, 0.0)
                 add(px, zero_rg, "pointing")
@@ -181,6 +189,11 @@ def propagate(solver: Callable, obs: Observations, position_m: np.ndarray, sourc
     """The covariance of an answer `position_m` (3,) on `obs` under the error `sources`, by finite differences of
     `solver(batch, position_m) -> (B, 3)` (NaN rows where it fails; `method_solver`) over the perturbed copies of
     the observations (module docstring)."""
+    thin = 1.0
+    if obs.n > MAX_FRAMES:
+        keep = np.unique(np.linspace(0, obs.n - 1, MAX_FRAMES).round().astype(int))
+        thin = len(keep) / obs.n
+        obs = obs.subset(keep)
     n_indep = 2 * int(obs.has_pixel.sum()) + int(obs.has_range.sum())
     dpx, drg, kind, ramp, sig_px = _perturbations(obs, sources, n_indep <= 3 * EXACT_FRAMES,
                                                   np.random.default_rng(seed))
@@ -205,7 +218,7 @@ def propagate(solver: Callable, obs: Observations, position_m: np.ndarray, sourc
     parts, cov = {}, np.zeros((3, 3))
     for name in ("pixel", "range", "pointing"):
         d = D[kind == name]
-        c = d.T @ d * scales.get(name, 1.0) ** 2
+        c = d.T @ d * scales.get(name, 1.0) ** 2 * (thin if name != "pointing" else 1.0)
         parts[name] = float(np.trace(c))
         cov += c
     shared = np.asarray(sources.shared_covariance_m2, dtype=np.float64)

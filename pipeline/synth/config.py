@@ -64,7 +64,9 @@ class PathConfig:
 
     kind: "arc" = a circle around the target at height_m above it and slant_distance_m from it; "straight" =
         a level line perpendicular to the horizontal line of sight at its midpoint (slant_distance_m there);
-        "waypoints" = a smooth curve through waypoints_enu_m (E, N, Up metres from the target) at speed_mps.
+        "waypoints" = a smooth curve through waypoints_enu_m (E, N, Up metres from the target) at speed_mps;
+        "hover" = a multirotor holding still at height_m above the target, slant_distance_m from it, at
+        start_azimuth_deg, heading towards it (no baseline: its lines of sight do not meet).
     intersection_angle_deg: arc / straight: the angle between the first and last lines of sight (exact).
     start_azimuth_deg: arc / straight: azimuth (from north, clockwise) of the platform seen from the target at
         the first observation (straight: at the line's midpoint).
@@ -73,7 +75,7 @@ class PathConfig:
         actual speed is adjusted slightly (truth.json records it).
     """
 
-    kind: Literal["arc", "straight", "waypoints"] = "arc"
+    kind: Literal["arc", "straight", "waypoints", "hover"] = "arc"
     height_m: Positive = 2000.0
     slant_distance_m: float = 5000.0
     intersection_angle_deg: float = 40.0
@@ -303,11 +305,10 @@ def _check(c: SynthConfig) -> None:
     elif p.kind == "straight":
         if not 0 < p.intersection_angle_deg < 170:
             raise ConfigError(f"'path.intersection_angle_deg' must be in (0, 170), got {p.intersection_angle_deg}")
-    else:
-        if len(p.waypoints_enu_m) < 2:
-            raise ConfigError("'path.waypoints_enu_m' must list at least two [E, N, Up] points")
-        if o.spacing_s < 1:
-            raise ConfigError("a waypoints path needs 'observations.spacing_s' >= 1")
+    elif p.kind == "waypoints" and len(p.waypoints_enu_m) < 2:
+        raise ConfigError("'path.waypoints_enu_m' must list at least two [E, N, Up] points")
+    if p.kind in ("waypoints", "hover") and o.spacing_s < 1:
+        raise ConfigError(f"a {p.kind} path needs 'observations.spacing_s' >= 1")
     if cam.zoom and any(cam.dist):
         raise ConfigError("'camera.zoom' needs 'camera.dist' all 0")
     if c.format == "klv" and (c.gimbal.yaw_in_vehicle_frame or any(cam.dist) or c.video.images_in_bag):

@@ -170,7 +170,8 @@ def _write_files(cfg: SynthConfig, tl: Timeline, tel, frames: FrameSource, folde
             files["frames"] = f"{name}:/uav/camera/image/compressed"
     if "frames" not in files:
         pts = tl.frame_pts_ns(tl.written_frames)
-        write_video(folder / "video.mp4", frames, pts, cfg.camera.fps, (cfg.camera.width_px, cfg.camera.height_px))
+        write_video(folder / "video.mp4", frames, pts, cfg.camera.fps, (cfg.camera.width_px, cfg.camera.height_px),
+                    start_ns=int(tl.video_offset_ns))
         files["video"] = "video.mp4"
         files["frames_csv"] = "video.frames.csv"
     return files

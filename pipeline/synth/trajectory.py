@@ -56,6 +56,8 @@ class CameraPath:
         elif p.kind == "straight":
             self.half_m = p.slant_distance_m * math.tan(gamma / 2.0)
             self.span_m = 2.0 * self.half_m
+        elif p.kind == "hover":
+            self.span_m = 0.0
         else:
             self._init_waypoints(np.asarray(p.waypoints_enu_m, dtype=np.float64), p.speed_mps)
 
@@ -80,6 +82,9 @@ class CameraPath:
             psi = self.psi0 + self.sign * self.dpsi * s
             return np.stack([self.radius_m * np.sin(psi), self.radius_m * np.cos(psi),
                              np.full_like(psi, self.height_m)], axis=-1)
+        if self.kind == "hover":
+            at = np.array([self.radius_m * math.sin(self.psi0), self.radius_m * math.cos(self.psi0), self.height_m])
+            return np.broadcast_to(at, (t.size, 3)).copy()
         if self.kind == "straight":
             mid = np.array([self.radius_m * math.sin(self.psi0), self.radius_m * math.cos(self.psi0), self.height_m])
             d = self.sign * np.array([math.cos(self.psi0), -math.sin(self.psi0), 0.0])
@@ -156,7 +161,10 @@ class Flight:
         R_ned_v_from_enu_t = np.swapaxes(R_enu_t_from_ned_v, -1, -2)
         v_ned = np.einsum("nij,nj->ni", R_ned_v_from_enu_t, vel_enu)
         a_ned = np.einsum("nij,nj->ni", R_ned_v_from_enu_t, acc_enu)
-        yaw = np.arctan2(v_ned[:, 1], v_ned[:, 0])
+        # heading along the velocity; hovering (below 0.1 m/s), towards the target
+        to_target = np.einsum("nij,nj->ni", R_ned_v_from_enu_t, -cam)
+        moving = np.hypot(v_ned[:, 0], v_ned[:, 1]) > 0.1
+        yaw = np.where(moving, np.arctan2(v_ned[:, 1], v_ned[:, 0]), np.arctan2(to_target[:, 1], to_target[:, 0]))
         right = np.stack([-np.sin(yaw), np.cos(yaw), np.zeros_like(yaw)], axis=-1)
         roll = np.arctan2(np.einsum("ni,ni->n", a_ned, right), GRAVITY_MPS2)  # coordinated turn
         climb = np.arctan2(-v_ned[:, 2], np.hypot(v_ned[:, 0], v_ned[:, 1]))

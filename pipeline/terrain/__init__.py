@@ -7,6 +7,7 @@
 """
 
 from pipeline.terrain.dem import Dem, VerticalDatum
+from pipeline.terrain.flat import FlatGround, ground_covariance_m2
 from pipeline.terrain.locate import dem_points, locate_dem
 
-__all__ = ["Dem", "VerticalDatum", "dem_points", "locate_dem"]
+__all__ = ["Dem", "FlatGround", "VerticalDatum", "dem_points", "ground_covariance_m2", "locate_dem"]

@@ -6,8 +6,10 @@ transform, skipped when the CRS is WGS84 geographic), interpolates bilinearly an
 N (pipeline.geometry.geoid, EGM2008) when the heights are orthometric. The vertical datum:
 
 - a vertical CRS in the file (GeoTIFF VerticalCSTypeGeoKey, compound CRS) named EGM96 or EGM2008 height:
-  orthometric; a 3-D geographic CRS (EPSG:4979, axis "ellipsoidal height"): ellipsoidal; any other vertical CRS
-  (NAVD88, a local datum, feet): refused, unless the caller states `vertical_datum`;
+  orthometric; NAVD88 height (USGS 3DEP): orthometric, converted with EGM2008 (the difference belongs in the DEM's
+  vertical sigma); a 3-D geographic CRS (EPSG:4979, axis "ellipsoidal height"): ellipsoidal; any other vertical CRS
+  (a local datum, feet): refused, unless the caller states `vertical_datum`;
+- a DTED file (.dt0/.dt1/.dt2): mean sea level (its header's vertical datum, E96 or MSL);
 - no vertical CRS (most SRTM, Copernicus, ALOS, ASTER GeoTIFFs): orthometric, the common DEMs' datum (EGM96 for
   SRTM, EGM2008 for Copernicus). Both are converted with EGM2008: EGM96 - EGM2008 is under ~1 m almost
   everywhere (a few metres in high mountains), part of the DEM vertical sigma (docs/terrain.md).
@@ -42,17 +44,28 @@ class VerticalDatum:
     source: str
 
 
-def _vertical_datum(wkt2: str, stated: str | None, path: Path) -> VerticalDatum:
+def _vertical_datum(wkt2: str, stated: str | None, path: Path, driver: str = "", tags=None) -> VerticalDatum:
     if stated is not None:
         if stated not in VERTICAL_DATUMS:
             raise InputError(f"vertical datum must be one of {', '.join(VERTICAL_DATUMS)}, got {stated!r}", path)
         return VerticalDatum(stated, "stated by the user")
+    if driver == "DTED":  # DTED heights are above mean sea level (MIL-PRF-89020B); the header names the datum
+        name = str((tags or {}).get("DTED_VerticalDatum", "")).strip() or "not named"
+        if name.upper() in ("E96", "MSL", "E08", "not named".upper()):
+            return VerticalDatum("orthometric", f"the DTED header (vertical datum {name}: mean sea level)")
+        raise InputError(f"unknown DTED vertical datum '{name}'; state the DEM's vertical datum (orthometric or "
+                         "ellipsoidal) if you know it", path)
     vert = re.search(r'VERTCRS\["([^"]*)"', wkt2)
     if vert:
         name = vert.group(1)
         unit = re.search(r'VERTCRS\[.*?LENGTHUNIT\["([^"]*)"', wkt2[vert.start():], re.S)
-        if re.search(r"EGM ?(96|2008)", name, re.I) and (unit is None or unit.group(1).lower() in _METRE):
+        metres = unit is None or unit.group(1).lower() in _METRE
+        if re.search(r"EGM ?(96|2008)", name, re.I) and metres:
             return VerticalDatum("orthometric", f"the file's vertical CRS ({name})")
+        if re.search(r"NAVD ?88", name, re.I) and metres:  # USGS 3DEP
+            return VerticalDatum("orthometric", f"the file's vertical CRS ({name}), converted with EGM2008: NAVD88 "
+                                                "is not EGM2008's geoid, count their difference (about a metre in "
+                                                "the US) in the DEM's vertical sigma")
         raise InputError(f"unknown vertical datum '{name}' (known: EGM96 or EGM2008 height in metres, or "
                          f"ellipsoidal heights); state the DEM's vertical datum (orthometric or ellipsoidal) "
                          f"if you know it", path)
@@ -161,7 +174,7 @@ class Dem:
                 units = (ds.units[0] or "").strip().lower() if ds.units else ""
                 if units not in _METRE:
                     raise InputError(f"heights are in '{units}', only metres are supported", path)
-                vertical = _vertical_datum(wkt2, vertical_datum, path)
+                vertical = _vertical_datum(wkt2, vertical_datum, path, ds.driver, ds.tags())
                 try:
                     _check_crs(crs, transform, rows, cols)
                 except Exception:  # PROJ's own messages are long JSON dumps

@@ -16,7 +16,6 @@ from pipeline.geometry.rays import camera_rays_m
 from pipeline.solve.estimate import Estimate, Status
 from pipeline.solve.observations import Observations
 from pipeline.terrain.dem import Dem
-from pipeline.terrain.raycast import intersect_rays
 
 
 def dem_points(obs: Observations, dem: Dem, origin_lla, labels: list[str] | None = None, pixels_shown=None):
@@ -39,14 +38,15 @@ def dem_points(obs: Observations, dem: Dem, origin_lla, labels: list[str] | None
     C_lla = lla_from_enu(C, origin)
     # the direction from the world ENU frame into the ENU frame at each camera, through ECEF
     R = np.swapaxes(R_ecef_from_enu(C_lla[:, 0], C_lla[:, 1]), -1, -2) @ R_ecef_from_enu(origin[0], origin[1])
-    hits, reasons = intersect_rays(dem, C_lla, np.einsum("kij,kj->ki", R, a))
+    hits, reasons = dem.intersect_many(C_lla, np.einsum("kij,kj->ki", R, a))  # a Dem, or a FlatGround
     for j, i in enumerate(idx):
         if reasons[j] is None:
             points[i] = enu_from_lla(*hits[j], origin)
         else:
             name = labels[i] if labels is not None else f"view {i} (t_ns {int(obs.t_ns[i])})"
             u, v = obs.pixel[i] if pixels_shown is None else np.asarray(pixels_shown, dtype=np.float64)[i]
-            misses[int(i)] = f"{name} pixel ({u:.1f}, {v:.1f}): {reasons[j]} (DEM {dem.path})"
+            where = getattr(dem, "label", None) or f"DEM {dem.path}"
+            misses[int(i)] = f"{name} pixel ({u:.1f}, {v:.1f}): {reasons[j]} ({where})"
     return points, misses
 
 

@@ -54,12 +54,15 @@ def _read_log(path: Path) -> None:
 
 
 def _read_video(path: Path) -> None:
-    """The video reader (frame times from frames.csv or the container) and decoding the first and last frame."""
+    """The video reader (frame times from frames.csv or the container), decoding the first and last frame, and
+    the container's creation time (`ridgeloc init`: None when absent or unreadable, never an error)."""
     from pipeline.ingest.video import VideoFrames, read_video
+    from pipeline.ingest.video_time import creation_time_ns
 
     frames = read_video(path)
     with VideoFrames(path) as vf:
         vf.read([int(frames.index.min()), int(frames.index.max())])
+    creation_time_ns(path)
 
 
 def _read_frames_csv(path: Path) -> None:
@@ -436,6 +439,35 @@ def _read_photo(path: Path) -> None:
 
 
 
+def _seed_maker_photo(maker: str):
+    """A 64x48 photo with `maker`'s pose tags (support.maker_photos: Skydio, Parrot, Pix4D Camera:, Teal), ~3 KB."""
+
+    def seed(folder: Path) -> Path:
+        from support.maker_photos import write_maker_photo
+
+        return write_maker_photo(folder / "P0001.jpg", maker, yaw=120.0, pitch=-35.0, roll=1.5,
+                                 platform=(300.0, -3.0, -1.0), exif_extra={40962: 64, 40963: 48})
+    return seed
+
+
+def _read_maker_photo(path: Path) -> None:
+    """`ridgeloc inspect PHOTO` (text and JSON) and `ridgeloc locate PHOTO --ground-height-m H`: the makers'
+    readers, the pose chain and the level-ground answer with its covariance."""
+    from pipeline.errors import RidgelocError
+    from pipeline.ingest.photo import read_photo_checked
+    from pipeline.ingest.photo_inspect import format_photo, photo_as_dict
+    from pipeline.locate import GroundAssumption, locate_photos
+
+    photo = read_photo_checked(path)
+    format_photo(photo)
+    json.dumps(photo_as_dict(photo))
+    if photo.intrinsics is not None:
+        try:
+            locate_photos([photo], methods=["ground"], ground=GroundAssumption("height", photo.alt_m - 50.0))
+        except RidgelocError:
+            pass  # a refusal in one line is an answer (check() tests the message of what read_photo raises)
+
+
 def _seed_dem(folder: Path) -> Path:
     """A 12 x 12 int16 GeoTIFF DEM (EPSG:4326, EGM2008 heights, deflate, nodata -32768), ~1 KB."""
     from pipeline.synth.dem import Hills, write_dem
@@ -489,6 +521,10 @@ TARGETS: tuple[Target, ...] = (
     Target("run-config", _seed_run_config, _read_run_config, tree="yaml"),
     Target("observations", _seed_observations, _read_observations, tree="json"),
     Target("photo", _seed_photo, _read_photo),
+    Target("photo-skydio", _seed_maker_photo("skydio"), _read_maker_photo),
+    Target("photo-parrot", _seed_maker_photo("parrot"), _read_maker_photo),
+    Target("photo-pix4d", _seed_maker_photo("parrot-disco"), _read_maker_photo),
+    Target("photo-teal", _seed_maker_photo("teal"), _read_maker_photo),
     Target("dem", _seed_dem, _read_dem),
 )
 BY_NAME = {t.name: t for t in TARGETS}

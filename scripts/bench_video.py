@@ -319,7 +319,10 @@ def main(argv=None) -> int:
     _, cpu, peak = _spawn([sys.executable, "-m", "pipeline", "run", str(cfg), "-o", str(out), "--force", "-q"])
     wall = time.perf_counter() - t
     results["ridgeloc run"] = {"s": wall, "cpu_s": cpu, "peak_mib": peak}
-    name = [p for p in out.iterdir() if p.is_dir()]
+    import yaml
+
+    group = out / yaml.safe_load(cfg.read_text())["name"]  # this flight's folder (a --loop run shares `out`)
+    name = [group] if group.is_dir() else []
     res = json.loads((name[0] / "result.json").read_text()) if name else {}
     est = json.loads((name[0] / "estimates.json").read_text())["estimates"] if name else {}
     tracking = json.loads((name[0] / "tracking.json").read_text()) if name else None

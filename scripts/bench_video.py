@@ -314,9 +314,10 @@ def main(argv=None) -> int:
         wall, cpu, peak = _child(imports, work, ts, wanted)
         results[name] = {"s": wall, "cpu_s": cpu, "peak_mib": peak}
         print(f"{name}: {wall:.2f} s wall, {cpu:.2f} s CPU, peak RSS {peak:.0f} MiB", flush=True)
-    out = folder / "run"
+    out = folder / f"run_{cfg.stem}"  # one output folder per flight (a run folder holds one run's flights)
     t = time.perf_counter()
-    _, cpu, peak = _spawn([sys.executable, "-m", "pipeline", "run", str(cfg), "-o", str(out), "--force", "-q"])
+    _, cpu, peak = _spawn([sys.executable, "-m", "pipeline", "run", str(cfg), "-o", str(out), "--force", "--overwrite",
+                           "-q"])
     wall = time.perf_counter() - t
     results["ridgeloc run"] = {"s": wall, "cpu_s": cpu, "peak_mib": peak}
     import yaml

@@ -290,6 +290,8 @@ def main(argv=None) -> int:
     ap.add_argument("--reuse", action="store_true", help="reuse a flight already generated in --workdir")
     ap.add_argument("--loop", type=int, default=1,
                     help="benchmark the generated flight copied this many times end to end (see loop())")
+    ap.add_argument("--max-detect-px", type=int, default=None,
+                    help="run with this tracking.max_detect_px (default: the config's default)")
     args = ap.parse_args(argv)
     folder = Path(args.workdir or f"/tmp/ridgeloc_bench_video_{int(args.seconds)}s")
     load0 = os.getloadavg()
@@ -301,6 +303,14 @@ def main(argv=None) -> int:
         t = time.perf_counter()
         cfg = loop(folder, args.loop)
         print(f"looped x{args.loop} in {time.perf_counter() - t:.0f} s", flush=True)
+    if args.max_detect_px is not None:  # the same flight with another SIFT resolution, in a config of its own
+        import yaml
+
+        doc = yaml.safe_load(cfg.read_text())
+        doc["name"] = f"{doc['name']}_sift{args.max_detect_px}"
+        doc["tracking"] = {**(doc.get("tracking") or {}), "max_detect_px": args.max_detect_px}
+        cfg = cfg.with_name(f"{cfg.stem}_sift{args.max_detect_px}.yaml")
+        cfg.write_text(yaml.safe_dump(doc, sort_keys=False))
     ts = folder / yaml_files(cfg)
     results = {"seconds": args.seconds * args.loop, "loop": args.loop, "load_before": load0,
                "mbytes": ts.stat().st_size / 1e6}
@@ -336,6 +346,8 @@ def main(argv=None) -> int:
     px = pixel_errors(tracking, gen["seconds"]) if tracking else np.zeros(0)
     results["pixel_error_px"] = {"tracked": int(px.size), "median": float(np.median(px)) if px.size else None,
                                  "p95": float(np.percentile(px, 95)) if px.size else None}
+    per_minute = [float(np.median(px[k:k + 60])) for k in range(0, px.size, 60)]  # one observation a second
+    results["pixel_error_px"]["median_per_minute"] = [round(v, 3) for v in per_minute]
     results["load_after"] = os.getloadavg()
     bare = results["bare decode (every frame)"]["s"]
     floor = results["decode floor (observation frames)"]["s"]

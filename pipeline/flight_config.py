@@ -34,6 +34,10 @@ from pipeline.targets import Geodetic, TargetEntry, check_mark, read_truth_file
 # ---- the flight configuration ------------------------------------------------------------------------------
 
 
+#: names a flight cannot have: the run's TAK outputs beside the group folders (OUTDIR/cot/, targets.zip)
+RESERVED_FLIGHT_NAMES = ("cot", "targets.zip")
+
+
 @dataclass(frozen=True)
 class Files:
     telemetry: tuple[str, ...] = ()
@@ -305,6 +309,9 @@ class FlightConfig:
             raise ValueError("'origin' must be 'auto' or {lat_deg, lon_deg, alt_m}")
         if not self.name or any(c in self.name for c in "/\\:") or self.name.startswith("."):
             raise ValueError(f"'name' must be a folder-safe name, got {self.name!r}")
+        if self.name.lower() in RESERVED_FLIGHT_NAMES:
+            raise ValueError(f"'name' {self.name!r} is taken by the run's TAK events (OUTDIR/cot/, targets.zip): "
+                             "name the flight otherwise")
         if self.truth is not None and self.truth_file is not None:
             raise ValueError("give 'truth' or 'truth_file', not both")
 

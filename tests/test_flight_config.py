@@ -64,6 +64,7 @@ def test_paths_resolve_relative_to_the_config_and_values_are_typed(flight_dir):
     (lambda d: d["target"].pop("pixel"), r"give either"),
     (lambda d: d["files"].update(video="nope.mp4"), r"files\.video: file not found: .*nope\.mp4"),
     (lambda d: d.update(name="a/b"), r"folder-safe"),
+    (lambda d: d.update(name="COT"), r"taken by the run's TAK events"),
 ])
 def test_mistakes_are_named(flight_dir, change, message):
     doc = copy.deepcopy(_doc())

@@ -18,6 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # Lowest first. Units in one layer are independent of each other.
 LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("base", ("pipeline", "errors", "atomic", "progress")),
+    ("TAK: CoT events, data packages, sending", ("tak",)),
     ("config schema and simple files", ("config_schema", "frames_csv")),
     ("solve options", ("solve_options",)),
     ("targets", ("targets",)),

@@ -6,7 +6,8 @@ import argparse
 import json
 import sys
 
-HELP = "locate a target from drone photos: one photo and a pixel (laser or DEM), or several photos (every method)"
+HELP = ("locate a target from drone photos (DJI, Skydio, Parrot, Teal, Autel): one answer from a photo and a pixel "
+        "(laser, DEM or level ground) or from several photos")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -58,6 +59,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--overwrite", action="store_true",
                         help="replace the results of another run in the --outdir folder")
     parser.add_argument("--json", action="store_true", help="print one JSON document, the answer first")
+    from pipeline.commands.send import add_tak_arguments
+
+    add_tak_arguments(parser)
 
 
 def stated_errors(photos, args):
@@ -91,10 +95,15 @@ def _default_name(paths) -> str:
 
 
 def main(args) -> int:
+    from pipeline.commands.send import check_send_args, cot_options
     from pipeline.errors import InputError
     from pipeline.ingest.photo import read_photos
     from pipeline.locate import check_pixels, estimate_row, locate_photos, read_marks
+    from pipeline.report.cot import check_flight_name
 
+    cot = cot_options(args)  # a bad CoT type, stale time, URL, certificate or name is refused before any work
+    check_send_args(args, args.send)
+    check_flight_name(args.name or _default_name(args.photos))
     if args.outdir is not None:  # refused before any work: a file there, or another run's results
         from pathlib import Path
 
@@ -165,7 +174,7 @@ def main(args) -> int:
         from pipeline.report.outputs import write_run_outputs
 
         write_run_outputs(args.outdir, [result], [], {"command": "locate", "outdir": str(args.outdir)},
-                          rewrite_groups=True)
+                          rewrite_groups=True, cot=cot)
     if args.json:
         print(json.dumps(doc, indent=2))
     else:
@@ -183,7 +192,14 @@ def main(args) -> int:
             print(f"note: {note}")
         if args.outdir is not None:
             print(f"wrote {Path(args.outdir) / 'targets.csv'} and the rest of the run outputs in {args.outdir}")
+    sent = 0
+    if args.send:
+        from pipeline.commands.send import send_events_to, send_run_outputs
+        from pipeline.report.cot import cot_entries
+
+        sent = (send_run_outputs(args.outdir, args) if args.outdir is not None
+                else send_events_to([e.xml for e in cot_entries([result], options=cot)], args.send, args))
     if answer["status"] != "located":  # exit 0 only with an answer
         print(f"ridgeloc: error: the target is not located: {answer['reason']}", file=sys.stderr)
         return 1
-    return 1 if bad else 0
+    return 1 if bad or sent else 0

@@ -8,10 +8,12 @@ import time
 from pathlib import Path
 
 from pipeline.commands import not_a_config, output_folder
+from pipeline.commands.send import add_tak_arguments, check_send_args, cot_options, send_run_outputs
 from pipeline.errors import InputError
 from pipeline.flight_config import FlightConfig, load_run_config
 
-HELP = "process flights (video, telemetry, ranges) into target positions, a Table-4-like report and GIS exports"
+HELP = ("process flights (video or photos, telemetry, ranges) into one answer per target (WGS84, MGRS, CE90), a report "
+        "comparing every method, GIS and TAK outputs")
 DEFAULT_CONFIG = Path("configs/sample.yaml")
 STAGES = ("ingest", "track", "sync", "solve")
 
@@ -37,6 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also write overlay.mp4 per video flight: the observation frames with the tracked "
                              "target, the answer and its 95 %% ellipse, the laser spot (shown in report.html)")
     parser.add_argument("-q", "--quiet", action="store_true", help="print only the summary and errors")
+    add_tak_arguments(parser)
 
 
 def _resolve_config(arg: str) -> Path:
@@ -93,6 +96,8 @@ def main(args) -> int:
     output_folder(args.outdir)  # a file there is refused before any flight runs
     if args.scheduler is not None and args.executor != "dask":
         raise InputError("--scheduler names a Dask scheduler: give --executor dask too (it would be ignored)")
+    cot = cot_options(args)  # a bad CoT type, stale time, URL or certificate is refused before any flight runs
+    check_send_args(args, args.send)
     config = _resolve_config(args.config)
     try:
         entries = load_run_config(config)  # a malformed run config is refused before the heavy imports below
@@ -130,7 +135,7 @@ def main(args) -> int:
                 "executor": args.executor, "ridgeloc": __version__, "reused": reused}
     t0 = time.perf_counter()
     if results:  # when every flight failed, no output at all (as for a flight config that does not load)
-        write_run_outputs(args.outdir, results, failures, settings, figures=not args.no_figures)
+        write_run_outputs(args.outdir, results, failures, settings, figures=not args.no_figures, cot=cot)
         md, tab = write_table4(args.outdir, results, failures)
         t2 = time.perf_counter()
     from pipeline.results import per_target, target_failures
@@ -149,8 +154,8 @@ def main(args) -> int:
     for f in failures:  # one line each on stderr; the count and the names go to stdout with the rest of the summary
         print(f"ridgeloc: {f.name}: failed: {f.message}", file=sys.stderr)
     if results and not args.quiet:
-        print(f"wrote {Path(args.outdir) / 'report.html'}, targets.csv/.geojson/.kml, estimates.csv/.geojson, {md} "
-              f"and {tab} in {t2 - t0:.2f} s")
+        print(f"wrote {Path(args.outdir) / 'report.html'}, targets.csv/.geojson/.kml, cot/ and targets.zip (TAK), "
+              f"estimates.csv/.geojson, {md} and {tab} in {t2 - t0:.2f} s")
     print(summarize_failures(failures, len(entries)).splitlines()[0])
     located = True
     if results:
@@ -159,4 +164,5 @@ def main(args) -> int:
         rows = answer_rows(results, failures)
         located = all(row["status"] == "located" for row in rows)
         print("\n" + answers_text(rows))
-    return 1 if failures or not_located or not located else 0
+    sent = send_run_outputs(args.outdir, args) if results and args.send else 0
+    return 1 if failures or not_located or not located or sent else 0

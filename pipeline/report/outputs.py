@@ -3,6 +3,7 @@
     OUTDIR/
       report.html                  self-contained report (html.py)
       targets.csv / .geojson / .kml  the answer per target (answers.py, exports.py)
+      cot/<target>.cot, targets.zip  the answers as Cursor on Target events and a TAK data package (cot.py)
       estimates.csv / .geojson     every method's estimate, for the comparison (exports.py)
       run.json                     groups done, failures with their messages, settings, clock offsets estimated
                                    (clock.estimate), software versions
@@ -35,6 +36,7 @@ from pipeline.atomic import (
 )
 from pipeline.errors import InputError
 from pipeline.report.answers import answer_rows
+from pipeline.report.cot import CotOptions, check_flight_name, write_cot_outputs
 from pipeline.report.exports import (
     estimates_geojson,
     write_estimates_csv,
@@ -153,15 +155,19 @@ def claim_output_folder(outdir: str | PathLike, names, overwrite: bool = False) 
 
 
 def write_run_outputs(outdir: str | PathLike, results: Sequence[GroupResult], failures: Sequence[GroupFailure],
-                      settings: Mapping, figures: bool = True, rewrite_groups: bool = False) -> dict[str, Path]:
-    """Write the run-level outputs (targets.csv/.geojson/.kml, estimates.csv/.geojson, report.html, run.json) and
-    every group folder that is not written yet (`rewrite_groups`: each result's folder written again). A failed
-    flight's folder left by an earlier run is removed: it no longer describes the flight. `figures=False` leaves
-    the figures out of new group folders and of the report (fast). Returns name -> path of the run-level files."""
+                      settings: Mapping, figures: bool = True, rewrite_groups: bool = False,
+                      cot: CotOptions | None = None) -> dict[str, Path]:
+    """Write the run-level outputs (targets.csv/.geojson/.kml, estimates.csv/.geojson, cot/ and targets.zip,
+    report.html, run.json) and every group folder that is not written yet (`rewrite_groups`: each result's folder
+    written again). A failed flight's folder left by an earlier run is removed: it no longer describes the flight.
+    `figures=False` leaves the figures out of new group folders and of the report (fast); `cot` sets the CoT
+    events' type and stale time. Returns name -> path of the run-level files."""
     outdir = Path(outdir)
+    results, failures = list(results), list(failures)  # in the run's order (the run config's)
+    for r in results:
+        check_flight_name(r.name)  # its folder would be the TAK events' (cot/)
     outdir.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(outdir)
-    results, failures = list(results), list(failures)  # in the run's order (the run config's)
     for f in failures:
         stale = group_dir(outdir, f.name)
         if stale.is_dir() and f.name not in {r.name for r in results}:
@@ -182,6 +188,7 @@ def write_run_outputs(outdir: str | PathLike, results: Sequence[GroupResult], fa
     write_targets_kml(paths["kml"], results, failures)
     write_estimates_csv(paths["estimates_csv"], results)
     write_estimates_geojson(paths["estimates_geojson"], results)
+    write_cot_outputs(outdir, results, cot)
     write_report_html(paths["html"], results, failures, settings,
                       {k: v for k, v in pngs.items() if v or not figures})
     atomic_write_text(paths["run"], json.dumps({

@@ -496,6 +496,29 @@ def _read_dem(path: Path) -> None:
             raise AssertionError(f"a ray error does not name the DEM: {exc}") from None
 
 
+def _seed_cot(folder: Path) -> Path:
+    """A CoT event file as `ridgeloc run` writes it (OUT/cot/<target>.cot), ~1 KB."""
+    from datetime import datetime, timezone
+
+    from pipeline.tak.cot import CotTarget, event_xml
+
+    target = CotTarget("ridgeloc-fuzz", "panel", 34.36, 108.76, 391.1, 9.7, 15.0, "ridgeloc mle\nMGRS 49S BU",
+                       {"method": "mle", "ce90_m": "9.7"})
+    path = folder / "panel.cot"
+    path.write_bytes(event_xml(target, datetime(2026, 1, 1, tzinfo=timezone.utc)))
+    return path
+
+
+def _read_cot(path: Path) -> None:
+    """`ridgeloc send`: the event read and re-stamped, then encoded as sent (XML, and protobuf by takproto)."""
+    from pipeline.commands.send import load_events
+    from pipeline.tak.send import encode, parse_destination
+
+    for event in load_events([path], None, None):
+        for url in ("udp://127.0.0.1:6969", "tcp://127.0.0.1:8087"):
+            encode(event, parse_destination(url), protobuf=True)
+
+
 TARGETS: tuple[Target, ...] = (
     Target("tlog", _seed_tlog, _read_log),
     Target("dataflash-bin", _seed_dataflash, _read_log),
@@ -526,6 +549,7 @@ TARGETS: tuple[Target, ...] = (
     Target("photo-pix4d", _seed_maker_photo("parrot-disco"), _read_maker_photo),
     Target("photo-teal", _seed_maker_photo("teal"), _read_maker_photo),
     Target("dem", _seed_dem, _read_dem),
+    Target("cot-event", _seed_cot, _read_cot),
 )
 BY_NAME = {t.name: t for t in TARGETS}
 

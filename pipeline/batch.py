@@ -424,19 +424,23 @@ def summarize_failures(failures: Iterable[GroupFailure], total: int) -> str:
 class _GroupTask:
     """Worker side of `run_groups`: process one group and write its folder (picklable when `process` is)."""
 
-    def __init__(self, process, outdir: str, extra_files, figures: bool):
+    def __init__(self, process, outdir: str, extra_files, figures: bool, overlay: bool = False):
         self.process, self.outdir, self.extra_files, self.figures = process, outdir, extra_files, figures
+        self.overlay = overlay
 
     def __call__(self, payload):
-        from pipeline.report.outputs import write_group_outputs
+        from pipeline.report.outputs import add_overlay, write_group_outputs
 
         name, job_payload, digest = payload
         result = self.process(job_payload)
         if getattr(result, "name", None) != name:
             raise ValueError(f"the job named {name!r} produced a group named {getattr(result, 'name', None)!r}")
+        extra = dict(self.extra_files(result)) if self.extra_files is not None else {}
+        if self.overlay:
+            report_stage("overlay")
+            extra.update(add_overlay(self.outdir, result))
         report_stage("report")
-        extra = self.extra_files(result) if self.extra_files is not None else None
-        write_group_outputs(self.outdir, result, digest, extra_files=extra, figures=self.figures)
+        write_group_outputs(self.outdir, result, digest, extra_files=extra or None, figures=self.figures)
         return result
 
 
@@ -458,14 +462,16 @@ def job_digest(config, files: Iterable[str | PathLike] = ()) -> str:
 
 def run_groups(jobs: Sequence[Job], process: Callable[[Any], Any], outdir: str | PathLike, *,
                digests: dict[str, str] | None = None, force: bool = False,
-               extra_files: Callable[[Any], dict] | None = None, figures: bool = True, **run_jobs_options
+               extra_files: Callable[[Any], dict] | None = None, figures: bool = True, overlay: bool = False,
+               **run_jobs_options
                ) -> tuple[list[Any], list[GroupFailure], list[str]]:
     """Process flight groups into OUTDIR/<group>/ folders, reusing finished ones.
 
     A job whose folder is finished for its digest (`digests[job.name]`, see `job_digest`; "" when not given) is not
     run again unless `force`: its saved GroupResult is loaded. The others run through `run_jobs` (same options:
     workers, executor, scheduler, progress, stages, on_done); each worker calls `process(job.payload)` and writes
-    the group's folder atomically with `extra_files(result)` (name -> content) beside the report's files.
+    the group's folder atomically with `extra_files(result)` (name -> content) beside the report's files, and with
+    `overlay` a video flight's overlay.mp4 (`pipeline.report.overlay`; its time is the result's "overlay" stage).
     `process` must return a GroupResult named `job.name`. Returns (results in job order, failures, names reused).
     """
     from pipeline.report.outputs import load_finished_group
@@ -479,10 +485,10 @@ def run_groups(jobs: Sequence[Job], process: Callable[[Any], Any], outdir: str |
                 reused[job.name] = r
     todo = [Job(j.name, j.source, (j.name, j.payload, digests.get(j.name, ""))) for j in jobs
             if j.name not in reused]
-    task = _GroupTask(process, str(outdir), extra_files, figures)
+    task = _GroupTask(process, str(outdir), extra_files, figures, overlay)
     stages = run_jobs_options.pop("stages", None)
     if stages is not None and "report" not in stages:
-        stages = (*stages, "report")
+        stages = (*stages, *(("overlay",) if overlay else ()), "report")
     new, failures = run_jobs(todo, task, stages=stages, **run_jobs_options)
     by_name = {**reused, **{r.name: r for r in new}}
     results = [by_name[j.name] for j in jobs if j.name in by_name]

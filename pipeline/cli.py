@@ -13,7 +13,8 @@ from pipeline import __version__
 from pipeline.errors import RidgelocError, environment_error_message
 
 # The stage order of the product, written once.
-COMMANDS = ("init", "run", "check", "solve", "simulate", "synth", "inspect", "locate", "mark", "send")
+COMMANDS = ("init", "run", "check", "solve", "simulate", "synth", "inspect", "locate", "mark", "overlay",
+            "send")
 
 
 def _load_commands() -> dict:

@@ -124,7 +124,7 @@ class TrackerSettings:
     keyframe_inlier_fraction: Annotated[float, Ge(0), Le(1)] = 0.5
     neighbours: Annotated[int, Ge(0)] = 2
     detect_scale: Annotated[float, Ge(0.1), Le(1)] = 0.5  # features found on the image resized by this factor
-    max_detect_px: Annotated[int, Ge(160)] = 1280  # ... and at most this many pixels on its long side
+    max_detect_px: Annotated[int, Ge(160)] = 960  # ... and at most this many pixels on its long side
 
 
 CLOCK_SOURCES = ("video", "range", "position", "attitude", "gimbal")

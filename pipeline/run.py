@@ -4,7 +4,8 @@
 run groups in worker processes. It returns a `GroupResult` (a `FlightResult` of one per target for a flight with
 named targets, issue 21) with the wall time of each stage:
   ingest  reading telemetry and the frame index (no pixels decoded): the `pipeline.flight.Flight`,
-  decode  decoding the frames the tracker asked for,
+  decode  waiting for the frames the tracker asked for (a video's are decoded ahead on worker threads while
+          the tracker works: their decoding overlaps track, and its CPU counts there),
   track   the target mark, the clock estimate (clock.estimate), SIFT, matching, homographies and refinement,
   sync    interpolation of the vehicle state, poses, projection matrices, undistortion, the geometry check,
   solve   every estimator.
@@ -61,8 +62,9 @@ def process_group(config: FlightConfig) -> GroupResult | FlightResult:
         notes += flight.notes + plan.notes
         notes += [r.line() for _, r in frame_centre_checks(flight.log)]  # the payload's own fix
         with times("track", flight.decoder):
-            fp = FlightPass(flight, plan, None, SiftTracker(config.tracking), ViewCache(share_matches=named),
-                            notes=notes, times=times)
+            # the cache serves frames decoded for one track to another: named targets, the clock estimate's
+            cache = ViewCache(share_matches=named) if named or config.clock.estimate else None
+            fp = FlightPass(flight, plan, None, SiftTracker(config.tracking), cache, notes=notes, times=times)
             first = [fp.acquire(m, notes) for m in (targets[0].marks if targets else [None])]
             fp.origin = flight.require_origin()
             if config.altitude.geoid_separation_m == "auto" and flight.log.position.alt_datum == "amsl":

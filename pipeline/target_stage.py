@@ -208,6 +208,21 @@ def _synchronize(flight: Flight, plan: ObservationPlan, track: TrackResult, rang
     return obs, useful, inside, geometry_warnings
 
 
+def payload_frame_centre_deg(flight: Flight, t_ns: np.ndarray) -> list | None:
+    """The payload's frame centre (KLV tags 23/24, EG 0104) at telemetry times t_ns (m,): [lat_deg, lon_deg]
+    interpolated in time, None outside its span; None when the logs give none. It comes with the positions, so
+    their clock offset applies."""
+    fc = flight.log.frame_centre
+    if fc is None or fc.t_ns.size == 0:
+        return None
+    t = np.asarray(t_ns, dtype=np.int64) - flight.config.clock.offset_ns("position")
+    inside = (t >= fc.t_ns[0]) & (t <= fc.t_ns[-1])
+    lat = np.interp(t, fc.t_ns, fc.lat_deg)
+    lon = np.interp(t, fc.t_ns, fc.lon_deg)
+    return [[round(float(a), 8), round(float(b), 8)] if ok and np.isfinite(a) and np.isfinite(b) else None
+            for a, b, ok in zip(lat, lon, inside, strict=True)]
+
+
 def truth_file_targets(config: FlightConfig) -> dict[str, tuple[float, float, float]]:
     """{name: (lat_deg, lon_deg, alt_m)} of the config's truth_file's named targets (synthetic flights with several
     targets); {} without a truth_file or when the config states its truth."""
@@ -306,6 +321,9 @@ def _result(fp: FlightPass, t: _Tracked, estimates: dict[str, Estimate], failure
     tracking["reason"] = [_frame_reason(lost, via, ins, use) for lost, via, ins, use in
                           zip(track.lost, tracking["via"], inside, useful, strict=True)]
     tracking["t_ns"] = [int(x) for x in plan.t_ns]
+    payload = payload_frame_centre_deg(flight, plan.t_ns)
+    if payload is not None:  # the KLV's own frame centre, for the report's map beside ridgeloc's
+        tracking["payload_frame_centre_deg"] = payload
     tracking["range_t_ns"] = [int(x) for x in plan.range_t_ns]
     tracking["mark"] = marks[0].to_dict()
     if len(marks) > 1:

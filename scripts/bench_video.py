@@ -12,10 +12,14 @@ frame's ground-plane homography, so generation costs one warp and one libx264 (u
 The flight config names only the .ts, with the target mark (the true pixel in the first observation frame) and
 the true target for the error column.
 
-Measures, in this one run: bare demux (PyAV packets of every stream, nothing kept), our index
-(`pipeline.ingest.video.demux_index`, frames only) and our full ingest (`read_flight`: index + KLV decode), each
-in a fresh subprocess; then `ridgeloc run FLIGHT.yaml` in a subprocess: wall time and peak RSS (ru_maxrss of
-the child). Prints the load average before and after; writes a JSON summary into the work folder.
+Measures, in this one run: bare demux (PyAV packets of every stream, nothing kept), a bare PyAV decode of every
+frame (`for f in av.open(ts).decode(video=0)`, PyAV's default threading: what the run is judged against), the
+decode floor of the answer (our reader, `VideoFrames.prefetch`, decoding the observation frames and nothing else:
+each from the key frame before it), our index (`pipeline.ingest.video.demux_index`, frames only) and our full
+ingest (`read_flight`: index + KLV decode), each in a fresh subprocess; then `ridgeloc run FLIGHT.yaml` in a
+subprocess: wall time and peak RSS (that child's own, from wait4), the run's stage times, the answer's errors and
+the tracked pixels' distance from the true target pixel. Prints the ratios run / bare decode and run / the
+flight's length, and the load average before and after; writes a JSON summary into the work folder.
 """
 
 from __future__ import annotations
@@ -24,7 +28,6 @@ import argparse
 import json
 import math
 import os
-import resource
 import subprocess
 import sys
 import time
@@ -229,20 +232,49 @@ def loop(folder: Path, times: int) -> Path:
 
 CHILD = {
     "bare demux": ("import av", "c=av.open(sys.argv[1])\nfor p in c.demux():\n    pass"),
+    "bare decode (every frame)": ("import av", "c=av.open(sys.argv[1])\nfor f in c.decode(video=0):\n    pass"),
+    "decode floor (observation frames)": (
+        "from pipeline.ingest.video import VideoFrames",
+        "v=VideoFrames(sys.argv[1], gray=True)\nw=[int(i) for i in sys.argv[2].split(',')]\nv.prefetch(w)\n"
+        "for i in w:\n    v[i]\nv.close()"),
     "index": ("from pipeline.ingest.video import demux_index", "demux_index(sys.argv[1])"),
     "ingest (index + KLV)": ("from pipeline.ingest import read_flight\nimport stanag4609.st0601",
                              "read_flight([sys.argv[1]])"),
 }
 
 
-def _child(imports: str, work: str, path: Path) -> tuple[float, float, float]:
+def _spawn(cmd: list[str]) -> tuple[str, float, float]:
+    """Run cmd: (its stdout, its own CPU s and peak RSS MiB from wait4). Raises when it fails."""
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    out = proc.stdout.read()
+    _, status, ru = os.wait4(proc.pid, 0)
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode:
+        raise subprocess.CalledProcessError(proc.returncode, cmd)
+    return out, ru.ru_utime + ru.ru_stime, ru.ru_maxrss / 1024.0
+
+
+def _child(imports: str, work: str, path: Path, *args: str) -> tuple[float, float, float]:
     """(wall s, CPU s) of `work` after `imports` in a fresh process, and its peak RSS (MiB)."""
     code = imports + "\n" + _TIMER.format(work=work)
-    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    out = subprocess.run([sys.executable, "-c", code, str(path)], check=True, cwd=ROOT, capture_output=True, text=True)
-    wall, cpu = json.loads(out.stdout.strip().splitlines()[-1])
-    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    return wall, cpu, max(peak, before) / 1024.0
+    out, _, peak = _spawn([sys.executable, "-c", code, str(path), *args])
+    wall, cpu = json.loads(out.strip().splitlines()[-1])
+    return wall, cpu, peak
+
+
+def pixel_errors(tracking: dict, seconds_generated: float) -> np.ndarray:
+    """Distances (px) of the tracked pixels from the true target pixel of their frames (a looped flight's frame
+    i shows frame i mod n of the generated one)."""
+    _, cam, R, _ = flight(seconds_generated)
+    K = _K()
+    out = []
+    for i, px in zip(tracking["frame_index"], tracking["pixel_px"], strict=True):
+        if px is None:
+            continue
+        j = i % len(cam)
+        x = K @ (R[j].T @ (-cam[j]))
+        out.append(math.hypot(px[0] - x[0] / x[2], px[1] - x[1] / x[2]))
+    return np.array(out)
 
 
 def yaml_files(cfg: Path) -> str:
@@ -258,6 +290,8 @@ def main(argv=None) -> int:
     ap.add_argument("--reuse", action="store_true", help="reuse a flight already generated in --workdir")
     ap.add_argument("--loop", type=int, default=1,
                     help="benchmark the generated flight copied this many times end to end (see loop())")
+    ap.add_argument("--max-detect-px", type=int, default=None,
+                    help="run with this tracking.max_detect_px (default: the config's default)")
     args = ap.parse_args(argv)
     folder = Path(args.workdir or f"/tmp/ridgeloc_bench_video_{int(args.seconds)}s")
     load0 = os.getloadavg()
@@ -269,39 +303,62 @@ def main(argv=None) -> int:
         t = time.perf_counter()
         cfg = loop(folder, args.loop)
         print(f"looped x{args.loop} in {time.perf_counter() - t:.0f} s", flush=True)
+    if args.max_detect_px is not None:  # the same flight with another SIFT resolution, in a config of its own
+        import yaml
+
+        doc = yaml.safe_load(cfg.read_text())
+        doc["name"] = f"{doc['name']}_sift{args.max_detect_px}"
+        doc["tracking"] = {**(doc.get("tracking") or {}), "max_detect_px": args.max_detect_px}
+        cfg = cfg.with_name(f"{cfg.stem}_sift{args.max_detect_px}.yaml")
+        cfg.write_text(yaml.safe_dump(doc, sort_keys=False))
     ts = folder / yaml_files(cfg)
     results = {"seconds": args.seconds * args.loop, "loop": args.loop, "load_before": load0,
                "mbytes": ts.stat().st_size / 1e6}
-    for name, (imports, work) in CHILD.items():  # separate processes; peak RSS is the largest child's so far
-        wall, cpu, peak = _child(imports, work, ts)
+    # the observation frames, found in a child (a child's peak RSS counts its parent's pages before exec)
+    wanted = subprocess.run([sys.executable, "-c", "import sys\nfrom pipeline.flight import Flight\n"
+                             "from pipeline.flight_config import load_run_config\n"
+                             "with Flight.open(load_run_config(sys.argv[1])[0].config) as f:\n"
+                             "    print(','.join(str(i) for i in f.require_plan().frame_index.tolist()))", str(cfg)],
+                            check=True, cwd=ROOT, capture_output=True, text=True).stdout.strip()
+    for name, (imports, work) in CHILD.items():  # separate processes, each with its own peak RSS
+        wall, cpu, peak = _child(imports, work, ts, wanted)
         results[name] = {"s": wall, "cpu_s": cpu, "peak_mib": peak}
-        print(f"{name}: {wall:.2f} s wall, {cpu:.2f} s CPU", flush=True)
-    out = folder / "run"
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        print(f"{name}: {wall:.2f} s wall, {cpu:.2f} s CPU, peak RSS {peak:.0f} MiB", flush=True)
+    out = folder / f"run_{cfg.stem}"  # one output folder per flight (a run folder holds one run's flights)
     t = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "pipeline", "run", str(cfg), "-o", str(out), "--force", "-q"], check=True,
-                   cwd=ROOT)
+    _, cpu, peak = _spawn([sys.executable, "-m", "pipeline", "run", str(cfg), "-o", str(out), "--force", "--overwrite",
+                           "-q"])
     wall = time.perf_counter() - t
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
-    peak = after.ru_maxrss / 1024.0  # this child is by far the largest
     results["ridgeloc run"] = {"s": wall, "cpu_s": cpu, "peak_mib": peak}
-    name = [p for p in out.iterdir() if p.is_dir()]
+    import yaml
+
+    group = out / yaml.safe_load(cfg.read_text())["name"]  # this flight's folder (a --loop run shares `out`)
+    name = [group] if group.is_dir() else []
     res = json.loads((name[0] / "result.json").read_text()) if name else {}
     est = json.loads((name[0] / "estimates.json").read_text())["estimates"] if name else {}
+    tracking = json.loads((name[0] / "tracking.json").read_text()) if name else None
     results["errors_m"] = {m: e.get("error_m") for m, e in est.items()}
     results["timings_s"] = res.get("timings_s")
     results["cpu_s"] = (res.get("settings") or {}).get("cpu_s")
-    results["n_observations"] = len(json.loads((name[0] / "tracking.json").read_text())["frame_index"]) if name \
-        else None
+    results["frames_decoded"] = (res.get("settings") or {}).get("frames_decoded")
+    results["n_observations"] = len(tracking["frame_index"]) if tracking else None
+    gen = json.loads((folder / "generate.json").read_text())
+    px = pixel_errors(tracking, gen["seconds"]) if tracking else np.zeros(0)
+    results["pixel_error_px"] = {"tracked": int(px.size), "median": float(np.median(px)) if px.size else None,
+                                 "p95": float(np.percentile(px, 95)) if px.size else None}
+    per_minute = [float(np.median(px[k:k + 60])) for k in range(0, px.size, 60)]  # one observation a second
+    results["pixel_error_px"]["median_per_minute"] = [round(v, 3) for v in per_minute]
     results["load_after"] = os.getloadavg()
-    ratio = results["index"]["s"] / results["bare demux"]["s"]
-    print(f"ridgeloc run: {wall:.1f} s wall, {cpu:.1f} s CPU, peak RSS {peak:.0f} MiB; "
-          f"index / bare demux = {ratio:.2f} (wall), "
-          f"{results['index']['cpu_s'] / results['bare demux']['cpu_s']:.2f} (CPU)")
+    bare = results["bare decode (every frame)"]["s"]
+    floor = results["decode floor (observation frames)"]["s"]
+    print(f"ridgeloc run: {wall:.1f} s wall, {cpu:.1f} s CPU, peak RSS {peak:.0f} MiB")
+    print(f"run / bare decode of every frame = {wall / bare:.2f} (wall); decode floor / bare decode = "
+          f"{floor / bare:.2f}; run / flight length = {wall / results['seconds']:.3f}")
+    print(f"index / bare demux = {results['index']['s'] / results['bare demux']['s']:.2f} (wall)")
     print(f"stages wall s: {results['timings_s']}")
     print(f"stages CPU s: {results['cpu_s']}")
     print(f"errors m: {results['errors_m']}")
+    print(f"tracked pixel - true pixel: {results['pixel_error_px']}")
     print(f"load average after: {' '.join(f'{v:.2f}' for v in results['load_after'])}")
     (folder / f"bench_video_x{args.loop}.json").write_text(json.dumps(results, indent=1, default=str))
     return 0

@@ -48,6 +48,24 @@ def test_container_times_and_chosen_frames(tmp_path):
         v[99]
 
 
+def test_prefetched_frames_are_the_frames_decoded_one_by_one(tmp_path):
+    """Worker threads decoding a planned order ahead give the same pixels as decoding each frame in turn, also
+    when the caller skips planned frames, asks for one outside the plan or goes back; a new plan replaces the old."""
+    p = tmp_path / "v.mp4"
+    _video(p)
+    with VideoFrames(p, gray=True) as v:
+        one_by_one = {i: v[i] for i in range(40)}
+    plan = [5, 6, 7, 20, 33, 39, 4, 2]
+    with VideoFrames(p, gray=True) as v:
+        v.prefetch(plan, workers=2, ahead=1)
+        got = {i: v[i] for i in (5, 7, 20, 12, 39, 2)}  # 6, 33 and 4 skipped; 12 is not in the plan
+        v.prefetch([30, 31], workers=1)
+        got.update(v.read([31, 30, 0]))
+    for i, img in got.items():
+        assert img.shape == (48, 64) and img.flags.owndata
+        np.testing.assert_array_equal(img, one_by_one[i])
+
+
 def test_frames_csv_gives_variable_rate_times(tmp_path):
     p = tmp_path / "video.mp4"
     _video(p, n=6)

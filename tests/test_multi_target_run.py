@@ -187,4 +187,5 @@ def test_the_report_map_shows_every_target_with_a_label_and_a_layer_per_method(r
 
     methods = {m for r in flight.targets for m, e in r.estimates.items() if np.isfinite(e.position_m).all()}
     assert sorted(probe["layers"]) == sorted(["Flight path", "Lines of sight", "Truth", "Target names",
+                                              "Camera footprints", "Frame centre: ridgeloc",
                                               *[method_label(m) for m in methods]])

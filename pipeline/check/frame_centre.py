@@ -19,6 +19,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.geometry.frames import R_ecef_from_ned, ecef_from_lla
 from pipeline.geometry.geoid import geoid_undulation_m
+from pipeline.geometry.grid_north import utm_convergence_deg
 from pipeline.ingest.klv import KlvTable, _platform_rotation, sensor_position, sensor_rotation, table_sensor_rotation
 
 CONSISTENT_M = 30.0  # median at or below: the conventions agree with the payload's
@@ -63,6 +64,9 @@ ALTERNATIVES = {
         lambda c, m: _platform_rotation(c, m) * _rel(c, m, signs=(-1, 1, 1)),
 }
 GRID_NORTH = "azimuths from UTM grid north, not true north (meridian convergence of the sensor's UTM zone)"
+TRUE_NORTH = "azimuths from true north, not UTM grid north (as the standards say)"
+# what the flight config sets to read the angles as the alternative that explains the miss
+SWITCH = {GRID_NORTH: "mapping: {klv: {azimuth_north: grid}}", TRUE_NORTH: "mapping: {klv: {azimuth_north: true}}"}
 HEIGHT_ALTERNATIVES = ("sensor altitude on the other datum (MSL <-> ellipsoid)",
                        "frame-centre elevation above the ellipsoid, not MSL")
 
@@ -95,16 +99,9 @@ class FrameCentreCheck:
                f"median {self.median_m:.1f} m, p95 {self.p95_m:.1f} m: {self.verdict}")
         if self.explained_by:
             out += f"; explained by: {self.explained_by} (median {self.alternatives[self.explained_by]:.1f} m)"
+            if self.explained_by in SWITCH:
+                out += f"; to read them so, set `{SWITCH[self.explained_by]}` in the flight config"
         return out
-
-
-def utm_convergence_deg(lat_deg, lon_deg) -> np.ndarray:
-    """Meridian convergence (deg) of the UTM zone at each point: the angle from true north to grid north, positive
-    east of the zone's central meridian; true azimuth = grid azimuth + convergence. Spherical form
-    atan(tan(dlon) sin(lat)); the ellipsoid's terms change it by under 0.001 deg within a zone."""
-    lon = np.asarray(lon_deg, dtype=np.float64)
-    central = (np.floor((lon + 180.0) / 6.0) * 6.0 - 177.0)
-    return np.degrees(np.arctan(np.tan(np.radians(lon - central)) * np.sin(np.radians(lat_deg))))
 
 
 def _distances(lat, lon, h_ell, R: Rotation, range_m, c_lat, c_lon, c_h_ell) -> tuple[np.ndarray, np.ndarray]:
@@ -129,8 +126,9 @@ def _conventions(table: KlvTable, m: np.ndarray) -> str:
     from pipeline.ingest.klv import SENSOR_CONVENTION
 
     eg = table.is_eg0104[m]
-    return ", ".join(f"{s}: {SENSOR_CONVENTION[s]}" for s, has in (("st0601", (~eg).any()), ("eg0104", eg.any()))
-                     if has)
+    out = ", ".join(f"{s}: {SENSOR_CONVENTION[s]}" for s, has in (("st0601", (~eg).any()), ("eg0104", eg.any()))
+                    if has)
+    return out + (", azimuths from UTM grid north" if table.azimuth_north == "grid" else "")
 
 
 def check_frame_centre(table: KlvTable) -> FrameCentreCheck | None:
@@ -165,9 +163,14 @@ def check_frame_centre(table: KlvTable) -> FrameCentreCheck | None:
                 continue  # the platform's angles are missing in some packets: only the earth reading applies
         h2, v2 = _distances(lat, lon, h_read, rot(c, m), rng, c_lat, c_lon, c_h)
         alternatives[name] = float(np.median(_summary(h2, v2)[0]))
-    grid = Rotation.from_euler("Z", np.radians(utm_convergence_deg(lat, lon))[:, None])
-    h2, v2 = _distances(lat, lon, h_read, grid * R, rng, c_lat, c_lon, c_h)
-    alternatives[GRID_NORTH] = float(np.median(_summary(h2, v2)[0]))
+    R_true = table_sensor_rotation(table, m, north="true")  # the azimuths as logged, from true north
+    if table.azimuth_north == "grid":
+        h2, v2 = _distances(lat, lon, h_read, R_true, rng, c_lat, c_lon, c_h)
+        alternatives[TRUE_NORTH] = float(np.median(_summary(h2, v2)[0]))
+    else:
+        grid = Rotation.from_euler("Z", np.radians(utm_convergence_deg(lat, lon))[:, None])
+        h2, v2 = _distances(lat, lon, h_read, grid * R_true, rng, c_lat, c_lon, c_h)
+        alternatives[GRID_NORTH] = float(np.median(_summary(h2, v2)[0]))
     if not horizontal_only:
         h2, v2 = _distances(lat, lon, h_other, R, rng, c_lat, c_lon, c_h)
         alternatives[HEIGHT_ALTERNATIVES[0]] = float(np.median(_summary(h2, v2)[0]))
@@ -189,11 +192,12 @@ def check_frame_centre(table: KlvTable) -> FrameCentreCheck | None:
         convention=_conventions(table, m), verdict=verdict, alternatives=alternatives, explained_by=explained)
 
 
-def check_file(path, index=None) -> FrameCentreCheck | None:
-    """`check_frame_centre` of a full-motion video's KLV stream or a raw KLV dump (ST 0601 or EG 0104)."""
+def check_file(path, index=None, mapping: dict | None = None) -> FrameCentreCheck | None:
+    """`check_frame_centre` of a full-motion video's KLV stream or a raw KLV dump (ST 0601 or EG 0104); `mapping`
+    the `klv` reading options (`azimuth_north`)."""
     from pipeline.ingest.klv import read_klv_table
 
-    table, _ = read_klv_table(path, index)
+    table, _ = read_klv_table(path, index, mapping)
     return check_frame_centre(table)
 
 

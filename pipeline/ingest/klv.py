@@ -135,6 +135,25 @@ def decode_eg0104(packet: bytes) -> dict | None:
     return out
 
 
+def _klv_packet(packet: bytes):
+    """One whole KLV packet (16-byte key, minimal BER length, value) -> the library's `KLVPacket`; raises the
+    library's errors when the length is malformed or does not end the packet.
+
+    Built here rather than by `decode_uas_local_set(bytes)`: its one-packet parser is a streaming parser over a
+    bytearray that it shrinks after reading a length through a memoryview of it. Where something holds the frame
+    that read the length (a sampling profiler, as every Dask worker runs, keeps other threads' frames and with
+    them their locals), the shrink raises "BufferError: Existing exports of data: object cannot be re-sized"
+    (tests/test_batch_dask_cluster.py). Immutable bytes have no such failure."""
+    from stanag4609.errors import DecodeError
+    from stanag4609.klv import KLVPacket, decode_ber_length
+
+    packet = bytes(packet)
+    length, used = decode_ber_length(packet, 16, canonical=True, max_value=MAX_PACKET_BYTES)
+    if 16 + used + length != len(packet):
+        raise DecodeError("the BER length does not end the packet")
+    return KLVPacket(packet[:16], packet[16 + used:], packet[16:16 + used], 0)
+
+
 def decode_packet(packet: bytes) -> dict[str, float] | None:
     """One ST 0601 packet -> {"t_us": int, column: value (NaN for reserved/out-of-range values)}, or None when
     the packet fails its checksum or does not decode (the library's checks: structure, tag 2 first, lengths)."""
@@ -142,7 +161,7 @@ def decode_packet(packet: bytes) -> dict[str, float] | None:
     from stanag4609.errors import Stanag4609Error
 
     try:
-        ls = st.decode_uas_local_set(packet, verify_checksum=True, require_version=False,
+        ls = st.decode_uas_local_set(_klv_packet(packet), verify_checksum=True, require_version=False,
                                      field_decoding=st.FieldDecodingMode.PRESERVE)
     except (Stanag4609Error, ValueError, TypeError, OverflowError):
         return None
@@ -161,10 +180,13 @@ def decode_packet(packet: bytes) -> dict[str, float] | None:
 
 class KlvTable:
     """Decoded packets as columns: t_us (n,) int64 tag-2 times, t_ns (n,) int64 times on `clock`, and one float
-    column per name in TAGS (NaN where a packet lacks the tag). Counts of skipped packets by reason."""
+    column per name in TAGS (NaN where a packet lacks the tag). Counts of skipped packets by reason. `azimuth_north`
+    "grid": the azimuths were logged from UTM grid north (mapping `klv.azimuth_north`), turned to true north by
+    the meridian convergence wherever the table's attitudes are built."""
 
-    def __init__(self, rows: list[dict], t_ns: list[int], clock: str, source: str):
+    def __init__(self, rows: list[dict], t_ns: list[int], clock: str, source: str, azimuth_north: str = "true"):
         self.n = len(rows)
+        self.azimuth_north = azimuth_north  # "true" or "grid": where the azimuths are measured from (mapping)
         self.t_us = np.array([r["t_us"] for r in rows], dtype=np.int64)
         self.t_ns = np.array(t_ns, dtype=np.int64)
         self.cols = {name: np.array([r.get(name, math.nan) for r in rows], dtype=np.float64) for name in COLUMNS}
@@ -207,8 +229,27 @@ def sensor_rotation(c: dict[str, np.ndarray], mask: np.ndarray, convention: str)
     return _platform_rotation(c, mask) * rel
 
 
-def table_sensor_rotation(table: KlvTable, mask: np.ndarray) -> Rotation:
-    """`sensor_rotation` of the rows in `mask`, each under its own set's convention (SENSOR_CONVENTION)."""
+def grid_to_true(table: KlvTable, mask: np.ndarray) -> Rotation:
+    """The rotation (about the local down axis) turning NED-from-x attitudes whose azimuths were logged from UTM
+    grid north into true-north ones, for the rows in `mask`: by each row's meridian convergence at the sensor
+    position (identity where the table's azimuths are true or a row has no position)."""
+    n = int(mask.sum())
+    if table.azimuth_north != "grid":
+        return Rotation.identity(n)
+    from pipeline.geometry.grid_north import utm_convergence_deg
+
+    gamma = np.nan_to_num(utm_convergence_deg(table.cols["lat_deg"][mask], table.cols["lon_deg"][mask]), nan=0.0)
+    return Rotation.from_euler("Z", np.radians(gamma)[:, None])
+
+
+def platform_rotation(table: KlvTable, mask: np.ndarray) -> Rotation:
+    """The platform's attitude (NED from body FRD) of the rows in `mask`, true north."""
+    return grid_to_true(table, mask) * _platform_rotation(table.cols, mask)
+
+
+def table_sensor_rotation(table: KlvTable, mask: np.ndarray, north: str | None = None) -> Rotation:
+    """`sensor_rotation` of the rows in `mask`, each under its own set's convention (SENSOR_CONVENTION), turned to
+    true north when the table's azimuths are grid ones (`north` "true": as logged, without that turn)."""
     eg = table.is_eg0104[mask]
     q = np.empty((int(mask.sum()), 4))
     for conv, rows in ((SENSOR_CONVENTION["eg0104"], eg), (SENSOR_CONVENTION["st0601"], ~eg)):
@@ -216,7 +257,8 @@ def table_sensor_rotation(table: KlvTable, mask: np.ndarray) -> Rotation:
             sub = mask.copy()
             sub[mask] = rows
             q[rows] = sensor_rotation(table.cols, sub, conv).as_quat()
-    return Rotation.from_quat(q)
+    rot = Rotation.from_quat(q)
+    return rot if north == "true" else grid_to_true(table, mask) * rot
 
 
 def sensor_position(table: KlvTable) -> tuple[np.ndarray, np.ndarray, str, str]:
@@ -254,14 +296,15 @@ def table_to_log(table: KlvTable, path: str, warnings: list[str]) -> FlightLog:
     att = _has(table, "heading_deg", "pitch_deg", "roll_deg")
     if att.any():
         t, o = _series(table, att)
-        log.attitude = AttitudeSeries(t, quat_wxyz_from_rotation(_platform_rotation(c, att))[o], clock=table.clock,
+        log.attitude = AttitudeSeries(t, quat_wxyz_from_rotation(platform_rotation(table, att))[o], clock=table.clock,
                                       source=f"{src}:{_items(table, 'tags 5/6/7', 'platform angles')}")
     gim = _has(table, "sensor_az_deg", "sensor_el_deg") & (att | table.is_eg0104)
     if gim.any():
         t, o = _series(table, gim)
         q = quat_wxyz_from_rotation(table_sensor_rotation(table, gim))[o]
+        grid = ", azimuths from UTM grid north" if table.azimuth_north == "grid" else ""
         log.gimbal = GimbalSeries(t, q, np.zeros(t.size, bool), clock=table.clock, source=f"{src}:" + _items(
-            table, "tags 18/19/20 on 5/6/7", "sensor angles (earth-referenced)"))
+            table, "tags 18/19/20 on 5/6/7", "sensor angles (earth-referenced)") + grid)
     rng = _has(table, "slant_range_m")
     if rng.any():
         t, o = _series(table, rng)
@@ -330,7 +373,18 @@ def _decode_all(chunks) -> tuple[list[dict], list, int, int, int, int, int]:
     return rows, times, bad, cut, other, unknown, damaged
 
 
-def _dump_table(p: Path) -> tuple[KlvTable, list[str]]:
+def _north(mapping: dict | None) -> str:
+    """The mapping's `azimuth_north` ("true" or "grid"; YAML's bare `true` counts as "true")."""
+    value = (mapping or {}).get("azimuth_north", True)
+    north = "true" if value is True or value == "true" else value
+    if north not in ("true", "grid"):
+        from pipeline.errors import ConfigError
+
+        raise ConfigError(f"ingest mapping klv.azimuth_north: expected true or grid, got {value!r}")
+    return north
+
+
+def _dump_table(p: Path, mapping: dict | None = None) -> tuple[KlvTable, list[str]]:
     try:
         data = p.read_bytes()
     except OSError as exc:
@@ -342,10 +396,11 @@ def _dump_table(p: Path) -> tuple[KlvTable, list[str]]:
         raise LogReadError(f"no valid ST 0601 or EG 0104 KLV packet ({bad} bad checksum or undecodable, {cut} cut "
                            "off)", path=p)
     t_ns = [r["t_us"] * 1000 for r in rows]
-    return KlvTable(rows, t_ns, "unix", p.name), _skipped_warning(p, len(rows), bad, cut, 0, unknown, damaged)
+    return (KlvTable(rows, t_ns, "unix", p.name, _north(mapping)),
+            _skipped_warning(p, len(rows), bad, cut, 0, unknown, damaged))
 
 
-def _fmv_table(p: Path, index) -> tuple[KlvTable, list[str]]:
+def _fmv_table(p: Path, index, mapping: dict | None = None) -> tuple[KlvTable, list[str]]:
     if not index.data_packets:
         raise LogReadError("no KLV data stream (this video carries no MISB metadata; give telemetry files)", path=p)
     rows, times, bad, cut, other, unknown, damaged = _decode_all(index.data_packets)
@@ -367,34 +422,34 @@ def _fmv_table(p: Path, index) -> tuple[KlvTable, list[str]]:
         t_ns[:] = (t_us - t_us.min()) * 1000
         warnings.append(f"{p.name}: KLV packets carry no PTS; their time stamps are aligned with the first video "
                         "frame (set clock offsets if this is wrong)")
-    return KlvTable(rows, t_ns.tolist(), "video", p.name), warnings
+    return KlvTable(rows, t_ns.tolist(), "video", p.name, _north(mapping)), warnings
 
 
-def read_klv_table(path, index=None) -> tuple[KlvTable, list[str]]:
+def read_klv_table(path, index=None, mapping: dict | None = None) -> tuple[KlvTable, list[str]]:
     """The decoded packets of a raw KLV dump (times on the "unix" clock) or of a video's KLV data stream (the
     "video" clock) and the reader's warnings; `index`: the video's demux_index(data_streams=True) if known."""
     from pipeline.ingest.video import VIDEO_SUFFIXES, demux_index
 
     p = Path(path)
     if index is None and p.suffix.lower() not in VIDEO_SUFFIXES:  # a raw dump (dispatch's rule: videos by suffix)
-        return _dump_table(p)
+        return _dump_table(p, mapping)
     if index is None:
         index = demux_index(p, data_streams=True)
-    return _fmv_table(p, index)
+    return _fmv_table(p, index, mapping)
 
 
-def read_klv_dump(path) -> FlightLog:
+def read_klv_dump(path, mapping: dict | None = None) -> FlightLog:
     """A raw file of consecutive ST 0601 packets or EG 0104 sets (`ffmpeg -i in.ts -map 0:d -f data out.klv`) ->
     FlightLog on the "unix" clock (tag 2 / the EG 0104 time stamp)."""
     p = Path(path)
-    table, warnings = _dump_table(p)
+    table, warnings = _dump_table(p, mapping)
     log = table_to_log(table, str(p), warnings)
     log.formats.append("klv")
     log.klv_tables[str(p)] = table
     return log
 
 
-def read_fmv(path, index=None) -> FlightLog:
+def read_fmv(path, index=None, mapping: dict | None = None) -> FlightLog:
     """An MPEG-TS (STANAG 4609) with a video stream and a KLV data stream -> FlightLog: frames from the video
     packets' pts, telemetry from the KLV packets, all on the "video" clock (0 = the first video frame), with a
     ClockLink video -> unix from each packet's time stamp. `index`: the file's demux_index(data_streams=True) if
@@ -403,7 +458,7 @@ def read_fmv(path, index=None) -> FlightLog:
 
     p = Path(path)
     index = index if index is not None else demux_index(p, data_streams=True)
-    table, warnings = _fmv_table(p, index)
+    table, warnings = _fmv_table(p, index, mapping)
     log = table_to_log(table, str(p), warnings)
     log.frames = index.frames
     log.clock_links.append(ClockLink("video", "unix", table.t_ns.copy(), table.t_us * 1000))

@@ -16,7 +16,7 @@ import yaml
 from pipeline.errors import ConfigError
 from pipeline.ingest.rangefinder import rename_deprecated_range_keys
 
-FORMATS = ("tlog", "dataflash", "ulog", "ros", "mcap", "video", "srt")
+FORMATS = ("tlog", "dataflash", "ulog", "ros", "mcap", "video", "srt", "klv")
 
 
 @cache

@@ -8,11 +8,17 @@ container's times (the synthetic mp4v flights write one: bursts make them variab
 
 Decoding (`VideoFrames`) seeks to the key frame at or before a wanted frame and decodes forward to it, or simply
 decodes forward when the wanted frame is later in the same group of pictures as the last one decoded; frames on
-the way are decoded but not converted, and nothing is kept but the frames asked for.
+the way are decoded but not converted, and nothing is kept but the frames asked for. `VideoFrames.prefetch(order)`
+announces the frames a caller will ask for, in that order: worker threads, each with its own decoder, decode them
+ahead (a group of pictures per worker at a time, a few groups ahead of the caller at most, so memory is bounded by
+the frames in flight, not the video's length) while the caller works on the frames it has; FFmpeg decodes without
+the interpreter lock, so the workers and the caller's OpenCV use every core.
 """
 
 from __future__ import annotations
 
+import functools
+import threading
 from array import array
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -31,6 +37,28 @@ def _av():
     import av
 
     return av
+
+
+_MMAP_THRESHOLD_BYTES = 4 * 2**20
+
+
+@functools.cache
+def _large_buffers_to_the_os() -> None:
+    """Have glibc serve allocations of 4 MiB and more (decoded 4K frames, SIFT's scale space) from their own
+    mappings, returned to the OS when freed. By default glibc raises that threshold to the largest block freed
+    so far (up to 32 MiB), after which 8 MiB frames freed by one thread stay in its heap arena while another
+    thread allocates new ones: on the 4K bench the run's peak was 484 MiB with the default and 442 MiB with this
+    (scripts/bench_video.py). A no-op where the C library is not glibc. Process-wide, once."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return
+    M_MMAP_THRESHOLD = -3
+    mallopt(M_MMAP_THRESHOLD, _MMAP_THRESHOLD_BYTES)
 
 
 def _why(exc) -> str:
@@ -153,7 +181,9 @@ class VideoFrames:
     `seek_after`: a wanted frame more than this many frames ahead of the decoder is reached by a seek to its key
     frame even within one group of pictures (None: only when a key frame lies in between)."""
 
-    def __init__(self, path, seek_after: int | None = None, gray: bool = False, index: DemuxIndex | None = None):
+    def __init__(self, path, seek_after: int | None = None, gray: bool = False, index: DemuxIndex | None = None,
+                 thread_type: str = "SLICE"):
+        _large_buffers_to_the_os()
         self.path = Path(path)
         self.seek_after = seek_after
         self.gray = gray
@@ -163,15 +193,28 @@ class VideoFrames:
             self._key_pos = np.concatenate([[0], self._key_pos])
         self._container = _open(self.path)
         self._stream = self._container.streams.video[0]
-        self._stream.thread_type = "AUTO"
+        self._stream.thread_type = thread_type
         self._byte_seek = "mpegts" in (self._container.format.name or "")
         self._frames = None  # decoder generator, positioned after frame self._pos
         self._pos = -1
         self.decoded = 0  # frames decoded, wanted or not (for benchmarks)
+        self._prefetch: _Prefetch | None = None
 
     def close(self) -> None:
+        self.prefetch(())
         self._frames = None
         self._container.close()
+
+    def prefetch(self, order, workers: int = 2, ahead: int = 2) -> None:
+        """Decode the frames `order` (display positions, in the order they will be asked for) ahead, on `workers`
+        threads each holding at most `ahead` groups of pictures' worth of wanted frames beyond the caller's
+        position; `read` and `[]` take them from there. A new call replaces the previous plan; `()` ends it."""
+        if self._prefetch is not None:
+            self.decoded += self._prefetch.close()
+            self._prefetch = None
+        order = [int(i) for i in order if 0 <= int(i) < self.index.pts.size]
+        if order and workers > 0:
+            self._prefetch = _Prefetch(self, order, workers, ahead)
 
     def __enter__(self):
         return self
@@ -206,7 +249,13 @@ class VideoFrames:
         self._pos = -1
 
     def _convert(self, frame) -> np.ndarray:
-        return frame.to_ndarray(format="gray" if self.gray else "bgr24")
+        # a copy: PyAV's array is a view of the frame's buffer, which would keep the whole picture (and the
+        # decoder's buffer pool behind it) alive as long as the image is
+        return np.array(frame.to_ndarray(format="gray" if self.gray else "bgr24"), copy=True)
+
+    def key_before(self, i: int) -> int:
+        """The display position of the key frame at or before display position i."""
+        return int(self._key_pos[np.searchsorted(self._key_pos, i, side="right") - 1])
 
     def _decode_to(self, target: int, fresh: bool):
         """Decode forward to the frame with pts `target`: the frame, or None when the decoder is already past it
@@ -234,13 +283,20 @@ class VideoFrames:
 
     def __getitem__(self, i: int) -> np.ndarray:
         i = int(i)
+        if self._prefetch is not None:
+            got = self._prefetch.take(i)
+            if got is not None:
+                return got
+        return self._decode(i)
+
+    def _decode(self, i: int) -> np.ndarray:
         n = self.index.pts.size
         if i < 0:
             raise IndexError(i)
         if i >= n:
             raise LogReadError(f"video ends before frame {i} (has {n})", path=self.path)
         target = int(self.index.pts[i])
-        key_before = int(self._key_pos[np.searchsorted(self._key_pos, i, side="right") - 1])
+        key_before = self.key_before(i)
         far = self.seek_after is not None and i - self._pos > self.seek_after
         if self._frames is not None and self._pos < i and key_before <= self._pos and not far:
             frame = self._decode_to(target, fresh=False)  # same group of pictures: decode on
@@ -256,3 +312,95 @@ class VideoFrames:
     def read(self, indices) -> dict[int, np.ndarray]:
         """Decode the given frame indices (any order, duplicates allowed) -> {index: image}."""
         return {i: self[i] for i in sorted(set(int(i) for i in indices))}
+
+
+class _Prefetch:
+    """Worker threads decoding a planned order of frames ahead of the caller (`VideoFrames.prefetch`).
+
+    The order is cut into runs of frames going forward within one group of pictures (decoded on without a seek);
+    runs go to the workers in turn, and a worker starts a run only when it begins fewer than `ahead` runs of the
+    caller's position. A frame the caller asks for is removed when taken; frames of the plan the caller has gone
+    past are dropped."""
+
+    def __init__(self, video: VideoFrames, order: list[int], workers: int, ahead: int):
+        self.position = {}  # frame -> its first place in the order
+        for k, i in enumerate(order):
+            self.position.setdefault(i, k)
+        runs: list[list[int]] = []
+        for k, i in enumerate(order):
+            if runs and i > order[k - 1] and video.key_before(i) <= order[k - 1]:
+                runs[-1].append(k)
+            else:
+                runs.append([k])
+        self.order, self.runs, self.ahead = order, runs, ahead
+        self.done: dict[int, object] = {}  # frame -> image, or the exception its decode raised
+        self.caller = 0  # place in the order the caller has reached
+        self.stopped = False
+        self.decoded = 0
+        self.cond = threading.Condition()
+        args = (video.path, video.gray, video.index, video._stream.thread_type)
+        self.threads = [threading.Thread(target=self._work, args=(w, workers, args), daemon=True)
+                        for w in range(min(workers, len(runs)))]
+        for t in self.threads:
+            t.start()
+
+    def _work(self, w: int, workers: int, args) -> None:
+        path, gray, index, thread_type = args
+        try:
+            reader = VideoFrames(path, gray=gray, index=index, thread_type=thread_type)
+        except BaseException as exc:  # handed to the caller with the frames it concerns
+            reader, failure = None, exc
+        try:
+            for r in range(w, len(self.runs), workers):
+                run = self.runs[r]
+                start = run[0]
+                with self.cond:
+                    self.cond.wait_for(lambda s=start: self.stopped or s - self.caller < self.ahead * workers)
+                    if self.stopped:
+                        return
+                for k in run:
+                    i = self.order[k]
+                    with self.cond:
+                        if self.stopped:
+                            return
+                        if k < self.caller or i in self.done:
+                            continue
+                    try:
+                        if reader is None:
+                            raise failure
+                        got = reader._decode(i)
+                    except BaseException as exc:  # re-raised by take() in the caller's thread
+                        got = exc
+                    with self.cond:
+                        self.done[i] = got
+                        self.cond.notify_all()
+        finally:
+            if reader is not None:
+                with self.cond:
+                    self.decoded += reader.decoded
+                reader.close()
+
+    def take(self, i: int) -> np.ndarray | None:
+        """Frame i from the plan (waiting for its worker), or None when it is not in the plan still ahead."""
+        k = self.position.get(i)
+        with self.cond:
+            if k is None or (k < self.caller and i not in self.done):
+                return None
+            self.caller = max(self.caller, k)
+            for j in [j for j in self.done if self.position[j] < self.caller and j != i]:
+                del self.done[j]  # planned frames the caller went past
+            self.cond.notify_all()
+            self.cond.wait_for(lambda: i in self.done or not any(t.is_alive() for t in self.threads))
+            got = self.done.pop(i, None)
+        if isinstance(got, BaseException):
+            raise got
+        return got
+
+    def close(self) -> int:
+        """Stop the workers; the number of frames they decoded."""
+        with self.cond:
+            self.stopped = True
+            self.cond.notify_all()
+        for t in self.threads:
+            t.join()
+        return self.decoded

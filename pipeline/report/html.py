@@ -15,6 +15,7 @@ import os
 from collections.abc import Mapping, Sequence
 from html import escape
 from os import PathLike
+from urllib.parse import quote
 
 import numpy as np
 
@@ -268,6 +269,16 @@ def _group_section(r: GroupResult, figures: Mapping[str, bytes], interactive: bo
         parts.append(f"<h3>Interactive map{which}</h3>" + map_fragment(flight_map or r)
                      + '<p class="note">Zoom and pan; tick a layer to show or hide a method. Basemap: OpenStreetMap '
                      "when online, a plain grid when not (everything else is in this file).</p>")
+    overlay = r.settings.get("overlay")
+    if isinstance(overlay, dict) and overlay.get("file") and flight_map != []:  # once per flight
+        src = f"{quote(r.name)}/{quote(overlay['file'])}"
+        parts.append(f"<h3>What was tracked{' (every target)' if flight_map else ''}</h3>"
+                     f'<video class="overlay" controls preload="metadata" src="{escape(src)}" '
+                     f'width="{int(overlay.get("width", 960))}" style="max-width:100%"></video>'
+                     f'<p class="note">{escape(src)}: the {int(overlay.get("frames", 0))} observation frames, '
+                     "each held 0.5 s: the tracked pixel in a reticle (a red cross where the target was lost), the "
+                     "answer projected back with its 95 % ellipse (orange), the laser's spot (red dot) and a "
+                     "caption with the time and range.</p>")
     if "map" in figures:
         parts.append(f"<figure>{_img(figures['map'], f'{r.name} map view')}<figcaption>Plan view: flight path, "
                      "lines of sight, each method's estimate and the truth; right, a close-up around the target "

@@ -20,6 +20,7 @@ one, the new one, or absent, and a group folder without `.done` is never reused.
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import time
 from collections.abc import Mapping, Sequence
@@ -79,9 +80,33 @@ def write_group_outputs(outdir: str | PathLike, r: GroupResult, config_digest: s
         for name, content in (extra_files or {}).items():
             p = tmp / name
             p.parent.mkdir(parents=True, exist_ok=True)
-            p.write_bytes(content if isinstance(content, bytes) else content.encode("utf-8"))
+            if isinstance(content, Path):  # a file written beside the folder: moved in
+                os.replace(content, p)
+            else:
+                p.write_bytes(content if isinstance(content, bytes) else content.encode("utf-8"))
         write_done_marker(tmp, config_digest)
     return final
+
+
+def add_overlay(outdir: str | PathLike, result) -> dict[str, Path]:
+    """Render a video flight's overlay.mp4 (`pipeline.report.overlay`) into a temporary file beside its group
+    folder; book its time as the result's "overlay" stage and name it in the settings (report.html shows it).
+    Returns {"overlay.mp4": that file} for `write_group_outputs`' extra files, {} for a flight without video."""
+    from pipeline.report.overlay import OVERLAY_FILE, video_of, write_overlay
+    from pipeline.results import per_target
+
+    targets = per_target([result])
+    if not targets or video_of(targets[0].settings) is None or not targets[0].tracking.get("frame_index"):
+        return {}
+    t0 = time.perf_counter()
+    Path(outdir).mkdir(parents=True, exist_ok=True)
+    tmp = Path(outdir) / f".{result.name}.{OVERLAY_FILE}"
+    info = write_overlay(result, tmp)
+    seconds = time.perf_counter() - t0
+    for r in [result, *targets]:
+        r.timings_s["overlay"] = seconds
+        r.settings["overlay"] = {"file": OVERLAY_FILE, **info}
+    return {OVERLAY_FILE: tmp}
 
 
 def load_finished_group(outdir: str | PathLike, name: str, config_digest: str | None = None) -> GroupResult | None:

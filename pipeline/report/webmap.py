@@ -1,5 +1,9 @@
 """The interactive map of a group in report.html: Leaflet through folium, with every asset embedded.
 
+    group_map(r) -> folium.Map       flight path, lines of sight, a video flight's camera footprints and frame-centre
+                                     tracks (ridgeloc's, the payload's KLV), truth, each method's estimate and 95 %
+
+
     answers_map(targets) -> folium.Map  the targets' answers with their 95 % ellipses and names (the report's top)
     answer_sites(results)            located targets grouped by site (a map each)
     group_map(r) -> folium.Map       flight path, lines of sight, truth, each determined method's estimate and 95 %
@@ -113,6 +117,8 @@ def group_map(r: GroupResult | Sequence[GroupResult], tiles: bool = True):
             folium.PolyLine(_latlon(s), color="#7F7F7F", weight=1, opacity=0.7).add_to(layer)
         layer.add_to(m)
 
+    _footprint_layers(m, r)
+
     truths = [t for t in targets if t.truth_m is not None]
     if truths:  # under the estimates, which are drawn after it
         layer = folium.FeatureGroup(name="Truth", show=True)
@@ -177,6 +183,36 @@ def group_map(r: GroupResult | Sequence[GroupResult], tiles: bool = True):
     m.fit_bounds([b.min(axis=0).tolist(), b.max(axis=0).tolist()], padding_top_left=(300, 20),
                  padding_bottom_right=(30, 30))
     return m
+
+
+def _footprint_layers(m, r: GroupResult) -> None:
+    """A video flight's camera footprints at a few frames and its frame-centre tracks (`footprints.py`)."""
+    import folium
+
+    from pipeline.report.footprints import flight_footprints
+
+    fp = flight_footprints(r)
+    if fp is None:
+        return
+    layer = folium.FeatureGroup(name="Camera footprints", show=True)
+    for k, outline in enumerate(fp.outline_lla):
+        frame = fp.frame_index[k]
+        t_s = (r.observations.t_ns[fp.frames[k]] - r.observations.t_ns[0]) / 1e9
+        folium.Polygon(_latlon(outline), color="#8E44AD", weight=2, fill=True, fill_opacity=0.05,
+                       tooltip=f"camera footprint, frame {frame} (+{t_s:.1f} s), on {escape(fp.ground)}").add_to(layer)
+    layer.add_to(m)
+    centre = fp.centre_lla[np.isfinite(fp.centre_lla).all(axis=1)]
+    if len(centre):
+        layer = folium.FeatureGroup(name="Frame centre: ridgeloc", show=True)
+        folium.PolyLine(_latlon(centre), color="#8E44AD", weight=3,
+                        tooltip=f"ridgeloc's frame centre (the image centre's ray on {escape(fp.ground)})"
+                        ).add_to(layer)
+        layer.add_to(m)
+    if fp.payload_deg is not None and len(fp.payload_deg):
+        layer = folium.FeatureGroup(name="Frame centre: payload (KLV)", show=True)
+        folium.PolyLine(_latlon(fp.payload_deg), color="#E67E22", weight=3, dash_array="8 5",
+                        tooltip="the payload's own frame centre (KLV)").add_to(layer)
+        layer.add_to(m)
 
 
 #: answers farther apart than this (km) get maps of their own: one map of targets on two continents shows neither

@@ -110,25 +110,34 @@ class TrackResult:
 class ViewCache:
     """Decoded frames' features shared by every target of a flight: each frame is decoded and its SIFT features
     computed once, whatever the number of targets tracked through it. Holds (grayscale image, keypoints,
-    descriptors) per frame until dropped with the cache (a flight's observation frames and stepping stones).
+    descriptors) per frame until dropped with the cache, up to `max_bytes`: past it, further frames are not kept
+    (a later target decodes them again), so memory does not grow with the flight's length. Not evicting keeps
+    the first frames for every later pass over the same frames in the same order (an LRU would keep none).
 
     share_matches: also keep each frame pair's homography (matching and RANSAC), so that targets tracked
     through the same key frames match each pair once. Each pair is then matched with FLANN's random trees seeded
     by the pair itself, so a target's track does not depend on which targets were tracked before it (without
     it, as for a flight's single `target:`, the seed is set once per track, as before many targets)."""
 
-    def __init__(self, share_matches: bool = False):
+    def __init__(self, share_matches: bool = False, max_bytes: int = 192 * 2**20):
         self.views: dict[int, _View] = {}
         self.pairs: dict[tuple[int, int], tuple] | None = {} if share_matches else None
+        self.max_bytes = max_bytes
+        self.bytes = 0
 
     def get(self, tracker: SiftTracker, decode: Callable[[Sequence[int]], dict[int, np.ndarray]],
             indices: Sequence[int]) -> dict[int, _View]:
-        """{index: view} of the frames among `indices` that decode, decoding only those not seen before."""
+        """{index: view} of the frames among `indices` that decode, decoding only those not kept before."""
+        out = {int(i): self.views[int(i)] for i in indices if int(i) in self.views}
         missing = [int(i) for i in indices if int(i) not in self.views]
         if missing:
             for i, img in decode(missing).items():
-                self.views[int(i)] = tracker.view(int(i), img)
-        return {int(i): self.views[int(i)] for i in indices if int(i) in self.views}
+                v = out[int(i)] = tracker.view(int(i), img)
+                size = v.image.nbytes + v.keypoints_px.nbytes + (0 if v.descriptors is None else v.descriptors.nbytes)
+                if self.bytes + size <= self.max_bytes:
+                    self.views[int(i)] = v
+                    self.bytes += size
+        return {int(i): out[int(i)] for i in indices if int(i) in out}
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:
@@ -288,6 +297,11 @@ class SiftTracker:
         wanted = [int(i) for i in wanted]
         mark_index = int(mark_index)
         p0 = np.asarray(mark_px, dtype=np.float64)
+        forward = sorted(i for i in set(wanted) if i > mark_index)
+        backward = sorted((i for i in set(wanted) if i < mark_index), reverse=True)
+        prefetch = getattr(decode, "prefetch", None)  # a reader that decodes ahead is told the order of the loop
+        if prefetch is not None:
+            prefetch([i for i in [mark_index, *forward, *backward] if cache is None or i not in cache.views])
         got0 = decode_views([mark_index])  # the others one at a time as the loop reaches them
         if mark_index not in got0:
             raise InputError(f"the target's mark frame {mark_index} cannot be decoded")
@@ -310,8 +324,8 @@ class SiftTracker:
         else:
             avail = sorted(set(int(i) for i in available))
             self._available = (available, avail)
-        for direction in (1, -1):
-            seq = sorted((i for i in set(wanted) if (i - mark_index) * direction > 0), key=lambda i: i * direction)
+        for seq in (forward, backward):
+            direction = 1 if seq is forward else -1
             key = _Key(mark, np.eye(3))
             for idx in seq:
                 for j in [j for j in views if j not in (mark_index, key.view.index)]:

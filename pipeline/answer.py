@@ -13,7 +13,8 @@ The rule (docs/outputs.md, "The answer") uses only what the flight itself shows,
    flight's geometry determines the point.
 2. The answer is the MLE when it is a candidate and its fit checks pass: its error model fits the flight, or the
    covariance it inflated to cover the misfit grew at most MAX_FIT_INFLATION times.
-3. Otherwise the candidate with the smallest CE90 (horizontal circle holding 90 %).
+3. Otherwise the candidate with the smallest CE90 (horizontal circle holding 90 %); an MLE whose fit checks failed
+   competes with its inflated covariance.
 4. Otherwise there is no answer: the target is `not_located`, with the reason in words a user can act on.
 
 `dji` (the photos' own laser target, the maker's one-shot answer) is compared, never chosen: no covariance of it
@@ -34,7 +35,7 @@ from pipeline.geometry.rays import camera_rays_m
 from pipeline.solve.estimate import Estimate, Status
 from pipeline.solve.observations import Observations
 from pipeline.solve.propagate import PROPAGATED, ErrorSources, method_solver, propagate
-from pipeline.solve.uncertainty import cep_m, horizontal
+from pipeline.solve.uncertainty import CHI2_3_95, cep_m, horizontal
 
 #: a method is determined where its 95 % error ellipsoid's largest semi-axis is at most this fraction of its
 #: distance from the cameras
@@ -49,9 +50,7 @@ GROUND_SIGMAS = 3.0
 LOWEST_LAND_MSL_M = -440.0
 #: the 90 % two-sided quantile of the standard normal: LE90 = Z90 sigma_up
 Z90 = 1.6448536269514722
-#: chi-square with 3 degrees of freedom, 95 %: the ellipsoid's semi-axes are sqrt of it times the 1-sigma ones
-_CHI2_3_95 = 7.814727903251178
-#: lines of sight spanning less than this (deg) with the cameras this close (baseline, m) are named as the cause
+#: lines of sight spanning less than this (deg), with no laser range or terrain model, have no baseline to meet
 NARROW_SPAN_DEG = 3.0
 #: compared, never the answer: the photos' own laser target (nothing states its uncertainty)
 NEVER_THE_ANSWER = ("dji",)
@@ -209,7 +208,7 @@ def judge(method: str, e: Estimate | None, unsolved_reason: str | None, obs: Obs
     cov = np.asarray(covariance_m2, dtype=np.float64)
     ce90 = float(cep_m(cov[:2, :2], 0.9))
     geometric = cov if offsets_m2 is None else cov - np.asarray(offsets_m2, dtype=np.float64)
-    semi95 = math.sqrt(max(float(np.linalg.eigvalsh(geometric).max()), 0.0) * _CHI2_3_95)
+    semi95 = math.sqrt(max(float(np.linalg.eigvalsh(geometric).max()), 0.0) * CHI2_3_95)
     dist = float(np.median(np.linalg.norm(obs.platform_m - X, axis=1)))
     rel = semi95 / dist if dist > 0 else math.inf
     v = dict(covariance_m2=cov, covariance_source=covariance_source, ce90_m=ce90, relative_uncertainty=rel)

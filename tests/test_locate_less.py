@@ -73,6 +73,18 @@ def test_a_ray_above_the_horizon_misses_the_ground_in_one_line(tmp_path):
     assert status == "degenerate" and "points above the horizon" in reason and "\n" not in reason
 
 
+def test_the_last_line_names_the_one_method_that_could_run(tmp_path, capsys):
+    """The ground ray points above the horizon: the last line says so (not the MLE's want of a second pixel, not
+    an estimates.csv that `locate` without -o never writes)."""
+    photo = write_maker_photo(tmp_path / "p.jpg", "parrot", pitch=5.0)
+    assert cli_main(["locate", str(photo), "--ground-height-m", "100"]) == 1
+    out = capsys.readouterr()
+    err = out.err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("ridgeloc: error: the target is not located: ground: ")
+    assert "points above the horizon" in err[0]
+    assert "estimates.csv" not in out.out + out.err
+
+
 # ---- the image rotation of re-saved photos ----------------------------------------------------------------
 
 def _pair(tmp_path, software, yaws=(0.0, 0.0)):

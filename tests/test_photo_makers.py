@@ -102,6 +102,9 @@ def test_parrot_1s_centre_ray_is_refused_in_one_line(capsys):
     assert rc == 1 and "lat_deg" not in dem and "\n" not in dem["reason"]
     assert "parrot-1.jpg pixel (959.5, 543.5): the ray starts below the DEM surface" in dem["reason"]
     assert len(out.err.strip().splitlines()) == 1
+    # the last line names the one method that could run, with its reason (docs/locate.md)
+    assert "not located: dem: parrot-1.jpg pixel (959.5, 543.5): the ray starts below the DEM surface" in out.err
+    assert "estimates.csv" not in out.out + out.err  # locate without -o writes none
 
 
 @needs_makers

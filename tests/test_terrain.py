@@ -172,6 +172,20 @@ def test_unusable_dems_are_refused_in_one_line_naming_the_file(tmp_path, make, m
     assert "\n" not in str(exc.value) and str(path) in str(exc.value)
 
 
+def test_a_plain_image_given_as_the_dem_is_refused_without_rasterio_s_warning(tmp_path):
+    import warnings
+
+    from PIL import Image
+
+    path = tmp_path / "photo.png"
+    Image.new("L", (8, 6)).save(path)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with pytest.raises(InputError, match="has no coordinate reference system"):
+            Dem.open(path)
+    assert [str(w.message) for w in caught] == []
+
+
 def test_a_stated_vertical_datum_overrides_an_unknown_one(tmp_path):
     path = _tiny(tmp_path / "dhhn.tif", "EPSG:4326+5783")
     assert Dem.open(path, vertical_datum="orthometric").vertical.source == "stated by the user"

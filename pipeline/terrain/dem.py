@@ -17,7 +17,9 @@ N (pipeline.geometry.geoid, EGM2008) when the heights are orthometric. The verti
 
 from __future__ import annotations
 
+import contextlib
 import re
+import warnings
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -34,6 +36,20 @@ VERTICAL_DATUMS = ("orthometric", "ellipsoidal")
 _WGS84_GEOGRAPHIC = {4326, 4979, 9518, 9707}  # 2-D, 3-D, + EGM2008 height, + EGM96 height
 _METRE = {"", "m", "metre", "meter", "metres", "meters"}
 
+
+
+@contextlib.contextmanager
+def _open_quietly(path: Path):
+    """rasterio.open without its NotGeoreferencedWarning: a plain image given as the DEM is refused in one line
+    ("has no coordinate reference system"), not after two lines of warning on stderr."""
+    import rasterio
+    from rasterio.errors import NotGeoreferencedWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        ds = rasterio.open(path)
+    with ds:
+        yield ds
 
 @dataclass(frozen=True)
 class VerticalDatum:
@@ -152,7 +168,7 @@ class Dem:
         if not path.is_file():
             raise InputError("file not found", path)
         try:
-            with rasterio.Env(GTIFF_REPORT_COMPD_CS=True, CPL_LOG="/dev/null"), rasterio.open(path) as ds:
+            with rasterio.Env(GTIFF_REPORT_COMPD_CS=True, CPL_LOG="/dev/null"), _open_quietly(path) as ds:
                 if ds.count < 1:
                     raise InputError("has no raster band", path)
                 rows, cols = ds.height, ds.width

@@ -540,6 +540,8 @@ def read_marks(path: str, photos) -> list:
         if name in by_name:
             raise InputError(f"line {i}: a second mark for photo {name}", path=path)
         by_name[name] = px
+    if not by_name:  # an empty file, or a header alone: not "no target pixel anywhere" further on
+        raise InputError("holds no marks: want a header photo,x_px,y_px and a row per marked photo", path=path)
     unknown = sorted(set(by_name) - {p.name for p in photos})
     if unknown:
         raise InputError(f"marks for photos not given: {', '.join(unknown[:5])}", path=path)

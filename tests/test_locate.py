@@ -112,6 +112,17 @@ def test_a_bad_photo_mark_is_one_line_naming_file_and_line(flight, capsys, tmp_p
     assert str(marks) in err and problem in err and "\n" not in err, err
 
 
+@pytest.mark.parametrize("text", ["", "photo,x_px,y_px\n"], ids=["empty", "header-only"])
+def test_a_marks_file_without_marks_is_refused(flight, capsys, tmp_path, text):
+    _, folder = flight
+    marks = tmp_path / "m.csv"
+    marks.write_text(text)
+    assert cli_main(["locate", str(folder), "--marks", str(marks)]) == 1
+    out = capsys.readouterr()
+    assert out.out == "" and out.err == f"ridgeloc: error: {marks}: holds no marks: want a header photo,x_px,y_px " \
+                                        "and a row per marked photo\n"
+
+
 def test_synth_command_writes_a_photo_flight_without_laser(tmp_path, capsys):
     out = tmp_path / "p"
     assert cli_main(["synth", "--photos", "3", "--no-laser", "-o", str(out), "--seed", "2"]) == 0

@@ -122,3 +122,19 @@ def test_check_of_a_photo_flight_says_which_command_reads_it(tmp_path, capsys, c
     assert capsys.readouterr().err.splitlines() == [
         f"ridgeloc: error: {config}: a photo flight (files.photos), not a video flight: use `ridgeloc locate` or "
         "`ridgeloc run`"]
+
+
+@pytest.mark.parametrize("command", ["locate", "mark"])
+def test_one_unreadable_photo_alone_is_one_line(tmp_path, capsys, command):
+    p = tmp_path / "x.jpg"
+    p.write_bytes(b"")
+    assert cli_main([command, str(p)]) == 1
+    out = capsys.readouterr()
+    assert out.out == "" and len(out.err.splitlines()) == 1 and out.err.startswith(f"ridgeloc: error: {p}: ")
+    assert list(tmp_path.iterdir()) == [p]
+
+
+def test_a_folder_without_photos_is_named_as_such(tmp_path, capsys):
+    (tmp_path / "notes.txt").write_text("no photos here")
+    assert cli_main(["locate", str(tmp_path)]) == 1
+    assert capsys.readouterr().err.splitlines() == [f"ridgeloc: error: {tmp_path}: no photos (.jpg, .jpeg files) here"]

@@ -54,3 +54,24 @@ def not_a_config(path: str | PathLike) -> InputError | None:
                           "files.video", p)
     return InputError("a telemetry log, not a flight config: use `ridgeloc inspect`, or name it in a flight "
                       "config's files.telemetry", p)
+
+
+def read_photos_reporting(paths, alt_datum: str | None = None) -> tuple[list, list[tuple[str, str]]]:
+    """`pipeline.ingest.photo.read_photos`, each unreadable photo's one-line error printed on stderr; InputError
+    when none is readable: the photo's own error when it was the only one, "no photos" for folders without any."""
+    import sys
+
+    from pipeline.ingest.photo import PHOTO_SUFFIXES, read_photos
+
+    photos, bad = read_photos(paths, alt_datum=alt_datum)
+    if not photos and len(bad) == 1:
+        raise InputError(bad[0][1])
+    for _path, err in bad:
+        print(f"ridgeloc: error: {err}", file=sys.stderr)
+    if not photos:
+        where = ", ".join(map(str, paths))
+        if not bad:
+            raise InputError(f"{where}: no photos ({', '.join(PHOTO_SUFFIXES)} files) here")
+        raise InputError(f"no readable photo among {where}")
+    return photos, bad
+

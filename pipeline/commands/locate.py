@@ -108,9 +108,9 @@ def _default_name(paths) -> str:
 
 
 def main(args) -> int:
+    from pipeline.commands import read_photos_reporting
     from pipeline.commands.send import check_send_args, cot_options
     from pipeline.errors import InputError
-    from pipeline.ingest.photo import read_photos
     from pipeline.locate import check_pixels, estimate_row, locate_photos, read_marks
     from pipeline.report.cot import check_flight_name
 
@@ -144,11 +144,7 @@ def main(args) -> int:
             terrain = Terrain(dem=args.dem, vertical_sigma_m=args.dem_sigma_m, vertical_datum=args.dem_datum)
         except ValueError:
             raise InputError(f"--dem-sigma-m must be a finite number > 0, got {args.dem_sigma_m}") from None
-    photos, bad = read_photos(args.photos, alt_datum=args.alt_datum)
-    for _path, err in bad:
-        print(f"ridgeloc: error: {err}", file=sys.stderr)
-    if not photos:
-        raise InputError("no readable photo among " + ", ".join(args.photos))
+    photos, bad = read_photos_reporting(args.photos, alt_datum=args.alt_datum)
     if args.marks:
         pixels = read_marks(args.marks, photos)
     elif args.pixel:

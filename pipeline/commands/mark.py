@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 HELP = ("write an HTML page showing frames of a flight, or drone photos, to click targets and save the marks CSV "
@@ -33,15 +32,11 @@ def _photo_page(paths, config, out: Path) -> int:
     import numpy as np
 
     from pipeline.atomic import atomic_write_text
+    from pipeline.commands import read_photos_reporting
     from pipeline.errors import InputError
-    from pipeline.ingest.photo import read_photos
     from pipeline.report.mark_page import mark_page
 
-    photos, bad = read_photos(paths)
-    for _path, err in bad:
-        print(f"ridgeloc: error: {err}", file=sys.stderr)
-    if not photos:
-        raise InputError("no readable photo among " + ", ".join(map(str, paths)))
+    photos, bad = read_photos_reporting(paths)
     base = out.resolve().parent
     images, sizes, keys = {}, {}, {}
     for p in photos:

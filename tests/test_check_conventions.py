@@ -246,6 +246,18 @@ def test_check_and_mark_of_a_log_say_it_is_not_a_config(tmp_path, capsys):
         assert capsys.readouterr().err.splitlines() == [
             f"ridgeloc: error: {log}: a telemetry log, not a flight config: use `ridgeloc inspect`, or name it in a "
             "flight config's files.telemetry"]
+    folder = tmp_path / "flight"  # a folder given for its flight config (was "cannot read: [Errno 21] Is a directory")
+    folder.mkdir()
+    for command in (["check"], ["mark", "-o", str(tmp_path / "marks.html")]):
+        assert cli_main([*command, str(folder)]) == 1
+        assert capsys.readouterr().err.splitlines() == [
+            f"ridgeloc: error: {folder}: a folder, not a flight config: `ridgeloc init {folder}` writes one from its "
+            "files"]
+    (folder / "flight.yaml").write_text("name: x\n")
+    assert cli_main(["check", str(folder)]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"ridgeloc: error: {folder}: a folder, not a flight config: give its flight config, {folder / 'flight.yaml'}"]
+    assert not (tmp_path / "marks.html").exists()
     repo = Path(__file__).resolve().parents[1]
     cfg = tmp_path / "group1.cfg"
     cfg.write_text((repo / "configs" / "flights" / "group1.yaml").read_text().replace("../../", f"{repo}/"))

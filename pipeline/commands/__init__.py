@@ -35,7 +35,7 @@ def _parent_is_a_folder(path: Path, what: str) -> None:
 
 
 def not_a_config(path: str | PathLike) -> InputError | None:
-    """The one-line error for a telemetry log, bag, video or drone photo given where a flight or run config
+    """The one-line error for a folder, a telemetry log, bag, video or drone photo given where a flight or run config
     belongs (by the readers' own suffix and content sniffing), saying what to do with it; None otherwise."""
     from pipeline.ingest.dispatch import detect_format
     from pipeline.ingest.photo_inspect import is_photo_input
@@ -48,12 +48,20 @@ def not_a_config(path: str | PathLike) -> InputError | None:
     try:
         fmt = detect_format(p)
     except RidgelocError:
-        return None
+        return _a_folder(p) if p.is_dir() else None
     if fmt == "video":
         return InputError("a video, not a flight config: use `ridgeloc inspect`, or name it in a flight config's "
                           "files.video", p)
     return InputError("a telemetry log, not a flight config: use `ridgeloc inspect`, or name it in a flight "
                       "config's files.telemetry", p)
+
+
+def _a_folder(p: Path) -> InputError:
+    """A folder (not a bag, not photos) given where a flight config belongs: its flight.yaml, or how to write one."""
+    config = p / "flight.yaml"
+    if config.is_file():
+        return InputError(f"a folder, not a flight config: give its flight config, {config}", p)
+    return InputError(f"a folder, not a flight config: `ridgeloc init {p}` writes one from its files", p)
 
 
 def read_photos_reporting(paths, alt_datum: str | None = None) -> tuple[list, list[tuple[str, str]]]:

@@ -223,6 +223,22 @@ def test_a_folder_without_a_flight_is_one_line(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
 
 
+def test_an_unreadable_file_is_named_once(tmp_path, capsys):
+    """One file given: its reader's own line (was "x.tlog: found x.tlog: x.tlog: no MAVLink ... (unreadable);
+    missing for localization: position, ..."); in a folder: its name once, with why."""
+    log = tmp_path / "f" / "x.tlog"
+    log.parent.mkdir()
+    log.write_text("garbage\n")
+    assert cli_main(["init", str(log)]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"ridgeloc: error: {log}: no MAVLink records found (not a .tlog, or garbage)"]
+    assert cli_main(["init", str(log.parent)]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"ridgeloc: error: {log.parent}: found x.tlog: no MAVLink records found (not a .tlog, or garbage) "
+        "(unreadable); missing for localization: position, attitude, gimbal, frames"]
+    assert sorted(p.name for p in log.parent.iterdir()) == ["x.tlog"]
+
+
 def test_photos_become_a_photo_flight(tmp_path):
     photos = ROOT / "sample_data" / "photos" / "h20_laser"
     draft = draft_flight_config(photos, tmp_path / "photos.yaml")

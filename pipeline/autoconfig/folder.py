@@ -62,13 +62,14 @@ class Folder:
             parts.append(f"{len(self.photos)} photo(s)")
         if self.dems:
             parts.append(", ".join(p.name for p in self.dems) + " (DEM)")
-        parts += [f"{p} (unreadable)" for p in self.unreadable]
+        parts += [f"{u} (unreadable)" for u in self.unreadable]
         return "found " + ("; ".join(parts) if parts else "no logs, videos or photos")
 
 
 def read_folder(root) -> Folder:
     """Read every flight file of `root` (a folder, or one file: a full-motion video, a log) with the default
-    mappings. InputError when `root` does not exist."""
+    mappings; a folder's unreadable files are listed (`unreadable`: "name: why"). InputError when `root` does not
+    exist or is one file that cannot be read."""
     root = Path(root)
     if not root.exists():
         raise InputError("no such file or folder", root)
@@ -78,13 +79,17 @@ def read_folder(root) -> Folder:
         folder.photos = [c for c in children if c.is_file() and c.suffix.lower() in PHOTO_SUFFIXES]
         folder.dems = [c for c in children if c.is_file() and c.suffix.lower() in DEM_SUFFIXES]
         paths = [p for _, p in expand_flight_folders([root]) if p != root]
-    else:
-        paths = [root]
+    else:  # one file: its reader's own one-line error when it cannot be read
+        folder.files.append(FolderFile(root, read_file(root)))
+        return folder
     for p in paths:
         try:
             folder.files.append(FolderFile(p, read_file(p)))
         except RidgelocError as exc:
-            folder.unreadable.append(f"{p.name}: {exc}")
+            why = str(exc)
+            if exc.path and why.startswith(f"{exc.path}: "):  # named once, by its name in the folder
+                why = why[len(exc.path) + 2:]
+            folder.unreadable.append(f"{p.name}: {why}")
     return folder
 
 

@@ -124,3 +124,12 @@ def test_overlay_refuses_a_folder_that_is_not_a_finished_flight(tmp_path, capsys
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "x: not a finished flight folder" in err[0]
     assert not (tmp_path / "x" / "overlay.mp4").exists()
+    assert main(["overlay", str(tmp_path / "nope")]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"ridgeloc: error: {tmp_path / 'nope'}: no such folder (give a flight's folder in a `ridgeloc run` output "
+        "folder, OUT/FLIGHT)"]
+    (tmp_path / "run.json").write_text(json.dumps({"groups": ["a", "b"]}))  # a run's folder, not a flight's
+    assert main(["overlay", str(tmp_path)]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"ridgeloc: error: {tmp_path}: a run's output folder, not one of its flights: give a flight's folder, "
+        f"{tmp_path / 'a'} or {tmp_path / 'b'}"]

@@ -12,6 +12,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("folder", metavar="OUT/GROUP", help="a flight's folder in a `ridgeloc run` output folder")
 
 
+def _not_a_flight(folder):
+    """The one-line error for a folder that is not a finished flight: missing, a run's output folder (naming its
+    flights' folders), or anything else."""
+    import json
+
+    from pipeline.errors import InputError
+
+    if not folder.is_dir():
+        return InputError("no such folder (give a flight's folder in a `ridgeloc run` output folder, OUT/FLIGHT)",
+                          folder)
+    try:
+        groups = [str(folder / g) for g in json.loads((folder / "run.json").read_text()).get("groups", [])]
+    except (OSError, ValueError, AttributeError, TypeError):
+        groups = []
+    if groups:
+        more = f" (and {len(groups) - 3} more)" if len(groups) > 3 else ""
+        return InputError(f"a run's output folder, not one of its flights: give a flight's folder, "
+                          f"{' or '.join(groups[:3])}{more}", folder)
+    return InputError("not a finished flight folder of a `ridgeloc run` (no result.json and .done)", folder)
+
+
 def main(args) -> int:
     import json
     import os
@@ -27,7 +48,7 @@ def main(args) -> int:
     outdir, name = folder.resolve().parent, folder.resolve().name
     result = load_finished_group(outdir, name)
     if result is None:
-        raise InputError("not a finished flight folder of a `ridgeloc run` (no result.json and .done)", folder)
+        raise _not_a_flight(folder)
     t0 = time.perf_counter()
     made = add_overlay(outdir, result)
     if not made:

@@ -156,6 +156,8 @@ class _Progress:
 
     def stage(self, name: str, stage: str) -> None:
         now = time.perf_counter()
+        if self.current.get(name, ("",))[0] == stage:  # re-entered at once (a flight's mark, then its track): one line
+            return
         self._stage_done(name, now)
         self.current[name] = (stage, now)
         if self.bar.disable:

@@ -63,6 +63,11 @@ def test_lines_are_flushed_as_they_happen_and_bars_stay_off_a_pipe():
     p.finished("g", None, 1.0, {"ingest": 0.25, "solve": 0.5})
     assert out.getvalue().splitlines()[-2].startswith("g: solve finished (")
     assert out.getvalue().splitlines()[-1] == "g: done in 1.00 s (ingest 0.25, solve 0.50, other 0.25 s)"
+    p.stage("k", "track")
+    p.stage("k", "track")  # entered again at once (the mark's acquisition, then the track): one stage, one line
+    p.stage("k", "sync")
+    k_lines = [ln for ln in out.getvalue().splitlines() if ln.startswith("k: ")]
+    assert len(k_lines) == 1 and k_lines[0].startswith("k: track finished (")
     p.finished("h", GroupFailure("h", "h.yaml", "no video"), 0.1, None)
     assert out.getvalue().splitlines()[-1] == "h: FAILED: no video"
     p.close()

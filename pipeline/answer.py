@@ -302,22 +302,24 @@ def unsolved_reasons(failures: dict | None) -> dict[str, str]:
 def choose_answer(obs: Observations, estimates: dict[str, Estimate], unsolved: dict[str, str], origin_lla, *,
                   sources: ErrorSources | None = None, options: dict | None = None, ground: Ground | None = None,
                   solvers: dict[str, Callable] | None = None,
-                  added_covariance: dict[str, np.ndarray] | None = None) -> Answer:
+                  added_covariance: dict[str, np.ndarray] | None = None,
+                  whole_covariance: dict[str, np.ndarray] | None = None) -> Answer:
     """The target's answer (module docstring) from every method's estimate and the reasons of those that gave none
     (`unsolved`, method -> reason). `sources`: the errors to propagate through the methods without a covariance of
     their own (default: the observations' stated sigmas); `options`: method -> the flight's solve options;
     `ground`: the terrain under the answer (a DEM); `solvers`: method -> solver for `propagate` beyond the batched
     methods (e.g. `dem`), `added_covariance`: method -> a covariance added to the propagated one (e.g. the DEM's
-    own error under `dem`)."""
+    own error under `dem`); `whole_covariance`: method -> the part of its own covariance that moves its answer as a
+    whole, in place of the shared offsets (`ground`: the assumed ground's error and the camera's position offset)."""
     sources = sources if sources is not None else ErrorSources.from_sigma(obs.sigma)
-    options, solvers, added = options or {}, solvers or {}, added_covariance or {}
+    options, solvers, added, whole = options or {}, solvers or {}, added_covariance or {}, whole_covariance or {}
     shared = np.asarray(sources.shared_covariance_m2, dtype=np.float64)
     verdicts: dict[str, Verdict] = {}
     for m in [*estimates, *unsolved]:
         if m in verdicts or m in NEVER_THE_ANSWER:
             continue
         e = estimates.get(m)
-        cov, source, why, offsets = None, "", None, shared
+        cov, source, why, offsets = None, "", None, whole.get(m, shared)
         if e is not None and np.isfinite(e.position_m).all():
             if e.covariance_m2 is not None:  # the estimator's own (the mle's; a photo's ground method's)
                 cov, source = e.covariance_m2, "estimator"

@@ -70,6 +70,9 @@ class PhotoLocation:
     estimates: dict[str, Estimate] = field(default_factory=dict)
     unsolved: dict[str, tuple[str, str]] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    #: method -> the part of its covariance (3, 3) ENU m^2 that moves it as a whole, not its geometry's (`ground`:
+    #: the assumed ground's error, the camera's position offset); the answer rule leaves it out of "determined"
+    whole_covariance_m2: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def photo_observations(views: PhotoViews, pixel_px=None, sigma: Sigma | None = None) -> Observations:
@@ -253,10 +256,12 @@ def level_ground(photos: list[Photo], ground: GroundAssumption, errors: PhotoErr
 
 
 def ground_estimate(obs: Observations, views: PhotoViews, photos: list[Photo], ground, errors: PhotoErrorModel,
-                    pixel_px) -> Estimate:
+                    pixel_px) -> tuple[Estimate, np.ndarray]:
     """The `ground` method: the rays cast onto level ground (as `dem` onto a DEM), with a covariance from the
     assumed ground's error and the pose's (pipeline.terrain.flat.ground_covariance_m2): per photo, the mean of the
-    photos' covariances for several (their errors are mostly shared, so averaging photos shrinks little of it)."""
+    photos' covariances for several (their errors are mostly shared, so averaging photos shrinks little of it).
+    Also the part of that covariance that moves the answer as a whole, as the DEM's own error moves `dem`'s: the
+    assumed ground's height and the camera's position offset (the rest is the pose's: heading, tilt, pixel)."""
     import dataclasses
 
     from pipeline.terrain import ground_covariance_m2, locate_dem
@@ -264,18 +269,20 @@ def ground_estimate(obs: Observations, views: PhotoViews, photos: list[Photo], g
     flat, rel, ab, what = ground
     e = locate_dem(obs, flat, views.origin_lla, labels=[p.name for p in photos],
                    pixels_shown=_file_pixels(photos, pixel_px))
-    covs = []
+    covs, pose = [], []
     for i, pt in enumerate(e.extras["points_m"]):
         if pt is None:
             continue
-        covs.append(ground_covariance_m2(
-            views.camera_m[i], views.R_enu0_from_optical[i], obs.pixel[i], views.K[i], np.asarray(pt),
-            sigma_relative_m=rel, sigma_absolute_m=ab, sigma_h_m=errors.shared_h_m,
-            sigma_yaw_deg=float(np.hypot(errors.bias_prior_deg, errors.sigma.attitude_deg)),
-            sigma_tilt_deg=float(np.hypot(GROUND_TILT_SIGMA_DEG, errors.sigma.attitude_deg)),
-            sigma_px=errors.sigma.pixel_px))
+        for out, r, a, h in ((covs, rel, ab, errors.shared_h_m), (pose, 0.0, 0.0, 0.0)):
+            out.append(ground_covariance_m2(
+                views.camera_m[i], views.R_enu0_from_optical[i], obs.pixel[i], views.K[i], np.asarray(pt),
+                sigma_relative_m=r, sigma_absolute_m=a, sigma_h_m=h,
+                sigma_yaw_deg=float(np.hypot(errors.bias_prior_deg, errors.sigma.attitude_deg)),
+                sigma_tilt_deg=float(np.hypot(GROUND_TILT_SIGMA_DEG, errors.sigma.attitude_deg)),
+                sigma_px=errors.sigma.pixel_px))
     extras = dict(e.extras, assumption=f"a weaker answer: {what}")
-    return dataclasses.replace(e, method="ground", covariance_m2=np.mean(covs, axis=0), extras=extras)
+    cov = np.mean(covs, axis=0)
+    return dataclasses.replace(e, method="ground", covariance_m2=cov, extras=extras), cov - np.mean(pose, axis=0)
 
 
 def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: int | None = None,
@@ -308,7 +315,7 @@ def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: in
                     out.unsolved[m] = ("insufficient_data", "no ground assumed (--ground takeoff or "
                                                             "--ground-height-m)")
                     continue
-                e = ground_estimate(obs, views, photos, flat, errors, pixel_px)
+                e, out.whole_covariance_m2[m] = ground_estimate(obs, views, photos, flat, errors, pixel_px)
             elif m == "dji":
                 e = dji_estimate(views, at_laser_pixel(photos, pixel_px))
                 if e is None:
@@ -360,6 +367,7 @@ def photo_answer(loc: PhotoLocation, dem=None, dem_sigma_m: float | None = None)
 
     unsolved = {m: reason for m, (_, reason) in loc.unsolved.items()}
     return choose_answer(loc.obs, loc.estimates, unsolved, loc.views.origin_lla, sources=error_sources(loc.errors),
+                         whole_covariance=loc.whole_covariance_m2,
                          **dem_answer_inputs(dem, dem_sigma_m, loc.obs, loc.views.origin_lla,
                                              loc.estimates.get("dem")))
 

@@ -66,6 +66,20 @@ def test_the_cli_labels_the_weaker_answer(tmp_path, capsys):
     assert "--ground-sigma-m is the assumed ground's error" in capsys.readouterr().err
 
 
+def test_the_weaker_answer_is_the_answer_when_nothing_else_locates(tmp_path, capsys):
+    """80 m above the take-off ground, looking nearly straight down, the ground assumed within 8 m: the answer is
+    `ground`, its CE90 holding the assumed ground's error. That error moves the answer as a whole, as a DEM's own
+    error moves `dem`'s, so it does not make the one ray's geometry undetermined (it did: +-23 m at 95 % against
+    a quarter of the 80 m, and the target was not located)."""
+    photo = write_maker_photo(tmp_path / "a.jpg", "autel-dji", pitch=-85.0, alt=580.0)
+    assert cli_main(["locate", str(photo), "--ground", "takeoff", "--ground-sigma-m", "8", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    answer = doc["answer"]
+    assert answer["status"] == "located" and answer["method"] == "ground"
+    # its CE90 is the whole covariance's, the assumed ground's error and the shared position offset included
+    assert answer["ce90_m"] == pytest.approx(doc["estimates"]["ground"]["cep90_m"], rel=1e-3)
+
+
 def test_a_ray_above_the_horizon_misses_the_ground_in_one_line(tmp_path):
     photo = read_photo_checked(write_maker_photo(tmp_path / "p.jpg", "parrot", pitch=5.0))
     loc = locate_photos([photo], methods=["ground"], ground=GroundAssumption("height", 100.0))

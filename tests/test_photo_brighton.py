@@ -127,7 +127,7 @@ def test_take_off_ground_answers_cover_their_error_against_the_pairs(photos):
     """One photo, no laser, no DEM, `--ground takeoff` (the rotation stated, as the pairs found it): the weaker
     answer's 95 % horizontal ellipse holds the two-photo answer, for every photo of every marked point."""
     from pipeline.geometry.frames import enu_from_lla
-    from pipeline.locate import GroundAssumption, locate_photos
+    from pipeline.locate import GroundAssumption, locate_photos, photo_answer
 
     chi2_2_95 = 5.991
     worst = 0.0
@@ -143,4 +143,6 @@ def test_take_off_ground_answers_cover_their_error_against_the_pairs(photos):
             d = enu_from_lla(*truth, one.views.origin_lla)[:2] - e.position_m[:2]
             worst = max(worst, float(d @ np.linalg.solve(e.covariance_m2[:2, :2], d)))
             assert np.hypot(*d) < 6.0
+            answer = photo_answer(one)  # the answer, not only an estimate (was not located: 40 m up, the assumed
+            assert answer.located and answer.method == "ground"  # ground's +-5 m counted as the geometry's)
     assert worst < chi2_2_95

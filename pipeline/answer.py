@@ -286,7 +286,8 @@ def baseline_problem(los: LinesOfSight, has_range: bool, has_terrain: bool) -> s
     if los.n < 2:
         return ("the target was seen in fewer than two frames and there is no laser range or terrain model: one "
                 "line of sight fixes a direction, not a point; mark it in more frames, or add a laser range or a "
-                "terrain model (a flight config's terrain:, locate's --dem)")
+                "terrain model (a flight config's terrain:, locate's --dem), or assume level ground (locate's "
+                "--ground takeoff, a weaker answer)")
     return (f"no baseline: the camera moved only {_fmt_m(los.baseline_m)} across its lines of sight, which span "
             f"{los.span_deg:.1f} deg, too little for them to meet, and no laser range or terrain model fixes the "
             "distance along them; fly around the target (lines of sight at least 10-20 deg apart), or add a laser "

@@ -80,6 +80,14 @@ def test_the_weaker_answer_is_the_answer_when_nothing_else_locates(tmp_path, cap
     assert answer["ce90_m"] == pytest.approx(doc["estimates"]["ground"]["cep90_m"], rel=1e-3)
 
 
+def test_one_photo_without_laser_dem_or_ground_names_the_ways_to_an_answer(tmp_path, capsys):
+    photo = write_maker_photo(tmp_path / "a.jpg", "autel-dji", pitch=-85.0, alt=580.0)
+    assert cli_main(["locate", str(photo)]) == 1
+    err = capsys.readouterr().err
+    assert "one line of sight fixes a direction, not a point" in err and "locate's --dem" in err
+    assert "--ground takeoff" in err  # what this photo needs, with the command that does it
+
+
 def test_a_ray_above_the_horizon_misses_the_ground_in_one_line(tmp_path):
     photo = read_photo_checked(write_maker_photo(tmp_path / "p.jpg", "parrot", pitch=5.0))
     loc = locate_photos([photo], methods=["ground"], ground=GroundAssumption("height", 100.0))

@@ -126,3 +126,25 @@ def test_reused_figures_give_the_same_pngs_as_new_ones(group):
     for k in fresh:
         assert again[k] == first[k] == fresh[k], k
     assert render_group_figures(other)["map"] != again["map"]
+
+
+def test_the_close_up_draws_the_answers_ellipse_where_its_method_has_no_covariance_of_its_own(group):
+    """The answer from a method without its own covariance (dem, los: propagated by the answer rule) gets its 95 %
+    ellipse in the close-up, which holds it (it had none: a photo's `dem` answer, CE90 128 m, in a +-5 m close-up)."""
+    import dataclasses
+
+    import numpy as np
+
+    from pipeline.answer import Answer
+    from pipeline.report.labels import METHOD_COLORS
+    from pipeline.solve.uncertainty import ellipse_points_en_m
+
+    assert group.estimates["los"].covariance_m2 is None
+    cov = np.diag([40.0 ** 2, 15.0 ** 2, 20.0 ** 2])
+    answer = Answer(True, "los", group.estimates["los"].position_m, cov, "los: the most precise", group.n_observations)
+    closeup = map_figure(dataclasses.replace(group, answer=answer)).axes[1]
+    dashed = [ln for ln in closeup.get_lines() if ln.get_linestyle() == "--"
+              and ln.get_color() == METHOD_COLORS["los"]]
+    assert len(dashed) == 1
+    extent = np.abs(ellipse_points_en_m(cov[:2, :2])).max()
+    assert closeup.get_xlim()[1] >= extent

@@ -139,12 +139,21 @@ def _centre_m(r: GroupResult) -> np.ndarray | None:
     return np.asarray(r.truth_m, float) if r.truth_m is not None else best_reference_m(r)
 
 
+def _ellipse_covariance(r: GroupResult, method: str) -> np.ndarray | None:
+    """The covariance (3, 3) m^2 drawn as a method's 95 % ellipse: the estimator's own, and for the answer's method
+    without one (dem, los, ...: propagated by the answer rule) the answer's, as the report's maps draw it."""
+    cov = r.estimates[method].covariance_m2
+    if cov is None and r.answer is not None and r.answer.method == method:
+        cov = r.answer.covariance_m2
+    return cov
+
+
 def _closeup_half_width_m(r: GroupResult, centre: np.ndarray, methods: list[str]) -> float:
     """Half width of the close-up: holds the ellipses and most estimates; far outliers are drawn as arrows."""
     d = np.array([np.linalg.norm(r.estimates[m].position_m[:2] - centre[:2]) for m in methods]) if methods else []
     ext = [5.0]
     for m in methods:
-        cov = r.estimates[m].covariance_m2
+        cov = _ellipse_covariance(r, m)
         if cov is not None and np.isfinite(cov).all():
             ring = ellipse_points_en_m(np.asarray(cov)[:2, :2]) + r.estimates[m].position_m[:2] - centre[:2]
             ext.append(float(np.abs(ring).max()))
@@ -209,7 +218,7 @@ def _draw_estimates_2d(ax, r: GroupResult, methods: list[str], offset: np.ndarra
             continue
         ax.plot(*xy, marker=marker, color=color, markersize=11 if m == "mle" else 8, markeredgecolor="k",
                 markeredgewidth=0.6, linestyle="none", zorder=5)
-        cov = e.covariance_m2
+        cov = _ellipse_covariance(r, m)
         if ellipses and cov is not None and np.isfinite(cov).all():
             ring = ellipse_points_en_m(np.asarray(cov)[:2, :2]) + xy
             ax.plot(ring[:, 0], ring[:, 1], color=color, lw=1.4, ls="--", zorder=4)

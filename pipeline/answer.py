@@ -237,6 +237,18 @@ def mle_fit_passes(e: Estimate) -> tuple[bool, str | None]:
                    f"{MAX_FIT_INFLATION:.0f} x)")
 
 
+def _misfit_covered(e: Estimate) -> str:
+    """What the answer's reason adds when the MLE's error model does not fit but its inflated covariance covers the
+    misfit (its fit checks pass all the same), so the reason does not read as a clean fit beside the run's sentence
+    that the model does not fit; "" when it fits."""
+    fit = e.extras.get("fit") if isinstance(e.extras, dict) else None
+    if not isinstance(fit, dict) or fit.get("consistent", True):
+        return ""
+    axes = math.sqrt(max(float(fit.get("covariance_inflation") or 1.0), 1.0))
+    return (f" (its error model does not fit this flight: the ellipse widened x{axes:.1f} to cover the misfit, at "
+            f"most x{math.sqrt(MAX_FIT_INFLATION):.0f} allowed)")
+
+
 @dataclass(frozen=True)
 class LinesOfSight:
     """How the cameras' lines of sight to the target spread: `span_deg` the largest angle between two of them,
@@ -336,7 +348,8 @@ def choose_answer(obs: Observations, estimates: dict[str, Estimate], unsolved: d
     mle = verdicts.get("mle")
     fit_ok, misfit = mle_fit_passes(estimates["mle"]) if mle is not None and mle.determined else (False, None)
     if fit_ok:
-        return _located("mle", estimates, verdicts, n, "weighted MLE: determined by the flight, its fit checks pass")
+        return _located("mle", estimates, verdicts, n, "weighted MLE: determined by the flight, its fit checks pass"
+                        + _misfit_covered(estimates["mle"]))
     candidates = [m for m, v in verdicts.items() if v.determined]  # an MLE whose fit fails competes on its CE90
     if candidates:
         best = min(candidates, key=lambda m: verdicts[m].ce90_m)

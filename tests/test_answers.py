@@ -68,6 +68,21 @@ def test_the_mle_is_the_answer_where_its_fit_checks_pass():
     assert all(v.determined for m, v in a.verdicts.items() if m in est and m != "range")
 
 
+def test_an_mle_whose_misfit_its_inflated_covariance_covers_answers_and_says_so():
+    """The error model does not fit, the covariance inflated 1.69 x (axes x1.3), within the 9 x allowed: the MLE
+    answers, and its reason says the model did not fit (it read "its fit checks pass" alone, beside the run's
+    sentence that the error model does not fit)."""
+    obs, _ = synthetic_observations(seed=3)
+    est, uns = _solved(obs)
+    est["mle"].extras["fit"] = {"consistent": False, "covariance_inflation": 1.69, "message": "does not fit"}
+    a = choose_answer(obs, est, uns, ORIGIN)
+    assert a.located and a.method == "mle"
+    assert a.reason == ("weighted MLE: determined by the flight, its fit checks pass (its error model does not fit "
+                        "this flight: the ellipse widened x1.3 to cover the misfit, at most x3 allowed)")
+    est["mle"].extras["fit"] = {"consistent": True}
+    assert choose_answer(obs, est, uns, ORIGIN).reason == "weighted MLE: determined by the flight, its fit checks pass"
+
+
 def test_where_the_mles_fit_checks_fail_the_most_precise_determined_method_answers():
     """The MLE's fit checks fail (its covariance inflated 25 x for a misfit): the answer is the determined method
     with the smallest CE90, which is no longer the MLE's (its inflated ellipse), and says why the MLE is not it."""

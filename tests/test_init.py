@@ -248,6 +248,21 @@ def test_photos_become_a_photo_flight(tmp_path):
     assert load_flight_config(tmp_path / "photos.yaml").files.photos == (str(photos),)
 
 
+def test_init_of_photos_says_to_mark_them_next(tmp_path, capsys):
+    """The photos' marks are what is left to fill in: the next command is `ridgeloc mark` (it said `ridgeloc run`,
+    which would locate each photo's image centre, a different ground point in each photo without a laser)."""
+    import shutil
+
+    folder = tmp_path / "photos"
+    shutil.copytree(ROOT / "sample_data" / "photos" / "h20_laser", folder)
+    (folder / "flight.yaml").unlink()
+    assert cli_main(["init", str(folder)]) == 0
+    last = capsys.readouterr().out.splitlines()[-1]
+    cfg = folder / "flight.yaml"
+    assert last == (f"next: ridgeloc mark {cfg} (click the target in every photo that shows it; set marks_file: to "
+                    f"the saved CSV), then ridgeloc run {cfg}")
+
+
 def test_bursts_are_aligned_with_the_shots_that_triggered_them():
     s = 10**9
     period = 40_000_000

@@ -52,11 +52,10 @@ def main(args) -> int:
         if not f.required:
             print(f"  optional: {f.why}")
     cfg = shlex.quote(str(out))
-    if "photos" in draft.doc["files"]:
-        print(f"next: ridgeloc run {cfg}")
-        return 0
     first = [f.key for f in required if f.key in ("camera", "clock")]
+    where = "in every photo that shows it" if "photos" in draft.doc["files"] else ""
     steps = ([f"fill in {' and '.join(first)}"] if first else []) + [
-        f"ridgeloc mark {cfg} (click the target; set marks_file: to the saved CSV)", f"ridgeloc run {cfg}"]
+        f"ridgeloc mark {cfg} (click the target{' ' + where if where else ''}; set marks_file: to the saved CSV)",
+        f"ridgeloc run {cfg}"]
     print("next: " + ", then ".join(steps))
     return 0

@@ -484,8 +484,13 @@ def _photo_result(config, photos, pixels, dem, dem_sigma, notes, truth, target):
     t0 = time.perf_counter()
     loc = locate_photos(photos, pixels, dem=dem, dem_sigma_m=dem_sigma)
     if not loc.estimates:
-        reasons = "; ".join(f"{m}: {r}" for m, (_, r) in loc.unsolved.items())
-        raise InputError(f"no method could locate the target from the photos: {reasons}", config.path)
+        reasons = "; ".join(r if r.startswith(f"{m}: ") else f"{m}: {r}" for m, (_, r) in loc.unsolved.items())
+        unmarked = ""
+        if pixels is None and not loc.obs.has_range.any():  # every image centre, and no laser pointing there
+            unmarked = ("the target is not marked (files.marks, marks_file:), so each photo's image centre is taken, "
+                        "where a laser would point, and these photos have no laser range: mark the target in the "
+                        "photos with `ridgeloc mark`; ")
+        raise InputError(f"no method could locate the target from the photos: {unmarked}{reasons}", config.path)
     return location_result(config.name, config.to_dict(), loc, notes, truth, target, dem, dem_sigma,
                            time.perf_counter() - t0)
 

@@ -146,3 +146,18 @@ def test_take_off_ground_answers_cover_their_error_against_the_pairs(photos):
             answer = photo_answer(one)  # the answer, not only an estimate (was not located: 40 m up, the assumed
             assert answer.located and answer.method == "ground"  # ground's +-5 m counted as the geometry's)
     assert worst < chi2_2_95
+
+
+def test_an_unmarked_photo_flight_without_laser_is_told_to_mark_the_target(photos, tmp_path, capsys):
+    """No marks, no laser: each photo's image centre is a different ground point; the failure says to mark the
+    target (it listed every method's reason, 'dlt: dlt: ...', and nothing a user could do)."""
+    import yaml
+
+    from pipeline.cli import main as cli_main
+
+    config = tmp_path / "flight.yaml"
+    config.write_text(yaml.safe_dump({"name": "brighton", "files": {"photos": [p.path for p in photos]}}))
+    assert cli_main(["run", str(config), "-o", str(tmp_path / "o"), "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "the target is not marked" in err and "`ridgeloc mark`" in err and "dlt: dlt:" not in err
+

@@ -403,6 +403,8 @@ def check_pixels(photos: list[Photo], pixel_px) -> None:
     for p, (u, v) in zip(photos, np.asarray(pixel_px, dtype=np.float64).reshape(-1, 2), strict=True):
         if np.isnan(u) and np.isnan(v):  # not marked in this photo
             continue
+        if not (np.isfinite(u) and np.isfinite(v)):
+            raise InputError(f"pixel ({u:g}, {v:g}) is not a pair of finite numbers", path=p.path)
         if not in_image(u, v, p.width_px, p.height_px):
             raise InputError(f"pixel ({u:g}, {v:g}) is outside the {p.width_px}x{p.height_px} image", path=p.path)
 

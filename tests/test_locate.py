@@ -89,6 +89,8 @@ def test_pixel_outside_the_image_is_refused(flight, capsys):
     assert cli_main(["locate", str(folder / "DJI_0001.JPG"), "--pixel", "5000", "10"]) == 1
     err = capsys.readouterr().err
     assert "DJI_0001.JPG" in err and "outside the 640x480 image" in err
+    assert cli_main(["locate", str(folder / "DJI_0001.JPG"), "--pixel", "nan", "10"]) == 1
+    assert "DJI_0001.JPG: pixel (nan, 10) is not a pair of finite numbers" in capsys.readouterr().err
 
 
 def test_marks_for_an_unknown_photo(flight, capsys, tmp_path):

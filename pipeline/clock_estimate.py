@@ -32,8 +32,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import savgol_filter
-from scipy.stats import t as student_t
+from scipy.special import stdtrit  # Student's t.ppf bit for bit, without importing scipy.stats
 
 from pipeline.flight import Flight, TargetMark
 from pipeline.geometry.lens import undistort_pixels
@@ -127,6 +126,8 @@ def _profile(deltas: np.ndarray, cost: np.ndarray, dof: int, inflation: float) -
 def _savgol(t_ns: np.ndarray, values: np.ndarray, span_s: float) -> np.ndarray:
     """values (n, k) smoothed along time by a cubic Savitzky-Golay filter about span_s wide (unchanged when the
     series is too short or too sparse for one)."""
+    from scipy.signal import savgol_filter  # imported here: scipy.signal imports scipy.stats (~0.5 s)
+
     t = np.asarray(t_ns, dtype=np.int64)
     if t.size < 9:
         return values
@@ -226,7 +227,7 @@ def estimate_video_offset(r: Flight, t_video_ns: np.ndarray, pixel_px: np.ndarra
         boot = deltas[np.argmin(counts @ cg.T, axis=1)]
         loo = deltas[np.argmin(total[None, :] - cg.T, axis=1)]
         sd = math.sqrt((n_groups - 1) / n_groups * float(np.sum((loo - loo.mean()) ** 2)))
-        half = float(student_t.ppf(0.975, n_groups - 1)) * sd
+        half = float(stdtrit(n_groups - 1, 0.975)) * sd
         lo = min(lo, float(np.quantile(boot, 0.025)), d_best - half)
         hi = max(hi, float(np.quantile(boot, 0.975)), d_best + half)
     else:

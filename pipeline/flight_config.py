@@ -125,6 +125,9 @@ class TrackerSettings:
     neighbours: Annotated[int, Ge(0)] = 2
     detect_scale: Annotated[float, Ge(0.1), Le(1)] = 0.5  # features found on the image resized by this factor
     max_detect_px: Annotated[int, Ge(160)] = 960  # ... and at most this many pixels on its long side
+    # features found at full resolution in a square of this side around the target instead, where it has at most
+    # half the pixels of the reduced frame (large videos); 0: never
+    detect_window_px: Annotated[int, Ge(0)] = 512
 
 
 CLOCK_SOURCES = ("video", "range", "position", "attitude", "gimbal")
@@ -234,6 +237,11 @@ class ObservationSelection:
     frame_indices: tuple[Annotated[int, Ge(0)], ...] = ()
     max_laser_offset_px: Positive | None = 50.0
     burst_gap_s: Positive = 0.5
+    # mode range_times: each shot's observation at the nearest key frame, its range interpolated there
+    # (pipeline/sync/key_frames.py): true, false, or auto (where it pays: pipeline/sync/select.py)
+    at_key_frames: bool | typing.Literal["auto"] = "auto"
+    key_frame_tolerance_s: Positive = 0.5
+    range_interpolation_gap_s: Positive = 1.5  # the two shots a range is interpolated between, at most this apart
 
     def __post_init__(self):
         if self.mode == "frames" and not self.frame_indices:

@@ -325,6 +325,8 @@ def _result(fp: FlightPass, t: _Tracked, estimates: dict[str, Estimate], failure
     if payload is not None:  # the KLV's own frame centre, for the report's map beside ridgeloc's
         tracking["payload_frame_centre_deg"] = payload
     tracking["range_t_ns"] = [int(x) for x in plan.range_t_ns]
+    if plan.range_error_m is not None:  # observations at key frames: the ranges' estimated interpolation error
+        tracking["range_error_m"] = [None if not np.isfinite(e) else round(float(e), 4) for e in plan.range_error_m]
     tracking["mark"] = marks[0].to_dict()
     if len(marks) > 1:
         tracking["marks"] = [m.to_dict() for m in marks]

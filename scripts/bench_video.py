@@ -355,6 +355,7 @@ def main(argv=None) -> int:
     print(f"run / bare decode of every frame = {wall / bare:.2f} (wall); decode floor / bare decode = "
           f"{floor / bare:.2f}; run / flight length = {wall / results['seconds']:.3f}")
     print(f"index / bare demux = {results['index']['s'] / results['bare demux']['s']:.2f} (wall)")
+    print(f"frames decoded by the run: {results['frames_decoded']} for {results['n_observations']} observations")
     print(f"stages wall s: {results['timings_s']}")
     print(f"stages CPU s: {results['cpu_s']}")
     print(f"errors m: {results['errors_m']}")

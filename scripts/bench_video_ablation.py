@@ -7,12 +7,17 @@ true target pixel, the MLE's error).
     python scripts/bench_video.py --seconds 60 --workdir /tmp/bv60          # makes the 4K flight
     python scripts/bench_video_ablation.py /tmp/bv60/flight.yaml --repeats 3
 
-Variants (each switches off one change of today's reader/tracker, by patching it in the child only):
+Variants (each switches off one change of today's reader/tracker, by a config key or by patching it in the
+child only):
   today            the defaults
-  sift 1280 px     features on the frame reduced to 1280 px (tracking.max_detect_px, the old default)
-  no prefetch      frames decoded one at a time when the tracker asks (no worker threads ahead)
-  before           both of the above, frames decoded as BGR then made grey, and a frame cache kept for every
-                   flight (the reader and tracker before issue 40)
+  no re-anchoring  the homography chain not re-anchored on the refined pixel (`SiftTracker._reanchor` a no-op)
+  shot frames      observations at the laser shots' own frames (observations.at_key_frames: false)
+  whole frame      features on the whole frame reduced to 960 px, not in a window (tracking.detect_window_px: 0)
+  first round      all three of the above switched back: the plan and tracker of issue 40's first round
+  sift 1280 px     that, with features on the frame reduced to 1280 px (tracking.max_detect_px, the old default)
+  no prefetch      that, with frames decoded one at a time when the tracker asks (no worker threads ahead)
+  before           the last two, frames decoded as BGR then made grey, and a frame cache kept for every flight
+                   (the reader and tracker before issue 40)
 """
 
 from __future__ import annotations
@@ -28,7 +33,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-VARIANTS = ("today", "sift 1280 px", "no prefetch", "before")
+VARIANTS = ("today", "no re-anchoring", "shot frames", "whole frame", "first round", "sift 1280 px", "no prefetch",
+            "before")
 
 CHILD = r"""
 import dataclasses, json, sys, time
@@ -40,6 +46,13 @@ import pipeline.ingest.video as video
 import pipeline.flight.frames as frames
 import pipeline.run as run
 cfg = load_run_config(sys.argv[1])[0].config
+if variant not in ("today", "shot frames", "whole frame"):
+    import pipeline.track.sift as sift
+    sift.SiftTracker._reanchor = staticmethod(lambda H, predicted_px, found_px: H)
+if variant not in ("today", "no re-anchoring", "whole frame"):
+    cfg = dataclasses.replace(cfg, observations=dataclasses.replace(cfg.observations, at_key_frames=False))
+if variant not in ("today", "no re-anchoring", "shot frames"):
+    cfg = dataclasses.replace(cfg, tracking=dataclasses.replace(cfg.tracking, detect_window_px=0))
 if variant in ("sift 1280 px", "before"):
     cfg = dataclasses.replace(cfg, tracking=dataclasses.replace(cfg.tracking, max_detect_px=1280))
 if variant in ("no prefetch", "before"):
@@ -64,7 +77,8 @@ gen = json.loads((__import__("pathlib").Path(sys.argv[1]).parent / "generate.jso
 px = bv.pixel_errors(r.tracking, gen["seconds"])
 print(json.dumps({"wall_s": wall, "cpu_s": cpu, "decode_s": r.timings_s.get("decode"),
                   "track_s": r.timings_s.get("track"), "px_median": float(np.median(px)) if px.size else None,
-                  "tracked": int(px.size), "mle_m": r.errors_m().get("mle")}))
+                  "tracked": int(px.size), "px_p95": float(np.percentile(px, 95)) if px.size else None,
+                  "mle_m": r.errors_m().get("mle"), "ridge_m": r.errors_m().get("ridge")}))
 """
 
 
@@ -92,11 +106,11 @@ def main(argv=None) -> int:
         for v in args.variants:
             runs[v].append(_one(args.config, v))
             print(f"  {k + 1}/{args.repeats} {v}: {runs[v][-1]}", flush=True)
-    keys = ("wall_s", "cpu_s", "peak_mib", "decode_s", "track_s", "px_median", "mle_m")
-    print(f"{'variant':<14} " + " ".join(f"{k:>10}" for k in keys) + "   (medians)")
+    keys = ("wall_s", "cpu_s", "peak_mib", "decode_s", "track_s", "px_median", "px_p95", "mle_m", "ridge_m")
+    print(f"{'variant':<26} " + " ".join(f"{k:>10}" for k in keys) + "   (medians)")
     for v, rs in runs.items():
         med = {k: statistics.median(r[k] for r in rs if r[k] is not None) for k in keys}
-        print(f"{v:<14} " + " ".join(f"{med[k]:>10.3f}" for k in keys))
+        print(f"{v:<26} " + " ".join(f"{med[k]:>10.3f}" for k in keys))
     print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
     return 0
 

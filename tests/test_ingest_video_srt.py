@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import threading
 
 import cv2
 import numpy as np
@@ -64,6 +65,26 @@ def test_prefetched_frames_are_the_frames_decoded_one_by_one(tmp_path):
     for i, img in got.items():
         assert img.shape == (48, 64) and img.flags.owndata
         np.testing.assert_array_equal(img, one_by_one[i])
+
+
+def test_a_prefetched_frame_asked_for_again_is_decoded_again(tmp_path):
+    """A retry of a frame already taken from the plan (a decoder retrying a frame it could not use) gets the frame
+    from the caller's own reader; it once waited forever for a worker that had moved on."""
+    p = tmp_path / "v.mp4"
+    _video(p)
+    with VideoFrames(p, gray=True) as v:
+        want = v[5]
+    got = {}
+    def ask_twice():
+        with VideoFrames(p, gray=True) as v:
+            v.prefetch([5, 20, 33], workers=1, ahead=1)  # the worker waits after 5's group for the caller
+            got["first"], got["again"], got["next"] = v[5], v[5], v[20]
+    t = threading.Thread(target=ask_twice, daemon=True)
+    t.start()
+    t.join(timeout=60)
+    assert not t.is_alive(), "asking for a taken frame again hangs"
+    np.testing.assert_array_equal(got["first"], want)
+    np.testing.assert_array_equal(got["again"], want)
 
 
 def test_frames_csv_gives_variable_rate_times(tmp_path):

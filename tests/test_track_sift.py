@@ -178,3 +178,53 @@ def test_a_lost_target_is_bridged_only_without_a_shared_cache(ground, scene, via
     assert results[True, "asked"] == set(wanted)  # no stone for a target that is not there to be found
     stones = results[False, "asked"] - set(wanted)
     assert stones and stones <= set(range(1, 8))  # stones between the key frame and the lost frame
+
+
+def _big(k: float, shift=(0.0, 0.0)) -> np.ndarray:
+    """Frame k's homography into a 1500 x 1000 frame (the ground magnified 2.5 times): a frame large enough for
+    features to be found in a window around the target (tracking.detect_window_px)."""
+    return np.diag([2.5, 2.5, 1.0]) @ homography(k, shift)
+
+
+class _Spy(SiftTracker):
+    """Records the size of every image SIFT ran on (after its reduction)."""
+
+    def __init__(self, *a, **kw):
+        super().__init__(*a, **kw)
+        self.detected: list[tuple[int, int]] = []
+
+    def _detect(self, image, f):
+        self.detected.append((round(image.shape[0] * f), round(image.shape[1] * f)))
+        return super()._detect(image, f)
+
+
+def test_large_frames_match_in_a_window_around_the_target_as_accurately(ground):
+    Hs = {k: _big(k) for k in range(0, 30, 3)}
+    frames = {k: cv2.warpPerspective(ground, H, (1500, 1000), flags=cv2.INTER_LINEAR) for k, H in Hs.items()}
+    wanted = sorted(Hs)
+    truth = np.array([true_px(Hs[k]) for k in wanted])
+    windowed = _Spy()
+    res = windowed.track(Decoder(frames), 0, true_px(Hs[0]), wanted)
+    side = TrackerSettings().detect_window_px // 2  # the window, at detect_scale 0.5
+    assert windowed.detected and all(s == (side, side) for s in windowed.detected)  # never the whole frame
+    whole = _Spy(TrackerSettings(detect_window_px=0))
+    ref = whole.track(Decoder(frames), 0, true_px(Hs[0]), wanted)
+    assert all(s == (500, 750) for s in whole.detected)  # the whole frame at half resolution
+    assert not res.lost.any() and not ref.lost.any()
+    err = np.linalg.norm(res.pixel_px - truth, axis=1)
+    err_ref = np.linalg.norm(ref.pixel_px - truth, axis=1)
+    assert np.median(err) < 0.15 and err.max() < 0.3, err
+    assert np.median(err) < np.median(err_ref) + 0.05, (err, err_ref)
+
+
+def test_a_target_far_from_where_it_was_is_found_on_the_whole_frame(ground):
+    """The window in the current frame is centred where the target was last found: when it jumps further than
+    the window reaches, the windows share no ground and the whole frames are matched instead."""
+    Hs = {0: _big(0), 3: _big(3), 6: _big(6, shift=(-160.0, -130.0))}  # the target 416 px left, 314 px up
+    frames = {k: cv2.warpPerspective(ground, H, (1500, 1000), flags=cv2.INTER_LINEAR) for k, H in Hs.items()}
+    spy = _Spy()
+    res = spy.track(Decoder(frames), 0, true_px(Hs[0]), [0, 3, 6])
+    assert not res.lost.any()
+    assert np.linalg.norm(res.pixel_px[2] - true_px(Hs[6])) < 0.3
+    assert (500, 750) in spy.detected  # the whole frame, for frame 6 only
+    assert spy.detected.count((500, 750)) == 2  # frame 6 and its key frame

@@ -102,7 +102,8 @@ def mapping_lines(r: Flight) -> list[str]:
                      f"{ov / 1e9:.1f} s")
     if r.plan is not None:
         n_r = int(np.isfinite(r.plan.range_m).sum())
-        lines.append(f"  observations {r.plan.n} ({r.config.observations.mode}), {n_r} with a laser range")
+        where = ", at key frames" if r.plan.at_key_frames else ""
+        lines.append(f"  observations {r.plan.n} ({r.config.observations.mode}{where}), {n_r} with a laser range")
     else:
         lines.append(f"  observations none: {r.plan_error}")
     if r.origin is not None:

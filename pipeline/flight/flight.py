@@ -40,16 +40,19 @@ def read_flight_logs(config: FlightConfig) -> FlightLog:
 
 
 def plan_flight_observations(config: FlightConfig, frames: FrameSeries, log: FlightLog,
-                             video_offset_ns: int | None = None) -> ObservationPlan:
+                             video_offset_ns: int | None = None, keyframe=None) -> ObservationPlan:
     """Which frames are observations, with their laser shots, as the flight config's `observations:` and
     `clock:` say, or with `video_offset_ns` when given (`pipeline.sync.select.plan_observations`; needs only
-    timestamps)."""
+    timestamps). keyframe (n,) bool: the frames' key-frame flags, when known (observations at key frames)."""
     c, sel = config.clock, config.observations
     video_offset_ns = c.offset_ns("video") if video_offset_ns is None else video_offset_ns
     return plan_observations(frames, log.range, mode=sel.mode, video_offset_ns=video_offset_ns,
                              range_offset_ns=c.offset_ns("range"), frame_tolerance_s=sel.frame_tolerance_s,
                              max_range_gap_s=sel.max_range_gap_s, frame_indices=sel.frame_indices,
-                             burst_gap_s=sel.burst_gap_s)
+                             burst_gap_s=sel.burst_gap_s, keyframe=keyframe, at_key_frames=sel.at_key_frames,
+                             key_frame_tolerance_s=sel.key_frame_tolerance_s,
+                             range_interpolation_gap_s=sel.range_interpolation_gap_s,
+                             range_sigma_m=config.sigma.range_m)
 
 
 def geoid_separation_m(config: FlightConfig, log: FlightLog) -> float | None:
@@ -118,7 +121,7 @@ class Flight:
             camera, camera_source = resolve_camera(config, log)
             plan, plan_error = None, None
             try:
-                plan = plan_flight_observations(config, source.frames, log)
+                plan = plan_flight_observations(config, source.frames, log, keyframe=source.keyframe)
             except InputError as exc:
                 plan_error = exc
             separation, origin, origin_error = None, None, None
@@ -168,7 +171,7 @@ class Flight:
     def plan_at(self, video_offset_ns: int) -> ObservationPlan:
         """The observation plan with the video clock `video_offset_ns` (an estimated offset) instead of the
         configured one."""
-        return plan_flight_observations(self.config, self.frames, self.log, video_offset_ns)
+        return plan_flight_observations(self.config, self.frames, self.log, video_offset_ns, self.source.keyframe)
 
     # ---- state, poses and lines of sight at telemetry times ---------------------------------------------------
 

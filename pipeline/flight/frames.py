@@ -55,11 +55,14 @@ class TimedDecoder:
 
 class FrameSource:
     """`frames`: the FrameSeries (index, t_ns on the video clock); `decoder(indices)` -> {index: gray image}
-    (a TimedDecoder); `close()` releases the reader (also on leaving a `with` block; closing twice is harmless)."""
+    (a TimedDecoder); `keyframe` (n,) bool, aligned with `frames`: the frames that decode on their own (None
+    where every frame does, or it is not known); `close()` releases the reader (also on leaving a `with` block;
+    closing twice is harmless)."""
 
     def __init__(self, frames: FrameSeries, read: Callable[[list[int]], dict[int, np.ndarray]], closable=None,
-                 prefetch: Callable[[list[int]], None] | None = None):
+                 prefetch: Callable[[list[int]], None] | None = None, keyframe: np.ndarray | None = None):
         self.frames = frames
+        self.keyframe = keyframe
         self.decoder = TimedDecoder(read, prefetch)
         self._closable = closable
 
@@ -76,6 +79,16 @@ class FrameSource:
         self.close()
 
 
+def _keyframes(video, frames: FrameSeries) -> np.ndarray | None:
+    """(n,) bool: which of `frames` (numbered in the video's display order) are key frames; None when all are."""
+    flags = np.asarray(video.index.keyframe, dtype=bool)
+    index = np.asarray(frames.index, dtype=np.int64)
+    if index.size == 0 or index.max() >= flags.size:
+        return None
+    key = flags[index]
+    return None if key.all() else key
+
+
 def open_frames(config: FlightConfig, log: FlightLog) -> FrameSource:
     """The flight's frames: the video file when the config names one, else the full-motion video the telemetry
     came from, else the image topic of a bag the telemetry came from."""
@@ -89,10 +102,10 @@ def open_frames(config: FlightConfig, log: FlightLog) -> FrameSource:
         except BaseException:
             video.close()
             raise
-        return FrameSource(frames, video.read, video, video.prefetch)
+        return FrameSource(frames, video.read, video, video.prefetch, _keyframes(video, frames))
     if log.frames is not None and "fmv" in log.formats:  # full-motion video: the frames of the telemetry file
-        video = ingest.VideoFrames(log.frames.source, gray=True)
-        return FrameSource(log.frames, video.read, video, video.prefetch)
+        video = ingest.VideoFrames(log.frames.source, gray=True, index=log.video_indexes.get(log.frames.source))
+        return FrameSource(log.frames, video.read, video, video.prefetch, _keyframes(video, log.frames))
     if log.frames is None:
         raise ConfigError("the flight has no video (files.video) and its logs carry no images", config.path)
     for path in config.files.telemetry:

@@ -21,6 +21,7 @@ earth-referenced (SENSOR_CONVENTION). A stream may hold both; each row keeps its
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -466,4 +467,5 @@ def read_fmv(path, index=None, mapping: dict | None = None) -> FlightLog:
                                   int(index.frames.t_ns[0]), int(index.frames.t_ns[-1]), ("frames",)))
     log.formats.append("fmv")
     log.klv_tables[str(p)] = table
+    log.video_indexes[str(p)] = dataclasses.replace(index, data_packets=[])
     return log

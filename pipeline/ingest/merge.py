@@ -47,6 +47,7 @@ def merge_logs(logs: list[FlightLog]) -> FlightLog:
         out.warnings += log.warnings
         out.formats += log.formats
         out.klv_tables.update(log.klv_tables)
+        out.video_indexes.update(log.video_indexes)
         if out.camera_info is None:
             out.camera_info = log.camera_info
     for q in QUANTITIES:

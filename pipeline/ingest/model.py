@@ -203,6 +203,9 @@ class FlightLog:
     frame_centre: PositionSeries | None = None  # where the payload says its optical axis meets the ground (KLV)
     payload_target: PositionSeries | None = None  # the payload's own target location (KLV tags 40-42)
     klv_tables: dict = field(default_factory=dict)  # file -> its decoded KLV packets (klv.KlvTable), kept for checks
+    # full-motion video file -> its demux index (video.DemuxIndex without the data packets): the frame reader's,
+    # so the file is demuxed once
+    video_indexes: dict = field(default_factory=dict)
 
     def missing_for_localization(self) -> list[str]:
         """Quantities localization needs that this log does not supply."""

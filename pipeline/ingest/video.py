@@ -319,8 +319,8 @@ class _Prefetch:
 
     The order is cut into runs of frames going forward within one group of pictures (decoded on without a seek);
     runs go to the workers in turn, and a worker starts a run only when it begins fewer than `ahead` runs of the
-    caller's position. A frame the caller asks for is removed when taken; frames of the plan the caller has gone
-    past are dropped."""
+    caller's position. A frame the caller asks for is removed when taken (asked for again, a retry, it is decoded
+    by the caller's own reader); frames of the plan the caller has gone past are dropped."""
 
     def __init__(self, video: VideoFrames, order: list[int], workers: int, ahead: int):
         self.position = {}  # frame -> its first place in the order
@@ -334,6 +334,7 @@ class _Prefetch:
                 runs.append([k])
         self.order, self.runs, self.ahead = order, runs, ahead
         self.done: dict[int, object] = {}  # frame -> image, or the exception its decode raised
+        self.taken: set[int] = set()  # frames handed to the caller: no worker decodes them again
         self.caller = 0  # place in the order the caller has reached
         self.stopped = False
         self.decoded = 0
@@ -381,10 +382,11 @@ class _Prefetch:
                 reader.close()
 
     def take(self, i: int) -> np.ndarray | None:
-        """Frame i from the plan (waiting for its worker), or None when it is not in the plan still ahead."""
+        """Frame i from the plan (waiting for its worker), or None when it is not in the plan still ahead or was
+        taken already."""
         k = self.position.get(i)
         with self.cond:
-            if k is None or (k < self.caller and i not in self.done):
+            if k is None or i in self.taken or (k < self.caller and i not in self.done):
                 return None
             self.caller = max(self.caller, k)
             for j in [j for j in self.done if self.position[j] < self.caller and j != i]:
@@ -392,6 +394,7 @@ class _Prefetch:
             self.cond.notify_all()
             self.cond.wait_for(lambda: i in self.done or not any(t.is_alive() for t in self.threads))
             got = self.done.pop(i, None)
+            self.taken.add(i)
         if isinstance(got, BaseException):
             raise got
         return got

@@ -8,6 +8,13 @@ more than `burst_gap_s` start a new burst), one observation per burst, at the fr
 when there is one within `frame_tolerance_s`, else the burst's middle frame, with the nearest valid range within
 `max_range_gap_s`; a burst whose shot was never logged still counts. All times are put on the telemetry clock
 first (config `clock`).
+
+Observations at key frames (`at_key_frames`, mode `range_times` of a video whose key frames are known): each shot
+moves to the nearest key frame within `key_frame_tolerance_s`, its range interpolated at that frame's time
+(`pipeline.sync.key_frames`). `True` always does so, `False` never, `"auto"` where it decodes at most half the
+frames, keeps the shots' observations and ranges (all but 2 %, at least one), and the interpolation's estimated
+error is small against the range's noise (90th percentile at most KEY_FRAME_ERROR_FRACTION of it): the smaller of
+`range_sigma_m` (the config's sigma.range_m, when stated) and the shots' own scatter about their local fits.
 """
 
 from __future__ import annotations
@@ -19,8 +26,10 @@ import numpy as np
 from pipeline.errors import InputError
 from pipeline.ingest.model import FrameSeries, RangeSeries
 from pipeline.sync.interpolate import nearest_within
+from pipeline.sync.key_frames import frames_to_decode, key_frame_observations
 
 NS_PER_S = 10**9
+KEY_FRAME_ERROR_FRACTION = 0.25  # the interpolation's error beside noise sigma: sqrt(1 + 0.25^2) = 1.03 sigma
 
 
 @dataclass(frozen=True)
@@ -35,6 +44,8 @@ class ObservationPlan:
     range_m: np.ndarray
     range_t_ns: np.ndarray
     notes: list[str] = field(default_factory=list)
+    at_key_frames: bool = False  # observations moved to key frames, ranges interpolated at their times
+    range_error_m: np.ndarray | None = None  # (m,) the interpolation's estimated error (at key frames), else None
 
     @property
     def n(self) -> int:
@@ -49,8 +60,12 @@ def usable_ranges(ranges: RangeSeries) -> np.ndarray:
 
 def plan_observations(frames: FrameSeries, ranges: RangeSeries | None, *, mode: str = "range_times",
                       video_offset_ns: int = 0, range_offset_ns: int = 0, frame_tolerance_s: float = 0.1,
-                      max_range_gap_s: float = 0.1, frame_indices=(), burst_gap_s: float = 0.5) -> ObservationPlan:
-    """Choose the observation frames and attach ranges (see the module docstring)."""
+                      max_range_gap_s: float = 0.1, frame_indices=(), burst_gap_s: float = 0.5,
+                      keyframe: np.ndarray | None = None, at_key_frames: bool | str = "auto",
+                      key_frame_tolerance_s: float = 0.5, range_interpolation_gap_s: float = 1.5,
+                      range_sigma_m: float | None = None) -> ObservationPlan:
+    """Choose the observation frames and attach ranges (see the module docstring). keyframe (n,) bool: which of
+    the frames are key frames (None: unknown, or every frame decodes alone)."""
     t_frames = np.asarray(frames.t_ns, dtype=np.int64) + int(video_offset_ns)
     notes: list[str] = []
     if ranges is not None:
@@ -97,10 +112,64 @@ def plan_observations(frames: FrameSeries, ranges: RangeSeries | None, *, mode: 
     if frame_pos.size == 0:
         raise InputError("no observation frames: no laser shot falls within the video's time span "
                          "(check clock.video_to_telemetry_offset_ns and clock.range_offset_ns)")
-    return ObservationPlan(frame_pos=frame_pos.astype(np.int64),
+    plan = ObservationPlan(frame_pos=frame_pos.astype(np.int64),
                            frame_index=np.asarray(frames.index, dtype=np.int64)[frame_pos],
                            t_ns=t_frames[frame_pos], range_m=range_m.astype(np.float64),
                            range_t_ns=range_t.astype(np.int64), notes=notes)
+    if mode == "range_times" and keyframe is not None and at_key_frames is not False:
+        plan = _at_key_frames(plan, frames, t_frames, np.asarray(keyframe, dtype=bool), ranges, t_rng, ok,
+                              at_key_frames, int(key_frame_tolerance_s * NS_PER_S),
+                              int(range_interpolation_gap_s * NS_PER_S), range_sigma_m)
+    return plan
+
+
+def _allowance(n: int) -> int:
+    return max(1, int(np.ceil(0.02 * n)))
+
+
+def _at_key_frames(plan: ObservationPlan, frames: FrameSeries, t_frames: np.ndarray, keyframe: np.ndarray,
+                   ranges: RangeSeries, t_rng: np.ndarray, ok: np.ndarray, when: bool | str, tolerance_ns: int,
+                   gap_ns: int, sigma_m: float | None) -> ObservationPlan:
+    """The plan at key frames instead of the shots' own frames, when `when` is True, or "auto" and it pays (see
+    the module docstring); else `plan`, with a note when key frames would have saved decoding but did not apply."""
+    kp = key_frame_observations(t_frames, keyframe, t_rng, ok, ranges.range_m, tolerance_ns=tolerance_ns,
+                                max_gap_ns=gap_ns)
+    ranged = np.isfinite(kp.range_m)
+    before, after = frames_to_decode(plan.frame_pos, keyframe), frames_to_decode(kp.frame_pos, keyframe)
+    err = kp.range_error_m[ranged]
+    p90 = float(np.percentile(err, 90)) if err.size and np.isfinite(err).all() else float("nan")
+    n_ranged = int(np.isfinite(plan.range_m).sum())
+    noise = kp.noise_m if sigma_m is None else min(sigma_m, kp.noise_m)
+    if when == "auto":
+        if before < 2 * after:
+            return plan
+        why = []
+        if kp.frame_pos.size < plan.n - _allowance(plan.n):
+            why.append(f"only {kp.frame_pos.size} of the {plan.n} shots have a key frame of their own within "
+                       f"{tolerance_ns / NS_PER_S:g} s")
+        if ranged.sum() < n_ranged - _allowance(n_ranged):
+            why.append(f"only {int(ranged.sum())} of {n_ranged} ranges could be interpolated (valid shots on "
+                       f"both sides within {gap_ns / NS_PER_S:g} s)")
+        if not p90 <= KEY_FRAME_ERROR_FRACTION * noise:
+            why.append(f"the range is not smooth enough: interpolation error p90 {p90:.3g} m against its noise "
+                       f"{noise:.3g} m")
+        if why:
+            plan.notes.append(f"observations at the shots' own frames: key frames would decode {after} frames "
+                              f"instead of {before}, but {'; '.join(why)} (observations.at_key_frames)")
+            return plan
+    if kp.frame_pos.size == 0:
+        raise InputError(f"observations.at_key_frames: no laser shot has a key frame within "
+                         f"{tolerance_ns / NS_PER_S:g} s (observations.key_frame_tolerance_s)")
+    med = float(np.median(err)) if err.size else float("nan")
+    notes = [f"observations at key frames ({'auto' if when == 'auto' else 'observations.at_key_frames'}): "
+             f"{kp.frame_pos.size} of {t_rng.size} laser shots, each at the nearest key frame within "
+             f"{tolerance_ns / NS_PER_S:g} s, {int(ranged.sum())} with a range interpolated at the frame's time "
+             f"(estimated error median {med:.3g} m, p90 {p90:.3g} m; the range's scatter {kp.noise_m:.3g} m); "
+             f"{after} frames to decode instead of {before}"]
+    pos = kp.frame_pos
+    return ObservationPlan(frame_pos=pos, frame_index=np.asarray(frames.index, dtype=np.int64)[pos],
+                           t_ns=t_frames[pos], range_m=kp.range_m, range_t_ns=np.where(ranged, t_frames[pos], -1),
+                           notes=notes, at_key_frames=True, range_error_m=kp.range_error_m)
 
 
 def _burst_frames(t_frames: np.ndarray, t_shots: np.ndarray, gap_ns: int, tolerance_ns: int) -> np.ndarray:

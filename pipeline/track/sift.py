@@ -3,12 +3,15 @@ through key frames, then sub-pixel refinement against the ORIGINAL mark.
 
 For each frame (processed outward from the mark frame, forward and backward in time):
 1. SIFT features are matched to the current key frame (Lowe's ratio test) and a homography H_cur_from_key is
-   fitted with RANSAC; the ground at kilometres of range is close to a plane, so one homography maps it.
+   fitted with RANSAC; the ground at kilometres of range is close to a plane, so one homography maps it. On large
+   frames the features are those of a window around the target (where it was last found, and around it in the
+   key frame: `tracking.detect_window_px`), the whole frames' only when the windows give too few matches.
 2. The mark's pixel is predicted through the chain H_cur_from_mark = H_cur_from_key @ H_key_from_mark.
 3. The mark image is warped into the current frame by H_cur_from_mark and the patch around the target is
    located in the current frame by normalised cross-correlation in a small window, with a parabolic fit of the
    peak for the sub-pixel position. The template always comes from the mark frame, so errors of the chain shift
-   only the prediction, not the answer: drift does not accumulate.
+   only the prediction, not the answer; and the chain is re-anchored on the position found (H_cur_from_mark moved
+   by the refinement's offset from the prediction), so those shifts do not add up over a long flight either.
 4. Quality: inlier count and ratio, RANSAC reprojection RMS, peak correlation. Below thresholds the frame is
    flagged lost (pixel NaN), never guessed. A failed frame is retried against the mark frame itself
    (re-acquisition) and through intermediate frames (stepping stones) when the caller offers them; with a
@@ -37,12 +40,14 @@ from pipeline.flight_config import TrackerSettings
 
 @dataclass
 class _View:
-    """A decoded frame's features."""
+    """A decoded frame and its features: of the whole frame (found on first use, `SiftTracker.features`), or of a
+    window of it (`window` (x0, y0, x1, y1) full-resolution pixels, `SiftTracker.window_view`)."""
 
     index: int
     image: np.ndarray  # grayscale uint8
-    keypoints_px: np.ndarray  # (k, 2)
-    descriptors: np.ndarray | None  # (k, 128) float32
+    keypoints_px: np.ndarray | None = None  # (k, 2) full-resolution pixels; None until found
+    descriptors: np.ndarray | None = None  # (k, 128) float32
+    window: tuple[int, int, int, int] | None = None
 
 
 @dataclass
@@ -50,6 +55,8 @@ class _Key:
     view: _View
     H_key_from_mark: np.ndarray
     first_inliers: int | None = None
+    centre_px: np.ndarray | None = None  # the target's pixel in the key frame (its feature window's centre)
+    window: _View | None = None  # the key frame's features around centre_px, found on first use
 
 
 @dataclass
@@ -133,7 +140,7 @@ class ViewCache:
         if missing:
             for i, img in decode(missing).items():
                 v = out[int(i)] = tracker.view(int(i), img)
-                size = v.image.nbytes + v.keypoints_px.nbytes + (0 if v.descriptors is None else v.descriptors.nbytes)
+                size = v.image.nbytes + tracker.s.n_features * (128 * 4 + 2 * 4)  # the image and its features
                 if self.bytes + size <= self.max_bytes:
                     self.views[int(i)] = v
                     self.bytes += size
@@ -167,6 +174,7 @@ class SiftTracker:
     def __init__(self, settings: TrackerSettings | None = None):
         self._pairs: dict | None = None  # a ViewCache's shared homographies during track(), when it shares them
         self._available: tuple = (None, [])  # the last `available` given to track() and its frames sorted
+        self._last_window: tuple | None = None  # the last window view found (`_window_of`)
         self.s = settings or TrackerSettings()
         self._sift = cv2.SIFT_create(nfeatures=self.s.n_features)
         self._matcher = cv2.FlannBasedMatcher({"algorithm": 1, "trees": 4}, {"checks": 48})
@@ -174,20 +182,51 @@ class SiftTracker:
     # ---- features and matching ---------------------------------------------------------------------------
 
     def view(self, index: int, image: np.ndarray) -> _View:
-        """Features of a frame, found on a reduced copy: `detect_scale`, and no more than `max_detect_px` on the
-        long side, so SIFT's cost does not grow with the video's resolution (the refinement stays full-res)."""
-        gray = to_gray(image)
-        f = min(self.s.detect_scale, self.s.max_detect_px / max(gray.shape))
-        small = gray if f == 1.0 else cv2.resize(gray, None, fx=f, fy=f, interpolation=cv2.INTER_AREA)
+        """A decoded frame (grayscale); its features are found when first needed (`features`, `window_view`)."""
+        return _View(int(index), to_gray(image))
+
+    def _detect(self, image: np.ndarray, f: float) -> tuple[np.ndarray, np.ndarray | None]:
+        """SIFT keypoints (k, 2) in `image`'s own pixels and descriptors, found on it resized by f."""
+        small = image if f == 1.0 else cv2.resize(image, None, fx=f, fy=f, interpolation=cv2.INTER_AREA)
         kp, desc = self._sift.detectAndCompute(small, None)
         # keypoints back to full-resolution pixel coordinates (pixel centres at integers in both)
         pts = ((np.array([k.pt for k in kp], dtype=np.float32).reshape(-1, 2) + 0.5) / f - 0.5).astype(np.float32)
-        return _View(int(index), gray, pts, desc)
+        return pts, desc
+
+    def _whole_scale(self, view: _View) -> float:
+        return min(self.s.detect_scale, self.s.max_detect_px / max(view.image.shape))
+
+    def features(self, view: _View) -> _View:
+        """The view with its whole-frame features, found (once) on a reduced copy: `detect_scale`, and no more than
+        `max_detect_px` on the long side, so SIFT's cost does not grow with the video's resolution (the refinement
+        stays full-res)."""
+        if view.keypoints_px is None:
+            view.keypoints_px, view.descriptors = self._detect(view.image, self._whole_scale(view))
+        return view
+
+    def windowed(self, view: _View) -> bool:
+        """Whether features are found in a window around the target (`tracking.detect_window_px` square, reduced
+        by `detect_scale`) rather than on the whole reduced frame: when the window has at most half the pixels
+        SIFT would see on the whole frame, and no other target shares this frame's matches."""
+        w, f = self.s.detect_window_px, self.s.detect_scale
+        h, wid = view.image.shape[:2]
+        whole = self._whole_scale(view) ** 2 * h * wid
+        return self._pairs is None and w > 0 and (w * f) ** 2 <= 0.5 * whole and w < min(h, wid)
+
+    def window_view(self, view: _View, centre_px: np.ndarray) -> _View:
+        """Features of the `detect_window_px` square of `view` centred on centre_px (moved inside the image),
+        found on it reduced by `detect_scale`, in full-frame pixels."""
+        w = self.s.detect_window_px
+        h, wid = view.image.shape[:2]
+        x0 = int(np.clip(round(float(centre_px[0]) - w / 2), 0, wid - w))
+        y0 = int(np.clip(round(float(centre_px[1]) - w / 2), 0, h - w))
+        pts, desc = self._detect(view.image[y0:y0 + w, x0:x0 + w], self.s.detect_scale)
+        return _View(view.index, view.image, pts + np.float32([x0, y0]), desc, (x0, y0, x0 + w, y0 + w))
 
     def homography(self, src: _View, dst: _View) -> tuple[np.ndarray | None, int, float, float]:
         """H_dst_from_src by ratio-test matches and RANSAC: (H or None, inliers, inlier ratio, RMS reprojection
         px of the inliers)."""
-        if self._pairs is None or src.index < 0 or dst.index < 0:
+        if self._pairs is None or src.index < 0 or dst.index < 0 or src.window or dst.window:
             return self._homography(src, dst)
         key = (src.index, dst.index)
         if key not in self._pairs:
@@ -208,8 +247,10 @@ class SiftTracker:
         if H is None or not np.isfinite(H).all():
             return None, 0, 0.0, float("nan")
         inl = mask.ravel().astype(bool)
+        if not inl.any():
+            return None, 0, 0.0, float("nan")
         proj = cv2.perspectiveTransform(a[inl].reshape(-1, 1, 2).astype(np.float64), H).reshape(-1, 2)
-        rms = float(np.sqrt(np.mean(np.sum((proj - b[inl]) ** 2, axis=1)))) if inl.any() else float("nan")
+        rms = float(np.sqrt(np.mean(np.sum((proj - b[inl]) ** 2, axis=1))))
         return H, int(inl.sum()), float(inl.mean()), rms
 
     # ---- refinement against the mark ---------------------------------------------------------------------
@@ -243,14 +284,37 @@ class SiftTracker:
         hgt, wid = view.image.shape[:2]
         return bool(np.isfinite(px).all() and m <= px[0] < wid - m and m <= px[1] < hgt - m)
 
-    def _attempt(self, key: _Key, mark: _View, mark_px: np.ndarray, cur: _View, via: str
-                 ) -> tuple[FrameTrack, np.ndarray | None]:
-        H, inl, ratio, rms = self.homography(key.view, cur)
+    def _attempt(self, key: _Key, mark: _View, mark_px: np.ndarray, cur: _View, via: str,
+                 centre_px: np.ndarray | None = None) -> tuple[FrameTrack, np.ndarray | None]:
+        """Match `cur` to the key frame and refine the target against the mark: (the frame's track, H_cur_from_mark
+        or None when lost). `centre_px`: where the target is expected in `cur`; where features are found in
+        windows (`windowed`), those around it and around the target in the key frame are matched first, the
+        whole frames only when the windows give too few matches."""
+        if centre_px is not None and self.windowed(cur):
+            if key.window is None:
+                c = key.centre_px if key.centre_px is not None else cv2.perspectiveTransform(
+                    mark_px.reshape(1, 1, 2).astype(np.float64), key.H_key_from_mark).reshape(2)
+                key.window = self.window_view(key.view, c)
+            ft, H = self._match(key.window, key.H_key_from_mark, mark, mark_px, self._window_of(cur, centre_px), via)
+            if ft.via != "too few matches":
+                return ft, H
+        return self._match(self.features(key.view), key.H_key_from_mark, mark, mark_px, self.features(cur), via)
+
+    def _window_of(self, cur: _View, centre_px: np.ndarray) -> _View:
+        """`window_view(cur, centre_px)`, kept for the next attempt on the same frame and centre."""
+        memo = (cur.index, id(cur.image), float(centre_px[0]), float(centre_px[1]))
+        if self._last_window is None or self._last_window[0] != memo:
+            self._last_window = (memo, self.window_view(cur, centre_px))
+        return self._last_window[1]
+
+    def _match(self, key_view: _View, H_key_from_mark: np.ndarray, mark: _View, mark_px: np.ndarray, cur: _View,
+               via: str) -> tuple[FrameTrack, np.ndarray | None]:
+        H, inl, ratio, rms = self.homography(key_view, cur)
         ft = FrameTrack(cur.index, inliers=inl, inlier_ratio=ratio, reproj_px=rms)
         if H is None or inl < self.s.min_inliers or ratio < self.s.min_inlier_ratio:
             ft.via = "too few matches"
             return ft, None
-        H_cur_from_mark = H @ key.H_key_from_mark
+        H_cur_from_mark = H @ H_key_from_mark
         pred = cv2.perspectiveTransform(mark_px.reshape(1, 1, 2).astype(np.float64), H_cur_from_mark).reshape(2)
         ft.predicted_px = (float(pred[0]), float(pred[1]))
         if not self._in_image(pred, cur):
@@ -268,7 +332,15 @@ class SiftTracker:
         ft.pixel_px = (float(px[0]), float(px[1]))
         ft.lost = False
         ft.via = via
-        return ft, H_cur_from_mark
+        return ft, self._reanchor(H_cur_from_mark, pred, px)
+
+    @staticmethod
+    def _reanchor(H_cur_from_mark: np.ndarray, predicted_px: np.ndarray, found_px: np.ndarray) -> np.ndarray:
+        """H_cur_from_mark moved so that it maps the mark to where the target was found: a key frame made from
+        this frame predicts the next ones from the refined position, so the chain's drift does not add up from
+        key frame to key frame (its local shape, which warps the template, is unchanged)."""
+        d = np.asarray(found_px, dtype=np.float64) - np.asarray(predicted_px, dtype=np.float64)
+        return np.array([[1.0, 0.0, d[0]], [0.0, 1.0, d[1]], [0.0, 0.0, 1.0]]) @ H_cur_from_mark
 
     def track(self, decode: Callable[[Sequence[int]], dict[int, np.ndarray]], mark_index: int,
               mark_px: Sequence[float], wanted: Sequence[int], available: Sequence[int] | None = None,
@@ -285,7 +357,7 @@ class SiftTracker:
         try:
             return self._track(decode, mark_index, mark_px, wanted, available, cache)
         finally:
-            self._pairs = None
+            self._pairs, self._last_window = None, None
 
     def _track(self, decode, mark_index, mark_px, wanted, available, cache) -> TrackResult:
         if cache is not None:
@@ -310,13 +382,23 @@ class SiftTracker:
             raise InputError(f"the target mark {p0.tolist()} is not inside frame {mark_index} "
                              f"({mark.image.shape[1]}x{mark.image.shape[0]} px) with a {self.s.patch_half_px} px "
                              "margin")
-        if mark.descriptors is None or len(mark.descriptors) < self.s.min_inliers:
+        def enough(v: _View) -> bool:
+            return v.descriptors is not None and len(v.descriptors) >= self.s.min_inliers
+
+        mark_window = self.window_view(mark, p0) if self.windowed(mark) else None
+        if not (mark_window is not None and enough(mark_window)) and not enough(self.features(mark)):
             raise InputError(f"the target's mark frame {mark_index} has too few SIFT features to track")
+
+        mark_features = mark_window if mark_window is not None and enough(mark_window) else mark
+
+        def mark_key() -> _Key:
+            return _Key(mark, np.eye(3), centre_px=p0, window=mark_window)
+
         views: dict[int, _View] = {mark_index: mark}
         p0_t = (float(p0[0]), float(p0[1]))
         out: dict[int, FrameTrack] = {mark_index: FrameTrack(
-            mark_index, pixel_px=p0_t, lost=False, inliers=len(mark.keypoints_px), inlier_ratio=1.0, reproj_px=0.0,
-            correlation=1.0, contrast=1.0, keyframe=True, via="mark", predicted_px=p0_t)}
+            mark_index, pixel_px=p0_t, lost=False, inliers=len(mark_features.keypoints_px), inlier_ratio=1.0,
+            reproj_px=0.0, correlation=1.0, contrast=1.0, keyframe=True, via="mark", predicted_px=p0_t)}
         if available is None:
             avail = []
         elif available is self._available[0]:  # a flight's frame index, sorted once for all its targets
@@ -326,7 +408,8 @@ class SiftTracker:
             self._available = (available, avail)
         for seq in (forward, backward):
             direction = 1 if seq is forward else -1
-            key = _Key(mark, np.eye(3))
+            key = mark_key()
+            centre = p0  # where the target is expected next: where it was last found
             for idx in seq:
                 for j in [j for j in views if j not in (mark_index, key.view.index)]:
                     del views[j]  # only the mark and the key frame are needed from here on
@@ -337,29 +420,31 @@ class SiftTracker:
                         continue
                     views[idx] = got[idx]
                 cur = views[idx]
-                ft, H = self._attempt(key, mark, p0, cur, "key")
+                ft, H = self._attempt(key, mark, p0, cur, "key", centre)
                 if H is None and key.view is not mark:  # re-acquisition against the mark itself
-                    ft2, H = self._attempt(_Key(mark, np.eye(3)), mark, p0, cur, "reacquired")
+                    ft2, H = self._attempt(mark_key(), mark, p0, cur, "reacquired", centre)
                     ft = ft2 if H is not None else ft
                 # the key frame's homography held: the target left the view, or is in view but not found (covered,
                 # washed out); stones would give the same view of it (see the module docstring, 4.)
                 held = ft.via in ("out of image", "low correlation", "low contrast") and self._pairs is not None
                 if H is None and not held:
-                    ft, H = self._bridge(decode_views, key, mark, p0, cur, avail, direction, views, ft)
+                    ft, H = self._bridge(decode_views, key, mark, p0, cur, avail, direction, views, ft, centre)
                 out[idx] = ft
                 if H is None:
                     continue
+                centre = np.array(ft.pixel_px)
                 if key.first_inliers is None and ft.via == "key":
                     key.first_inliers = ft.inliers
                 floor = self.s.keyframe_inlier_fraction * (key.first_inliers or 0)
                 weak = key.first_inliers is not None and ft.inliers < floor
                 if weak or ft.via in ("reacquired", "bridge"):
-                    key = _Key(cur, H)
+                    key = _Key(cur, H, centre_px=centre)
                     ft.keyframe = True
         return TrackResult([out[i] if i in out else FrameTrack(i, via="not tracked") for i in wanted])
 
     def _bridge(self, decode_views, key: _Key, mark: _View, p0: np.ndarray, cur: _View, avail: list[int],
-                direction: int, views: dict[int, _View], failed: FrameTrack) -> tuple[FrameTrack, np.ndarray | None]:
+                direction: int, views: dict[int, _View], failed: FrameTrack, centre_px: np.ndarray | None = None
+                ) -> tuple[FrameTrack, np.ndarray | None]:
         """Try intermediate frames between the key frame and `cur` as stepping stones (nearest to the key first,
         at most `neighbours` of them); `decode_views(indices)` -> {index: view}."""
         lo, hi = sorted((key.view.index, cur.index))
@@ -376,12 +461,12 @@ class SiftTracker:
                 if i not in images:
                     continue
                 views[i] = images[i]
-            ft, H = self._attempt(k, mark, p0, views[i], "bridge")
+            ft, H = self._attempt(k, mark, p0, views[i], "bridge", centre_px)
             if H is not None:
-                k = _Key(views[i], H)
+                k = _Key(views[i], H, centre_px=np.array(ft.pixel_px))
         if k is key:
             return failed, None
-        ft, H = self._attempt(k, mark, p0, cur, "bridge")
+        ft, H = self._attempt(k, mark, p0, cur, "bridge", centre_px)
         return (ft, H) if H is not None else (failed, None)
 
     # ---- marking by a template image ---------------------------------------------------------------------

@@ -202,9 +202,28 @@ def test_a_dji_video_whose_srt_states_the_gimbal_needs_only_the_target(tmp_path)
     assert load_flight_config(folder / "flight.yaml").name == "ruz76_DJI_M300RTK"
 
 
+def test_a_dji_srt_with_heights_above_take_off_leaves_the_take_off_altitude_to_fill_in(tmp_path):
+    """Phantom 4 RTK: gimbal angles but `H` heights above the take-off point and no focal length. The config is
+    written with the take-off altitude (mapping srt.takeoff_altitude_m) and the intrinsics to fill in; filled in,
+    the positions are the heights plus the take-off altitude, on its datum."""
+    from pipeline.flight.flight import read_flight_logs
+
+    folder = _dji_folder(tmp_path, "juanirache_p4_rtk.SRT", 30 * 56)
+    draft = draft_flight_config(folder, folder / "flight.yaml")
+    assert sorted(f.key for f in draft.fill_in if f.required) == ["camera", "mapping", "target"]
+    text = config_text(draft, "ridgeloc init")
+    assert "#   srt: {takeoff_altitude_m: FILL_IN, abs_datum: amsl}" in text
+    filled = (text.replace("#   srt: {takeoff_altitude_m: FILL_IN, abs_datum: amsl}",
+                           "  srt: {takeoff_altitude_m: 20.0, abs_datum: ellipsoid}")
+              .replace("# mapping:", "mapping:", 1))
+    (folder / "flight.yaml").write_text(filled)
+    position = read_flight_logs(load_flight_config(folder / "flight.yaml")).position
+    assert position.alt_datum == "ellipsoid"
+    np.testing.assert_allclose(position.alt_m[:3], [85.80 + 20, 85.83 + 20, 85.94 + 20])
+
+
 @pytest.mark.parametrize(("srt", "missing"), [
     ("juanirache_mavic_pro.SRT", "missing for localization: attitude, gimbal"),  # no aircraft or gimbal angles
-    ("juanirache_p4_rtk.SRT", "relative to the take-off point"),  # Phantom 4 RTK: heights above the take-off only
 ])
 def test_a_dji_srt_that_lacks_what_localization_needs_is_one_line(tmp_path, capsys, srt, missing):
     folder = _dji_folder(tmp_path, srt, 30)

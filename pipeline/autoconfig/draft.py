@@ -14,6 +14,7 @@ laser point), and, where the intrinsics are known, the video clock's offset esti
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import datetime
 import os
@@ -133,6 +134,16 @@ def _altitude(draft: Draft, log: FlightLog) -> None:
                    "the WGS84 ellipsoid with the EGM2008 geoid at the flight's first position (auto); give the "
                    "number your autopilot uses if it is another geoid model.")
         draft.decisions.append(("altitude", "AMSL, converted with the EGM2008 geoid (auto)"))
+    elif pos.alt_datum == "relative":  # an SRT's heights above the take-off point (flight_files refuses others)
+        draft.doc["altitude"] = {"geoid_separation_m": "auto"}  # used when the take-off altitude is AMSL
+        draft.fill_in.append(FillIn("mapping", [
+            "mapping:                # FILL IN: the SRT's heights are above the take-off point: its altitude (m), "
+            "AMSL (or ellipsoid, an RTK fix's), is added to them",
+            "  srt: {takeoff_altitude_m: FILL_IN, abs_datum: amsl}"],
+            f"mapping: the take-off point's altitude (srt.takeoff_altitude_m: {_source(pos)} gives heights above "
+            "it only)"))
+        draft.decisions.append(("altitude", "heights above the take-off point; its altitude is to be filled in "
+                                "(AMSL converted with the EGM2008 geoid, auto)"))
     else:
         draft.decisions.append(("altitude", "heights above the WGS84 ellipsoid"))
 
@@ -229,7 +240,7 @@ def _check_with_data(draft: Draft, out_path: Path, camera: Camera | None, size_p
     the video clock estimated from the flight."""
     fixed = None  # the config lines of a convention fixed
     for _ in range(2):  # a convention fixed: checked once more as written
-        config = flight_config_from_dict(draft.doc, out_path)
+        config = _config_for_checks(draft, out_path)
         if camera is None:  # the optical axes do not depend on the intrinsics: any will do for them
             w, h = size_px
             config = dataclasses.replace(config, camera=dataclasses.replace(
@@ -285,6 +296,19 @@ def _check_with_data(draft: Draft, out_path: Path, camera: Camera | None, size_p
         _estimate_clock(draft, out_path, clock)
 
 
+def _config_for_checks(draft: Draft, out_path: Path) -> FlightConfig:
+    """The drafted config, with a provisional take-off altitude (0 m, ellipsoid) where the take-off point's altitude
+    is still to be filled in: whether the lines of sight meet, and when, does not depend on a height shared by every
+    position."""
+    doc = draft.doc
+    if any(f.key == "mapping" and "takeoff_altitude_m" in "".join(f.lines) for f in draft.fill_in):
+        doc = copy.deepcopy(doc)
+        srt = doc.setdefault("mapping", {}).setdefault("srt", {})
+        srt.setdefault("takeoff_altitude_m", 0.0)
+        srt.setdefault("abs_datum", "ellipsoid")
+    return flight_config_from_dict(doc, out_path)
+
+
 def _merge(doc: dict, changes: dict) -> None:
     for key, value in changes.items():
         if isinstance(value, dict) and isinstance(doc.get(key), dict):
@@ -295,7 +319,7 @@ def _merge(doc: dict, changes: dict) -> None:
 
 def _estimate_clock(draft: Draft, out_path: Path, clock: VideoClock) -> None:
     """The video offset estimated from the flight (the image centre tracked, `check`'s estimate)."""
-    config = flight_config_from_dict(draft.doc, out_path)
+    config = _config_for_checks(draft, out_path)
     try:
         result = check_flight(config, clock=True)
     except RidgelocError as exc:

@@ -119,7 +119,9 @@ def flight_files(folder: Folder) -> FlightFiles:
     if videos:  # the video's frames, not a bag's images (files.video wins over them in a run too)
         log = dataclasses.replace(log, frames=videos[0].log.frames)
     missing = [q for q in NEEDED if getattr(log, q) is None]
-    if log.position is not None and log.position.alt_datum in ("missing", "relative"):
+    relative_srt = "srt" in log.formats  # an SRT's heights above take-off: its take-off altitude is filled in
+    if log.position is not None and (log.position.alt_datum == "missing" or
+                                     (log.position.alt_datum == "relative" and not relative_srt)):
         missing.append("altitudes above the ellipsoid or sea level (the positions' are "
                        f"{'missing' if log.position.alt_datum == 'missing' else 'relative to the take-off point'})")
     if missing or not telemetry:

@@ -52,7 +52,7 @@ def main(args) -> int:
         if not f.required:
             print(f"  optional: {f.why}")
     cfg = shlex.quote(str(out))
-    first = [f.key for f in required if f.key in ("camera", "clock")]
+    first = [f.key for f in required if f.key in ("camera", "clock", "mapping")]
     where = "in every photo that shows it" if "photos" in draft.doc["files"] else ""
     steps = ([f"fill in {' and '.join(first)}"] if first else []) + [
         f"ridgeloc mark {cfg} (click the target{' ' + where if where else ''}; set marks_file: to the saved CSV)",

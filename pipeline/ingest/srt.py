@@ -13,7 +13,9 @@ Layouts (the test corpus in tests/data/srt has one file per layout; docs/ingest.
   the satellite count, which is what tells the coordinate order apart).
 A file whose cues carry no altitude at all (Mavic 2 Pro firmware printing only `[latitude]` `[longtitude]`) gives
 its horizontal track: altitude from the mapping's `altitude_m` (datum `abs_datum`) when set, else NaN on datum
-"missing", which gives way to another log's positions when the flight has one (merge.py).
+"missing", which gives way to another log's positions when the flight has one (merge.py). Heights above the
+take-off point alone (`H`, `BAROMETER`) keep the datum "relative" unless the mapping's `takeoff_altitude_m` states
+the take-off point's altitude (datum `abs_datum`), which is added to them.
 Cue times are the subtitle start times on the "video" clock; each cue's absolute date/time, when the layout
 prints one, is kept as a ClockLink from "video" to "local" (the aircraft's wall clock, time zone unknown), or to
 "unix" when `srt.utc_offset_h` states the zone.
@@ -254,6 +256,11 @@ def read_srt(path: str | Path, mapping: dict) -> FlightLog:
         ok, alt, datum = has_rel, cols["rel_alt"], "relative"
         if mapping["alt"] == "abs" and has_abs.any():
             warn(f"{path}: some cues lack the absolute altitude; using relative altitudes")
+        takeoff = mapping.get("takeoff_altitude_m")
+        if takeoff is not None:  # heights above the take-off point + the take-off point's own altitude
+            alt, datum = alt + float(takeoff), mapping["abs_datum"]
+            warn(f"{path}: heights above the take-off point plus the mapping's srt.takeoff_altitude_m "
+                 f"{float(takeoff):g} m ({datum})")
     else:
         ok, alt, datum = has_abs, cols["abs_alt"], mapping["abs_datum"]
     if not ok.any():  # e.g. Mavic 2 Pro firmware printing only [latitude] [longtitude]

@@ -53,6 +53,10 @@ def frame_states(log: FlightLog, t_ns: np.ndarray, *, position_offset_ns: int = 
             raise ConfigError("the positions' altitudes are AMSL: set altitude.geoid_separation_m (ellipsoid height "
                               "minus AMSL height at the flight area)")
         alt = ellipsoid_from_amsl_m(alt, geoid_separation_m)
+    elif pos.alt_datum == "relative":
+        raise ConfigError("the positions' heights are above the take-off point; ridgeloc needs AMSL or ellipsoid "
+                          "heights: give the take-off point's altitude (a DJI SRT's: mapping srt.takeoff_altitude_m "
+                          "with srt.abs_datum)")
     elif pos.alt_datum != "ellipsoid":
         raise ConfigError(f"positions have altitude datum {pos.alt_datum!r}; ridgeloc needs AMSL or ellipsoid heights")
     t_pos = _on_telemetry_clock(pos, log, position_offset_ns)

@@ -181,6 +181,25 @@ def test_ogrinfo_reads_typed_kml_fields(tmp_path, groups):
         assert re.search(rf"^{field}: {kind}", out, flags=re.M), (field, kind, out[:2000])
 
 
+def test_ogrinfo_reads_targets_csv_as_points(tmp_path, groups):
+    """targets.csvt and targets.prj beside targets.csv: GDAL opens it as WGS84 points at (lon_deg, lat_deg), with
+    numbers as numbers (without them every column was a String and no geometry)."""
+    if shutil.which("ogrinfo") is None:
+        pytest.skip("ogrinfo (GDAL, Debian package gdal-bin) is not installed")
+    write_targets_csv(tmp_path / "targets.csv", groups)
+    rows = list(csv.DictReader((tmp_path / "targets.csv").open()))
+    located = [r for r in rows if r["lat_deg"]]
+    assert located
+    out = subprocess.run(["ogrinfo", "-ro", "-al", str(tmp_path / "targets.csv")], capture_output=True, text=True,
+                         check=True).stdout
+    assert "Geometry: Point" in out and f"Feature Count: {len(rows)}" in out and "WGS 84" in out
+    for field, kind in (("ce90_m", "Real"), ("alt_msl_m", "Real"), ("n_observations", "Integer"),
+                        ("mgrs", "String"), ("lat_deg", "Real")):
+        assert re.search(rf"^{field}: {kind}", out, flags=re.M), (field, kind)
+    points = [tuple(map(float, m)) for m in re.findall(r"POINT \(([-\d.]+) ([-\d.]+)\)", out)]
+    assert points == [(float(r["lon_deg"]), float(r["lat_deg"])) for r in located]
+
+
 @pytest.mark.parametrize("sigma", [0.5, 2.0, 10.0])
 def test_cep_closed_forms_circular(sigma):
     cov = np.diag([sigma ** 2, sigma ** 2])

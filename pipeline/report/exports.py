@@ -17,6 +17,7 @@ import json
 import xml.etree.ElementTree as ET
 from collections.abc import Iterable
 from os import PathLike
+from pathlib import Path
 
 import numpy as np
 
@@ -217,8 +218,27 @@ def targets_csv_text(results: Iterable[GroupResult | FlightResult], failures: It
     return _csv_text(answer_rows(list(results), list(failures)), ANSWER_COLUMNS)
 
 
+#: targets.csvt's types (GDAL's CSV driver, GeoCSV): numbers as numbers, lon/lat as the point's coordinates
+_CSVT_TYPES = {"lat_deg": "CoordY", "lon_deg": "CoordX", "n_observations": "Integer"}
+_CSVT_TEXT = ("name", "group", "target", "status", "mgrs", "tle_category", "method", "reason", "alt_datum",
+              "alt_msl_datum", "covariance_source")
+
+
+def targets_csvt_text() -> str:
+    """targets.csvt: the column types GDAL and QGIS read beside targets.csv (points from lon_deg, lat_deg)."""
+    return ",".join(f'"{_CSVT_TYPES.get(c, "String" if c in _CSVT_TEXT else "Real")}"' for c in ANSWER_COLUMNS) + "\n"
+
+
 def write_targets_csv(path: str | PathLike, results: Iterable[GroupResult], failures=()) -> None:
+    """targets.csv, with targets.csvt (column types, the point's columns) and targets.prj (WGS84 longitude and
+    latitude) beside it, so that GDAL, QGIS and ArcGIS open it as points."""
+    from pyproj import CRS
+    from pyproj.enums import WktVersion
+
+    path = Path(path)
     atomic_write_text(path, targets_csv_text(results, failures))
+    atomic_write_text(path.with_suffix(".csvt"), targets_csvt_text())
+    atomic_write_text(path.with_suffix(".prj"), CRS.from_epsg(4326).to_wkt(WktVersion.WKT1_ESRI) + "\n")
 
 
 def estimates_csv_text(results: Iterable[GroupResult | FlightResult]) -> str:

@@ -168,9 +168,19 @@ def test_a_full_motion_video_needs_only_the_target(tmp_path):
     draft = draft_flight_config(clip, tmp_path / "clip.yaml")
     assert [f.key for f in draft.fill_in if f.required] == ["target"]
     assert draft.doc["altitude"] == {"geoid_separation_m": "auto"}  # EG 0104 altitudes are MSL
-    assert "mapping" not in draft.doc and "clock" not in draft.doc
+    assert "clock" not in draft.doc
+    # its frame centres lie 72 m off the line of sight with true-north azimuths, 0.4 m with grid north (check's
+    # frame-centre check): init reads them so, as check suggests
+    assert draft.doc["mapping"] == {"klv": {"azimuth_north": "grid"}}
+    assert "from UTM grid north" in dict(draft.decisions)["azimuths"]
     (tmp_path / "clip.yaml").write_text(config_text(draft, "ridgeloc init"))
-    assert load_flight_config(tmp_path / "clip.yaml").files.telemetry == (str(clip),)
+    config = load_flight_config(tmp_path / "clip.yaml")
+    assert config.files.telemetry == (str(clip),)
+    from pipeline.check.frame_centre import frame_centre_checks
+    from pipeline.flight.flight import read_flight_logs
+
+    (_, check), = frame_centre_checks(read_flight_logs(config))
+    assert check.median_m < 5 and check.explained_by is None
 
 
 def _dji_folder(tmp_path, srt: str, frames: int) -> Path:

@@ -87,6 +87,7 @@ def draft_flight_config(root, out_path) -> Draft:
     draft.found += [f"{u} (skipped)" for u in folder.unreadable]
     draft.note("files", "Files: what each supplies, as `ridgeloc inspect` reads it: " + "; ".join(draft.found) + ".")
     _altitude(draft, log)
+    _azimuth_north(draft, log)
     camera = _camera(draft, log)
     clock = _clock(draft, log, ff.video)
     choice = observation_choice(log, 0 if clock.shared else clock.start_ns)
@@ -146,6 +147,26 @@ def _altitude(draft: Draft, log: FlightLog) -> None:
                                 "(AMSL converted with the EGM2008 geoid, auto)"))
     else:
         draft.decisions.append(("altitude", "heights above the WGS84 ellipsoid"))
+
+
+def _azimuth_north(draft: Draft, log: FlightLog) -> None:
+    """A KLV stream whose frame centres the line of sight misses as a grid-north azimuth would (or true north,
+    when read as grid) is read the way that explains them (`ridgeloc check`'s frame-centre check)."""
+    from pipeline.check.frame_centre import GRID_NORTH, TRUE_NORTH, frame_centre_checks
+
+    for path, c in frame_centre_checks(log):
+        north = {GRID_NORTH: "grid", TRUE_NORTH: "true"}.get(c.explained_by)
+        if north is None:
+            continue
+        _merge(draft.doc, {"mapping": {"klv": {"azimuth_north": north}}})
+        name = Path(path).name
+        draft.note("mapping", f"Azimuths: {name}'s frame centres lie {c.median_m:.1f} m (median) from the line of "
+                   f"sight at the slant range as the standard reads the angles, "
+                   f"{c.alternatives[c.explained_by]:.1f} m with {c.explained_by}: read so (klv.azimuth_north).")
+        draft.decisions.append(("azimuths", f"{name}: from {'UTM grid' if north == 'grid' else 'true'} north: the "
+                                f"frame centres {c.alternatives[c.explained_by]:.1f} m from the line of sight "
+                                f"(median; {c.median_m:.1f} m read the other way)"))
+        return
 
 
 def _source(series) -> str:

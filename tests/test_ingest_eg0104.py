@@ -194,6 +194,17 @@ def test_check_json_on_a_clip_prints_frame_centre():
     assert fc["n"] == 48 and fc["median_m"] == pytest.approx(35.5, abs=0.5) and fc["p95_m"] >= fc["median_m"]
 
 
+def test_check_on_a_clip_does_not_give_the_undetermined_meeting_point_a_small_sigma():
+    """The ranges against where nearly parallel lines of sight meet: the line says the meeting point is
+    undetermined (+-3 km along them), beside the warning; it printed the statistical +-14.6 m."""
+    p = _clip("aphill_short.ts")
+    out = subprocess.run([sys.executable, "-m", "pipeline", "check", str(p), "--no-clock"],
+                         capture_output=True, text=True, timeout=600).stdout
+    (line,) = [x for x in out.splitlines() if "laser range - distance to where the lines of sight meet" in x]
+    assert re.search(r"\(undetermined: \+-\d{4} m along nearly parallel lines of sight\)$", line), line
+    assert "warning: the lines of sight are nearly parallel" in out
+
+
 @pytest.mark.parametrize("name", sorted(CLIPS))
 def test_run_on_a_clip_locates_the_crosshair_near_the_frame_centre(name):
     import pipeline.ingest.klv as klv

@@ -87,8 +87,10 @@ def format_check(result: CheckResult) -> str:
         lines.append(f"  {g.what} at {c.n} observations ({c.n_ranged} with a range): {c.describe()}"
                      + ("  << no baseline" if c.no_baseline else "" if c.consistent else "  << not converging"))
         if c.consistent and c.range_bias_m == c.range_bias_m:  # not NaN
+            sigma = (f"undetermined: +-{c.meet_along_sigma_m:.0f} m along nearly parallel lines of sight"
+                     if c.meet_undetermined else f"+-{c.range_bias_sigma_m:.1f} m")
             lines.append(f"  laser range - distance to where the lines of sight meet: {c.range_bias_m:+.1f} m "
-                         f"(+-{c.range_bias_sigma_m:.1f} m)")
+                         f"({sigma})")
     for a in g.alternatives:
         lines.append(f"  alternative clustering within {_fmt_m(a.cluster.spread_m)} ({a.cluster.metric}):")
         lines += [f"      {line}" for line in a.lines]

@@ -11,6 +11,7 @@ from pipeline.commands import not_a_config, output_folder
 from pipeline.commands.send import add_tak_arguments, check_send_args, cot_options, send_run_outputs
 from pipeline.errors import InputError
 from pipeline.flight_config import FlightConfig, load_run_config
+from pipeline.report.labels import count
 
 HELP = ("process flights (video or photos, telemetry, ranges) into one answer per target (WGS84, MGRS, CE90), a report "
         "comparing every method, GIS and TAK outputs")
@@ -77,7 +78,7 @@ def group_summary(r, reused: bool = False) -> list[str]:
     errs = r.errors_m()
     shown = ", ".join(f"{m} {errs[m]:.2f} m" for m in ("ridge", "mle") if errs.get(m) is not None)
     state = "reused" if reused else f"{sum(r.timings_s.values()):.2f} s"
-    lines = [f"{r.label}: {r.n_observations} observations, {state}" + (f", error {shown}" if shown else "")]
+    lines = [f"{r.label}: {count(r.n_observations, 'observation')}, {state}" + (f", error {shown}" if shown else "")]
     lines += [f"  warning: {w}" for w in r.settings.get("geometry_warnings") or []]
     lines += [f"  {n}" for n in r.settings.get("notes") or [] if str(n).startswith("mle: the error model does not fit")]
     mle = r.estimates.get("mle")

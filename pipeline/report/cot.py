@@ -21,6 +21,7 @@ from pipeline.atomic import atomic_dir, atomic_write_bytes
 from pipeline.errors import InputError
 from pipeline.flight_config import RESERVED_FLIGHT_NAMES
 from pipeline.report.answers import answer_row
+from pipeline.report.labels import count
 from pipeline.results import GroupResult, per_target
 from pipeline.tak import DEFAULT_STALE_S, DEFAULT_TYPE
 from pipeline.tak.cot import CotTarget, check_type, event_xml, target_uid
@@ -89,7 +90,7 @@ def _m(x) -> str:
 def remarks(row: dict, when: str | None) -> str:
     """The remarks ATAK shows under the marker: the method, MGRS, CE90/LE90 and category, the 95 % ellipse, the
     heights and the flight."""
-    lines = [f"ridgeloc {row['method']} from {row['n_observations']} observations",
+    lines = [f"ridgeloc {row['method']} from {count(row['n_observations'], 'observation')}",
              f"MGRS {mgrs_spaced(row['mgrs'])}",
              f"CE90 {_m(row['ce90_m'])}, LE90 {_m(row['le90_m'])}"
              + (f" (TLE {row['tle_category']})" if row.get("tle_category") else "")]

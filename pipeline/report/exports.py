@@ -38,7 +38,7 @@ from pipeline.report.geometry import (
     lines_of_sight_m,
     uncertainty,
 )
-from pipeline.report.labels import method_label, ordered_methods
+from pipeline.report.labels import count, method_label, ordered_methods
 from pipeline.results import FlightResult, GroupFailure, GroupResult, per_target
 from pipeline.solve.uncertainty import ELLIPSE_CONFIDENCE, ellipse_points_en_m, horizontal
 
@@ -469,7 +469,7 @@ def _description(row: dict) -> str:
     """The balloon text of a target's placemark: the answer as a user reads it."""
     return (f"{row['mgrs']}; {row['alt_msl_m']:.1f} m above sea level (EGM2008), {row['alt_m']:.1f} m WGS84 "
             f"ellipsoidal; CE90 {row['ce90_m']} m, LE90 {row['le90_m']} m ({row['tle_category']}); method "
-            f"{row['method']}, {row['n_observations']} observations")
+            f"{row['method']}, {count(row['n_observations'], 'observation')}")
 
 
 def targets_kml(results: Iterable[GroupResult | FlightResult], failures: Iterable[GroupFailure] = ()) -> bytes:

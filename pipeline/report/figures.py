@@ -32,7 +32,7 @@ from pipeline.report.geometry import (
     frame_residuals,
     lines_of_sight_m,
 )
-from pipeline.report.labels import METHOD_COLORS, METHOD_MARKERS, method_label, ordered_methods
+from pipeline.report.labels import METHOD_COLORS, METHOD_MARKERS, count, method_label, ordered_methods
 from pipeline.results import GroupResult
 from pipeline.solve.uncertainty import ellipse_points_en_m
 
@@ -293,7 +293,7 @@ def map_figure(r: GroupResult, reuse: bool = False) -> Figure:
     ncol = min(6, len(handles))
     fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=ncol, frameon=False, fontsize=9)
     angle = f", intersection angle {r.intersection_angle_deg:.1f}°" if np.isfinite(r.intersection_angle_deg) else ""
-    fig.suptitle(f"{r.label}: {obs.n} observations{angle}", fontsize=13)
+    fig.suptitle(f"{r.label}: {count(obs.n, 'observation')}{angle}", fontsize=13)
     w_in, h_in = fig.get_size_inches()
     bottom = _legend_height_in(len(handles), ncol) + _XAXIS_IN
     height = h_in - bottom - _TITLE_IN - _AX_TITLE_IN

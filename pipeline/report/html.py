@@ -23,7 +23,7 @@ from pipeline.atomic import atomic_write_text
 from pipeline.report.answers import answer_of, answer_rows
 from pipeline.report.exports import ALT_MSL_DATUM, estimate_rows, failure_status_reason
 from pipeline.report.geometry import ALT_DATUM
-from pipeline.report.labels import METHOD_COLORS, method_label, ordered_methods
+from pipeline.report.labels import METHOD_COLORS, count, method_label, ordered_methods
 from pipeline.report.versions import software_versions
 from pipeline.results import FlightResult, GroupFailure, GroupResult, per_target, target_failures
 
@@ -260,7 +260,7 @@ def _group_section(r: GroupResult, figures: Mapping[str, bytes], interactive: bo
     shown in the flight's first target's section; [] for the others)."""
     parts = [f'<h2 id="group-{escape(r.label)}">{escape(r.label)}</h2>']
     angle = _fmt(float(r.intersection_angle_deg))
-    parts.append(f'<p class="meta">{r.n_observations} observations, intersection angle {angle}°'
+    parts.append(f'<p class="meta">{count(r.n_observations, "observation")}, intersection angle {angle}°'
                  + ("" if r.truth_m is not None else ", target truth unknown") + "</p>")
     if interactive and flight_map != []:
         from pipeline.report.webmap import map_fragment

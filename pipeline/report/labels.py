@@ -42,3 +42,8 @@ def ordered_methods(methods) -> list[str]:
     methods = list(methods)
     known = [m for m in METHOD_ORDER if m in methods]
     return known + [m for m in methods if m not in METHOD_ORDER]
+
+
+def count(n: int, noun: str) -> str:
+    """'1 observation', '2 observations'."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"

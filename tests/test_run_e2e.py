@@ -167,8 +167,10 @@ def test_hard_outliers_tracking_lists_every_frame_with_its_reason():
     doc = json.loads(group_files(r)["estimates.json"])
     rejected = doc["estimates"]["mle"]["rejected"]
     assert [x["residual"] for x in rejected] == ["range"] * 3 and all(abs(x["value"]) > 300 for x in rejected)
-    # laser ranging alone: the short arc leaves it rank deficient (or, a tenth of a pixel further, running away)
-    assert doc["unsolved"]["range"]["status"] in ("degenerate", "diverged")
+    # laser ranging alone: the short arc leaves it rank deficient; where it does iterate (another BLAS kernel, a
+    # tenth of a pixel elsewhere) it runs away or stops unconverged: never a converged point
+    range_doc = (doc.get("unsolved") or {}).get("range") or doc["estimates"]["range"]
+    assert range_doc["status"] in ("degenerate", "diverged", "max_iterations")
     video = [f for f, used in zip(t["frame_index"], t["used"], strict=True) if used]
     t0 = min(r.observations.t_ns)
     notes = [n for n in r.settings["notes"] if n.startswith("mle: rejected")]

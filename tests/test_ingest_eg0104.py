@@ -22,7 +22,8 @@ from pipeline.ingest.klv import KlvTable, decode_eg0104, read_klv_table, scan_pa
 from support.writers import eg0104_set, klv_item
 
 FMV = Path(__file__).resolve().parents[1].parent / "shared" / "fmv"  # ../shared from the repo root
-CLIPS = {"aphill_short.ts": (48, 96), "aphill_klv_10s.ts": (300, 10)}  # KLV sets, video frames (README there)
+# KLV sets, video frames (README there: aphill_short.ts has 96 access units, the two fields of each of 48 frames)
+CLIPS = {"aphill_short.ts": (48, 48), "aphill_klv_10s.ts": (300, 10)}
 SET_KEY = bytes.fromhex("060E2B34020101010E01010201010000")
 UL = "060E2B34010101"  # EG 0104.5 table 1: every item key starts so; the 8th byte is the registry version
 
@@ -192,6 +193,28 @@ def test_check_json_on_a_clip_prints_frame_centre():
     doc = json.loads(out.stdout)
     fc = doc["frame_centre"]
     assert fc["n"] == 48 and fc["median_m"] == pytest.approx(35.5, abs=0.5) and fc["p95_m"] >= fc["median_m"]
+
+
+def test_a_field_coded_clip_is_indexed_one_frame_per_field_pair():
+    """aphill_short.ts is interlaced H.264 coded as fields: 96 packets, two per frame, 48 decoded frames. The
+    index holds the 48 (29.97 Hz), each decodes once; it held 96, every second undecodable (and retried)."""
+    from fractions import Fraction
+
+    from pipeline.ingest import VideoFrames
+    from pipeline.ingest.video import first_fields
+
+    with VideoFrames(_clip("aphill_short.ts"), gray=True) as v:
+        n = v.index.pts.size
+        assert n == 48
+        assert np.median(np.diff(v.index.frames.t_ns)) == pytest.approx(1e9 * 1001 / 30000, abs=1e5)
+        assert len(v.read(list(range(n)))) == n and v.decoded == n
+    tb = Fraction(1, 90000)
+    fields = (np.round(np.arange(20) * 1501.5) + 129003).astype(np.int64)  # packets half a frame apart
+    assert first_fields(fields, Fraction(30000, 1001), Fraction(60000, 1001), tb).tolist() == [True, False] * 10
+    # progressive: the base rate is the frame rate, every packet a frame
+    assert first_fields(fields, Fraction(60000, 1001), Fraction(60000, 1001), tb) is None
+    frames = (np.arange(20) * 3003 + 129003).astype(np.int64)
+    assert first_fields(frames, Fraction(30000, 1001), Fraction(60000, 1001), tb) is None  # no second fields
 
 
 def test_check_on_a_clip_does_not_give_the_undetermined_meeting_point_a_small_sigma():

@@ -107,6 +107,22 @@ class DemuxIndex:
     pos: np.ndarray | None = None  # (n,) int64 byte offset of each frame's packet (-1: unknown)
 
 
+def first_fields(pts: np.ndarray, average_rate, base_rate, time_base: Fraction) -> np.ndarray | None:
+    """(n,) bool: the packets (pts sorted, time_base units) that start a frame, where the stream is coded as
+    fields: FFmpeg's base rate twice the average frame rate, packets half a frame apart, and half of them on the
+    frame grid of the first packet, the other half half a frame off it (a frame's second field, which decodes
+    into the frame of the first). None for any other stream: every packet is a frame."""
+    if not average_rate or not base_rate or pts.size < 4 or abs(base_rate / average_rate - 2) > 0.01:
+        return None
+    frame_ticks = float(1 / (Fraction(average_rate) * time_base))
+    phase = ((pts - pts[0]) / frame_ticks) % 1.0
+    first = (phase < 0.2) | (phase > 0.8)
+    second = np.abs(phase - 0.5) < 0.2
+    if not (first | second).all() or abs(int(first.sum()) - int(second.sum())) > max(2, 0.05 * pts.size):
+        return None
+    return first
+
+
 def demux_index(path, data_streams: bool = False) -> DemuxIndex:
     """Index the first video stream of `path` (and collect its data-stream packets) by demuxing packets only."""
     path = Path(path)
@@ -137,6 +153,7 @@ def demux_index(path, data_streams: bool = False) -> DemuxIndex:
         cc = vs.codec_context  # None when damage leaves the stream without a decoder
         width, height = (cc.width, cc.height) if cc is not None else (0, 0)
         tb = vs.time_base or Fraction(1, 90000)
+        rates = (vs.average_rate, vs.base_rate)
     finally:
         container.close()
     if not pts or not width or not height:
@@ -146,6 +163,9 @@ def demux_index(path, data_streams: bool = False) -> DemuxIndex:
     raw = raw[order]
     keyframe = np.frombuffer(key, dtype=np.int8)[order].astype(bool)
     offsets = np.frombuffer(pos, dtype=np.int64)[order]
+    frame = first_fields(raw, *rates, tb)
+    if frame is not None:  # field-coded (interlaced H.264 PAFF): one frame per pair of field packets
+        raw, keyframe, offsets = raw[frame], keyframe[frame], offsets[frame]
     t0 = int(raw[0])
     t_ns = ((raw - t0) * (tb.numerator * 10**9) + tb.denominator // 2) // tb.denominator
     origin = Fraction(t0) * tb

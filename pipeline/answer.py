@@ -11,10 +11,16 @@ The rule (docs/outputs.md, "The answer") uses only what the flight itself shows,
    the method under the flight's stated errors (`pipeline.solve.propagate`); what moves the answer as a whole (an
    offset every camera's position shares, the terrain model's own error) counts in its CE90, not in whether the
    flight's geometry determines the point.
-2. The answer is the MLE when it is a candidate and its fit checks pass: its error model fits the flight, or the
-   covariance it inflated to cover the misfit grew at most MAX_FIT_INFLATION times.
-3. Otherwise the candidate with the smallest CE90 (horizontal circle holding 90 %); an MLE whose fit checks failed
-   competes with its inflated covariance.
+2. The answer is the MLE when it is a candidate and its fit checks pass: its error model fits the flight, or its
+   misfit (`misfit_factor`: the largest variance factor its fit checks measured, the covariance inflation, the
+   robust scale guard's and, where the chi-square test fails, chi-square over its degrees of freedom) is at most
+   MAX_FIT_INFLATION. Where the model does not fit, the MLE's covariance is widened to that misfit wherever its
+   own inflation fell short (a bias-mixture covariance is not widened by the scale guard), before it is judged.
+3. Otherwise the simpler method with the smallest CE90 (horizontal circle holding 90 %) among the candidates; an
+   MLE whose fit checks failed is not one (its model does not describe the flight). `ridge` is determined only
+   where `fusion`, the same
+   observations and model without its penalty, is: the penalty narrows its ellipse by pulling the point towards
+   where its iteration started, not by measuring it.
 4. Otherwise there is no answer: the target is `not_located`, with the reason in words a user can act on.
 
 `dji` (the photos' own laser target, the maker's one-shot answer) is compared, never chosen: no covariance of it
@@ -33,6 +39,7 @@ from pipeline.geometry.frames import lla_from_enu
 from pipeline.geometry.geoid import geoid_undulation_m
 from pipeline.geometry.rays import camera_rays_m
 from pipeline.solve.estimate import Estimate, Status
+from pipeline.solve.fit_checks import CHI2_ALPHA
 from pipeline.solve.observations import Observations
 from pipeline.solve.propagate import PROPAGATED, ErrorSources, method_solver, propagate
 from pipeline.solve.uncertainty import CHI2_3_95, cep_m, horizontal
@@ -224,29 +231,56 @@ def judge(method: str, e: Estimate | None, unsolved_reason: str | None, obs: Obs
     return Verdict(method, True, None, **v)
 
 
-def mle_fit_passes(e: Estimate) -> tuple[bool, str | None]:
-    """(the MLE's fit checks pass, why not): its error model fits, or the inflation it applied is within
-    MAX_FIT_INFLATION."""
+def _fit(e: Estimate) -> dict | None:
+    """The MLE's fit checks (`pipeline.solve.mle_outputs.fit_summary`) where its error model does not fit, else
+    None."""
     fit = e.extras.get("fit") if isinstance(e.extras, dict) else None
-    if not isinstance(fit, dict) or fit.get("consistent", True):
+    return None if not isinstance(fit, dict) or fit.get("consistent", True) else fit
+
+
+def misfit_factor(fit: dict) -> tuple[float, float]:
+    """(the misfit as a variance factor, the covariance inflation the MLE applied) of a fit that failed: the
+    largest of that inflation, the robust scale guard's factor (the spread squared) and, where the chi-square test
+    failed, chi-square / degrees of freedom."""
+    inflation = max(float(fit.get("covariance_inflation") or 1.0), 1.0)
+    spread = float(fit.get("robust_spread") or 1.0)
+    chi2, dof, p = fit.get("chi2"), fit.get("dof"), fit.get("p_value")
+    chi = chi2 / dof if chi2 is not None and dof and p is not None and p < CHI2_ALPHA else 1.0
+    return max(inflation, spread * spread, chi), inflation
+
+
+def mle_fit_passes(e: Estimate) -> tuple[bool, str | None]:
+    """(the MLE's fit checks pass, why not): its error model fits, or its misfit is within MAX_FIT_INFLATION."""
+    fit = _fit(e)
+    if fit is None:
         return True, None
-    inflation = float(fit.get("covariance_inflation") or 1.0)
-    if inflation <= MAX_FIT_INFLATION:
+    factor, _ = misfit_factor(fit)
+    if factor <= MAX_FIT_INFLATION:
         return True, None
-    return False, (f"its error model does not fit this flight (covariance inflated {inflation:.0f} x, more than "
-                   f"{MAX_FIT_INFLATION:.0f} x)")
+    return False, (f"its error model does not fit this flight (residuals x{math.sqrt(factor):.1f} the stated "
+                   f"sigmas, more than x{math.sqrt(MAX_FIT_INFLATION):.0f})")
 
 
 def _misfit_covered(e: Estimate) -> str:
-    """What the answer's reason adds when the MLE's error model does not fit but its inflated covariance covers the
-    misfit (its fit checks pass all the same), so the reason does not read as a clean fit beside the run's sentence
-    that the model does not fit; "" when it fits."""
-    fit = e.extras.get("fit") if isinstance(e.extras, dict) else None
-    if not isinstance(fit, dict) or fit.get("consistent", True):
+    """What the answer's reason adds when the MLE's error model does not fit but its covariance, widened to the
+    misfit, covers it (its fit checks pass all the same), so the reason does not read as a clean fit beside the
+    run's sentence that the model does not fit; "" when it fits."""
+    fit = _fit(e)
+    if fit is None:
         return ""
-    axes = math.sqrt(max(float(fit.get("covariance_inflation") or 1.0), 1.0))
-    return (f" (its error model does not fit this flight: the ellipse widened x{axes:.1f} to cover the misfit, at "
-            f"most x{math.sqrt(MAX_FIT_INFLATION):.0f} allowed)")
+    factor, _ = misfit_factor(fit)
+    return (f" (its error model does not fit this flight: the ellipse widened x{math.sqrt(factor):.1f} to cover "
+            f"the misfit, at most x{math.sqrt(MAX_FIT_INFLATION):.0f} allowed)")
+
+
+def _widened_to_misfit(e: Estimate) -> np.ndarray:
+    """The MLE's covariance, widened to its misfit (`misfit_factor`) where its own inflation fell short."""
+    cov = np.asarray(e.covariance_m2, dtype=np.float64)
+    fit = _fit(e)
+    if fit is None:
+        return cov
+    factor, inflation = misfit_factor(fit)
+    return cov * max(factor / inflation, 1.0)
 
 
 @dataclass(frozen=True)
@@ -335,7 +369,7 @@ def choose_answer(obs: Observations, estimates: dict[str, Estimate], unsolved: d
         cov, source, why, offsets = None, "", None, whole.get(m, shared)
         if e is not None and np.isfinite(e.position_m).all():
             if e.covariance_m2 is not None:  # the estimator's own (the mle's; a photo's ground method's)
-                cov, source = e.covariance_m2, "estimator"
+                cov, source = (_widened_to_misfit(e) if m == "mle" else e.covariance_m2), "estimator"
             elif m in PROPAGATED or m in solvers:
                 solver = solvers.get(m) or method_solver(m, options.get(m))
                 with np.errstate(all="ignore"):
@@ -344,26 +378,41 @@ def choose_answer(obs: Observations, estimates: dict[str, Estimate], unsolved: d
                 if cov is not None and m in added:
                     cov, offsets = cov + added[m], shared + added[m]
         verdicts[m] = judge(m, e, unsolved.get(m), obs, origin_lla, cov, source, ground, why, offsets)
+    _ridge_needs_fusion(verdicts)
     n = int(obs.n)
     mle = verdicts.get("mle")
     fit_ok, misfit = mle_fit_passes(estimates["mle"]) if mle is not None and mle.determined else (False, None)
     if fit_ok:
         return _located("mle", estimates, verdicts, n, "weighted MLE: determined by the flight, its fit checks pass"
                         + _misfit_covered(estimates["mle"]))
-    candidates = [m for m, v in verdicts.items() if v.determined]  # an MLE whose fit fails competes on its CE90
+    candidates = [m for m, v in verdicts.items() if v.determined and m != "mle"]
     if candidates:
         best = min(candidates, key=lambda m: verdicts[m].ce90_m)
         precise = f"the most precise method the flight determines (CE90 {verdicts[best].ce90_m:.1f} m)"
-        if best == "mle":
-            return _located(best, estimates, verdicts, n, f"weighted MLE: {precise}, although {misfit}")
         why = misfit or (mle.reason if mle is not None else "not run")
         return _located(best, estimates, verdicts, n, f"{best}: {precise}; the MLE is not taken: {why}")
     headline = baseline_problem(lines_of_sight(obs), bool(obs.has_range.any()), "dem" in estimates or ground
                                 is not None)
     if headline is None:
-        why = f" (mle: {mle.reason})" if mle is not None else ""
+        why = f" (mle: {misfit or mle.reason})" if mle is not None else ""
         headline = f"no method's estimate is determined by this flight{why}; estimates.csv says why for each"
     return Answer(False, None, None, None, headline, n, verdicts)
+
+
+def _ridge_needs_fusion(verdicts: dict[str, Verdict]) -> None:
+    """`ridge` undetermined (in place) where the flight does not determine `fusion`'s geometry: the same
+    observations and model without the ridge penalty, whose narrower ellipse is bias towards the iteration's start,
+    not measurement."""
+    ridge, fusion = verdicts.get("ridge"), verdicts.get("fusion")
+    if ridge is None or fusion is None or not ridge.determined or fusion.determined:
+        return
+    if not (fusion.reason or "").startswith("the flight does not determine it"):
+        return  # fusion's own point failed (behind a camera, underground): not the geometry
+    why = fusion.reason.split(": ", 1)[-1]
+    verdicts["ridge"] = Verdict("ridge", False, f"the flight does not determine it: it is fusion with a penalty, and "
+                                f"fusion is not determined ({why}); the penalty narrows its ellipse by pulling the "
+                                "point towards where its iteration started, not by measuring it",
+                                ridge.covariance_m2, ridge.covariance_source, ridge.ce90_m, ridge.relative_uncertainty)
 
 
 def _located(method: str, estimates: dict[str, Estimate], verdicts: dict[str, Verdict], n: int,

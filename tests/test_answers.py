@@ -95,10 +95,56 @@ def test_where_the_mles_fit_checks_fail_the_most_precise_determined_method_answe
     determined = {m: v.ce90_m for m, v in a.verdicts.items() if v.determined}
     assert a.located and a.method != "mle" and a.method in determined
     assert determined[a.method] == min(determined.values())
-    assert a.covariance_source == "propagated" and "the MLE is not taken" in a.reason and "25 x" in a.reason
+    assert a.covariance_source == "propagated" and "the MLE is not taken" in a.reason and "x5.0" in a.reason
     # the propagated uncertainty is honest on this flight: the truth within its 95 % ellipsoid
     d = a.position_m - truth
     assert d @ np.linalg.solve(a.covariance_m2, d) < 7.815
+
+
+def test_a_misfit_the_covariance_inflation_does_not_show_still_fails_the_fit_checks():
+    """A real clip's marked target (no laser): residuals 6.5 x the stated sigmas (the robust scale guard), the
+    chi-square 674 on 17, while the bias mixture's covariance grew only x1.01: the fit checks fail on the misfit
+    (42 x in variance), and a failed MLE is no answer: with nothing else determined, none. A misfit of 2.3 x
+    (5.3 x in variance) passes, its ellipse widened to it."""
+    from pipeline.answer import misfit_factor, mle_fit_passes
+
+    obs, _ = synthetic_observations(seed=3)
+    est, uns = _solved(obs)
+    bad = {"consistent": False, "covariance_inflation": 1.01, "robust_spread": 6.5, "chi2": 674.3, "dof": 17.0,
+           "p_value": 2e-132, "message": "does not fit"}
+    assert misfit_factor(bad) == (pytest.approx(42.25), 1.01)
+    est["mle"].extras["fit"] = bad
+    assert mle_fit_passes(est["mle"]) == (False, "its error model does not fit this flight (residuals x6.5 the "
+                                                 "stated sigmas, more than x3)")
+    only_mle = {"mle": est["mle"]}
+    a = choose_answer(obs, only_mle, {m: f"{m}: not run" for m in est if m != "mle"}, ORIGIN)
+    assert not a.located and "mle: its error model does not fit this flight (residuals x6.5" in a.reason
+    est["mle"].extras["fit"] = dict(bad, robust_spread=2.3, chi2=40.0, p_value=0.001)
+    a = choose_answer(obs, est, uns, ORIGIN)
+    assert a.located and a.method == "mle" and "the ellipse widened x2.3 to cover the misfit" in a.reason
+    np.testing.assert_allclose(a.covariance_m2, est["mle"].covariance_m2 * 2.3 ** 2 / 1.01)
+
+
+def test_ridge_is_determined_only_where_fusion_is():
+    """Ridge is fusion with a penalty: where the flight does not determine fusion's geometry, the penalty's
+    narrower ellipse is bias, not measurement; where fusion's own point fails (not its geometry), ridge is judged
+    on its own."""
+    from pipeline.answer import Verdict, _ridge_needs_fusion
+
+    ridge = Verdict("ridge", True, None, np.eye(3), "propagated", 3.0, 0.01)
+    verdicts = {"ridge": ridge, "fusion": Verdict("fusion", False, "the flight does not determine it: it fails under "
+                                                                   "a one-sigma pointing error")}
+    _ridge_needs_fusion(verdicts)
+    assert not verdicts["ridge"].determined
+    assert verdicts["ridge"].reason.startswith("the flight does not determine it: it is fusion with a penalty, and "
+                                               "fusion is not determined (it fails under a one-sigma pointing error)")
+    verdicts = {"ridge": ridge, "fusion": Verdict("fusion", False, "its point lies behind a camera that saw the "
+                                                                   "target")}
+    _ridge_needs_fusion(verdicts)
+    assert verdicts["ridge"] is ridge
+    verdicts = {"ridge": ridge, "fusion": Verdict("fusion", True)}
+    _ridge_needs_fusion(verdicts)
+    assert verdicts["ridge"] is ridge
 
 
 def test_where_only_vision_is_determined_it_answers_with_its_propagated_uncertainty():

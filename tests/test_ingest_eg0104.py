@@ -217,6 +217,24 @@ def test_a_field_coded_clip_is_indexed_one_frame_per_field_pair():
     assert first_fields(frames, Fraction(30000, 1001), Fraction(60000, 1001), tb) is None  # no second fields
 
 
+def test_a_cut_clip_gets_no_ridge_point_hundreds_of_metres_underground(tmp_path):
+    """aphill_klv_10s.ts cut to its first 100 kB (two laser shots): fusion is not determined there, and ridge, fusion
+    with a penalty, answered 336 m below sea level with a CE90 of 36 m. Now ridge is not determined where fusion is
+    not, and the answer is the laser's point, as on the whole clip."""
+    import csv
+
+    from pipeline.cli import main as cli_main
+
+    cut = tmp_path / "clip.ts"
+    cut.write_bytes(_clip("aphill_klv_10s.ts").read_bytes()[:100_000])
+    assert cli_main(["run", str(cut), "-o", str(tmp_path / "out"), "-q"]) == 0
+    (answer,) = list(csv.DictReader((tmp_path / "out" / "targets.csv").open()))
+    assert answer["status"] == "located" and answer["method"] == "los" and abs(float(answer["alt_msl_m"])) < 50
+    rows = {r["method"]: r for r in csv.DictReader((tmp_path / "out" / "estimates.csv").open())}
+    assert rows["fusion"]["determined"] == "false" and rows["ridge"]["determined"] == "false"
+    assert "it is fusion with a penalty" in rows["ridge"]["reason"]
+
+
 def test_check_on_a_clip_does_not_give_the_undetermined_meeting_point_a_small_sigma():
     """The ranges against where nearly parallel lines of sight meet: the line says the meeting point is
     undetermined (+-3 km along them), beside the warning; it printed the statistical +-14.6 m."""

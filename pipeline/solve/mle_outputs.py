@@ -30,7 +30,8 @@ def fit_summary(ex: dict) -> dict:
             "p_value": _f(ex["chi2_p"]), "autocorrelation_pixel": _f(ex["autocorrelation_pixel"]),
             "autocorrelation_range": _f(ex["autocorrelation_range"]),
             **{k: _f(ex[k]) if k in ex else None for k in ("batch_means_pixel", "batch_means_range")},
-            "covariance_inflation": _f(ex["covariance_inflation"]), "message": msg}
+            "covariance_inflation": _f(ex["covariance_inflation"]),
+            "robust_spread": _f(np.max(ex["robust_spread"])) if "robust_spread" in ex else None, "message": msg}
 
 
 #: a bias angle counts as determined by the flight when its posterior sigma is below this fraction of the

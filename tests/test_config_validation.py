@@ -86,6 +86,23 @@ def test_check_and_run_refuse_a_mistake_before_reading_data(tmp_path, capsys):
         assert not (tmp_path / "out").exists()
 
 
+def test_a_mapping_typo_names_the_config_file_not_a_log(tmp_path, capsys):
+    """`mapping:` is checked against the readers' keys when the logs are opened: the error names the config file and
+    the dotted key, as every other config mistake does, before the (1 byte of garbage) telemetry is read."""
+    from pipeline.cli import main
+
+    doc = _flight(tmp_path)
+    doc["mapping"] = {"klv": {"azimuth_nort": "grid"}}
+    path = _write(tmp_path / "bad.yaml", doc)
+    for cmd in (["check", str(path)], ["run", str(path), "-q", "-o", str(tmp_path / "out")]):
+        assert main(cmd) != 0
+        _out, err = capsys.readouterr()
+        assert f"{path}: mapping.klv: unknown key 'azimuth_nort' (did you mean 'azimuth_north'? known: " \
+               "azimuth_north)" in err, (cmd, err)
+        assert "Traceback" not in err
+        assert not (tmp_path / "out").exists()
+
+
 def test_good_options_are_read_as_a_plain_dict_of_the_given_keys(tmp_path):
     doc = _flight(tmp_path)
     doc["solve"] = {"methods": ["ridge", "mle"],

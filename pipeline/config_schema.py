@@ -46,11 +46,23 @@ _KIND = {"bool_type": "true or false", "bool_parsing": "true or false", "string_
          "dataclass_type": "a mapping of keys", "dataclass_args_type": "a mapping of keys"}
 
 
+class _Loader(yaml.SafeLoader):
+    """yaml.SafeLoader that also reads exponents as YAML 1.2 writes them (`1e-6`, `2.5e3`): PyYAML's YAML 1.1
+    resolver wants a dot and a signed exponent (`1.0e-6`, `2.5e+3`) and reads the others as text, which the schema
+    would refuse as not a number. Quoted scalars stay strings."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."))
+
+
 def read_yaml(path: str | PathLike):
     """The YAML document in `path` (None if empty), or ConfigError naming the file (and the line of a syntax error)."""
     path = Path(path)
     try:
-        return yaml.safe_load(path.read_text())
+        return yaml.load(path.read_text(), Loader=_Loader)  # a SafeLoader: no arbitrary objects
     except FileNotFoundError:
         raise ConfigError("config file not found", path) from None
     except (OSError, UnicodeDecodeError) as exc:

@@ -203,6 +203,10 @@ class Clock:
         return total - round(getattr(self, f"{source}_latency_s") * 1e9)
 
 
+#: the largest geoid separation a config may state (m): EGM2008's undulation spans -107..+86 m
+MAX_GEOID_SEPARATION_M = 150.0
+
+
 @dataclass(frozen=True)
 class Altitude:
     """Altitude datum conversion: ellipsoid height = AMSL altitude + geoid_separation_m. `"auto"` takes it from
@@ -213,6 +217,10 @@ class Altitude:
     def __post_init__(self):
         if isinstance(self.geoid_separation_m, str) and self.geoid_separation_m != "auto":
             raise ValueError("geoid_separation_m must be a number (m) or 'auto' (the EGM2008 geoid model), "
+                             f"got {self.geoid_separation_m!r}")
+        if isinstance(self.geoid_separation_m, (int, float)) and abs(self.geoid_separation_m) > MAX_GEOID_SEPARATION_M:
+            raise ValueError(f"geoid_separation_m must be within +-{MAX_GEOID_SEPARATION_M:.0f} m (the geoid lies "
+                             "-107..+86 m from the WGS84 ellipsoid, EGM2008), or 'auto', "
                              f"got {self.geoid_separation_m!r}")
 
 

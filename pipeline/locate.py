@@ -29,7 +29,7 @@ from pipeline.photo_errors import PhotoErrorModel, photo_error_model
 from pipeline.solve import METHODS, Estimate, Status, solve, unsolved_status
 from pipeline.solve.observations import Observations, Sigma
 from pipeline.solve.propagate import ErrorSources
-from pipeline.targets import in_image
+from pipeline.targets import in_image, unreadable_marks
 
 #: a pixel within this fraction of the image width from the centre is taken to be where the laser points
 LASER_PIXEL_TOLERANCE = 0.01
@@ -529,7 +529,7 @@ def read_marks(path: str, photos) -> list:
         with open(path, encoding="utf-8-sig") as f:
             first = f.readline()
     except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read marks: {exc}", path=path) from None
+        raise InputError(unreadable_marks(exc), path=path) from None
     if first.strip().startswith("name,"):
         from pipeline.targets import read_marks_csv
 
@@ -543,7 +543,7 @@ def read_marks(path: str, photos) -> list:
         with open(path, newline="") as f:
             rows = list(csv.DictReader(f))
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise InputError(f"cannot read marks: {exc}", path=path) from None
+        raise InputError(unreadable_marks(exc), path=path) from None
     by_name = {}
     for i, r in enumerate(rows, start=2):
         try:

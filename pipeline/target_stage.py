@@ -336,6 +336,8 @@ def _result(fp: FlightPass, t: _Tracked, estimates: dict[str, Estimate], failure
     settings["camera_resolved"] = {"source": flight.camera_source, **{k: getattr(cam, k) for k in (
         "width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px", "dist")}}
     settings["notes"] = [*fp.notes, *notes]
+    if flight.notes:  # the logs' own warnings (also in notes): damage read past, shown on the console too
+        settings["input_warnings"] = list(flight.notes)
     if t.geometry_warnings:  # also in notes; every estimate's reason in the exports carries them
         settings["geometry_warnings"] = list(t.geometry_warnings)
     if fp.clock_estimate is not None:

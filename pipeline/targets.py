@@ -263,6 +263,15 @@ def _group(rows: list[tuple[str, Mark]], truths: dict[str, tuple | None]) -> lis
     return [NamedTarget(n, tuple(ms), truths.get(n)) for n, ms in order.items()]
 
 
+def unreadable_marks(exc: BaseException) -> str:
+    """Why a marks file cannot be read, without the path again (ConfigError puts it first)."""
+    if isinstance(exc, IsADirectoryError):
+        return "a folder, not a marks file: give the marks CSV in it (`ridgeloc mark` saves marks.csv)"
+    if isinstance(exc, UnicodeDecodeError):
+        return "cannot read the marks file: not UTF-8 text (a CSV is expected)"
+    return f"cannot read the marks file: {getattr(exc, 'strerror', None) or exc}"
+
+
 def read_marks_csv(path: str | Path) -> list[NamedTarget]:
     """Targets of a marks CSV (`name,frame_or_image,x_px,y_px`); ConfigError naming file, row and problem.
     Row numbers count the header as row 1. A name may repeat (several marks of one target) but not with the
@@ -271,7 +280,7 @@ def read_marks_csv(path: str | Path) -> list[NamedTarget]:
     try:
         text = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read the marks file: {exc}", path) from None
+        raise ConfigError(unreadable_marks(exc), path) from None
     reader = csv.reader(text.splitlines())
     header = next(reader, None)
     if header is None or tuple(h.strip() for h in header) != MARKS_CSV_HEADER:
@@ -361,7 +370,7 @@ def read_marks_file(path: str | Path) -> tuple[list[NamedTarget], list[str]]:
     try:
         first = path.read_text(encoding="utf-8-sig").split("\n", 1)[0]
     except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read the marks file: {exc}", path) from None
+        raise ConfigError(unreadable_marks(exc), path) from None
     if first.strip().startswith("name,") or path.suffix.lower() == ".csv":
         return read_marks_csv(path), []
     return read_gcp_list(path)

@@ -86,6 +86,49 @@ def test_check_and_run_refuse_a_mistake_before_reading_data(tmp_path, capsys):
         assert not (tmp_path / "out").exists()
 
 
+def test_a_mapping_typo_names_the_config_file_not_a_log(tmp_path, capsys):
+    """`mapping:` is checked against the readers' keys when the logs are opened: the error names the config file and
+    the dotted key, as every other config mistake does, before the (1 byte of garbage) telemetry is read."""
+    from pipeline.cli import main
+
+    doc = _flight(tmp_path)
+    doc["mapping"] = {"klv": {"azimuth_nort": "grid"}}
+    path = _write(tmp_path / "bad.yaml", doc)
+    for cmd in (["check", str(path)], ["run", str(path), "-q", "-o", str(tmp_path / "out")]):
+        assert main(cmd) != 0
+        _out, err = capsys.readouterr()
+        assert f"{path}: mapping.klv: unknown key 'azimuth_nort' (did you mean 'azimuth_north'? known: " \
+               "azimuth_north)" in err, (cmd, err)
+        assert "Traceback" not in err
+        assert not (tmp_path / "out").exists()
+
+
+def test_numbers_with_an_exponent_are_numbers(tmp_path):
+    """`1e-6` and `2.5e3` are numbers as a user (and YAML 1.2) writes them; PyYAML's YAML 1.1 resolver read them as
+    text, which the schema refused as "must be a plain number (the unit is in the key's name)". Quoted, a string."""
+    (tmp_path / "flight.tlog").write_bytes(b"x")
+    head = "name: g1\nfiles: {telemetry: [flight.tlog]}\n"
+    path = tmp_path / "f.yaml"
+    path.write_text(head + "sigma: {range_m: 5e-1, position_m: 2E0, attitude_deg: .2e+0}\n"
+                    "target: {frame_index: 0, pixel: [3e2, 2.0e2]}\n")
+    cfg = load_flight_config(path)
+    assert (cfg.sigma.range_m, cfg.sigma.position_m, cfg.sigma.attitude_deg) == (0.5, 2.0, 0.2)
+    assert tuple(cfg.target.pixel) == (300.0, 200.0)
+    path.write_text(head + "sigma: {range_m: '5e-1'}\n")
+    with pytest.raises(ConfigError, match=r"sigma\.range_m: must be a plain number"):
+        load_flight_config(path)
+
+
+def test_a_geoid_separation_no_geoid_has_is_refused(tmp_path):
+    doc = _flight(tmp_path)
+    doc["altitude"] = {"geoid_separation_m": 1200.0}  # an altitude typed into the wrong key, say
+    with pytest.raises(ConfigError) as info:
+        load_flight_config(_write(tmp_path / "bad.yaml", doc))
+    assert "altitude: geoid_separation_m must be within +-150 m" in str(info.value)
+    doc["altitude"] = {"geoid_separation_m": -106.5}
+    assert load_flight_config(_write(tmp_path / "ok.yaml", doc)).altitude.geoid_separation_m == -106.5
+
+
 def test_good_options_are_read_as_a_plain_dict_of_the_given_keys(tmp_path):
     doc = _flight(tmp_path)
     doc["solve"] = {"methods": ["ridge", "mle"],

@@ -34,6 +34,16 @@ def test_a_mark_in_no_frame_of_the_video_is_a_config_error():
         _mark(Target(frame_index=13, pixel=(100.0, 50.0)))
 
 
+def test_a_run_names_the_config_file_once_and_the_frames_there_are():
+    """A flight config's `target:` reaches `run` as a mark whose source already names the config file
+    (pipeline.targets.flight_targets); the error said the file twice ("f.yaml: f.yaml: target: ...")."""
+    from pipeline.targets import Mark
+
+    with pytest.raises(ConfigError) as exc:
+        _mark(Mark(frame_index=999, pixel=(100.0, 50.0), source="f.yaml: target"))
+    assert str(exc.value) == "f.yaml: target: frame_index 999 is not a frame of the video (the video has frames 10..12)"
+
+
 def test_without_a_mark_the_crosshair_of_the_first_observation():
     m = _mark(None)
     assert (m.frame_index, m.pixel_px) == (11, (319.5, 241.0)) and "image centre of frame 11" in m.note

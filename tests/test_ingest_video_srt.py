@@ -120,6 +120,10 @@ def test_bad_videos(tmp_path):
     w.release()
     with pytest.raises(LogReadError, match=r"zero\.mp4: "):
         read_video(z)
+    d = tmp_path / "DCIM"  # a folder given as files.video: said so, not "no such video file"
+    d.mkdir()
+    with pytest.raises(LogReadError, match=r"DCIM: a folder, not a video file$"):
+        read_video(d)
 
 
 MAVIC3 = """1

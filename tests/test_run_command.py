@@ -135,6 +135,23 @@ def test_console_summary_says_misfit_rejections_and_unsolved_methods():
     assert group_summary(r) == ["g: 3 observations, 0.50 s, error mle 5.00 m", f"  warning: {parallel}"]
 
 
+def test_a_truncated_log_read_past_is_said_on_the_console(tmp_path, capsys):
+    """A tlog cut mid-record is read up to the cut and the flight runs on what it holds: the console says so under
+    the flight's line (it was only in the report's notes, the answer looking as sure as a whole flight's)."""
+    doc = _flight_config("cut")
+    whole = Path(doc["files"]["telemetry"][0]).read_bytes()
+    cut = tmp_path / "flight.tlog"
+    cut.write_bytes(whole[: len(whole) * 2 // 3])
+    doc["files"]["telemetry"] = [str(cut)]
+    config = tmp_path / "flight.yaml"
+    config.write_text(yaml.safe_dump(doc))
+    main(["run", str(config), "-o", str(tmp_path / "out"), "--no-figures"])
+    captured = capsys.readouterr()
+    lines = (captured.out + captured.err).splitlines()
+    at = next(i for i, line in enumerate(lines) if line.startswith("cut: ") and "observation" in line)
+    assert lines[at + 1].startswith(f"  warning: {cut}: file ends mid-record (truncated); read "), lines[at:at + 3]
+
+
 def test_quiet_run_still_says_when_the_mle_model_does_not_fit(tmp_path, capsys, monkeypatch):
     """`ridgeloc run -q` prints only the summary and errors, and the mle's misfit sentence per group."""
     import pipeline.batch

@@ -80,6 +80,24 @@ def test_a_bad_marks_file_is_one_line_naming_file_row_and_problem(tmp_path, rows
     assert msg.startswith(f"{marks}: {problem}") and "\n" not in msg, msg
 
 
+def test_a_marks_file_that_is_a_folder_or_not_text_is_one_plain_line(tmp_path):
+    """A folder given as the marks file, or a binary one: one line, without Python's '[Errno 21] Is a directory:
+    ...' (the path twice) or the codec's byte positions; the same for `ridgeloc locate --marks`."""
+    from pipeline.locate import read_marks
+
+    (tmp_path / "marks_dir").mkdir()
+    (tmp_path / "bin.csv").write_bytes(b"\xff\xfe\x00 not text")
+    for name, problem in (("marks_dir", "a folder, not a marks file: give the marks CSV in it"),
+                          ("bin.csv", "cannot read the marks file: not UTF-8 text (a CSV is expected)")):
+        with pytest.raises(ConfigError) as exc:
+            load_flight_config(_flight(tmp_path, marks_file=name))
+        assert str(exc.value).startswith(f"{tmp_path / name}: {problem}"), str(exc.value)
+        with pytest.raises(InputError) as exc:
+            read_marks(str(tmp_path / name), [])
+        assert str(exc.value).startswith(f"{tmp_path / name}: {problem}"), str(exc.value)
+        assert "Errno" not in str(exc.value) and "codec" not in str(exc.value)
+
+
 @pytest.mark.parametrize("u, v, inside", [
     (-0.5, -0.5, True), (599.5, 399.5, True), (0, 0, True), (300, 200, True),  # pixel centres at integers:
     (-0.51, 10, False), (10, -0.51, False), (599.51, 10, False), (10, 399.51, False)])  # the image spans +-0.5

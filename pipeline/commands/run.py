@@ -70,15 +70,16 @@ def _input_files(cfg: FlightConfig) -> list[Path]:
 
 
 def group_summary(r, reused: bool = False) -> list[str]:
-    """A finished group's console lines: observations, time and errors; then, indented, the geometry warnings of
-    its checks, the mle's words when its error model does not fit the flight, how many observations it rejected,
-    and the methods that did not solve (the report has the details)."""
+    """A finished group's console lines: observations, time and errors; then, indented, the logs' warnings (damage
+    read past), the geometry warnings of its checks, the mle's words when its error model does not fit the flight,
+    how many observations it rejected, and the methods that did not solve (the report has the details)."""
     from pipeline.report.exports import unsolved_methods
 
     errs = r.errors_m()
     shown = ", ".join(f"{m} {errs[m]:.2f} m" for m in ("ridge", "mle") if errs.get(m) is not None)
     state = "reused" if reused else f"{sum(r.timings_s.values()):.2f} s"
     lines = [f"{r.label}: {count(r.n_observations, 'observation')}, {state}" + (f", error {shown}" if shown else "")]
+    lines += [f"  warning: {w}" for w in r.settings.get("input_warnings") or []]  # a truncated log, say
     lines += [f"  warning: {w}" for w in r.settings.get("geometry_warnings") or []]
     lines += [f"  {n}" for n in r.settings.get("notes") or [] if str(n).startswith("mle: the error model does not fit")]
     mle = r.estimates.get("mle")

@@ -30,8 +30,15 @@ from pipeline.sync.select import ObservationPlan, plan_observations
 def read_flight_logs(config: FlightConfig) -> FlightLog:
     """The flight's telemetry files read into one FlightLog; InputError when it lacks position, attitude or gimbal."""
     from pipeline.ingest import read_flight
+    from pipeline.ingest.mapping import check_override
 
-    log = read_flight(list(config.files.telemetry), mapping=config.mapping)
+    try:  # a mistake in the config's `mapping:` (a ConfigError naming no file) is the config file's: name it
+        check_override(config.mapping)
+        log = read_flight(list(config.files.telemetry), mapping=config.mapping)
+    except ConfigError as exc:
+        if exc.path is not None or config.path is None:
+            raise
+        raise ConfigError(str(exc), config.path) from None
     missing = [q for q in ("position", "attitude", "gimbal") if getattr(log, q) is None]
     if missing:
         raise InputError(f"the flight's logs supply no {', '.join(missing)}: check `mapping:` "

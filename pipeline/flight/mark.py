@@ -46,8 +46,12 @@ def acquire_mark(target: Target | Mark | None, *, frames: FrameSeries, plan_fram
             raise ConfigError("target.template: not a readable image", target.template)
         index, pixel = tracker.acquire(template, target.template_pixel, decoder, np.asarray(plan_frame_index).tolist())
         return TargetMark(int(index), (float(pixel[0]), float(pixel[1])))
-    if target.frame_index not in set(np.asarray(frames.index).tolist()):
+    indices = set(np.asarray(frames.index).tolist())
+    if target.frame_index not in indices:
         source = getattr(target, "source", "target")
         where = f"{source}: " if source and source != "target" else "target."
-        raise ConfigError(f"{where}frame_index {target.frame_index} is not a frame of the video", config_path)
+        if config_path is not None and where.startswith(f"{config_path}: "):
+            config_path = None  # the mark's source already names the config file
+        have = f" (the video has frames {min(indices)}..{max(indices)})" if indices else ""
+        raise ConfigError(f"{where}frame_index {target.frame_index} is not a frame of the video{have}", config_path)
     return TargetMark(int(target.frame_index), (float(target.pixel[0]), float(target.pixel[1])))

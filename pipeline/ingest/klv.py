@@ -381,7 +381,7 @@ def _north(mapping: dict | None) -> str:
     if north not in ("true", "grid"):
         from pipeline.errors import ConfigError
 
-        raise ConfigError(f"ingest mapping klv.azimuth_north: expected true or grid, got {value!r}")
+        raise ConfigError(f"mapping.klv.azimuth_north: expected true or grid, got {value!r}")
     return north
 
 

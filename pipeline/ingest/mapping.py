@@ -8,6 +8,7 @@ in the defaults is rejected (ConfigError) so that a typo never silently falls ba
 from __future__ import annotations
 
 import copy
+import difflib
 from functools import cache
 from importlib import resources
 
@@ -34,11 +35,13 @@ def default_mapping(fmt: str) -> dict:
 
 def _merge(base: dict, override: dict, where: str) -> dict:
     if not isinstance(override, dict):
-        raise ConfigError(f"ingest mapping {where}: expected a mapping, got {type(override).__name__}")
+        raise ConfigError(f"mapping.{where}: expected a mapping, got {type(override).__name__}")
     out = dict(base)
     for key, val in override.items():
         if key not in base:
-            raise ConfigError(f"ingest mapping {where}: unknown key {key!r} (known: {', '.join(map(str, base))})")
+            near = difflib.get_close_matches(str(key), list(map(str, base)), n=1)
+            hint = f"did you mean {near[0]!r}? " if near else ""
+            raise ConfigError(f"mapping.{where}: unknown key {key!r} ({hint}known: {', '.join(map(str, base))})")
         if isinstance(base[key], dict):
             out[key] = _merge(base[key], val, f"{where}.{key}")
         else:
@@ -55,10 +58,10 @@ def check_override(override: dict | None) -> None:
 def mapping_for(fmt: str, override: dict | None = None) -> dict:
     """Defaults of `fmt` with `override[fmt]` merged over them."""
     if override is not None and not isinstance(override, dict):
-        raise ConfigError(f"ingest mapping: expected a mapping keyed by format, got {type(override).__name__}")
+        raise ConfigError(f"mapping: expected a mapping keyed by format, got {type(override).__name__}")
     for key in override or {}:
         if key not in FORMATS:
-            raise ConfigError(f"ingest mapping: unknown format {key!r} (known: {', '.join(FORMATS)})")
+            raise ConfigError(f"mapping: unknown format {key!r} (known: {', '.join(FORMATS)})")
     base = default_mapping(fmt)
     if override and override.get(fmt) is not None:
         return _merge(base, rename_deprecated_range_keys(fmt, override[fmt]), fmt)

@@ -67,6 +67,8 @@ def _why(exc) -> str:
 
 
 def _open(path: Path):
+    if path.is_dir():
+        raise LogReadError("a folder, not a video file", path=path)
     if not path.is_file():
         raise LogReadError("no such video file", path=path)
     if path.stat().st_size == 0:

@@ -221,6 +221,8 @@ def test_a_dji_srt_with_heights_above_take_off_leaves_the_take_off_altitude_to_f
     folder = _dji_folder(tmp_path, "juanirache_p4_rtk.SRT", 30 * 56)
     draft = draft_flight_config(folder, folder / "flight.yaml")
     assert sorted(f.key for f in draft.fill_in if f.required) == ["camera", "mapping", "target"]
+    (target,) = [f for f in draft.fill_in if f.key == "target"]
+    assert target.why.endswith("without a laser, whatever the camera looked at)")  # no laser to point
     text = config_text(draft, "ridgeloc init")
     assert "#   srt: {takeoff_altitude_m: FILL_IN, abs_datum: amsl}" in text
     filled = (text.replace("#   srt: {takeoff_altitude_m: FILL_IN, abs_datum: amsl}",

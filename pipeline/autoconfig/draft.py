@@ -104,7 +104,7 @@ def draft_flight_config(root, out_path) -> Draft:
     else:
         draft.decisions.append(("conventions", "not checked: the frames cannot be put on the telemetry clock yet "
                                 "(`ridgeloc check` checks them once clock.video_start is given)"))
-    _target_placeholder(draft)
+    _target_placeholder(draft, log.range is not None)
     flight_config_from_dict(draft.doc, out_path)  # what is written loads
     return draft
 
@@ -364,13 +364,13 @@ def _estimate_clock(draft: Draft, out_path: Path, clock: VideoClock) -> None:
     draft.decisions.append(("clock", f"video_start {_iso(start_ns)}, estimated from the flight"))
 
 
-def _target_placeholder(draft: Draft) -> None:
+def _target_placeholder(draft: Draft, laser: bool) -> None:
     frame = draft.first_frame
     draft.fill_in.append(FillIn("target", [
         f"target: {{frame_index: {frame}, pixel: [FILL_IN_x, FILL_IN_y]}}   # FILL IN the target's pixel in a "
         "frame (ridgeloc mark shows the frames), or marks_file: marks.csv"],
-        "target: the target's pixel (until then the image centre of the first observation, where the laser "
-        "points)"))
+        "target: the target's pixel (until then the image centre of the first observation"
+        + (", where the laser points)" if laser else ": without a laser, whatever the camera looked at)")))
 
 
 # ---- photos -------------------------------------------------------------------------------------------------

@@ -122,9 +122,9 @@ class ViewCache:
     the first frames for every later pass over the same frames in the same order (an LRU would keep none).
 
     share_matches: also keep each frame pair's homography (matching and RANSAC), so that targets tracked
-    through the same key frames match each pair once. Each pair's RANSAC is then seeded by the pair itself, so a
-    target's track does not depend on which targets were tracked before it (without it, as for a flight's single
-    `target:`, the seed is set once per track, as before many targets)."""
+    through the same key frames match each pair once. Each pair is then matched with FLANN's random trees seeded
+    by the pair itself, so a target's track does not depend on which targets were tracked before it (without
+    it, as for a flight's single `target:`, the seed is set once per track, as before many targets)."""
 
     def __init__(self, share_matches: bool = False, max_bytes: int = 192 * 2**20):
         self.views: dict[int, _View] = {}
@@ -177,9 +177,7 @@ class SiftTracker:
         self._last_window: tuple | None = None  # the last window view found (`_window_of`)
         self.s = settings or TrackerSettings()
         self._sift = cv2.SIFT_create(nfeatures=self.s.n_features)
-        # exact nearest neighbours: at a few hundred to a thousand descriptors a frame, brute force is faster than
-        # FLANN's trees (2.0 against 6.6 ms for a 512 px window's ~450, 10 against 15 ms for 1,000) and needs no RNG
-        self._matcher = cv2.BFMatcher(cv2.NORM_L2)
+        self._matcher = cv2.FlannBasedMatcher({"algorithm": 1, "trees": 4}, {"checks": 48})
 
     # ---- features and matching ---------------------------------------------------------------------------
 
@@ -354,7 +352,7 @@ class SiftTracker:
         directly (given again as the same list, unchanged, for another target: it is sorted once). `cache`:
         frames' features shared with other targets' tracks (each frame decoded once); without it only the mark and
         key frames are kept (memory stays flat). Returns the wanted frames' tracks in the order of `wanted`."""
-        cv2.setRNGSeed(0x5EED)  # RANSAC draws from OpenCV's RNG: same input, same answer
+        cv2.setRNGSeed(0x5EED)  # FLANN's randomised trees draw from OpenCV's RNG: same input, same answer
         self._pairs = cache.pairs if cache is not None else None
         try:
             return self._track(decode, mark_index, mark_px, wanted, available, cache)

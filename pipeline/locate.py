@@ -15,7 +15,7 @@ is also an error of the terrain prior, whose sigma grows by it. `dem` is moved h
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -366,10 +366,25 @@ def photo_answer(loc: PhotoLocation, dem=None, dem_sigma_m: float | None = None)
     from pipeline.terrain.flight import dem_answer_inputs
 
     unsolved = {m: reason for m, (_, reason) in loc.unsolved.items()}
-    return choose_answer(loc.obs, loc.estimates, unsolved, loc.views.origin_lla, sources=error_sources(loc.errors),
-                         whole_covariance=loc.whole_covariance_m2,
-                         **dem_answer_inputs(dem, dem_sigma_m, loc.obs, loc.views.origin_lla,
-                                             loc.estimates.get("dem")))
+    answer = choose_answer(loc.obs, loc.estimates, unsolved, loc.views.origin_lla,
+                           sources=error_sources(loc.errors), whole_covariance=loc.whole_covariance_m2,
+                           **dem_answer_inputs(dem, dem_sigma_m, loc.obs, loc.views.origin_lla,
+                                               loc.estimates.get("dem")))
+    why = None if answer.located else _one_method_reason(loc, answer)
+    return answer if why is None else replace(answer, reason=why)
+
+
+def _one_method_reason(loc: PhotoLocation, answer: Answer) -> str | None:
+    """Why the photos' target is not located where one method alone could run (had the data it needs) and gave
+    no answer: that method and its own reason (a ray that misses the DEM, a ray above the horizon), which says
+    what to do, rather than the MLE's want of a second pixel; None where none or several could."""
+    tried = [(m, r) for m, (status, r) in loc.unsolved.items() if status != "insufficient_data"]
+    tried += [(m, answer.verdicts[m].reason) for m in loc.estimates
+              if m in answer.verdicts and not answer.verdicts[m].determined]
+    if len(tried) != 1:
+        return None
+    method, why = tried[0]
+    return why if why.startswith(f"{method}: ") else f"{method}: {why}"
 
 
 def estimate_row(e: Estimate, views: PhotoViews) -> dict:

@@ -4,6 +4,7 @@ numbers in them."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 import re
 import shutil
@@ -27,6 +28,7 @@ from pipeline.report.exports import (
     write_targets_kml,
 )
 from pipeline.report.store import load_group_result, save_group_result
+from pipeline.solve.estimate import Estimate
 from pipeline.solve.uncertainty import cep_m, ellipse_axes_m
 
 DOCS = Path(__file__).resolve().parent.parent / "docs" / "outputs.md"
@@ -242,3 +244,17 @@ def test_group_result_round_trip(tmp_path, groups):
             assert b.covariance_m2 is None
         else:
             np.testing.assert_array_equal(b.covariance_m2, e.covariance_m2)
+
+
+def test_group_result_with_nan_in_extras_is_strict_json(tmp_path, groups):
+    """An MLE from one observation has no degrees of freedom: its sigma0_sq is NaN (a 60 kB cut of
+    aphill_klv_10s.ts failed with 'internal error (ValueError): Out of range float values are not JSON compliant')."""
+    mle = groups[0].estimates["mle"]
+    nan_mle = Estimate(mle.method, mle.position_m, mle.iterations, mle.status, covariance_m2=mle.covariance_m2,
+                       extras={"sigma0_sq": float("nan"), "variance_factors": {"pixel": float("inf")},
+                               "starts": [[1.0, float("nan")]]})
+    g = dataclasses.replace(groups[0], estimates={**groups[0].estimates, "mle": nan_mle})
+    save_group_result(tmp_path / "result.json", g)
+    back = load_group_result(tmp_path / "result.json")
+    assert back.estimates["mle"].extras == {"sigma0_sq": None, "variance_factors": {"pixel": None},
+                                            "starts": [[1.0, None]]}

@@ -108,6 +108,27 @@ def test_parrot_1s_centre_ray_is_refused_in_one_line(capsys):
 
 
 @needs_makers
+def test_a_ray_above_the_terrain_is_the_reason_in_every_output(tmp_path, capsys):
+    """Skydio's pixel near the top edge looks over the DEM: the answer's reason (the table, --json, targets.csv)
+    is the one method that could run and its reason, as the last line says, not the MLE's want of a second pixel
+    (a single photo was told to mark it again while the DEM said the ray never meets the ground)."""
+    import csv
+
+    args = ["locate", str(MAKERS / "skydio-catilina.jpg"), "--dem", str(MAKERS / "skydio-catilina-dem.tiff"),
+            "--pixel", "750", "2", "--image-rotation", "0"]
+    assert cli_main([*args, "--json"]) == 1
+    out = capsys.readouterr()
+    reason = json.loads(out.out)["answer"]["reason"]
+    assert reason.startswith("dem: skydio-catilina.jpg pixel (750.0, 2.0): the ray never meets the ground")
+    assert out.err.strip().splitlines()[-1] == f"ridgeloc: error: the target is not located: {reason}"
+    assert cli_main([*args, "-o", str(tmp_path / "out")]) == 1
+    table = capsys.readouterr().out
+    assert f"NOT LOCATED: {reason}" in table and "mle" not in table.split("photo(s)")[0]
+    with open(tmp_path / "out" / "targets.csv", newline="") as f:
+        assert [r["reason"] for r in csv.DictReader(f)] == [reason]
+
+
+@needs_makers
 @pytest.mark.parametrize("name, dem", [("skydio-catilina.jpg", "skydio-catilina-dem.tiff"),
                                        ("teal2_img_ir_00015.jpg", "teal2.tiff")])
 def test_locate_answers_each_photo_its_dem_covers(capsys, name, dem):

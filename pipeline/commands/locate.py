@@ -86,19 +86,6 @@ def stated_errors(photos, args):
     return errors
 
 
-def not_located_why(loc, answer, reason: str) -> str:
-    """Why the photos' target is not located, for the last line: where one method alone could run (had the data
-    it needs) and gave no answer, that method and its own reason (a ray that misses the DEM, a ray above the
-    horizon), which says what to do; else the answer's `reason`."""
-    tried = [(m, r) for m, (status, r) in loc.unsolved.items() if status != "insufficient_data"]
-    tried += [(m, answer.verdicts[m].reason) for m in loc.estimates
-              if m in answer.verdicts and not answer.verdicts[m].determined]
-    if len(tried) != 1:
-        return reason
-    method, why = tried[0]
-    return why if why.startswith(f"{method}: ") else f"{method}: {why}"
-
-
 def _default_name(paths) -> str:
     """The target's name when --name is not given: the folder of the first photo (or the folder given)."""
     from pathlib import Path
@@ -213,7 +200,7 @@ def main(args) -> int:
         sent = (send_run_outputs(args.outdir, args) if args.outdir is not None
                 else send_events_to([e.xml for e in cot_entries([result], options=cot)], args.send, args))
     if answer["status"] != "located":  # exit 0 only with an answer
-        print(f"ridgeloc: error: the target is not located: {not_located_why(loc, result.answer, answer['reason'])}",
+        print(f"ridgeloc: error: the target is not located: {answer['reason']}",
               file=sys.stderr)
         return 1
     return 1 if bad or sent else 0

@@ -27,6 +27,17 @@ def _nan_to_none(values) -> list:
     return [None if not np.isfinite(v) else float(v) for v in np.asarray(values, dtype=np.float64).ravel()]
 
 
+def _finite_or_none(value):
+    """`value` (nested dicts, lists, numbers) with every non-finite float as None: strict JSON."""
+    if isinstance(value, dict):
+        return {k: _finite_or_none(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite_or_none(v) for v in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
 def _none_to_nan(values) -> np.ndarray:
     return np.array([np.nan if v is None else v for v in values], dtype=np.float64)
 
@@ -40,7 +51,7 @@ def estimate_to_json(e: Estimate) -> dict:
         "residuals": _nan_to_none(e.residuals),
         "condition_number": _nan_to_none([e.condition_number])[0],
         "covariance_m2": None if e.covariance_m2 is None else np.asarray(e.covariance_m2).tolist(),
-        "extras": e.extras,
+        "extras": _finite_or_none(e.extras),
     }
 
 

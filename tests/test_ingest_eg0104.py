@@ -235,6 +235,19 @@ def test_a_cut_clip_gets_no_ridge_point_hundreds_of_metres_underground(tmp_path)
     assert "it is fusion with a penalty" in rows["ridge"]["reason"]
 
 
+def test_a_clip_cut_after_one_metadata_packet_is_named_so_not_a_clock_error(tmp_path, capsys):
+    """aphill_short.ts cut to 30 kB keeps one EG 0104 packet: the telemetry is a single instant; the run said "the
+    video clock is off; set clock.video_start", which no clock setting fixes."""
+    from pipeline.cli import main as cli_main
+
+    cut = tmp_path / "clip.ts"
+    cut.write_bytes(_clip("aphill_short.ts").read_bytes()[:30_000])
+    assert cli_main(["run", str(cut), "-o", str(tmp_path / "out"), "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "the telemetry covers a single instant (-0.033 s)" in err and "is the file cut short?" in err
+    assert "video clock is off" not in err
+
+
 def test_check_on_a_clip_does_not_give_the_undetermined_meeting_point_a_small_sigma():
     """The ranges against where nearly parallel lines of sight meet: the line says the meeting point is
     undetermined (+-3 km along them), beside the warning; it printed the statistical +-14.6 m."""

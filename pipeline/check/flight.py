@@ -117,6 +117,9 @@ def mapping_lines(r: Flight) -> list[str]:
 def outside_telemetry(r: Flight) -> str:
     """The one-line problem when no observation time falls inside the telemetry."""
     tel = r.telemetry_span_ns()
+    if tel is not None and tel[0] == tel[1]:  # e.g. a video cut short after its first metadata packet
+        return (f"the telemetry covers a single instant ({_when(tel[0])}): position, attitude and gimbal together "
+                "have one sample, no span to interpolate a pose at any frame in; is the file cut short?")
     span = "" if tel is None else f" ({_when(tel[0])} .. {_when(tel[1])})"
     return (f"no observation time falls inside the telemetry{span}: the video clock is off; set clock.video_start "
             "(the first frame's UNIX time or ISO 8601) or clock.video_offset_s")

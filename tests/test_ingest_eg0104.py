@@ -287,9 +287,11 @@ def test_run_on_a_clip_locates_the_crosshair_near_the_frame_centre(name):
     assert any(n.startswith(f"frame centre: {CLIPS[name][0]} packets") for n in result.settings["notes"])
     # the lines of sight are 1.3 and 7.9 deg apart, the ranges 1.7 km and 517 m shorter than where they meet
     # (docs/check.md): run carries check's warning into the notes and every estimate's reason in the exports
-    (warning,) = result.settings["geometry_warnings"]
-    assert warning in result.settings["notes"]
+    warning, level = result.settings["geometry_warnings"]
+    assert warning in result.settings["notes"] and level in result.settings["notes"]
     assert re.search(r"nearly parallel \(first to last \d+\.\d deg\): where they meet is undetermined", warning)
+    # the payload's slant ranges end at sea level (no laser): said, in the answer's reason too
+    assert level.startswith("the laser ranges all end at sea level (+0.")
     from pipeline.report.answers import answer_row
     from pipeline.report.exports import estimate_rows
 
@@ -301,6 +303,7 @@ def test_run_on_a_clip_locates_the_crosshair_near_the_frame_centre(name):
     # one answer, the laser's point, at the platform's own frame centre (within the grid-azimuth offset)
     answer = answer_row(result)
     assert answer["status"] == "located" and answer["method"] == "los"
+    assert answer["reason"].endswith(f"; warning: {warning}; warning: {level}")
 
     def off_centre_m(row):
         return np.hypot((log.frame_centre.lat_deg - row["lat_deg"]) * 111_000,

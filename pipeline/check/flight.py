@@ -307,10 +307,44 @@ def geometry_checks(r: Flight, pixel_px: np.ndarray | None = None, t_ns: np.ndar
     if rb and not alts and not c.no_baseline:
         problems.append(rb)
     warnings += cluster_warnings(c)
+    level = ranges_end_at_sea_level(r, *(rays(r, t_ns)[:2] if pixel_px is not None else (o, d)), ranges_m)
+    if level:
+        warnings.append(level)
     if marks_ok and (c.consistent or alts):  # the first mark's line of sight against where the others meet
         problems += mark_checks(r, c.centre_m if c.consistent else (alts[0].cluster.centre_m if alts else None),
                                 alts[0].convention if alts and not c.consistent else None, now)[0]
     return GeometryResult(c, alts, problems, warnings, what)
+
+
+#: ranges whose end points all lie within this of sea level (m) look computed against it, not measured
+SEA_LEVEL_BAND_M = 2.0
+
+
+def ranges_end_at_sea_level(r: Flight, o: np.ndarray, d: np.ndarray, ranges_m) -> str | None:
+    """A warning when every range (at least 3), laid along its line of sight o + d range (ENU m, (n, 3)), ends within
+    SEA_LEVEL_BAND_M of mean sea level (EGM2008) although the platform's height changes: a slant range the payload
+    computed against sea level (full-motion video without a laser) puts the answer at sea level, not on the
+    ground; else None. (A laser on a target at sea level would show the same: the warning says what it means.)"""
+    if ranges_m is None or r.origin is None:
+        return None
+    rng = np.asarray(ranges_m, dtype=np.float64)
+    ok = np.isfinite(rng) & np.isfinite(o).all(axis=1) & np.isfinite(d).all(axis=1)
+    if ok.sum() < 3:
+        return None
+    from pipeline.geometry.frames import lla_from_enu
+    from pipeline.geometry.geoid import geoid_undulation_m
+
+    end = o[ok] + d[ok] * rng[ok, None]
+    lla = lla_from_enu(end, r.origin)
+    lat, lon, h = lla[:, 0], lla[:, 1], lla[:, 2]
+    msl = h - np.asarray(geoid_undulation_m(lat, lon), dtype=np.float64)
+    if np.abs(msl).max() > SEA_LEVEL_BAND_M:
+        return None
+    return (f"the laser ranges all end at sea level ({float(np.median(msl)):+.1f} m, EGM2008, over {int(ok.sum())} "
+            f"ranges from {float(rng[ok].min()):.0f} to {float(rng[ok].max()):.0f} m): they look computed by the "
+            "payload against sea level, not measured, and then every answer that uses them lies at sea level, not "
+            "on the ground; give a terrain model (terrain: dem) for the ground's height, or trust them only if the "
+            "target really is at sea level")
 
 
 def cluster_warnings(c: Cluster) -> list[str]:
@@ -326,7 +360,10 @@ def run_checks(r: Flight, t_ns, pixel_px, ranges_m) -> tuple[str | None, list[st
     `check` gives the same cluster (`cluster_warnings`))."""
     o, d, _ = rays(r, t_ns, pixel_px)
     c = cluster(o, d, ranges_m)
-    return _refusal(r, t_ns, pixel_px, ranges_m, c), ([] if c is None else cluster_warnings(c))
+    warnings = [] if c is None else cluster_warnings(c)
+    oa, da, _ = rays(r, t_ns)  # the ranges lie along the optical axis, where the laser points
+    level = ranges_end_at_sea_level(r, oa, da, ranges_m)
+    return _refusal(r, t_ns, pixel_px, ranges_m, c), warnings + ([level] if level else [])
 
 
 def _no_baseline(o: np.ndarray, d: np.ndarray) -> str:

@@ -127,6 +127,9 @@ def answer_row(r: GroupResult) -> dict:
                alt_msl_datum=ALT_MSL_DATUM)
     if not a.located:
         return row
+    warnings = r.settings.get("geometry_warnings") or []  # what the run's checks say about every point of it
+    if warnings:
+        row["reason"] = "; ".join([a.reason, *(f"warning: {w}" for w in warnings)])
     lat, lon, h = geodetic_from_enu(a.position_m, r.origin_lla)
     n_m = float(geoid_undulation_m(lat, lon))
     row.update(lat_deg=_num(lat, 8), lon_deg=_num(lon, 8), alt_m=_num(h), alt_msl_m=_num(h - n_m),

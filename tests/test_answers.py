@@ -311,3 +311,10 @@ def test_a_synthetic_hover_is_not_located_and_check_names_the_missing_baseline(t
     (row,) = csv.DictReader((tmp_path / "out" / "targets.csv").open(newline=""))
     assert row["status"] == "not_located" and row["reason"].startswith("no baseline: the camera moved only")
     assert "NOT LOCATED: no baseline" in capsys.readouterr().out
+
+
+def test_a_height_that_rounds_to_zero_has_no_sign():
+    """-0.013 m MSL printed '-0.0' in report.md, the KML balloon, the CoT remarks and the map's popup."""
+    from pipeline.report.labels import one_decimal
+
+    assert one_decimal(-0.013) == "0.0" and one_decimal(0.04) == "0.0" and one_decimal(-0.06) == "-0.1"

@@ -21,6 +21,7 @@ import numpy as np
 from pipeline.answer import Z90, Answer, choose_answer, unsolved_reasons
 from pipeline.geometry.geoid import GEOID_MODEL_LONG, geoid_undulation_m
 from pipeline.report.geometry import ALT_DATUM, geodetic_from_enu
+from pipeline.report.labels import one_decimal
 from pipeline.results import FlightResult, GroupFailure, GroupResult
 from pipeline.solve.uncertainty import horizontal
 
@@ -82,12 +83,6 @@ def shown_covariance(r: GroupResult, method: str) -> np.ndarray | None:
     return None if e is None or e.covariance_m2 is None else np.asarray(e.covariance_m2)
 
 
-def _f1(x: float) -> str:
-    """x with one decimal, without a sign on a zero ('-0.0' reads as a sign that means something)."""
-    text = f"{x:.1f}"
-    return "0.0" if text == "-0.0" else text
-
-
 def answers_text(rows: list[dict]) -> str:
     """The answers as a plain-text table for the console: target, latitude, longitude, MSL height, MGRS, CE90,
     category, method; a target without an answer gets its reason on its line."""
@@ -96,7 +91,7 @@ def answers_text(rows: list[dict]) -> str:
     for row in rows:
         if row["status"] == "located":
             ce90 = "-" if row["ce90_m"] is None else f"{row['ce90_m']:.1f}"
-            lines.append((row["name"], f"{row['lat_deg']:.7f}", f"{row['lon_deg']:.7f}", _f1(row["alt_msl_m"]),
+            lines.append((row["name"], f"{row['lat_deg']:.7f}", f"{row['lon_deg']:.7f}", one_decimal(row["alt_msl_m"]),
                           row["mgrs"], ce90, row["tle_category"] or "-", row["method"]))
         else:
             lines.append((row["name"], f"NOT LOCATED: {row['reason']}"))

@@ -21,7 +21,7 @@ from pipeline.atomic import atomic_dir, atomic_write_bytes
 from pipeline.errors import InputError
 from pipeline.flight_config import RESERVED_FLIGHT_NAMES
 from pipeline.report.answers import answer_row
-from pipeline.report.labels import count
+from pipeline.report.labels import count, one_decimal
 from pipeline.results import GroupResult, per_target
 from pipeline.tak import DEFAULT_STALE_S, DEFAULT_TYPE
 from pipeline.tak.cot import CotTarget, check_type, event_xml, target_uid
@@ -97,7 +97,8 @@ def remarks(row: dict, when: str | None) -> str:
     if row.get("ellipse95_semi_major_m") is not None:
         lines.append(f"95% ellipse {row['ellipse95_semi_major_m']:.1f} x {row['ellipse95_semi_minor_m']:.1f} m, "
                      f"major axis {row['ellipse95_azimuth_deg']:.0f} deg from north")
-    lines.append(f"height {row['alt_msl_m']:.1f} m MSL (EGM2008), {row['alt_m']:.1f} m WGS84 ellipsoid")
+    lines.append(f"height {one_decimal(row['alt_msl_m'])} m MSL (EGM2008), {one_decimal(row['alt_m'])} m WGS84 "
+                 "ellipsoid")
     flight = f"flight {row['group']}" + (f", target {row['target']}" if row.get("target") else "")
     lines.append(flight + (f", {when}" if when else ""))
     return "\n".join(lines)

@@ -38,7 +38,7 @@ from pipeline.report.geometry import (
     lines_of_sight_m,
     uncertainty,
 )
-from pipeline.report.labels import count, method_label, ordered_methods
+from pipeline.report.labels import count, method_label, one_decimal, ordered_methods
 from pipeline.results import FlightResult, GroupFailure, GroupResult, per_target
 from pipeline.solve.uncertainty import ELLIPSE_CONFIDENCE, ellipse_points_en_m, horizontal
 
@@ -467,9 +467,9 @@ def _placemark(parent: ET.Element, name: str, style: str, schema: str, props: di
 
 def _description(row: dict) -> str:
     """The balloon text of a target's placemark: the answer as a user reads it."""
-    return (f"{row['mgrs']}; {row['alt_msl_m']:.1f} m above sea level (EGM2008), {row['alt_m']:.1f} m WGS84 "
-            f"ellipsoidal; CE90 {row['ce90_m']} m, LE90 {row['le90_m']} m ({row['tle_category']}); method "
-            f"{row['method']}, {count(row['n_observations'], 'observation')}")
+    return (f"{row['mgrs']}; {one_decimal(row['alt_msl_m'])} m above sea level (EGM2008), "
+            f"{one_decimal(row['alt_m'])} m WGS84 ellipsoidal; CE90 {row['ce90_m']} m, LE90 {row['le90_m']} m "
+            f"({row['tle_category']}); method {row['method']}, {count(row['n_observations'], 'observation')}")
 
 
 def targets_kml(results: Iterable[GroupResult | FlightResult], failures: Iterable[GroupFailure] = ()) -> bytes:

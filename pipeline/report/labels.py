@@ -47,3 +47,9 @@ def ordered_methods(methods) -> list[str]:
 def count(n: int, noun: str) -> str:
     """'1 observation', '2 observations'."""
     return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
+def one_decimal(x: float) -> str:
+    """x with one decimal, without a sign on a zero ('-0.0' reads as a sign that means something)."""
+    text = f"{x:.1f}"
+    return "0.0" if text == "-0.0" else text

@@ -21,6 +21,7 @@ import numpy as np
 
 from pipeline.geometry.frames import lla_from_enu
 from pipeline.report.exports import unsolved_methods
+from pipeline.report.labels import one_decimal
 from pipeline.results import FlightResult, GroupFailure, GroupResult, per_target, target_failures
 
 # Table-4 order, then ours.
@@ -108,7 +109,7 @@ def _answers_markdown(results, failures) -> list[str]:
         if a["status"] != "located":
             rows.append([a["name"], "not located", "", "", "", "", "", "", a["reason"]])
             continue
-        rows.append([a["name"], f"{a['lat_deg']:.7f}", f"{a['lon_deg']:.7f}", f"{a['alt_msl_m']:.1f}", a["mgrs"],
+        rows.append([a["name"], f"{a['lat_deg']:.7f}", f"{a['lon_deg']:.7f}", one_decimal(a['alt_msl_m']), a["mgrs"],
                      _fmt(a["ce90_m"]) or "—", a["tle_category"] or "—", a["method"], _fmt(a["error_m"]) or "—"])
     return ["## Answers: one per target", "",
             _md_table(["Target", "Latitude", "Longitude", "MSL m", "MGRS", "CE90 m", "Category", "Method",

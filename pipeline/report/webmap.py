@@ -34,7 +34,7 @@ from pipeline.report.geometry import (
     geodetic_from_enu,
     lines_of_sight_m,
 )
-from pipeline.report.labels import METHOD_COLORS, method_label, ordered_methods
+from pipeline.report.labels import METHOD_COLORS, method_label, one_decimal, ordered_methods
 from pipeline.results import GroupResult
 from pipeline.solve.uncertainty import ELLIPSE_CONFIDENCE, ellipse_points_en_m
 
@@ -270,7 +270,7 @@ def answers_map(targets: Sequence[GroupResult], tiles: bool = True):
         folium.CircleMarker(_latlon(lla)[0], radius=7, color="#000000", weight=1, fill=True, fill_color=ANSWER_COLOR,
                             fill_opacity=1.0,
                             tooltip=f"<b>{escape(t.label)}</b><br>{lla[0]:.7f}°, {lla[1]:.7f}°<br>"
-                                    f"{escape(row['mgrs'])}<br>{row['alt_msl_m']:.1f} m MSL{ce90}<br>"
+                                    f"{escape(row['mgrs'])}<br>{one_decimal(row['alt_msl_m'])} m MSL{ce90}<br>"
                                     f"method {escape(str(row['method']))}").add_to(m)
         folium.CircleMarker(_latlon(lla)[0], radius=1, opacity=0, fill=False,  # its name, always shown
                             tooltip=folium.Tooltip(escape(t.label), permanent=True, direction="right",

@@ -9,7 +9,6 @@ the flight's hand-written config (the table in docs/init.md).
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 import sys
 import tempfile
@@ -22,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from pipeline.autoconfig import config_text, draft_flight_config
 from pipeline.flight_config import flight_config_from_dict, load_flight_config
 from pipeline.run import process_group
-from pipeline.synth.config import SynthConfig
+from pipeline.synth.config import SynthConfig, with_sections
 from pipeline.synth.flight import generate
 
 # the flights of tests/test_init.py
@@ -43,15 +42,6 @@ FORMATS = {
 }
 
 
-def _merged(base: dict, changes: dict) -> dict:
-    out = copy.deepcopy(base)
-    for k, v in changes.items():
-        if isinstance(v, dict):
-            out.setdefault(k, {}).update(v)
-        else:
-            out[k] = v
-    return out
-
 
 def _ecef(result) -> np.ndarray:
     import pymap3d
@@ -61,7 +51,8 @@ def _ecef(result) -> np.ndarray:
 
 def one(fmt: str, seed: int, tmp: Path) -> list[str]:
     folder = tmp / f"{seed}-{fmt.split()[0]}"
-    generate(SynthConfig.from_dict(_merged({**TINY, "seed": seed}, FORMATS[fmt])), folder, write_flight_config=True)
+    cfg = SynthConfig.from_dict(with_sections({**TINY, "seed": seed}, FORMATS[fmt]))
+    generate(cfg, folder, write_flight_config=True)
     out = tmp / f"{folder.name}.yaml"
     draft = draft_flight_config(folder, out)
     out.write_text(config_text(draft, "ridgeloc init"))

@@ -7,7 +7,6 @@ config (`ridgeloc synth`'s flight.yaml: the operator's camera calibration, lever
 Real files: the MISB clips and the DJI SRTs of ../shared.
 """
 
-import copy
 import json
 import math
 import shutil
@@ -25,7 +24,7 @@ from pipeline.errors import InputError
 from pipeline.flight_config import flight_config_from_dict, load_flight_config
 from pipeline.ingest.video_time import creation_time_ns
 from pipeline.run import process_group
-from pipeline.synth.config import SynthConfig
+from pipeline.synth.config import SynthConfig, with_sections
 from pipeline.synth.conventions import BASE, FLIGHTS
 from pipeline.synth.flight import generate
 
@@ -54,15 +53,6 @@ FORMATS = {
 }
 
 
-def _merged(base: dict, changes: dict) -> dict:
-    out = copy.deepcopy(base)
-    for k, v in changes.items():
-        if isinstance(v, dict):
-            out.setdefault(k, {}).update(v)
-        else:
-            out[k] = v
-    return out
-
 
 @pytest.fixture(scope="module", params=list(FORMATS))
 def initialised(request, tmp_path_factory):
@@ -70,7 +60,7 @@ def initialised(request, tmp_path_factory):
     fmt = request.param
     root = tmp_path_factory.mktemp(f"init-{fmt}")
     folder = root / fmt
-    generate(SynthConfig.from_dict(_merged(TINY, FORMATS[fmt][0])), folder, write_flight_config=True)
+    generate(SynthConfig.from_dict(with_sections(TINY, FORMATS[fmt][0])), folder, write_flight_config=True)
     out = root / "init.yaml"
     assert cli_main(["init", str(folder), "-o", str(out)]) == 0
     return fmt, folder, json.loads((folder / "truth.json").read_text()), out
@@ -135,7 +125,7 @@ def test_the_run_command_on_an_init_config(tmp_path, capsys):
     """`ridgeloc init` then `ridgeloc run` as a user types them (images and CameraInfo in a ROS 1 bag; the
     target left at the image centre of the first observation, where the laser points)."""
     folder = tmp_path / "bag"
-    generate(SynthConfig.from_dict(_merged(TINY, FORMATS["ros1"][0])), folder)
+    generate(SynthConfig.from_dict(with_sections(TINY, FORMATS["ros1"][0])), folder)
     assert cli_main(["init", str(folder)]) == 0
     printed = capsys.readouterr().out
     assert f"wrote {folder / 'flight.yaml'}" in printed
@@ -151,7 +141,7 @@ def test_conventions_are_found_from_the_data(tmp_path):
     """A gimbal topic in the camera optical frame with its yaw relative to the vehicle: the default reading
     scatters the optical axes over kilometres; init writes the mapping check names, and the axes meet."""
     name = "ros_optical_vehicle_yaw"
-    cfg = _merged({**BASE, "group": name}, FLIGHTS[name])
+    cfg = with_sections({**BASE, "group": name}, FLIGHTS[name])
     generate(SynthConfig.from_dict(cfg), tmp_path / name)
     draft = draft_flight_config(tmp_path / name, tmp_path / "init.yaml")
     assert draft.doc["mapping"] == {"ros": {"gimbal": {"frame": "optical_enu", "yaw_in_vehicle_frame": True}}}

@@ -123,7 +123,8 @@ def _answers_section(results: Sequence[GroupResult], rows: list[dict], interacti
     parts.append(_answers_table(rows, results))
     parts.append('<p class="note">Each answer is chosen by one rule from what the flight shows (docs/outputs.md, '
                  '"The answer"): the weighted MLE when the flight determines it and its fit checks pass, else the '
-                 "most precise method the flight determines; a target no method locates is not located, and why. "
+                 "most precise simpler method the flight determines; a target no method locates is not located, and "
+                 "why. "
                  "CE90: the circle around the answer holding 90 % of the horizontal error; LE90: 90 % of the "
                  "height's; category: target location error category (JP 3-09.3) of CE90. Heights above mean sea "
                  "level (EGM2008); targets.csv also gives WGS84 ellipsoidal heights. The shaded ellipse on the map "

@@ -333,3 +333,17 @@ def _check(c: SynthConfig) -> None:
     names = [c.site.target_name, *[t.name for t in c.site.extra_targets]]
     if len(set(names)) != len(names):
         raise ConfigError(f"'site.extra_targets': target names must be unique, got {names}")
+
+
+def with_sections(base: dict, changes: dict) -> dict:
+    """A copy of the synth config dict `base` with `changes`: a dict value updates that section's keys (one level
+    deep), any other value replaces the key."""
+    import copy
+
+    out = copy.deepcopy(base)
+    for key, value in changes.items():
+        if isinstance(value, dict):
+            out.setdefault(key, {}).update(value)
+        else:
+            out[key] = value
+    return out

@@ -64,6 +64,7 @@ class Draft:
     warnings: list[str] = field(default_factory=list)
     found: list[str] = field(default_factory=list)
     first_frame: int = 0  # the first observation frame, where the target is marked by default
+    heights_above_takeoff: bool = False  # the take-off altitude is to be filled in (checks run with a provisional one)
 
     def note(self, key: str, text: str) -> None:
         self.comments.setdefault(key, []).append(text)
@@ -143,6 +144,7 @@ def _altitude(draft: Draft, log: FlightLog) -> None:
             "  srt: {takeoff_altitude_m: FILL_IN, abs_datum: amsl}"],
             f"mapping: the take-off point's altitude (srt.takeoff_altitude_m: {_source(pos)} gives heights above "
             "it only)"))
+        draft.heights_above_takeoff = True
         draft.decisions.append(("altitude", "heights above the take-off point; its altitude is to be filled in "
                                 "(AMSL converted with the EGM2008 geoid, auto)"))
     else:
@@ -322,7 +324,7 @@ def _config_for_checks(draft: Draft, out_path: Path) -> FlightConfig:
     is still to be filled in: whether the lines of sight meet, and when, does not depend on a height shared by every
     position."""
     doc = draft.doc
-    if any(f.key == "mapping" and "takeoff_altitude_m" in "".join(f.lines) for f in draft.fill_in):
+    if draft.heights_above_takeoff:
         doc = copy.deepcopy(doc)
         srt = doc.setdefault("mapping", {}).setdefault("srt", {})
         srt.setdefault("takeoff_altitude_m", 0.0)

@@ -12,14 +12,16 @@ frame's ground-plane homography, so generation costs one warp and one libx264 (u
 The flight config names only the .ts, with the target mark (the true pixel in the first observation frame) and
 the true target for the error column.
 
-Measures, in this one run: bare demux (PyAV packets of every stream, nothing kept), a bare PyAV decode of every
-frame (`for f in av.open(ts).decode(video=0)`, PyAV's default threading: what the run is judged against), the
-decode floor of the answer (our reader, `VideoFrames.prefetch`, decoding the observation frames and nothing else:
-each from the key frame before it), our index (`pipeline.ingest.video.demux_index`, frames only) and our full
-ingest (`read_flight`: index + KLV decode), each in a fresh subprocess; then `ridgeloc run FLIGHT.yaml` in a
-subprocess: wall time and peak RSS (that child's own, from wait4), the run's stage times, the answer's errors and
-the tracked pixels' distance from the true target pixel. Prints the ratios run / bare decode and run / the
-flight's length, and the load average before and after; writes a JSON summary into the work folder.
+Measures, in this one run: the imports every run loads before its first frame, bare demux (PyAV packets of every
+stream, nothing kept), a bare PyAV decode of every frame (`for f in av.open(ts).decode(video=0)`, PyAV's default
+threading: what the run is judged against), the decode floor of the answer (our reader, `VideoFrames.prefetch`,
+decoding the observation frames and nothing else: each from the key frame before it), our index
+(`pipeline.ingest.video.demux_index`, frames only) and our full ingest (`read_flight`: index + KLV decode), each in
+a fresh subprocess; then `ridgeloc run FLIGHT.yaml` in a subprocess: wall time and peak RSS (that child's own, from
+wait4), the run's stage times, the answer's errors and the tracked pixels' distance from the true target pixel.
+Prints the ratios run / bare decode and run / the flight's length, the floor no run goes below (imports + ingest +
+decode floor) against the bare decode, and the load average before and after; writes a JSON summary into the work
+folder.
 """
 
 from __future__ import annotations
@@ -230,7 +232,12 @@ def loop(folder: Path, times: int) -> Path:
     return path
 
 
+# what every run imports before its first frame (the interpreter's own start is not counted)
+RUN_IMPORTS = ("pipeline.commands.run", "pipeline.run", "pipeline.report.outputs", "pipeline.report.html",
+               "pipeline.report.figures", "pipeline.report.cot", "stanag4609.st0601", "folium", "cv2", "av")
+
 CHILD = {
+    "imports (modules a run loads)": ("", "\n".join(f"import {m}" for m in RUN_IMPORTS)),
     "bare demux": ("import av", "c=av.open(sys.argv[1])\nfor p in c.demux():\n    pass"),
     "bare decode (every frame)": ("import av", "c=av.open(sys.argv[1])\nfor f in c.decode(video=0):\n    pass"),
     "decode floor (observation frames)": (
@@ -354,6 +361,10 @@ def main(argv=None) -> int:
     print(f"ridgeloc run: {wall:.1f} s wall, {cpu:.1f} s CPU, peak RSS {peak:.0f} MiB")
     print(f"run / bare decode of every frame = {wall / bare:.2f} (wall); decode floor / bare decode = "
           f"{floor / bare:.2f}; run / flight length = {wall / results['seconds']:.3f}")
+    fixed = sum(results[k]["s"] for k in ("imports (modules a run loads)", "ingest (index + KLV)",
+                                          "decode floor (observation frames)"))
+    print(f"imports + ingest + decode floor = {fixed:.2f} s = {fixed / bare:.2f} of the bare decode (a run's floor "
+          "before any tracking, solving or report)")
     print(f"index / bare demux = {results['index']['s'] / results['bare demux']['s']:.2f} (wall)")
     print(f"frames decoded by the run: {results['frames_decoded']} for {results['n_observations']} observations")
     print(f"stages wall s: {results['timings_s']}")

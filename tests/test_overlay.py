@@ -133,3 +133,27 @@ def test_overlay_refuses_a_folder_that_is_not_a_finished_flight(tmp_path, capsys
     assert capsys.readouterr().err.splitlines() == [
         f"ridgeloc: error: {tmp_path}: a run's output folder, not one of its flights: give a flight's folder, "
         f"{tmp_path / 'a'} or {tmp_path / 'b'}"]
+
+
+def test_overlay_caption_range_is_the_frames_shot_whichever_target_kept_it():
+    """Two targets on one frame: the first lies off the laser's axis, so its observation keeps no range (NaN); the
+    caption's laser range is still the frame's shot, which the second target kept (the kwiver clip with a target
+    marked beside the crosshair showed 'no laser range' on every frame)."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from pipeline.report.overlay import OverlayTarget, frame_camera
+
+    P = np.hstack([np.eye(3), np.zeros((3, 1))])
+    tracking = {"frame_index": [0, 5], "used": [True, True]}
+
+    def target(label, ranges):
+        obs = SimpleNamespace(P=np.stack([P, P]), platform_m=np.zeros((2, 3)), range_m=np.array(ranges))
+        return OverlayTarget(label, tracking, obs, None, None)
+
+    off_axis, on_axis = target("car", [np.nan, np.nan]), target("truck", [1730.3, 1731.0])
+    _, _, rng = frame_camera([off_axis, on_axis], 1)
+    assert rng == pytest.approx(1731.0)
+    P1, origin, rng = frame_camera([off_axis, target("gone", [np.nan, np.nan])], 0)
+    assert P1 is not None and origin is not None and np.isnan(rng)

@@ -187,6 +187,24 @@ def _caption(img: np.ndarray, lines: Sequence[str]) -> None:
                     (255, 255, 255), 1, cv2.LINE_AA)
 
 
+def frame_camera(targets: Sequence[OverlayTarget], k: int) -> tuple[np.ndarray | None, np.ndarray | None, float]:
+    """(P (3, 4), laser origin (3,) m, laser range m or NaN) of the planned frame `k`: every target's observations
+    of a frame share its camera (a target dropped there borrows another's); the range is the frame's shot, which a
+    target off the laser's axis does not keep (its range is NaN), so it comes from any target that kept it."""
+    P = origin = None
+    rng = math.nan
+    for t in targets:
+        used = t.tracking.get("used") or [True] * len(t.tracking["frame_index"])
+        if not used[k]:
+            continue
+        j = int(sum(1 for u in used[:k] if u))  # the frame's row in this target's observations
+        if P is None:
+            P, origin = t.observations.P[j], t.observations.platform_m[j]
+        if not np.isfinite(rng):
+            rng = float(t.observations.range_m[j])
+    return P, origin, rng
+
+
 def draw_frame(image: np.ndarray, scale: float, k: int, targets: Sequence[OverlayTarget], camera: dict,
                t0_ns: int) -> np.ndarray:
     """One overlay frame: `image` the scaled source frame (BGR, drawn on in place), `k` the row of the planned
@@ -203,15 +221,7 @@ def draw_frame(image: np.ndarray, scale: float, k: int, targets: Sequence[Overla
     def seen(px):  # an ideal pinhole pixel -> where the lens put it
         return distort_pixels(px[None], K, dist)[0] if lens else px
 
-    # the frame's camera: every target's observations of it share it (a target dropped here borrows another's)
-    P = origin = None
-    rng = math.nan
-    for t in targets:
-        used = t.tracking.get("used") or [True] * len(t.tracking["frame_index"])
-        if used[k]:
-            j = int(sum(1 for u in used[:k] if u))  # the frame's row in this target's observations
-            P, origin, rng = t.observations.P[j], t.observations.platform_m[j], float(t.observations.range_m[j])
-            break
+    P, origin, rng = frame_camera(targets, k)
     range_text = f"laser range {rng:.1f} m" if np.isfinite(rng) else "no laser range"
     status = []
     for n, t in enumerate(targets):

@@ -126,3 +126,27 @@ def test_mark_refuses_a_folder_or_a_file_in_the_pages_way_before_reading_the_fli
         assert main(["mark", config, "-o", str(out)]) == 1
         assert capsys.readouterr().err.splitlines() == [f"ridgeloc: error: {out}: {problem}"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"] and afile.read_text() == "keep me"
+
+
+def test_mark_shows_a_colour_video_in_colour(tmp_path):
+    """The real KWIVER clip is in colour (a pink car beside a grey one): the page shows its frames in colour, not
+    the tracker's grayscale, so the person marking can tell the targets apart by it."""
+    import base64
+
+    import cv2
+
+    from pipeline.cli import main
+
+    clip = ROOT / ".." / "shared" / "fmv" / "aphill_short.ts"
+    if not clip.is_file():
+        pytest.skip(f"{clip} absent (the shared read-only material is not beside this checkout)")
+    (tmp_path / "flight.yaml").write_text(f"name: clip\nfiles: {{telemetry: [{clip.resolve()}]}}\n"
+                                          "altitude: {geoid_separation_m: auto}\n")
+    assert main(["mark", str(tmp_path / "flight.yaml"), "--max-frames", "2"]) == 0
+    html = (tmp_path / "marks.html").read_text()
+    jpegs = re.findall(r"data:image/jpeg;base64,([A-Za-z0-9+/=]+)", html)
+    assert len(jpegs) == 2
+    img = cv2.imdecode(np.frombuffer(base64.b64decode(jpegs[0]), np.uint8), cv2.IMREAD_UNCHANGED)
+    assert img.ndim == 3 and img.shape == (480, 720, 3)
+    saturation = cv2.cvtColor(img, cv2.COLOR_BGR2HSV)[..., 1]
+    assert np.percentile(saturation, 99) > 80  # a gray page has none

@@ -110,7 +110,7 @@ def main(args) -> int:
         known = [{"name": t.name, "frame": int(m.frame_index), "x": float(m.pixel[0]), "y": float(m.pixel[1])}
                  for t in flight_targets(config) if t.name is not None for m in t.marks if m.template is None]
         wanted = sorted(set(wanted) | {m["frame"] for m in known})
-        images = flight.decoder(wanted)
+        images = flight.source.colour(wanted)  # in colour: the person marking tells targets apart by it
     atomic_write_text(out, mark_page(images, f"ridgeloc mark: {config.name}", known))
     print(f"wrote {out} ({len(images)} frame(s)); open it in a browser, click the targets and save marks.csv, "
           "then set `marks_file: marks.csv` in the flight config")

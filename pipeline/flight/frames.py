@@ -66,6 +66,20 @@ class FrameSource:
         self.decoder = TimedDecoder(read, prefetch)
         self._closable = closable
 
+    def colour(self, indices: Sequence[int]) -> dict[int, np.ndarray]:
+        """{index: BGR image} of a video's frames, for a person to look at (`ridgeloc mark`); the tracker's gray
+        images where the frames are not a video file's (a bag's image topic). Not timed, no prefetch."""
+        from pipeline import ingest
+
+        video = self._closable
+        if not isinstance(video, ingest.VideoFrames):
+            return self.decoder(indices)
+        try:
+            with ingest.VideoFrames(video.path, index=video.index) as colour:
+                return colour.read(sorted(set(int(i) for i in indices)))
+        except RidgelocError:  # a damaged stream: the tracker's reader keeps the frames that decode
+            return self.decoder(indices)
+
     def close(self) -> None:
         closable, self._closable = self._closable, None
         close = getattr(closable, "close", None)

@@ -244,8 +244,8 @@ def test_check_and_mark_of_a_log_say_it_is_not_a_config(tmp_path, capsys):
     for command in (["check"], ["mark", "-o", str(tmp_path / "marks.html")]):
         assert cli_main([*command, str(log)]) == 1
         assert capsys.readouterr().err.splitlines() == [
-            f"ridgeloc: error: {log}: a telemetry log, not a flight config: use `ridgeloc inspect`, or name it in a "
-            "flight config's files.telemetry"]
+            f"ridgeloc: error: {log}: a telemetry log, not a flight config: `ridgeloc init {tmp_path}` writes one "
+            "from the flight's files, or name it in a flight config's files.telemetry"]
     folder = tmp_path / "flight"  # a folder given for its flight config (was "cannot read: [Errno 21] Is a directory")
     folder.mkdir()
     for command in (["check"], ["mark", "-o", str(tmp_path / "marks.html")]):

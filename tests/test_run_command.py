@@ -228,12 +228,20 @@ def _not_configs(folder: Path) -> dict[str, Path]:
             "photo": folder / "DJI_0001.JPG", "video": folder / "clip.avi"}
 
 
-LOG_NOT_CONFIG = ("a telemetry log, not a flight config: use `ridgeloc inspect`, or name it in a flight config's "
-                  "files.telemetry")
-NOT_CONFIG = {"telemetry log": LOG_NOT_CONFIG, "srt": LOG_NOT_CONFIG, "ros2": LOG_NOT_CONFIG,
-              "photo": "drone photos, not a flight config: use `ridgeloc inspect` or `ridgeloc locate`",
-              "video": "a video, not a flight config: use `ridgeloc inspect`, or name it in a flight config's "
-                       "files.video"}
+def _log_not_config(path: Path) -> str:
+    return (f"a telemetry log, not a flight config: `ridgeloc init {path.parent}` writes one from the flight's files, "
+            "or name it in a flight config's files.telemetry")
+
+
+def _not_config(kind: str, path: Path) -> str:
+    """What a user who gave `path` where a config belongs is told: for a log or a video, the command that writes
+    the config (`ridgeloc init` of its folder), not only the one that shows what the file holds."""
+    if kind == "photo":
+        return "drone photos, not a flight config: use `ridgeloc inspect` or `ridgeloc locate`"
+    if kind == "video":
+        return (f"a video, not a flight config: `ridgeloc init {path.parent}` writes one from the flight's files, "
+                "or name it in a flight config's files.video")
+    return _log_not_config(path)
 
 
 def test_run_of_a_log_says_it_is_not_a_config(tmp_path, capsys):
@@ -242,12 +250,12 @@ def test_run_of_a_log_says_it_is_not_a_config(tmp_path, capsys):
     out = tmp_path / "out"
     for kind, path in _not_configs(tmp_path / "in").items():
         assert main(["run", str(path), "-o", str(out), "-q"]) == 1, kind
-        assert capsys.readouterr().err.splitlines() == [f"ridgeloc: error: {path}: {NOT_CONFIG[kind]}"], kind
+        assert capsys.readouterr().err.splitlines() == [f"ridgeloc: error: {path}: {_not_config(kind, path)}"], kind
     log = tmp_path / "in" / "flight.tlog"
     manifest = tmp_path / "manifest.yaml"
     manifest.write_text(yaml.safe_dump([str(log)]))
     assert main(["run", str(manifest), "-o", str(out), "-q"]) == 1
-    assert capsys.readouterr().err.splitlines() == [f"ridgeloc: flight: failed: {log}: {LOG_NOT_CONFIG}"]
+    assert capsys.readouterr().err.splitlines() == [f"ridgeloc: flight: failed: {log}: {_log_not_config(log)}"]
     assert not out.exists()
 
 

@@ -50,10 +50,10 @@ def not_a_config(path: str | PathLike) -> InputError | None:
     except RidgelocError:
         return _a_folder(p) if p.is_dir() else None
     if fmt == "video":
-        return InputError("a video, not a flight config: use `ridgeloc inspect`, or name it in a flight config's "
-                          "files.video", p)
-    return InputError("a telemetry log, not a flight config: use `ridgeloc inspect`, or name it in a flight "
-                      "config's files.telemetry", p)
+        return InputError(f"a video, not a flight config: `ridgeloc init {p.parent}` writes one from the flight's "
+                          "files, or name it in a flight config's files.video", p)
+    return InputError(f"a telemetry log, not a flight config: `ridgeloc init {p.parent}` writes one from the flight's "
+                      "files, or name it in a flight config's files.telemetry", p)
 
 
 def _a_folder(p: Path) -> InputError:

@@ -301,3 +301,18 @@ def test_a_failed_flights_folder_from_an_earlier_run_is_removed(tmp_path):
     assert not (out / "b").exists() and (out / "a" / ".done").is_file()
     rows = (out / "targets.csv").read_text().splitlines()[1:]
     assert [r.split(",")[0] for r in rows] == ["a", "b"] and "not_located" in rows[1]
+
+
+def test_broken_flight_configs_of_a_folder_are_named_by_their_folders(tmp_path, capsys):
+    """A folder of flights, each in its own folder as `ridgeloc init` writes them (FOLDER/flight.yaml): a config
+    that does not load is reported under its folder's name, not as 'flight' (every one of them was)."""
+    for name, text in (("north", "name: north\naltitdue: {geoid_separation_m: auto}\n"), ("south", "name: [\n")):
+        (tmp_path / "flights" / name).mkdir(parents=True)
+        (tmp_path / "flights" / name / "flight.yaml").write_text(text)
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "flights"), "-o", str(out), "-q"]) == 1
+    printed = capsys.readouterr()
+    err = printed.err.splitlines()
+    assert [line.split(": failed: ")[0] for line in err] == ["ridgeloc: north", "ridgeloc: south"], err
+    assert "north/flight.yaml: altitdue: unknown key (did you mean 'altitude'?)" in err[0]
+    assert "2 of 2 flight(s) failed: north, south" in printed.out and not out.exists()

@@ -94,6 +94,16 @@ def group_summary(r, reused: bool = False) -> list[str]:
     return lines
 
 
+def _failed_name(source: str) -> str:
+    """The name a flight config that does not load is reported under: its file's stem, or for a flight.yaml (what
+    `ridgeloc init` writes, one per flight folder) its folder's name, so that the failures of a folder of flights
+    are told apart."""
+    p = Path(source)
+    if p.stem == "flight" and p.suffix.lower() in (".yaml", ".yml") and p.resolve().parent.name:
+        return p.resolve().parent.name
+    return p.stem
+
+
 def main(args) -> int:
     output_folder(args.outdir)  # a file there is refused before any flight runs
     if args.scheduler is not None and args.executor != "dask":
@@ -117,7 +127,7 @@ def main(args) -> int:
     for entry in entries:
         if entry.config is None:
             log = not_a_config(entry.source)  # a log listed as a flight config
-            config_failures.append(GroupFailure(Path(entry.source).stem, entry.source, str(log or entry.error)))
+            config_failures.append(GroupFailure(_failed_name(entry.source), entry.source, str(log or entry.error)))
         else:
             loaded.append((entry.source, entry.config))
     jobs = [Job(cfg.name, source, cfg) for source, cfg in loaded]

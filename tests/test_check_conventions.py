@@ -5,6 +5,7 @@ clock keys, the clusters."""
 
 import csv
 import datetime
+import json
 import math
 import re
 from pathlib import Path
@@ -262,3 +263,20 @@ def test_check_and_mark_of_a_log_say_it_is_not_a_config(tmp_path, capsys):
     cfg = tmp_path / "group1.cfg"
     cfg.write_text((repo / "configs" / "flights" / "group1.yaml").read_text().replace("../../", f"{repo}/"))
     assert cli_main(["check", "--no-clock", str(cfg)]) == 0  # was "unknown log type (suffix '.cfg', ...)"
+
+
+def test_the_principal_point_warning_names_a_named_target_as_the_config_gives_it(tmp_path, capsys):
+    """A flight whose first target is named (`targets:` or a marks file) is warned about under that name, not as
+    `target.pixel`, a key the config does not have."""
+    clip = Path(__file__).resolve().parents[1] / ".." / "shared" / "fmv" / "aphill_short.ts"
+    if not clip.is_file():
+        pytest.skip(f"{clip} absent (the shared read-only material is not beside this checkout)")
+    config = tmp_path / "flight.yaml"
+    config.write_text(f"name: clip\nfiles: {{telemetry: [{clip.resolve()}]}}\naltitude: {{geoid_separation_m: auto}}\n"
+                      "mapping: {klv: {azimuth_north: grid}}\n"
+                      "targets: [{name: car, frame_index: 0, pixel: [497, 250]}]\n")
+    assert cli_main(["check", str(config), "--no-clock", "--json"]) == 0
+    warnings = json.loads(capsys.readouterr().out)["warnings"]
+    (far,) = [w for w in warnings if "from the principal point" in w]
+    assert far.startswith(f"target 'car' ({config}: targets[0] (car)): pixel [497, 250] is 138 px from the "
+                          "principal point"), far

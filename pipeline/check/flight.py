@@ -230,19 +230,21 @@ def mark_checks(r: Flight, centre_m: np.ndarray | None, conv: Convention | None 
                 problems.append(f"{key} {m.frame_index} is not a frame of the video")
                 continue
             if primary:
-                warnings += _primary_mark_checks(r, m, centre_m, conv, now, frame_numbers, problems)
+                warnings += _primary_mark_checks(r, m, centre_m, conv, now, frame_numbers, problems,
+                                                 "target.pixel" if target.name is None else what)
     return problems, warnings
 
 
-def _primary_mark_checks(r: Flight, m, centre_m, conv, now, frame_numbers, problems: list[str]) -> list[str]:
+def _primary_mark_checks(r: Flight, m, centre_m, conv, now, frame_numbers, problems: list[str],
+                         what: str = "target.pixel") -> list[str]:
     """The first mark against the principal point (a warning, returned) and the cluster of the lines of sight
-    (a problem, appended)."""
+    (a problem, appended); `what` names the mark as the config or marks file gives it."""
     cam = r.camera
     u, v = m.pixel
     warnings = []
     off = math.hypot(u - cam.cx_px, v - cam.cy_px)
     if off > 0.25 * min(cam.width_px, cam.height_px):
-        warnings.append(f"target.pixel [{u:g}, {v:g}] is {off:.0f} px from the principal point "
+        warnings.append(f"{what} [{u:g}, {v:g}] is {off:.0f} px from the principal point "
                         f"({cam.cx_px:.1f}, {cam.cy_px:.1f}): the laser may not be on the target")
     if centre_m is None or r.plan is None or m.frame_index is None or frame_numbers is None:
         return warnings
@@ -260,7 +262,7 @@ def _primary_mark_checks(r: Flight, m, centre_m, conv, now, frame_numbers, probl
         if miss["as given"] > 0.05 * dist:
             better = {k: mm for k, mm in miss.items() if k != "as given" and mm < 0.3 * miss["as given"]}
             hint = f"; swapped to [{v:g}, {u:g}] it misses by {_fmt_m(min(better.values()))}" if better else ""
-            problems.append(f"the line of sight through target.pixel [{u:g}, {v:g}] in frame {m.frame_index} "
+            problems.append(f"the line of sight through {what} [{u:g}, {v:g}] in frame {m.frame_index} "
                             f"misses where the lines of sight meet by {_fmt_m(miss['as given'])}{hint}")
     return warnings
 

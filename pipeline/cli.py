@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from pipeline import __version__
@@ -44,6 +45,23 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict]:
     return parser, modules
 
 
+def _stdout_gone() -> bool:
+    """Whether stdout is a pipe whose reader has closed it (poll says so); if so, stdout is pointed at /dev/null so
+    that the interpreter's flush at exit does not fail on it too. False for a broken pipe elsewhere."""
+    import select
+
+    try:
+        fd = sys.stdout.fileno()
+        poll = select.poll()
+    except (AttributeError, ValueError, OSError):  # stdout without a file descriptor (captured); no poll
+        return False
+    poll.register(fd, select.POLLOUT)
+    if not any(ev & (select.POLLERR | select.POLLHUP) for _, ev in poll.poll(0)):
+        return False
+    os.dup2(os.open(os.devnull, os.O_WRONLY), fd)
+    return True
+
+
 def main(argv: list[str] | None = None) -> int:
     parser, modules = build_parser()
     args = parser.parse_args(argv)
@@ -56,6 +74,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"ridgeloc: error: {exc}", file=sys.stderr)
         return 1
     except OSError as exc:  # a full disk, a read-only folder: the machine's state, not a bug
+        if isinstance(exc, BrokenPipeError) and _stdout_gone():
+            return 141  # the reader of the output left (`ridgeloc inspect LOG | head`): stop, as Unix tools do
         message = environment_error_message(exc)
         if message is None:
             raise

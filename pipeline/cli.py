@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from pipeline import __version__
@@ -55,6 +56,9 @@ def main(argv: list[str] | None = None) -> int:
     except RidgelocError as exc:
         print(f"ridgeloc: error: {exc}", file=sys.stderr)
         return 1
+    except BrokenPipeError:  # `ridgeloc ... | head` closed the pipe: stop quietly, as other command-line tools do
+        _silence_stdout()
+        return 141  # 128 + SIGPIPE, the shell's status for a command whose reader went away
     except OSError as exc:  # a full disk, a read-only folder: the machine's state, not a bug
         message = environment_error_message(exc)
         if message is None:
@@ -64,6 +68,13 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("ridgeloc: interrupted", file=sys.stderr)
         return 130
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null, so that the interpreter's last flush of what is left of a closed pipe's buffer
+    raises no second BrokenPipeError at exit (the Python documentation's recipe, `signal` module notes)."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
 
 
 if __name__ == "__main__":

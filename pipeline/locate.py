@@ -537,6 +537,21 @@ def location_result(name: str, settings: dict, loc: PhotoLocation, notes: list[s
                        timings_s={"locate": elapsed_s}, settings=settings, target=target, answer=answer)
 
 
+def marks_target_name(path: str) -> str | None:
+    """The target's name in a marks CSV of `ridgeloc mark` (`name,frame_or_image,x_px,y_px`, one target), None for
+    a `photo,x_px,y_px` file (no name). The file is read as `read_marks` reads it (its errors are raised there)."""
+    try:
+        with open(path, encoding="utf-8-sig") as f:
+            if not f.readline().strip().startswith("name,"):
+                return None
+    except (OSError, UnicodeDecodeError):
+        return None
+    from pipeline.targets import read_marks_csv
+
+    targets = read_marks_csv(path)
+    return targets[0].name if len(targets) == 1 else None
+
+
 def read_marks(path: str, photos) -> list:
     """(n, 2) pixels (NaN where a photo is not listed) from a marks CSV `photo,x_px,y_px`, or from the marks CSV of
     `ridgeloc mark` (`name,frame_or_image,x_px,y_px`, pipeline.targets) holding one target."""

@@ -67,7 +67,11 @@ def test_mark_of_a_photo_folder_and_the_csv_locate_reads(tmp_path, capsys):
     (target,) = read_marks_csv(csv)
     assert [m.template for m in target.marks] == [str((folder / f"P{k}.jpg").resolve()) for k in (0, 1)]
     cli_main(["locate", str(folder), "--marks", str(csv), "--json"])
-    assert np.isfinite(json.loads(capsys.readouterr().out)["estimates"]["dlt"]["lat_deg"])
+    doc = json.loads(capsys.readouterr().out)
+    assert np.isfinite(doc["estimates"]["dlt"]["lat_deg"])
+    # the name typed on the page names the answer, as `ridgeloc run` of a flight config with that marks_file: does
+    assert (doc["answer"]["name"], doc["answer"]["group"], doc["answer"]["target"]) == ("photos:cairn", "photos",
+                                                                                         "cairn")
 
 
 def test_mark_of_a_photo_flight_config_shows_its_known_marks(tmp_path, capsys):

@@ -531,6 +531,8 @@ def location_result(name: str, settings: dict, loc: PhotoLocation, notes: list[s
     settings["notes"] = list(notes)
     settings["solve_failures"] = {m: {"status": s, "reason": r} for m, (s, r) in loc.unsolved.items()}
     settings["photos"] = [p.path for p in loc.views.photos]
+    # the zone of the first photo's time (pipeline.ingest.photo): "unknown" is the camera's local clock, not UTC
+    settings["photo_time_zone"] = loc.views.photos[0].time_zone if loc.views.photos else "unknown"
     settings["error_model"] = loc.errors.to_dict()
     return GroupResult(name=name, origin_lla=loc.views.origin_lla, observations=loc.obs,
                        estimates=loc.estimates, truth_m=truth_m, intersection_angle_deg=gamma,

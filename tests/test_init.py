@@ -282,6 +282,8 @@ def test_init_of_photos_says_to_mark_them_next(tmp_path, capsys):
     cfg = folder / "flight.yaml"
     assert last == (f"next: ridgeloc mark {cfg} (click the target in every photo that shows it; set marks_file: to "
                     f"the saved CSV), then ridgeloc run {cfg}")
+    # the line to fill in names the file `ridgeloc mark` saves, not targets.csv (the answers' file of `run`)
+    assert "\n# marks_file: marks.csv   # FILL IN: the CSV `ridgeloc mark` saves" in cfg.read_text()
 
 
 def test_bursts_are_aligned_with_the_shots_that_triggered_them():

@@ -99,7 +99,14 @@ def main(args) -> int:
     from pipeline.commands import read_photos_reporting
     from pipeline.commands.send import check_send_args, cot_options
     from pipeline.errors import InputError
-    from pipeline.locate import check_pixels, estimate_row, locate_photos, marks_target_name, read_marks
+    from pipeline.locate import (
+        check_pixels,
+        estimate_row,
+        locate_photos,
+        marks_target_name,
+        read_marks,
+        unmarked_reason,
+    )
     from pipeline.report.cot import check_flight_name
 
     cot = cot_options(args)  # a bad CoT type, stale time, URL, certificate or name is refused before any work
@@ -160,7 +167,8 @@ def main(args) -> int:
                      "the mle as a terrain prior (docs/terrain.md)")
     name = args.name or _default_name(args.photos)
     result = location_result(name, {"command": "locate", "photos": [p.path for p in photos]}, loc, notes,
-                             target=target, dem=dem, dem_sigma_m=args.dem_sigma_m)
+                             target=target, dem=dem, dem_sigma_m=args.dem_sigma_m,
+                             unmarked=unmarked_reason(loc, pixels, "--marks, --pixel"))
     answer = answer_row(result)
     if args.outdir is None and answer["status"] != "located":  # no estimates.csv to point to: the list below
         answer["reason"] = answer["reason"].replace(

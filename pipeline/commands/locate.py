@@ -160,6 +160,7 @@ def main(args) -> int:
 
     from pipeline.locate import location_result
     from pipeline.report.answers import answer_row, answers_text
+    from pipeline.report.labels import one_decimal
 
     notes = list(loc.notes)
     if dem is not None and args.dem_sigma_m is None:
@@ -195,8 +196,12 @@ def main(args) -> int:
         for m, r in rows.items():
             if "lat_deg" in r:
                 cep = "" if r["cep50_m"] is None else f"  CEP50 {r['cep50_m']:.2f} m"
-                print(f"  {m:10s} {r['lat_deg']:.7f} {r['lon_deg']:.7f}  h {r['h_m']:.1f} m (ellipsoid)  "
-                      f"{r['alt_msl_m']:.1f} m MSL{cep}")
+                # rounded as targets.csv is before shown as the answer's line is: the answer's method prints the
+                # same digits (651.0504 m is 651.05 there, shown 651.0; here it was 651.1)
+                lat, lon, h, msl = (round(r[k], d) for k, d in (("lat_deg", 8), ("lon_deg", 8), ("h_m", 3),
+                                                                 ("alt_msl_m", 3)))
+                print(f"  {m:10s} {lat:.7f} {lon:.7f}  h {one_decimal(h)} m (ellipsoid)  {one_decimal(msl)} m "
+                      f"MSL{cep}")
             else:
                 print(f"  {m:10s} {r['status']}: {r['reason']}")
         for note in doc["notes"]:

@@ -391,6 +391,12 @@ def _photo_draft(folder: Folder, out_path: Path) -> Draft:
         draft.doc["terrain"] = {"dem": rel(folder.dems[0])}
         draft.note("terrain", "The GeoTIFF DEM beside the photos; add vertical_sigma_m (its vertical error, m) for "
                    "the MLE's terrain prior.")
+    elif folder.dems:  # which one covers the target is not for init to guess
+        names = ", ".join(rel(d) for d in folder.dems)
+        draft.fill_in.append(FillIn("terrain", [
+            f"terrain: {{dem: {rel(folder.dems[0])}}}   # optional: the DEM that covers the target, one of {names}"],
+            f"terrain: the DEM that covers the target, one of the {len(folder.dems)} beside the photos ({names})",
+            required=False))
     draft.fill_in.append(FillIn("marks_file", [
         "marks_file: marks.csv   # FILL IN: the CSV `ridgeloc mark` saves, name,frame_or_image,x_px,y_px per "
         "target and photo (none: the target at every image centre, where the laser points)"],

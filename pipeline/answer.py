@@ -379,7 +379,7 @@ def choose_answer(obs: Observations, estimates: dict[str, Estimate], unsolved: d
                     cov, offsets = cov + added[m], shared + added[m]
         verdicts[m] = judge(m, e, unsolved.get(m), obs, origin_lla, cov, source, ground, why, offsets)
     _ridge_needs_fusion(verdicts)
-    n = int(obs.n)
+    n = int((obs.has_pixel | obs.has_range).sum())  # the frames or photos that see or range the target
     mle = verdicts.get("mle")
     fit_ok, misfit = mle_fit_passes(estimates["mle"]) if mle is not None and mle.determined else (False, None)
     if fit_ok:

@@ -502,26 +502,34 @@ def _photo_result(config, photos, pixels, dem, dem_sigma, notes, truth, target):
     loc = locate_photos(photos, pixels, dem=dem, dem_sigma_m=dem_sigma)
     if not loc.estimates:
         reasons = "; ".join(r if r.startswith(f"{m}: ") else f"{m}: {r}" for m, (_, r) in loc.unsolved.items())
-        unmarked = ""
-        if pixels is None and not loc.obs.has_range.any():  # every image centre, and no laser pointing there
-            unmarked = ("the target is not marked (files.marks, marks_file:), so each photo's image centre is taken, "
-                        "where a laser would point, and these photos have no laser range: mark the target in the "
-                        "photos with `ridgeloc mark`; ")
+        unmarked = unmarked_reason(loc, pixels, "files.marks, marks_file:")
         raise InputError(f"no method could locate the target from the photos: {unmarked}{reasons}", config.path)
     return location_result(config.name, config.to_dict(), loc, notes, truth, target, dem, dem_sigma,
                            time.perf_counter() - t0)
 
 
+def unmarked_reason(loc: PhotoLocation, pixels, how: str) -> str:
+    """Why several photos without a marked target and without a laser locate nothing, to lead their reason: each
+    image centre is another ground point, which no baseline makes meet (`how`: where the marks go). Empty
+    otherwise."""
+    if pixels is not None or loc.obs.n < 2 or loc.obs.has_range.any():
+        return ""
+    return (f"the target is not marked ({how}), so each photo's image centre is taken, where a laser would point, "
+            "and these photos have no laser range: mark the target in the photos with `ridgeloc mark`; ")
+
+
 def location_result(name: str, settings: dict, loc: PhotoLocation, notes: list[str], truth=None, target=None,
-                    dem=None, dem_sigma_m: float | None = None, elapsed_s: float = 0.0):
+                    dem=None, dem_sigma_m: float | None = None, elapsed_s: float = 0.0, unmarked: str = ""):
     """A photo location as the GroupResult the outputs take (`ridgeloc run` of a photo flight, `ridgeloc locate
     -o`): its estimates, the answer (`photo_answer`), the truth (lat, lon, h) where known, the error model in
-    the settings."""
+    the settings. `unmarked` (`unmarked_reason`) leads the reason of an answer that is not located."""
     from pipeline.geometry.rays import intersection_angle_deg
     from pipeline.results import GroupResult
 
     truth_m = None if truth is None else enu_from_lla(*truth, origin_lla=loc.views.origin_lla)
     answer = photo_answer(loc, dem, dem_sigma_m)
+    if unmarked and not answer.located:
+        answer = replace(answer, reason=unmarked + answer.reason)
     ref = truth_m if truth_m is not None else (answer.position_m if answer.located else next(
         (e.position_m for e in loc.estimates.values()), None))
     seen = loc.obs.has_pixel | loc.obs.has_range
@@ -531,10 +539,27 @@ def location_result(name: str, settings: dict, loc: PhotoLocation, notes: list[s
     settings["notes"] = list(notes)
     settings["solve_failures"] = {m: {"status": s, "reason": r} for m, (s, r) in loc.unsolved.items()}
     settings["photos"] = [p.path for p in loc.views.photos]
+    # the zone of the first photo's time (pipeline.ingest.photo): "unknown" is the camera's local clock, not UTC
+    settings["photo_time_zone"] = loc.views.photos[0].time_zone if loc.views.photos else "unknown"
     settings["error_model"] = loc.errors.to_dict()
     return GroupResult(name=name, origin_lla=loc.views.origin_lla, observations=loc.obs,
                        estimates=loc.estimates, truth_m=truth_m, intersection_angle_deg=gamma,
                        timings_s={"locate": elapsed_s}, settings=settings, target=target, answer=answer)
+
+
+def marks_target_name(path: str) -> str | None:
+    """The target's name in a marks CSV of `ridgeloc mark` (`name,frame_or_image,x_px,y_px`, one target), None for
+    a `photo,x_px,y_px` file (no name). The file is read as `read_marks` reads it (its errors are raised there)."""
+    try:
+        with open(path, encoding="utf-8-sig") as f:
+            if not f.readline().strip().startswith("name,"):
+                return None
+    except (OSError, UnicodeDecodeError):
+        return None
+    from pipeline.targets import read_marks_csv
+
+    targets = read_marks_csv(path)
+    return targets[0].name if len(targets) == 1 else None
 
 
 def read_marks(path: str, photos) -> list:

@@ -68,6 +68,23 @@ def test_the_mle_is_the_answer_where_its_fit_checks_pass():
     assert all(v.determined for m, v in a.verdicts.items() if m in est and m != "range")
 
 
+def test_the_answer_counts_the_observations_of_its_target_not_the_frames_without_it():
+    """n_observations (targets.csv, the KML, the CoT remarks) are the frames or photos that see or range the target:
+    six photos of which two are marked answer from 2, not 6 (docs/outputs.md: "observations of the target")."""
+    import dataclasses
+
+    obs, _ = synthetic_observations(seed=3)
+    unseen = np.arange(obs.n) % 3 == 0  # a third of the frames neither see nor range the target
+    pixel, range_m = obs.pixel.copy(), obs.range_m.copy()
+    pixel[unseen], range_m[unseen] = np.nan, np.nan
+    range_m[1] = np.nan  # a frame that sees it without a range counts; one that ranges it unseen too
+    pixel[2] = np.nan
+    obs = dataclasses.replace(obs, pixel=pixel, range_m=range_m)
+    est, uns = _solved(obs)
+    a = choose_answer(obs, est, uns, ORIGIN)
+    assert a.located and a.n_observations == int((~unseen).sum()) < obs.n
+
+
 def test_an_mle_whose_misfit_its_inflated_covariance_covers_answers_and_says_so():
     """The error model does not fit, the covariance inflated 1.69 x (axes x1.3), within the 9 x allowed: the MLE
     answers, and its reason says the model did not fit (it read "its fit checks pass" alone, beside the run's

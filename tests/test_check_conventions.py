@@ -249,11 +249,14 @@ def test_check_and_mark_of_a_log_say_it_is_not_a_config(tmp_path, capsys):
             "from the flight's files, or name it in a flight config's files.telemetry"]
     folder = tmp_path / "flight"  # a folder given for its flight config (was "cannot read: [Errno 21] Is a directory")
     folder.mkdir()
-    for command in (["check"], ["mark", "-o", str(tmp_path / "marks.html")]):
-        assert cli_main([*command, str(folder)]) == 1
-        assert capsys.readouterr().err.splitlines() == [
-            f"ridgeloc: error: {folder}: a folder, not a flight config: `ridgeloc init {folder}` writes one from its "
-            "files"]
+    assert cli_main(["check", str(folder)]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"ridgeloc: error: {folder}: a folder, not a flight config: `ridgeloc init {folder}` writes one from its "
+        "files"]
+    assert cli_main(["mark", "-o", str(tmp_path / "marks.html"), str(folder)]) == 1  # mark also takes photo folders
+    assert capsys.readouterr().err.splitlines() == [
+        f"ridgeloc: error: {folder}: no drone photos (.jpg, .jpeg files) here, and a folder is not a flight config: "
+        f"`ridgeloc init {folder}` writes one from a flight's files"]
     (folder / "flight.yaml").write_text("name: x\n")
     assert cli_main(["check", str(folder)]) == 1
     assert capsys.readouterr().err.splitlines() == [

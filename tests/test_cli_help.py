@@ -41,3 +41,27 @@ def test_output_into_a_closed_pipe_stops_without_a_traceback():
     p.stdout.close()  # before the child prints (it is still importing)
     err = p.stderr.read().decode()
     assert p.wait(timeout=120) == 141 and err == ""
+
+
+def test_output_piped_into_a_reader_that_stops_early_ends_quietly():
+    """`ridgeloc locate ... --json | head` closes the pipe after a few lines: no traceback, the SIGPIPE status.
+    A command printing more than a pipe holds stands in for a long output."""
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "from pipeline import cli\n"
+            "import types\n"
+            "def main_(args):\n"
+            "    for i in range(100000):\n"
+            "        print('line', i)\n"
+            "    return 0\n"
+            "mod = types.SimpleNamespace(HELP='h', add_arguments=lambda p: None, main=main_)\n"
+            "cli._load_commands = lambda: {'inspect': mod}\n"
+            "raise SystemExit(cli.main(['inspect']))\n")
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.readline()
+    p.stdout.close()  # the reader goes away, as `head -1` does
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=60) == 141
+    assert "Traceback" not in err and "BrokenPipeError" not in err, err

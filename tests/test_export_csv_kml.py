@@ -146,6 +146,9 @@ def test_kml_is_kml22_and_agrees_with_geojson_and_csv(tmp_path, groups):
         assert c[2] == pytest.approx(h - n_m, abs=0.011) and float(rows[name]["alt_msl_m"]) == pytest.approx(
             h - n_m, abs=0.011)
         assert rows[name]["mgrs"] in pm.findtext(f"{KML}description")
+        # the balloon's CE90 and LE90 as the CoT remarks give them: one decimal each (LE90 had targets.csv's three)
+        ce, le = (float(rows[name][k]) for k in ("ce90_m", "le90_m"))
+        assert f"CE90 {ce:.1f} m, LE90 {le:.1f} m (" in pm.findtext(f"{KML}description")
 
 
 def test_kml_attributes_are_typed_by_a_schema(tmp_path, groups):

@@ -282,6 +282,26 @@ def test_init_of_photos_says_to_mark_them_next(tmp_path, capsys):
     cfg = folder / "flight.yaml"
     assert last == (f"next: ridgeloc mark {cfg} (click the target in every photo that shows it; set marks_file: to "
                     f"the saved CSV), then ridgeloc run {cfg}")
+    # the line to fill in names the file `ridgeloc mark` saves, not targets.csv (the answers' file of `run`)
+    assert "\n# marks_file: marks.csv   # FILL IN: the CSV `ridgeloc mark` saves" in cfg.read_text()
+
+
+def test_photos_beside_several_dems_are_told_to_pick_the_one_covering_the_target(tmp_path, capsys):
+    """Photos with three GeoTIFFs beside them (../shared/photos/makers): init does not guess which covers the target,
+    and does not drop them silently either: an optional line lists them, and uncommented it loads."""
+    folder = tmp_path / "photos"
+    shutil.copytree(ROOT / "sample_data" / "photos" / "h20_laser", folder)
+    (folder / "flight.yaml").unlink()
+    shutil.copy(folder / "dem.tif", folder / "other.tif")
+    assert cli_main(["init", str(folder)]) == 0
+    out = capsys.readouterr().out
+    assert "optional: terrain: the DEM that covers the target, one of the 2 beside the photos (dem.tif, other.tif)" \
+        in out
+    text = (folder / "flight.yaml").read_text()
+    assert "\nterrain:" not in text
+    line = next(ln for ln in text.splitlines() if ln.startswith("# terrain: "))
+    (folder / "flight.yaml").write_text(text.replace(line, line[2:]))
+    assert load_flight_config(folder / "flight.yaml").terrain.dem == str(folder / "dem.tif")
 
 
 def test_bursts_are_aligned_with_the_shots_that_triggered_them():

@@ -216,3 +216,18 @@ def test_a_dem_is_the_mle_prior_only_with_a_stated_sigma(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--dem-sigma-m is the DEM's vertical error: give the DEM with --dem" in err
     assert len(err.strip().splitlines()) == 1
+
+
+def test_the_answers_method_prints_the_answers_digits(capsys):
+    """The table's answer and its method's line in the list below it show the same latitude, longitude and MSL
+    height: on the sample h20_laser photos the MLE's 651.0504 m MSL was '651.0' above (targets.csv's 651.05
+    shown to one decimal) and '651.1' below."""
+    from pathlib import Path
+
+    folder = Path(__file__).resolve().parents[1] / "sample_data" / "photos" / "h20_laser"
+    assert cli_main(["locate", str(folder), "--dem", str(folder / "dem.tif")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    answer = lines[1].split()
+    method = next(ln.split() for ln in lines if ln.startswith(f"  {answer[-1]} "))
+    assert answer[0] == "h20_laser" and answer[-1] == "mle"
+    assert (method[1], method[2], method[7]) == (answer[1], answer[2], answer[3])

@@ -176,3 +176,21 @@ def test_locate_reads_the_mark_pages_csv_of_one_target(tmp_path, capsys):
     assert cli_main(["locate", *(p.path for p in photos), "--marks", str(csv)]) != 0
     err = capsys.readouterr().err
     assert "holds 2 targets (cairn, mast): locate takes one" in err and len(err.strip().splitlines()) == 1
+
+
+def test_photos_without_marks_or_laser_are_told_to_mark_the_target(tmp_path, capsys):
+    """Several photos, no mark, no laser: each image centre is another ground point. The line says to mark the
+    target (as `ridgeloc run` of the same photos does), not to fly around it, and targets.csv gives the same reason."""
+    (tmp_path / "photos").mkdir()
+    for k, lon in enumerate((LON - 0.0003, LON + 0.0003)):
+        write_maker_photo(tmp_path / "photos" / f"P{k}.jpg", "parrot", yaw=0.0, pitch=-60.0, lat=LAT, lon=lon,
+                          size=(640, 480))
+    assert cli_main(["locate", str(tmp_path / "photos"), "-o", str(tmp_path / "out")]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(
+        "ridgeloc: error: the target is not located: the target is not marked (--marks, --pixel), so each photo's "
+        "image centre is taken")
+    assert "the target is not marked" in (tmp_path / "out" / "targets.csv").read_text()
+    # a marked pixel, even the same in both photos, is the user's statement: its reason is the geometry's
+    assert cli_main(["locate", str(tmp_path / "photos"), "--pixel", "320", "240"]) == 1
+    assert "not marked" not in capsys.readouterr().err

@@ -67,7 +67,11 @@ def test_mark_of_a_photo_folder_and_the_csv_locate_reads(tmp_path, capsys):
     (target,) = read_marks_csv(csv)
     assert [m.template for m in target.marks] == [str((folder / f"P{k}.jpg").resolve()) for k in (0, 1)]
     cli_main(["locate", str(folder), "--marks", str(csv), "--json"])
-    assert np.isfinite(json.loads(capsys.readouterr().out)["estimates"]["dlt"]["lat_deg"])
+    doc = json.loads(capsys.readouterr().out)
+    assert np.isfinite(doc["estimates"]["dlt"]["lat_deg"])
+    # the name typed on the page names the answer, as `ridgeloc run` of a flight config with that marks_file: does
+    assert (doc["answer"]["name"], doc["answer"]["group"], doc["answer"]["target"]) == ("photos:cairn", "photos",
+                                                                                         "cairn")
 
 
 def test_mark_of_a_photo_flight_config_shows_its_known_marks(tmp_path, capsys):
@@ -90,3 +94,15 @@ def test_mark_refuses_a_mix_of_configs_and_photos(tmp_path, capsys):
     assert "give one flight config, or drone photos" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         cli_main(["mark"])
+
+
+def test_mark_of_a_folder_without_photos_says_it_has_none(tmp_path, capsys):
+    """`ridgeloc mark FOLDER` takes a photo folder: one without photos is told so (it said only "a folder, not a
+    flight config", as if mark took no folders), and no page is written."""
+    folder = tmp_path / "empty"
+    folder.mkdir()
+    assert cli_main(["mark", str(folder)]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"ridgeloc: error: {folder}: no drone photos (.jpg, .jpeg files) here, and a folder is not a flight config: "
+        f"`ridgeloc init {folder}` writes one from a flight's files"]
+    assert list(folder.iterdir()) == []

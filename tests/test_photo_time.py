@@ -74,3 +74,20 @@ def test_damaged_gps_time_is_no_time(photo):
     _retag(photo, "2023:11:14 22:13:20", None, (25.0, 0.0, 0.0), gps_date="2023:13:40")
     p = read_photo_checked(photo)
     assert p.gps_t_ns is None and p.time_zone == "unknown"
+
+
+@pytest.mark.parametrize("offset, when", [(None, "2024-07-31 19:17 camera local time"),
+                                          ("+02:00", "2024-07-31 17:17 UTC")])
+def test_the_tak_remarks_call_a_time_without_a_zone_the_cameras_local_time(tmp_path, offset, when):
+    """A photo's DateTimeOriginal without OffsetTimeOriginal or a GPS time is the camera's local clock (`inspect`
+    says so): the CoT remarks ATAK shows must not call it UTC."""
+    from pipeline.cli import main
+    from support.maker_photos import write_maker_photo
+
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    write_maker_photo(folder / "P0.jpg", "parrot", yaw=0.0, pitch=-60.0, alt=900.0, size=(640, 480),
+                      model="test camera", exif_extra=None if offset is None else {36881: offset})
+    assert main(["locate", str(folder), "--ground-height-m", "800", "-o", str(tmp_path / "out")]) == 0
+    (cot,) = (tmp_path / "out" / "cot").glob("*.cot")
+    assert f"flight photos, {when}</remarks>" in cot.read_text()

@@ -4,6 +4,8 @@ The truths are independent of the ray caster: hits on the analytic terrain (pipe
 surface that a bilinear grid represents exactly) found by dense sampling and bisection along the ray.
 """
 
+import re
+
 import numpy as np
 import pytest
 import rasterio
@@ -213,6 +215,24 @@ def test_a_ray_that_misses_is_one_line_naming_photo_pixel_and_dem(hills_dem, ori
     msg = str(exc.value)
     assert isinstance(exc.value, InputError) and "\n" not in msg
     assert msg.startswith("DJI_0042.JPG pixel (2000.0, 1500.0): ") and str(hills_dem.path) in msg
+
+
+def test_a_miss_names_its_heights_datum_and_where_a_dem_of_another_site_is(hills_dem):
+    """The camera's height in a miss is WGS84 ellipsoidal (the photo states AMSL: they differ by the geoid), and a
+    camera away from the DEM hears where the DEM is: a DEM of another site is the usual cause."""
+    with pytest.raises(GeometryError, match=r"500\.0 m WGS84 ellipsoidal height, [0-9.]+ m under the ground"):
+        hills_dem.intersect((LAT0, LON0, 500.0), (0, 1, -0.5))
+    with pytest.raises(GeometryError) as exc:
+        hills_dem.intersect((LAT0 + 0.1, LON0, 600.0), (0, 1, 0.0))
+    lat0, lat1, _, _ = hills_dem.bounds_deg
+    d_m = (LAT0 + 0.1 - lat1) * 111_000  # north of the DEM by about this
+    got = re.search(r"the DEM covers lat ([0-9.]+)\.\.([0-9.]+), lon [0-9.]+\.\.[0-9.]+, about (\d+) m from the camera",
+                    str(exc.value))
+    assert got and float(got[1]) == pytest.approx(lat0, abs=1e-4) and float(got[2]) == pytest.approx(lat1, abs=1e-4)
+    assert abs(int(got[3]) - d_m) < 100
+    with pytest.raises(GeometryError) as exc:  # over the DEM: nothing to say about where it is
+        hills_dem.intersect((LAT0, LON0, 900.0), (0, 1, 0.01))
+    assert "the DEM covers" not in str(exc.value)
 
 
 def test_a_nodata_hole_on_the_way_stops_the_ray(tmp_path):

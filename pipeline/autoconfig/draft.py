@@ -383,16 +383,23 @@ def _photo_draft(folder: Folder, out_path: Path) -> Draft:
     root = folder.root
     draft = Draft({"name": _name(root), "files": {"photos": [rel(root)]}})
     draft.found = [f"{len(folder.photos)} photo(s)"]
-    draft.note("files", f"{len(folder.photos)} drone photos: each states its pose, camera and laser range in its "
-               "metadata (`ridgeloc inspect` lists them); `ridgeloc locate` and `ridgeloc run` read them.")
+    draft.note("files", f"{len(folder.photos)} drone photos: each states its pose and camera (and its laser range, "
+               "with a rangefinder) in its metadata (`ridgeloc inspect` lists them); `ridgeloc locate` and `ridgeloc "
+               "run` read them.")
     draft.decisions.append(("photos", f"{len(folder.photos)} photo(s); intrinsics and poses from their metadata"))
     if len(folder.dems) == 1:
         draft.doc["terrain"] = {"dem": rel(folder.dems[0])}
         draft.note("terrain", "The GeoTIFF DEM beside the photos; add vertical_sigma_m (its vertical error, m) for "
                    "the MLE's terrain prior.")
+    elif folder.dems:  # which one covers the target is not for init to guess
+        names = ", ".join(rel(d) for d in folder.dems)
+        draft.fill_in.append(FillIn("terrain", [
+            f"terrain: {{dem: {rel(folder.dems[0])}}}   # optional: the DEM that covers the target, one of {names}"],
+            f"terrain: the DEM that covers the target, one of the {len(folder.dems)} beside the photos ({names})",
+            required=False))
     draft.fill_in.append(FillIn("marks_file", [
-        "marks_file: targets.csv   # FILL IN: name,frame_or_image,x_px,y_px per target and photo (none: the "
-        "target at every image centre, where the laser points)"],
+        "marks_file: marks.csv   # FILL IN: the CSV `ridgeloc mark` saves, name,frame_or_image,x_px,y_px per "
+        "target and photo (none: the target at every image centre, where the laser points)"],
         "marks_file: the targets' pixels in the photos (until then the image centres, where the laser points)"))
     flight_config_from_dict(draft.doc, out_path)
     return draft

@@ -18,8 +18,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     where.add_argument("--pixel", nargs=2, type=float, metavar=("X", "Y"),
                        help="the target pixel in every photo (default: the image centre, where the laser points)")
     where.add_argument("--marks", metavar="FILE",
-                       help="CSV with a header `photo,x_px,y_px`: the target pixel per photo (file name); photos "
-                            "not listed have no pixel")
+                       help="CSV with a header `photo,x_px,y_px`, or the marks CSV `ridgeloc mark` saves (one "
+                            "target): the target pixel per photo (file name); photos not listed have no pixel")
     parser.add_argument("--alt-datum", choices=("amsl", "ellipsoid"), default=None,
                         help="datum of drone-dji:AbsoluteAltitude / EXIF GPSAltitude (default amsl; docs/ingest.md)")
     parser.add_argument("--image-rotation", type=int, choices=(0, 180), default=None,
@@ -55,7 +55,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also write the run outputs there: targets.csv/.geojson/.kml (the answer), estimates.csv/"
                              ".geojson (every method), report.html, run.json (docs/outputs.md)")
     parser.add_argument("--name", default=None,
-                        help="the target's name in the outputs (default: the first photo's folder name)")
+                        help="the name in the outputs (default: the first photo's folder name); a marks CSV of "
+                             "`ridgeloc mark` adds its target's name: NAME:TARGET, as `ridgeloc run` names it")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace the results of another run in the --outdir folder")
     parser.add_argument("--json", action="store_true", help="print one JSON document, the answer first")
@@ -98,7 +99,14 @@ def main(args) -> int:
     from pipeline.commands import read_photos_reporting
     from pipeline.commands.send import check_send_args, cot_options
     from pipeline.errors import InputError
-    from pipeline.locate import check_pixels, estimate_row, locate_photos, read_marks
+    from pipeline.locate import (
+        check_pixels,
+        estimate_row,
+        locate_photos,
+        marks_target_name,
+        read_marks,
+        unmarked_reason,
+    )
     from pipeline.report.cot import check_flight_name
 
     cot = cot_options(args)  # a bad CoT type, stale time, URL, certificate or name is refused before any work
@@ -132,8 +140,10 @@ def main(args) -> int:
         except ValueError:
             raise InputError(f"--dem-sigma-m must be a finite number > 0, got {args.dem_sigma_m}") from None
     photos, bad = read_photos_reporting(args.photos, alt_datum=args.alt_datum)
+    target = None
     if args.marks:
         pixels = read_marks(args.marks, photos)
+        target = marks_target_name(args.marks)  # the name typed on the marks page: NAME:TARGET, as `run` names it
     elif args.pixel:
         pixels = [args.pixel] * len(photos)
     else:
@@ -150,6 +160,7 @@ def main(args) -> int:
 
     from pipeline.locate import location_result
     from pipeline.report.answers import answer_row, answers_text
+    from pipeline.report.labels import one_decimal
 
     notes = list(loc.notes)
     if dem is not None and args.dem_sigma_m is None:
@@ -157,7 +168,8 @@ def main(args) -> int:
                      "the mle as a terrain prior (docs/terrain.md)")
     name = args.name or _default_name(args.photos)
     result = location_result(name, {"command": "locate", "photos": [p.path for p in photos]}, loc, notes,
-                             dem=dem, dem_sigma_m=args.dem_sigma_m)
+                             target=target, dem=dem, dem_sigma_m=args.dem_sigma_m,
+                             unmarked=unmarked_reason(loc, pixels, "--marks, --pixel"))
     answer = answer_row(result)
     if args.outdir is None and answer["status"] != "located":  # no estimates.csv to point to: the list below
         answer["reason"] = answer["reason"].replace(
@@ -184,8 +196,12 @@ def main(args) -> int:
         for m, r in rows.items():
             if "lat_deg" in r:
                 cep = "" if r["cep50_m"] is None else f"  CEP50 {r['cep50_m']:.2f} m"
-                print(f"  {m:10s} {r['lat_deg']:.7f} {r['lon_deg']:.7f}  h {r['h_m']:.1f} m (ellipsoid)  "
-                      f"{r['alt_msl_m']:.1f} m MSL{cep}")
+                # rounded as targets.csv is before shown as the answer's line is: the answer's method prints the
+                # same digits (651.0504 m is 651.05 there, shown 651.0; here it was 651.1)
+                lat, lon, h, msl = (round(r[k], d) for k, d in (("lat_deg", 8), ("lon_deg", 8), ("h_m", 3),
+                                                                 ("alt_msl_m", 3)))
+                print(f"  {m:10s} {lat:.7f} {lon:.7f}  h {one_decimal(h)} m (ellipsoid)  {one_decimal(msl)} m "
+                      f"MSL{cep}")
             else:
                 print(f"  {m:10s} {r['status']}: {r['reason']}")
         for note in doc["notes"]:

@@ -88,6 +88,9 @@ def main(args) -> int:
         return _photo_page(paths, None, out)
     if len(paths) > 1:
         raise InputError(f"give one flight config, or drone photos: {', '.join(map(str, paths))}")
+    if paths[0].is_dir() and not (paths[0] / "flight.yaml").is_file():  # mark takes photo folders: say it has none
+        raise InputError(f"no drone photos (.jpg, .jpeg files) here, and a folder is not a flight config: `ridgeloc "
+                         f"init {paths[0]}` writes one from a flight's files", paths[0])
     # a folder or a file in the page's way is refused before the video is read
     out = output_file(args.output or paths[0].resolve().parent / "marks.html", "marks.html")
     try:

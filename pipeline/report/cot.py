@@ -80,7 +80,10 @@ def _flight_time(r: GroupResult) -> str | None:
     t = r.observations.t_ns
     if t is None or len(t) == 0 or int(t[0]) < _PLAUSIBLE_NS:
         return None
-    return datetime.fromtimestamp(int(t[0]) / 1e9, timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    when = datetime.fromtimestamp(int(t[0]) / 1e9, timezone.utc).strftime("%Y-%m-%d %H:%M")
+    if r.settings.get("photo_time_zone") == "unknown":  # a photo's DateTimeOriginal without a zone or GPS time
+        return f"{when} camera local time"
+    return f"{when} UTC"
 
 
 def _m(x) -> str:

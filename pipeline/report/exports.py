@@ -465,10 +465,16 @@ def _placemark(parent: ET.Element, name: str, style: str, schema: str, props: di
     return pm
 
 
+def _metres(x) -> str:
+    """A CE90 / LE90 as the CoT remarks give it: one decimal, or 'unknown'."""
+    return "unknown" if x is None else f"{one_decimal(x)} m"
+
+
 def _description(row: dict) -> str:
     """The balloon text of a target's placemark: the answer as a user reads it."""
     return (f"{row['mgrs']}; {one_decimal(row['alt_msl_m'])} m above sea level (EGM2008), "
-            f"{one_decimal(row['alt_m'])} m WGS84 ellipsoidal; CE90 {row['ce90_m']} m, LE90 {row['le90_m']} m "
+            f"{one_decimal(row['alt_m'])} m WGS84 ellipsoidal; CE90 {_metres(row['ce90_m'])}, LE90 "
+            f"{_metres(row['le90_m'])} "
             f"({row['tle_category']}); method {row['method']}, {count(row['n_observations'], 'observation')}")
 
 

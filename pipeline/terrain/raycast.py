@@ -120,6 +120,20 @@ def _crossings(g: np.ndarray, t: np.ndarray, ray: np.ndarray, n_lines: int):
     return rays, tc
 
 
+def _where_the_dem_is(dem, origin_lla: np.ndarray) -> str:
+    """For a ray that misses the DEM's area from a camera outside it: where the DEM is, and how far (a DEM of
+    another site says so), e.g. "; the DEM covers lat 40.7088..40.7121, lon -111.8962..-111.8925, 1812 km from the
+    camera". Empty for a camera over the DEM's bounds."""
+    lat0, lat1, lon0, lon1 = dem.bounds_deg
+    lat, lon = float(origin_lla[0]), float(origin_lla[1])
+    if lat0 <= lat <= lat1 and lon0 <= lon <= lon1:
+        return ""
+    e, n, _ = pymap3d.geodetic2enu(dem.outline_deg[:, 0], dem.outline_deg[:, 1], 0.0, lat, lon, 0.0)
+    d_m = float(np.hypot(e, n).min())  # to the nearest of the outline's sampled points: within a few posts
+    far = f"{d_m / 1000:.0f} km" if d_m >= 10_000 else f"{d_m:.0f} m"
+    return f"; the DEM covers lat {lat0:.4f}..{lat1:.4f}, lon {lon0:.4f}..{lon1:.4f}, about {far} from the camera"
+
+
 def intersect_rays(dem, origins_lla: np.ndarray, directions_enu: np.ndarray):
     """First ground hits of k rays. origins_lla (k, 3) (lat_deg, lon_deg, ellipsoid height m); directions_enu
     (k, 3) in the ENU frame at each origin (any length). Returns lla (k, 3) (NaN where there is no hit) and a
@@ -157,7 +171,7 @@ def intersect_rays(dem, origins_lla: np.ndarray, directions_enu: np.ndarray):
     above = good & (t_far <= 0)
     for r in np.flatnonzero(above):
         reasons[r] = (f"the ray never meets the ground: it points above the terrain (starts at {h0[r]:.1f} m, "
-                      f"above the DEM's highest post at {dem.h_max_m:.1f} m)")
+                      f"above the DEM's highest post at {dem.h_max_m:.1f} m; WGS84 ellipsoidal heights)")
     node_t = np.where(d_h * t_far > 0, NODE_POSTS * post / np.maximum(d_h, 1e-300), t_far)
     node_t = np.clip(node_t, t_far / MAX_NODES, t_far)  # a camera 1000s of posts from a fine DEM: bounded work
     n_int = np.where(t_far > 0, np.ceil(t_far / np.where(node_t > 0, node_t, 1.0)), 0).astype(np.int64)
@@ -209,8 +223,8 @@ def intersect_rays(dem, origins_lla: np.ndarray, directions_enu: np.ndarray):
                 ll = _f(dem, O, D, np.array([r]), np.array([t0[e]]))
                 where = f"{ll[1][0]:.6f}, {ll[2][0]:.6f}"
                 if t0[e] == 0.0:
-                    reasons[r] = (f"the ray starts below the DEM surface (at {where}, {h0[r]:.1f} m, "
-                                  f"{-f0[e]:.1f} m under the ground)")
+                    reasons[r] = (f"the ray starts below the DEM surface (at {where}, {h0[r]:.1f} m WGS84 "
+                                  f"ellipsoidal height, {-f0[e]:.1f} m under the ground)")
                 else:
                     reasons[r] = (f"the ray enters the DEM's data below its surface at {where}: the ground it "
                                   f"meets is outside the DEM")
@@ -228,9 +242,10 @@ def intersect_rays(dem, origins_lla: np.ndarray, directions_enu: np.ndarray):
                     reasons[r] = "the ray never meets the ground within the DEM: it passes above the terrain"
                 elif t_far[r] == t_v[r]:
                     reasons[r] = (f"the ray meets the ground outside the DEM: it drops below the DEM's lowest post "
-                                  f"({dem.h_min_m:.1f} m) without crossing its area")
+                                  f"({dem.h_min_m:.1f} m WGS84 ellipsoidal) without crossing its area"
+                                  + _where_the_dem_is(dem, o[r]))
                 else:
-                    reasons[r] = "the ray never crosses the DEM's area"
+                    reasons[r] = "the ray never crosses the DEM's area" + _where_the_dem_is(dem, o[r])
         block += 1
 
     if hit_seg:

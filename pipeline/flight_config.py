@@ -410,14 +410,15 @@ FMV_SUFFIXES = (".ts", ".m2ts", ".mts", ".mpg", ".mpeg", ".mp4", ".mkv", ".mov")
 def flight_config_for_video(path: str | PathLike) -> FlightConfig:
     """The flight config of a full-motion video (MISB ST 0601 KLV beside the video) given alone on the command
     line: the file is the telemetry and the video, the intrinsics come from its field of view and the target is
-    where the boresighted laser points, the crosshair of the first observation frame."""
+    where the boresighted laser points, the crosshair of the first observation frame; its azimuths are read from
+    true or UTM grid north as its frame centres say (`mapping: {klv: {azimuth_north: auto}}`)."""
     path = Path(path).resolve()
     if not path.is_file():
         raise ConfigError("no such file", path)
     name = "".join(c if c.isalnum() or c in "-_" else "_" for c in path.stem) or "flight"
     # MSL altitudes (EG 0104, ST 0601 tag 15 alone) converted with the EGM2008 geoid; unused for ellipsoid heights
     return FlightConfig(name=name.lstrip("."), files=Files(telemetry=(str(path),)), path=str(path),
-                        altitude=Altitude(geoid_separation_m="auto"))
+                        altitude=Altitude(geoid_separation_m="auto"), mapping={"klv": {"azimuth_north": "auto"}})
 
 
 @dataclass(frozen=True)

@@ -13,10 +13,10 @@ named targets, issue 21) with the wall time of each stage:
 
 from __future__ import annotations
 
-from pipeline.check.frame_centre import frame_centre_checks
 from pipeline.clock_estimate import ClockEstimate, estimate_clock
 from pipeline.flight import Flight, TargetMark
 from pipeline.flight_config import FlightConfig
+from pipeline.ingest.frame_centre import frame_centre_checks
 from pipeline.locate import process_photo_group
 from pipeline.results import FlightResult, GroupResult
 from pipeline.sync.select import ObservationPlan

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pipeline.check.frame_centre import GRID_NORTH, TRUE_NORTH, check_file, check_frame_centre
 from pipeline.geometry.grid_north import utm_convergence_deg
 from pipeline.ingest import read_flight
+from pipeline.ingest.frame_centre import GRID_NORTH, TRUE_NORTH, check_file, check_frame_centre
 from pipeline.ingest.klv import KlvTable, decode_eg0104, read_klv_table, scan_packets
 from support.writers import eg0104_set, klv_item
 
@@ -187,12 +187,38 @@ def test_the_grid_azimuth_switch_puts_the_line_of_sight_on_the_frame_centre(name
 
 
 def test_check_json_on_a_clip_prints_frame_centre():
+    """A clip checked alone reads its azimuths as its frame centres say (azimuth_north: auto): from grid north,
+    0.2 m from the frame centres, and says so among the warnings."""
     p = _clip("aphill_short.ts")
     out = subprocess.run([sys.executable, "-m", "pipeline", "check", str(p), "--json", "--no-clock"],
                          capture_output=True, text=True, timeout=600)
     doc = json.loads(out.stdout)
     fc = doc["frame_centre"]
-    assert fc["n"] == 48 and fc["median_m"] == pytest.approx(35.5, abs=0.5) and fc["p95_m"] >= fc["median_m"]
+    assert fc["n"] == 48 and fc["median_m"] < 1.0 and fc["p95_m"] >= fc["median_m"] and fc["explained_by"] is None
+    assert "grid north" in fc["convention"]
+    assert any("azimuths read from UTM grid north (klv.azimuth_north: auto)" in w and "35.5 m read from true north"
+               in w for w in doc["warnings"]), doc["warnings"]
+
+
+@pytest.mark.parametrize("name", sorted(CLIPS))
+def test_a_clip_run_alone_reads_its_azimuths_as_its_frame_centres_say(name):
+    """`ridgeloc run clip.ts` (no config): the clip's config asks for azimuth_north auto, and the reader takes
+    grid north where the frame-centre check finds the miss explained by it (both KWIVER clips), true north where
+    the frame centres agree with it (the sample full-motion video) or where no config asks (the default)."""
+    from pipeline.flight_config import flight_config_for_video
+
+    config = flight_config_for_video(_clip(name))
+    assert config.mapping == {"klv": {"azimuth_north": "auto"}}
+    auto = read_flight([_clip(name)], mapping=config.mapping)
+    assert next(iter(auto.klv_tables.values())).azimuth_north == "grid"
+    assert sum("(klv.azimuth_north: auto)" in w for w in auto.warnings) == 1
+    plain = read_flight([_clip(name)])
+    assert next(iter(plain.klv_tables.values())).azimuth_north == "true"
+    assert not any("azimuth_north: auto" in w for w in plain.warnings)
+    sample = Path(__file__).resolve().parents[1] / "sample_data" / "fmv" / "flight.ts"
+    synthetic = read_flight([sample], mapping=config.mapping)
+    assert next(iter(synthetic.klv_tables.values())).azimuth_north == "true"
+    assert not any("azimuth_north: auto" in w for w in synthetic.warnings)
 
 
 def test_a_field_coded_clip_is_indexed_one_frame_per_field_pair():

@@ -166,8 +166,8 @@ def test_a_full_motion_video_needs_only_the_target(tmp_path):
     (tmp_path / "clip.yaml").write_text(config_text(draft, "ridgeloc init"))
     config = load_flight_config(tmp_path / "clip.yaml")
     assert config.files.telemetry == (str(clip),)
-    from pipeline.check.frame_centre import frame_centre_checks
     from pipeline.flight.flight import read_flight_logs
+    from pipeline.ingest.frame_centre import frame_centre_checks
 
     (_, check), = frame_centre_checks(read_flight_logs(config))
     assert check.median_m < 5 and check.explained_by is None

@@ -154,7 +154,7 @@ def _altitude(draft: Draft, log: FlightLog) -> None:
 def _azimuth_north(draft: Draft, log: FlightLog) -> None:
     """A KLV stream whose frame centres the line of sight misses as a grid-north azimuth would (or true north,
     when read as grid) is read the way that explains them (`ridgeloc check`'s frame-centre check)."""
-    from pipeline.check.frame_centre import GRID_NORTH, TRUE_NORTH, frame_centre_checks
+    from pipeline.ingest.frame_centre import GRID_NORTH, TRUE_NORTH, frame_centre_checks
 
     for path, c in frame_centre_checks(log):
         north = {GRID_NORTH: "grid", TRUE_NORTH: "true"}.get(c.explained_by)

@@ -5,14 +5,20 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from pipeline.check.flight import GeometryResult, geometry_checks, mapping_lines
-from pipeline.check.frame_centre import add_frame_centre, frame_centre_checks, frame_centre_document
 from pipeline.check.geometry import _fmt_m
 from pipeline.clock_estimate import ClockEstimate, estimate_clock
 from pipeline.errors import RidgelocError
 from pipeline.flight import Flight, acquire_mark
 from pipeline.flight_config import FlightConfig
+from pipeline.ingest.frame_centre import LARGE_M, FrameCentreCheck, frame_centre_checks, frame_centre_document
 from pipeline.targets import first_mark
 from pipeline.track.sift import SiftTracker
+
+
+def add_frame_centre(result, checks: list[tuple[str, FrameCentreCheck]]) -> None:
+    """Put the checks on a check result; a convention error (median above LARGE_M) is also a problem."""
+    result.frame_centre = checks
+    result.problems += [f"{f}: {r.line()}" for f, r in checks if r.median_m > LARGE_M]
 
 
 @dataclass

@@ -65,7 +65,7 @@ def _klv_kind(path) -> str | None:
 
 def _check_klv_dump(args) -> int:
     """A raw KLV dump has no frames to check: the frame-centre check alone."""
-    from pipeline.check.frame_centre import LARGE_M, check_file, frame_centre_document
+    from pipeline.ingest.frame_centre import LARGE_M, check_file, frame_centre_document
 
     r = check_file(args.config)
     checks = [] if r is None else [(str(args.config), r)]

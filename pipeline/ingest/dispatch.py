@@ -93,14 +93,16 @@ def _read_file(path: str | Path, mapping: dict | None, scan_all: bool) -> Flight
         from pipeline.ingest.mcap_plain import read_mcap
         return read_mcap(p, mapping_for("mcap", mapping), mapping_for("ros", mapping), scan_all=scan_all)
     if fmt == "klv":
+        from pipeline.ingest.frame_centre import auto_north
         from pipeline.ingest.klv import read_klv_dump
-        return read_klv_dump(p, mapping_for("klv", mapping))
+        return read_klv_dump(p, mapping_for("klv", mapping), auto_north)
     if fmt == "video":
         from pipeline.ingest.video import demux_index, read_video
         index = demux_index(p, data_streams=True)
         if index.data_packets:  # MISB full-motion video: telemetry and frames from one file
+            from pipeline.ingest.frame_centre import auto_north
             from pipeline.ingest.klv import read_fmv
-            return read_fmv(p, index, mapping_for("klv", mapping))
+            return read_fmv(p, index, mapping_for("klv", mapping), auto_north)
         frames = read_video(p, frames_csv=mapping_for("video", mapping)["frames_csv"], index=index)
         from pipeline.ingest.model import StreamInfo
         stream = StreamInfo(p.name, "video", int(frames.t_ns.size),

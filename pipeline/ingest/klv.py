@@ -375,14 +375,27 @@ def _decode_all(chunks) -> tuple[list[dict], list, int, int, int, int, int]:
 
 
 def _north(mapping: dict | None) -> str:
-    """The mapping's `azimuth_north` ("true" or "grid"; YAML's bare `true` counts as "true")."""
+    """The mapping's `azimuth_north` ("true", "grid" or "auto"; YAML's bare `true` counts as "true")."""
     value = (mapping or {}).get("azimuth_north", True)
     north = "true" if value is True or value == "true" else value
-    if north not in ("true", "grid"):
+    if north not in ("true", "grid", "auto"):
         from pipeline.errors import ConfigError
 
-        raise ConfigError(f"mapping.klv.azimuth_north: expected true or grid, got {value!r}")
+        raise ConfigError(f"mapping.klv.azimuth_north: expected true, grid or auto, got {value!r}")
     return north
+
+
+def _resolve_north(table: KlvTable, warnings: list[str], north_of) -> None:
+    """azimuth_north "auto": the table's reading as `north_of(table) -> ("true" | "grid", note or None)` decides
+    (the frame-centre check, `pipeline.ingest.frame_centre.auto_north`), its note added to the warnings; "true"
+    without a `north_of`."""
+    if table.azimuth_north != "auto":
+        return
+    table.azimuth_north = "true"
+    if north_of is not None:
+        table.azimuth_north, note = north_of(table)
+        if note:
+            warnings.append(note)
 
 
 def _dump_table(p: Path, mapping: dict | None = None) -> tuple[KlvTable, list[str]]:
@@ -439,27 +452,30 @@ def read_klv_table(path, index=None, mapping: dict | None = None) -> tuple[KlvTa
     return _fmv_table(p, index, mapping)
 
 
-def read_klv_dump(path, mapping: dict | None = None) -> FlightLog:
+def read_klv_dump(path, mapping: dict | None = None, north_of=None) -> FlightLog:
     """A raw file of consecutive ST 0601 packets or EG 0104 sets (`ffmpeg -i in.ts -map 0:d -f data out.klv`) ->
-    FlightLog on the "unix" clock (tag 2 / the EG 0104 time stamp)."""
+    FlightLog on the "unix" clock (tag 2 / the EG 0104 time stamp). `north_of`: what decides azimuth_north "auto"
+    (`_resolve_north`)."""
     p = Path(path)
     table, warnings = _dump_table(p, mapping)
+    _resolve_north(table, warnings, north_of)
     log = table_to_log(table, str(p), warnings)
     log.formats.append("klv")
     log.klv_tables[str(p)] = table
     return log
 
 
-def read_fmv(path, index=None, mapping: dict | None = None) -> FlightLog:
+def read_fmv(path, index=None, mapping: dict | None = None, north_of=None) -> FlightLog:
     """An MPEG-TS (STANAG 4609) with a video stream and a KLV data stream -> FlightLog: frames from the video
     packets' pts, telemetry from the KLV packets, all on the "video" clock (0 = the first video frame), with a
     ClockLink video -> unix from each packet's time stamp. `index`: the file's demux_index(data_streams=True) if
-    known."""
+    known; `north_of`: what decides azimuth_north "auto" (`_resolve_north`)."""
     from pipeline.ingest.video import demux_index
 
     p = Path(path)
     index = index if index is not None else demux_index(p, data_streams=True)
     table, warnings = _fmv_table(p, index, mapping)
+    _resolve_north(table, warnings, north_of)
     log = table_to_log(table, str(p), warnings)
     log.frames = index.frames
     log.clock_links.append(ClockLink("video", "unix", table.t_ns.copy(), table.t_us * 1000))

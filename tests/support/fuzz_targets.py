@@ -296,7 +296,7 @@ def _seed_eg0104_dump(folder: Path) -> Path:
 
 def _read_klv_checked(path: Path) -> None:
     """`ridgeloc inspect` of a raw KLV dump, then `ridgeloc check FILE`'s frame-centre check of it."""
-    from pipeline.check.frame_centre import check_file
+    from pipeline.ingest.frame_centre import check_file
 
     _read_log(path)
     r = check_file(path)

@@ -12,6 +12,7 @@ are a convention error, and the same distance under each alternative reading of 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import pymap3d
@@ -221,7 +222,18 @@ def frame_centre_document(checks: list[tuple[str, FrameCentreCheck]]) -> dict | 
     return {**docs[0], "others": docs[1:]} if len(docs) > 1 else docs[0]
 
 
-def add_frame_centre(result, checks: list[tuple[str, FrameCentreCheck]]) -> None:
-    """Put the checks on a check result; a convention error (median above LARGE_M) is also a problem."""
-    result.frame_centre = checks
-    result.problems += [f"{f}: {r.line()}" for f, r in checks if r.median_m > LARGE_M]
+def auto_north(table: KlvTable) -> tuple[str, str | None]:
+    """`mapping: {klv: {azimuth_north: auto}}` (a full-motion video run alone, `ridgeloc run clip.ts`): "grid" where
+    the frame-centre check of the azimuths read from true north finds the miss explained by a grid-north reading
+    (`GRID_NORTH`, the rule `ridgeloc check` and `ridgeloc init` apply), else "true"; and a note saying which and
+    why (None where the table has no frame centres to judge by)."""
+    table.azimuth_north = "true"
+    c = check_frame_centre(table)
+    if c is None:
+        return "true", None
+    name = Path(table.source).name
+    if c.explained_by == GRID_NORTH:
+        return "grid", (f"{name}: azimuths read from UTM grid north (klv.azimuth_north: auto): the payload's frame "
+                        f"centres lie {c.alternatives[GRID_NORTH]:.1f} m (median) from the line of sight so, "
+                        f"{c.median_m:.1f} m read from true north")
+    return "true", None

@@ -98,3 +98,21 @@ def test_run_send_delivers_every_event_valid_for_the_stale_time_asked(runs):
     assert set(got) == {e.uid for e in events.values()}
     for e in got.values():
         assert e.staleTime - e.startTime == 2 * 3600 * 1000
+
+
+def test_a_marker_carries_the_warnings_of_its_answer(tmp_path):
+    """A TAK user sees only the marker: the real KLV clip's answer, whose laser ranges all end at sea level (the
+    payload's computed range), says so in its remarks as targets.csv's reason does, head first."""
+    import xml.etree.ElementTree as ET
+
+    clip = ROOT.parent / "shared" / "fmv" / "aphill_klv_10s.ts"
+    if not clip.is_file():
+        pytest.skip(f"{clip} absent (the shared read-only material is not beside this checkout)")
+    assert cli_main(["run", str(clip), "-o", str(tmp_path / "out"), "--no-figures", "-q"]) == 0
+    (row,) = list(csv.DictReader((tmp_path / "out" / "targets.csv").open()))
+    assert "warning: the laser ranges all end at sea level" in row["reason"]
+    (cot,) = (tmp_path / "out" / "cot").glob("*.cot")
+    text = ET.fromstring(cot.read_bytes()).find("detail/remarks").text
+    warnings = [ln for ln in text.splitlines() if ln.startswith("WARNING: ")]
+    assert any(ln.startswith("WARNING: the laser ranges all end at sea level (+0.6 m") for ln in warnings), text
+    assert all(": " not in ln[len("WARNING: "):] for ln in warnings)  # the head of each, not the advice

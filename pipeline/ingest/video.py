@@ -361,7 +361,10 @@ class _Prefetch:
         self.stopped = False
         self.decoded = 0
         self.cond = threading.Condition()
-        args = (video.path, video.gray, video.index, video._stream.thread_type)
+        # several workers each decode single-threaded: they already keep the cores busy, and FFmpeg's slice
+        # threads inside each cost more CPU for the same frames (scripts/bench_video.py: docs/ingest.md)
+        threading_of_each = "NONE" if workers > 1 else video._stream.thread_type
+        args = (video.path, video.gray, video.index, threading_of_each)
         self.threads = [threading.Thread(target=self._work, args=(w, workers, args), daemon=True)
                         for w in range(min(workers, len(runs)))]
         for t in self.threads:

@@ -90,9 +90,10 @@ def _m(x) -> str:
     return "unknown" if x is None else f"{x:.1f} m"
 
 
-def remarks(row: dict, when: str | None) -> str:
+def remarks(row: dict, when: str | None, warnings=()) -> str:
     """The remarks ATAK shows under the marker: the method, MGRS, CE90/LE90 and category, the 95 % ellipse, the
-    heights and the flight."""
+    heights, the flight, and the head of each of the run's geometry warnings (its words before the first colon:
+    what is wrong, not the advice), which targets.csv's reason gives in full."""
     lines = [f"ridgeloc {row['method']} from {count(row['n_observations'], 'observation')}",
              f"MGRS {mgrs_spaced(row['mgrs'])}",
              f"CE90 {_m(row['ce90_m'])}, LE90 {_m(row['le90_m'])}"
@@ -104,6 +105,7 @@ def remarks(row: dict, when: str | None) -> str:
                  "ellipsoid")
     flight = f"flight {row['group']}" + (f", target {row['target']}" if row.get("target") else "")
     lines.append(flight + (f", {when}" if when else ""))
+    lines += [f"WARNING: {w.split(': ', 1)[0]}" for w in warnings]
     return "\n".join(lines)
 
 
@@ -118,7 +120,8 @@ def cot_target(r: GroupResult, row: dict) -> CotTarget:
                   **{k: str(row[k]) for k in _ATTRIBUTES if row.get(k) is not None}}
     return CotTarget(uid=target_uid(flight_key(r) + "\n" + (r.target or "")), callsign=row["name"],
                      lat_deg=row["lat_deg"], lon_deg=row["lon_deg"], hae_m=row["alt_m"], ce90_m=row["ce90_m"],
-                     le90_m=row["le90_m"], remarks=remarks(row, _flight_time(r)), attributes=attributes)
+                     le90_m=row["le90_m"], attributes=attributes,
+                     remarks=remarks(row, _flight_time(r), r.settings.get("geometry_warnings") or ()))
 
 
 def cot_entries(results, now: datetime | None = None, options: CotOptions | None = None) -> list[PackageEntry]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 
+import numpy as np
 import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
@@ -148,3 +149,20 @@ def test_the_close_up_draws_the_answers_ellipse_where_its_method_has_no_covarian
     assert len(dashed) == 1
     extent = np.abs(ellipse_points_en_m(cov[:2, :2])).max()
     assert closeup.get_xlim()[1] >= extent
+
+
+def test_views_centre_on_the_answer_not_on_an_undetermined_method():
+    """On the real KLV clip vision and mle lie kilometres off along nearly parallel lines of sight while the answer
+    is the line of sight's point: the close-up, the footprints and the lines of sight centre on the answer; without
+    an answer, on the first finite estimate of the order (mle first)."""
+    from types import SimpleNamespace
+
+    from pipeline.report.geometry import best_reference_m
+
+    est = {"mle": SimpleNamespace(position_m=np.array([900.0, 0.0, -1000.0])),
+           "vision": SimpleNamespace(position_m=np.array([800.0, 0.0, -900.0])),
+           "los": SimpleNamespace(position_m=np.array([1.0, 2.0, 3.0]))}
+    located = SimpleNamespace(located=True, position_m=np.array([1.0, 2.0, 3.0]))
+    assert best_reference_m(SimpleNamespace(estimates=est, answer=located)).tolist() == [1.0, 2.0, 3.0]
+    not_located = SimpleNamespace(located=False, position_m=None)
+    assert best_reference_m(SimpleNamespace(estimates=est, answer=not_located)).tolist() == [900.0, 0.0, -1000.0]

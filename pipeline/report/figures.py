@@ -149,7 +149,10 @@ def _ellipse_covariance(r: GroupResult, method: str) -> np.ndarray | None:
 
 
 def _closeup_half_width_m(r: GroupResult, centre: np.ndarray, methods: list[str]) -> float:
-    """Half width of the close-up: holds the ellipses and most estimates; far outliers are drawn as arrows."""
+    """Half width of the close-up: holds the ellipses and most of the estimates the flight determines (all of them
+    where the answer rule judged none); far outliers and undetermined points are drawn as arrows."""
+    verdicts = r.answer.verdicts if r.answer is not None else {}
+    methods = [m for m in methods if m in verdicts and verdicts[m].determined] or methods
     d = np.array([np.linalg.norm(r.estimates[m].position_m[:2] - centre[:2]) for m in methods]) if methods else []
     ext = [5.0]
     for m in methods:
@@ -272,7 +275,8 @@ def map_figure(r: GroupResult, reuse: bool = False) -> Figure:
         ax1.set_ylim(-half, half)
         ax1.set_aspect("equal")
         _few_ticks(ax1, 6)
-        what = "truth" if r.truth_m is not None else "the reference estimate"
+        what = "truth" if r.truth_m is not None else ("the answer" if r.answer is not None and r.answer.located
+                                                      else "the reference estimate")
         ax1.set_xlabel(f"East of {what} (m)")
         ax1.set_ylabel(f"North of {what} (m)")
         ax1.set_title("Close-up: estimates, dashed = 95 % error ellipse", y=1.0)

@@ -92,7 +92,12 @@ def frame_residuals(obs: Observations, position_m: np.ndarray) -> tuple[np.ndarr
 
 
 def best_reference_m(r: GroupResult, order=("mle", "ridge", "fusion", "vision", "range")) -> np.ndarray | None:
-    """The position lines of sight are drawn towards: the first finite estimate in `order`, else any."""
+    """The position lines of sight are drawn towards and close-ups centre on: the answer where the target is
+    located, else the first finite estimate in `order`, else any (an undetermined method's point, kilometres off
+    on nearly parallel lines of sight, is no centre while there is an answer)."""
+    a = r.answer
+    if a is not None and a.located and a.position_m is not None and np.isfinite(a.position_m).all():
+        return np.asarray(a.position_m, dtype=np.float64)
     for m in (*order, *r.estimates):
         e = r.estimates.get(m)
         if e is not None and np.isfinite(e.position_m).all():

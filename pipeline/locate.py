@@ -285,6 +285,29 @@ def ground_estimate(obs: Observations, views: PhotoViews, photos: list[Photo], g
     return dataclasses.replace(e, method="ground", covariance_m2=cov, extras=extras), cov - np.mean(pose, axis=0)
 
 
+#: photos of one target lie within this of each other (km): twice the farthest a drone camera resolves a target
+#: (about 25 km, the longest laser rangefinders' reach); farther apart they were taken of different places
+ONE_SITE_KM = 50.0
+
+
+def check_one_site(photos: list[Photo], pixel_px=None) -> None:
+    """InputError naming the two photos farthest apart when the photos that see the target (the marked ones;
+    all without pixels) were taken more than ONE_SITE_KM apart: one target is not seen from both."""
+    use = [p for p, (u, v) in zip(photos, _file_pixels(photos, pixel_px), strict=True)
+           if not (np.isnan(u) and np.isnan(v))] if pixel_px is not None else photos
+    if len(use) < 2:
+        return
+    lat, lon = np.radians([p.lat_deg for p in use]), np.radians([p.lon_deg for p in use])
+    # great-circle distances (haversine, mean Earth radius): a site check, metres do not matter
+    h = (np.sin((lat[:, None] - lat[None]) / 2) ** 2
+         + np.cos(lat[:, None]) * np.cos(lat[None]) * np.sin((lon[:, None] - lon[None]) / 2) ** 2)
+    d_km = 2 * 6371.0 * np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0)))
+    i, j = np.unravel_index(int(np.argmax(d_km)), d_km.shape)
+    if d_km[i, j] > ONE_SITE_KM:
+        raise InputError(f"{use[i].name} and {use[j].name} were taken {d_km[i, j]:,.0f} km apart: photos of one "
+                         f"target lie within {ONE_SITE_KM:.0f} km of each other; locate each site's photos apart")
+
+
 def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: int | None = None,
                   errors: PhotoErrorModel | None = None, dem_sigma_m: float | None = None,
                   methods=None, ground: GroundAssumption | None = None) -> PhotoLocation:
@@ -294,6 +317,7 @@ def locate_photos(photos: list[Photo], pixel_px=None, dem=None, rotation_deg: in
     `terrain.vertical_sigma_m`: no stated sigma, no prior; docs/locate.md says why). rotation_deg: the files' pixels
     against the cameras' (0 or 180 for all), None to find it (image_rotations; its note in out.notes). `ground`
     (GroundAssumption) adds the `ground` method: the weaker answer on assumed level ground, with its note."""
+    check_one_site(photos, pixel_px)
     rotations, note = image_rotations(photos, pixel_px, rotation_deg)
     views = photo_views(photos, rotation_deg=rotations)
     obs = photo_observations(views, pixel_px, None if errors is None else errors.sigma)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import threading
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -190,3 +191,18 @@ def test_srt_reader_and_gimbal_frame(tmp_path):
     e.write_text("1\n00:00:00,000 --> 00:00:01,000\nhello\n")
     with pytest.raises(LogReadError, match=r"e\.srt: no subtitle with a GPS position"):
         read_flight([e])
+
+
+def test_a_transport_stream_cut_mid_packet_says_it_looks_cut_off(tmp_path):
+    """`head -c N clip.ts` (a copy or recording that stopped): read as far as it goes, with a warning in the log
+    that inspect, check and run print; the whole file has none."""
+    from pipeline.ingest import read_flight
+    from pipeline.ingest.video import demux_index
+
+    whole = Path(__file__).resolve().parents[1] / "sample_data" / "fmv" / "flight.ts"
+    assert demux_index(whole).warnings == [] and not any("cut off" in w for w in read_flight([whole]).warnings)
+    cut = tmp_path / "cut.ts"
+    cut.write_bytes(whole.read_bytes()[:188 * 4000 + 100])
+    (w,) = demux_index(cut).warnings
+    assert w.startswith("cut.ts: ends inside a transport packet (752,100 bytes, 100 past") and "cut off" in w
+    assert sum("looks cut off" in x for x in read_flight([cut]).warnings) == 1

@@ -108,7 +108,8 @@ def _read_file(path: str | Path, mapping: dict | None, scan_all: bool) -> Flight
         stream = StreamInfo(p.name, "video", int(frames.t_ns.size),
                             int(frames.t_ns[0]) if frames.t_ns.size else None,
                             int(frames.t_ns[-1]) if frames.t_ns.size else None, ("frames",))
-        return FlightLog(path=str(p), frames=frames, streams=[stream], formats=["video"])
+        return FlightLog(path=str(p), frames=frames, streams=[stream], formats=["video"],
+                         warnings=list(index.warnings))
     if fmt == "srt":
         from pipeline.ingest.srt import read_srt
         return read_srt(p, mapping_for("srt", mapping))

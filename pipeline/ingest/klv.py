@@ -475,6 +475,7 @@ def read_fmv(path, index=None, mapping: dict | None = None, north_of=None) -> Fl
     p = Path(path)
     index = index if index is not None else demux_index(p, data_streams=True)
     table, warnings = _fmv_table(p, index, mapping)
+    warnings = [*index.warnings, *warnings]
     _resolve_north(table, warnings, north_of)
     log = table_to_log(table, str(p), warnings)
     log.frames = index.frames

@@ -107,6 +107,7 @@ class DemuxIndex:
     time_base: Fraction
     data_packets: list = field(default_factory=list)
     pos: np.ndarray | None = None  # (n,) int64 byte offset of each frame's packet (-1: unknown)
+    warnings: list[str] = field(default_factory=list)  # a file that looks cut off
 
 
 def first_fields(pts: np.ndarray, average_rate, base_rate, time_base: Fraction) -> np.ndarray | None:
@@ -135,6 +136,7 @@ def demux_index(path, data_streams: bool = False) -> DemuxIndex:
         streams = [vs] + (list(container.streams.data) if data_streams else [])
         pts, key, pos = array("q"), array("b"), array("q")
         data: list[tuple[bytes, int | None, Fraction]] = []
+        warnings = _cut_off(path, container)
         try:
             for pkt in container.demux(streams):
                 if pkt.size == 0:
@@ -152,6 +154,8 @@ def demux_index(path, data_streams: bool = False) -> DemuxIndex:
         except av.error.FFmpegError as exc:  # damaged tail: keep what was read
             if not pts:
                 raise LogReadError(f"cannot demux this video: {_why(exc)}", path=path) from None
+            warnings.append(f"{path.name}: demuxing stopped early ({_why(exc)}): the frames and metadata after "
+                            f"{len(pts)} frames are not read")
         cc = vs.codec_context  # None when damage leaves the stream without a decoder
         width, height = (cc.width, cc.height) if cc is not None else (0, 0)
         tb = vs.time_base or Fraction(1, 90000)
@@ -174,7 +178,19 @@ def demux_index(path, data_streams: bool = False) -> DemuxIndex:
     packets = [(b, None if t is None else round((Fraction(t) * dtb - origin) * 10**9)) for b, t, dtb in data]
     frames = FrameSeries(t_ns.astype(np.int64), np.arange(raw.size, dtype=np.int64), source=str(path), clock="video",
                          width_px=int(width), height_px=int(height))
-    return DemuxIndex(frames, raw, keyframe, tb, packets, offsets)
+    return DemuxIndex(frames, raw, keyframe, tb, packets, offsets, warnings)
+
+
+def _cut_off(path: Path, container) -> list[str]:
+    """A warning when an MPEG transport stream's size is no whole number of 188-byte packets (nor of the 192-byte
+    ones of M2TS): the file was cut off mid-packet (a copy or a recording that stopped), so its tail is lost."""
+    if "mpegts" not in (container.format.name or ""):
+        return []
+    size = path.stat().st_size
+    if size % 188 == 0 or size % 192 == 0:
+        return []
+    return [f"{path.name}: ends inside a transport packet ({size:,} bytes, {size % 188} past the last whole "
+            "188-byte packet): the file looks cut off, and the frames and metadata after its end are missing"]
 
 
 def read_video(path, frames_csv="auto", index: DemuxIndex | None = None) -> FrameSeries:
@@ -361,10 +377,7 @@ class _Prefetch:
         self.stopped = False
         self.decoded = 0
         self.cond = threading.Condition()
-        # several workers each decode single-threaded: they already keep the cores busy, and FFmpeg's slice
-        # threads inside each cost more CPU for the same frames (scripts/bench_video.py: docs/ingest.md)
-        threading_of_each = "NONE" if workers > 1 else video._stream.thread_type
-        args = (video.path, video.gray, video.index, threading_of_each)
+        args = (video.path, video.gray, video.index, video._stream.thread_type)
         self.threads = [threading.Thread(target=self._work, args=(w, workers, args), daemon=True)
                         for w in range(min(workers, len(runs)))]
         for t in self.threads:

@@ -206,3 +206,19 @@ def test_a_transport_stream_cut_mid_packet_says_it_looks_cut_off(tmp_path):
     (w,) = demux_index(cut).warnings
     assert w.startswith("cut.ts: ends inside a transport packet (752,100 bytes, 100 past") and "cut off" in w
     assert sum("looks cut off" in x for x in read_flight([cut]).warnings) == 1
+
+
+def test_a_video_without_telemetry_is_refused_with_what_it_does_supply(tmp_path):
+    """A plain video given as the flight's only file: one line saying it supplies only frames and that its
+    telemetry logs belong beside it (it said 'check `mapping:`', which cannot help)."""
+    from pipeline.errors import InputError
+    from pipeline.flight.flight import read_flight_logs
+    from pipeline.flight_config import Files, FlightConfig
+
+    video = next((Path(__file__).resolve().parents[1] / "sample_data" / "group1").glob("*.mp4"))
+    config = FlightConfig(name="plain", files=Files(telemetry=(str(video),)), path=str(tmp_path / "f.yaml"))
+    with pytest.raises(InputError) as info:
+        read_flight_logs(config)
+    msg = str(info.value)
+    assert "supply only frames: no position, attitude, gimbal; a video without KLV metadata needs the flight's " \
+           "telemetry logs beside it (files.telemetry)" in msg and "\n" not in msg

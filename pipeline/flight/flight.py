@@ -41,8 +41,15 @@ def read_flight_logs(config: FlightConfig) -> FlightLog:
         raise ConfigError(str(exc), config.path) from None
     missing = [q for q in ("position", "attitude", "gimbal") if getattr(log, q) is None]
     if missing:
-        raise InputError(f"the flight's logs supply no {', '.join(missing)}: check `mapping:` "
-                         "(see `ridgeloc inspect`)", config.path)
+        supplied = [q for q in ("position", "attitude", "gimbal", "range", "frames") if getattr(log, q) is not None]
+        what = f"supply only {', '.join(supplied)}" if supplied else "supply nothing ridgeloc reads"
+        advice = ("a video without KLV metadata needs the flight's telemetry logs beside it (files.telemetry)"
+                  if supplied == ["frames"] else
+                  "give the logs that record them, or, where a log has them under other names, set `mapping:` "
+                  "(`ridgeloc inspect LOG` lists what each file holds)")
+        cut = [w for w in log.warnings if "looks cut off" in w or "demuxing stopped early" in w]
+        raise InputError(f"the flight's files {what}: no {', '.join(missing)}; {advice}"
+                         + "".join(f"; {w}" for w in cut), config.path)
     return log
 
 

@@ -29,6 +29,7 @@ from pipeline.flight import Flight, TargetMark, acquire_mark
 from pipeline.flight_config import FlightConfig
 from pipeline.geometry.frames import enu_from_lla
 from pipeline.geometry.rays import intersection_angle_deg
+from pipeline.ingest.clocks import find_link, map_clock
 from pipeline.intrinsics import frame_K
 from pipeline.progress import report_stage
 from pipeline.results import FlightResult, GroupResult, TargetFailure
@@ -298,6 +299,17 @@ def _solve_tracked(fp: FlightPass, tracked: list[_Tracked]) -> list[tuple[dict[s
     return solved
 
 
+def unix_times_ns(log, t_ns: np.ndarray) -> list[int] | None:
+    """Times on the telemetry clock (the position's) mapped onto UNIX time through the log's clock link, where the
+    clock is another (a KLV video's "video" clock, linked by its packets' time stamps); None where it is UNIX
+    time already or no link exists."""
+    clock = getattr(log.position, "clock", "unix")
+    if clock == "unix":
+        return None
+    link, reverse = find_link(log.clock_links, clock, "unix")
+    return None if link is None else [int(x) for x in map_clock(np.asarray(t_ns, np.int64), link, reverse)]
+
+
 def _result(fp: FlightPass, t: _Tracked, estimates: dict[str, Estimate], failures: dict) -> GroupResult:
     """One target's result with the flight's settings, notes and times added; where no estimator could solve it,
     its answer says why (`not_located`)."""
@@ -321,6 +333,9 @@ def _result(fp: FlightPass, t: _Tracked, estimates: dict[str, Estimate], failure
     tracking["reason"] = [_frame_reason(lost, via, ins, use) for lost, via, ins, use in
                           zip(track.lost, tracking["via"], inside, useful, strict=True)]
     tracking["t_ns"] = [int(x) for x in plan.t_ns]
+    unix = unix_times_ns(flight.log, plan.t_ns)
+    if unix is not None:  # the frames' UNIX times (a KLV video: its packets' time stamps), for the overlay's UTC
+        tracking["unix_t_ns"] = unix
     payload = payload_frame_centre_deg(flight, plan.t_ns)
     if payload is not None:  # the KLV's own frame centre, for the report's map beside ridgeloc's
         tracking["payload_frame_centre_deg"] = payload

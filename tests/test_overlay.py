@@ -157,3 +157,24 @@ def test_overlay_caption_range_is_the_frames_shot_whichever_target_kept_it():
     assert rng == pytest.approx(1731.0)
     P1, origin, rng = frame_camera([off_axis, target("gone", [np.nan, np.nan])], 0)
     assert P1 is not None and origin is not None and np.isnan(rng)
+
+
+def test_a_klv_video_overlay_caption_gives_utc_from_the_packets_time_stamps():
+    """A KLV video runs on its own "video" clock; its packets' time stamps (tag 2, UNIX microseconds) map the
+    frames onto UTC, which the caption shows beside the time from the first observation."""
+    from pathlib import Path
+
+    import numpy as np
+
+    from pipeline.ingest import read_flight
+    from pipeline.report.overlay import _clock_text
+    from pipeline.target_stage import unix_times_ns
+
+    assert _clock_text(3_000_000_000, 0, 1_221_665_015_033_181_004) == "t +3.00 s (15:23:35.033 UTC)"
+    assert _clock_text(3_000_000_000, 0) == "t +3.00 s"
+    root = Path(__file__).resolve().parents[1]
+    log = read_flight([root / "sample_data" / "fmv" / "flight.ts"])
+    table = next(iter(log.klv_tables.values()))
+    unix = unix_times_ns(log, table.t_ns[:5])
+    assert unix is not None and np.abs(np.array(unix) - table.t_us[:5] * 1000).max() < 1_000_000  # within 1 ms
+    assert unix_times_ns(read_flight([root / "sample_data" / "group1" / "flight.tlog"]), table.t_ns[:5]) is None

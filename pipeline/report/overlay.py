@@ -101,10 +101,14 @@ def _ellipse(cov_px: np.ndarray) -> tuple[tuple[float, float], float] | None:
     return (math.sqrt(w[1] * CHI2_2_95), math.sqrt(w[0] * CHI2_2_95)), math.degrees(math.atan2(v[1, 1], v[0, 1]))
 
 
-def _clock_text(t_ns: int, t0_ns: int) -> str:
+def _clock_text(t_ns: int, t0_ns: int, unix_ns: int | None = None) -> str:
+    """'t +S s' from the first observation, with the UTC time where the clock is UNIX time or `unix_ns` (the
+    frame's time mapped onto UNIX time, a KLV video's packet time stamps) gives it."""
     text = f"t +{(t_ns - t0_ns) / 1e9:.2f} s"
-    if t_ns > 10**17:  # a UNIX clock: show the UTC time too
-        utc = datetime.datetime.fromtimestamp(t_ns / 1e9, datetime.timezone.utc)
+    if unix_ns is None and t_ns > 10**17:  # a UNIX clock: show the UTC time too
+        unix_ns = t_ns
+    if unix_ns is not None:
+        utc = datetime.datetime.fromtimestamp(unix_ns / 1e9, datetime.timezone.utc)
         text += f" ({utc:%H:%M:%S.%f}"[:-3] + " UTC)"
     return text
 
@@ -214,6 +218,7 @@ def draw_frame(image: np.ndarray, scale: float, k: int, targets: Sequence[Overla
     first = targets[0].tracking
     frame = first["frame_index"][k]
     t_ns = (first.get("t_ns") or [t0_ns] * len(first["frame_index"]))[k]
+    unix_ns = (first.get("unix_t_ns") or [None] * len(first["frame_index"]))[k]
     K = np.array([[camera["fx_px"], 0, camera["cx_px"]], [0, camera["fy_px"], camera["cy_px"]], [0, 0, 1.0]])
     dist = np.asarray(camera.get("dist") or [0.0] * 5, dtype=np.float64)
     lens = bool(np.any(dist != 0))
@@ -255,7 +260,7 @@ def draw_frame(image: np.ndarray, scale: float, k: int, targets: Sequence[Overla
             uv, _ = _project(P, origin + dist_m * axis[0])
             if uv is not None:
                 canvas.dot(seen(uv), LASER_BGR, 4)
-    _caption(image, [f"frame {frame}   {_clock_text(int(t_ns), t0_ns)}   {range_text}", "   ".join(status),
+    _caption(image, [f"frame {frame}   {_clock_text(int(t_ns), t0_ns, unix_ns)}   {range_text}", "   ".join(status),
                      "reticle: tracked   red x: lost   orange: answer + 95 % ellipse   red dot: laser"])
     return image
 

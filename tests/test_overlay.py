@@ -178,3 +178,13 @@ def test_a_klv_video_overlay_caption_gives_utc_from_the_packets_time_stamps():
     unix = unix_times_ns(log, table.t_ns[:5])
     assert unix is not None and np.abs(np.array(unix) - table.t_us[:5] * 1000).max() < 1_000_000  # within 1 ms
     assert unix_times_ns(read_flight([root / "sample_data" / "group1" / "flight.tlog"]), table.t_ns[:5]) is None
+
+
+def test_the_caption_band_is_at_the_top_where_a_browsers_controls_do_not_cover_it():
+    import numpy as np
+
+    from pipeline.report.overlay import _caption
+
+    img = np.full((240, 360, 3), 200, np.uint8)
+    _caption(img, ["frame 3", "target: tracked", "legend"])
+    assert img[:5].mean() < 100 and (img[-40:] == 200).all()

@@ -178,16 +178,17 @@ class _Canvas:
 
 
 def _caption(img: np.ndarray, lines: Sequence[str]) -> None:
-    """White lines on a darkened band at the bottom, the font scaled so a 640 px wide line fits the frame."""
+    """White lines on a darkened band at the top (a browser's video controls cover the bottom while the mouse is
+    over the video), the font scaled so a 640 px wide line fits the frame."""
     import cv2
 
     scale = min(0.5, img.shape[1] / 1280.0)
     step = int(np.ceil(40 * scale))
     h = step * len(lines) + step // 2
-    band = img[-h:]
+    band = img[:h]
     band[:] = (band * 0.35).astype(np.uint8)
     for k, line in enumerate(lines):
-        cv2.putText(img, line, (6, img.shape[0] - h + step * (k + 1)), cv2.FONT_HERSHEY_SIMPLEX, scale,
+        cv2.putText(img, line, (6, step * (k + 1)), cv2.FONT_HERSHEY_SIMPLEX, scale,
                     (255, 255, 255), 1, cv2.LINE_AA)
 
 

@@ -182,7 +182,7 @@ def test_an_existing_file_as_the_output_folder_is_refused_before_any_flight_runs
     afile.write_text("keep me")
     assert main(["run", str(SAMPLE), "-o", str(afile), "--no-figures", "-q"]) == 1
     assert capsys.readouterr().err.splitlines() == [
-        f"ridgeloc: error: {afile}: cannot create the output folder: File exists"]
+        f"ridgeloc: error: {afile}: is a file, not a folder: -o names the folder to write the outputs into"]
     assert main(["run", str(SAMPLE), "-o", str(afile / "sub"), "--no-figures", "-q"]) == 1
     assert capsys.readouterr().err.splitlines() == [
         f"ridgeloc: error: {afile / 'sub'}: cannot create the output folder: {afile} is not a folder"]

@@ -140,5 +140,5 @@ def test_an_existing_file_as_out_is_refused_before_the_experiment_runs(tmp_path,
     afile.write_text("keep me")
     assert cli_main(["simulate", str(CONFIGS / "simulation_table2.yaml"), "--out", str(afile), "--quiet"]) == 1
     assert capsys.readouterr().err.splitlines() == [
-        f"ridgeloc: error: {afile}: cannot create the output folder: File exists"]
+        f"ridgeloc: error: {afile}: is a file, not a folder: --out names the folder to write the outputs into"]
     assert afile.read_text() == "keep me"

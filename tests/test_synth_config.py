@@ -79,5 +79,5 @@ def test_cli_refuses_a_file_as_the_output_folder_even_with_overwrite(tmp_path, c
     afile.write_text("keep me")
     assert main(["synth", *args, "-o", str(afile)]) == 1
     assert capsys.readouterr().err.splitlines() == [
-        f"ridgeloc: error: {afile}: cannot create the output folder: File exists"]
+        f"ridgeloc: error: {afile}: is a file, not a folder: -o names the folder to write the outputs into"]
     assert afile.read_text() == "keep me"

@@ -9,11 +9,12 @@ from pathlib import Path
 from pipeline.errors import InputError, RidgelocError
 
 
-def output_folder(path: str | PathLike) -> Path:
-    """`path` as an output folder (existing or not); InputError when it, or the nearest existing parent, is a file."""
+def output_folder(path: str | PathLike, option: str = "-o") -> Path:
+    """`path` as an output folder (existing or not); InputError when it, or the nearest existing parent, is a file
+    (`option`: how the command line names it)."""
     path = Path(path)
     if path.exists() and not path.is_dir():
-        raise InputError("cannot create the output folder: File exists", path)
+        raise InputError(f"is a file, not a folder: {option} names the folder to write the outputs into", path)
     _parent_is_a_folder(path, "cannot create the output folder")
     return path
 

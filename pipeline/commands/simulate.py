@@ -31,7 +31,7 @@ def main(args: argparse.Namespace) -> int:
     from pipeline.simulate.report import markdown_table
 
     t0, cpu0 = time.perf_counter(), time.process_time()
-    output_folder(args.out)  # a file there is refused before the experiment runs
+    output_folder(args.out, "--out")  # a file there is refused before the experiment runs
     source = args.config
     if source is None and not Path(DEFAULT_CONFIG).is_file():
         cfg, source = SimulationConfig(), "built-in defaults (= configs/simulation_table2.yaml)"

@@ -337,7 +337,7 @@ def read_photo(path, alt_datum: str | None = None) -> Photo:
             gps = dict(exif.get_ifd(0x8825))
             base = dict(exif)
     except UnidentifiedImageError:
-        raise InputError("not an image Pillow can identify", path=p) from None
+        raise InputError("not an image file (its bytes are no JPEG, TIFF or other image format)", path=p) from None
     except OSError as exc:
         if exc.errno is not None:
             raise

@@ -573,9 +573,7 @@ def _check_inputs(method: str, obs: Observations, st: Stacked, o: dict) -> None:
     needs_pixels = method in ("dlt", "vision") or not has_init
     if needs_pixels and npix < 2 and method != "range":  # range without pixels starts from the ranges
         what = method if method in ("dlt", "vision") else f"{method} (initialised from vision)"
-        raise ObservationError(f"{what} needs at least two frames with a target pixel, got {npix}"
-                               + ("" if method in ("dlt", "vision")
-                                  else "; from Python, solve(..., initial_m=...) starts it elsewhere"))
+        raise ObservationError(f"{what} needs at least two frames with a target pixel, got {npix}")
     if needs_pixels and npix >= 2:
         centres = -np.linalg.solve(st.M[0, has_pix], st.p4[0, has_pix][:, :, None])[:, :, 0]
         spread = np.sqrt(((centres - centres.mean(axis=0)) ** 2).sum(axis=1).max())
@@ -621,7 +619,7 @@ def _estimate(method: str, obs: Observations, st: Stacked, o: dict, be: BatchEst
                                 f"({starts['not_determined']})")
         if method in _USES_PIXELS and info["behind_camera"]:
             raise GeometryError(f"{method}: the estimate lies behind the camera of a frame with a target "
-                                "pixel (check the pixels and the sign convention of P)")
+                                "pixel (check the marked pixels, and the camera's conventions with `ridgeloc check`)")
         if method == "range" and info["collinear_platforms"]:
             raise GeometryError("range: the ranged platform positions lie on a straight line within their position "
                                 f"noise (sigma {obs.sigma.position_m or 0:g} m, chi-square test at 95 %): ranges "

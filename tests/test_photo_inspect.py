@@ -17,8 +17,21 @@ def test_inspect_brighton(capsys):
     out = capsys.readouterr().out
     assert out.count("[photo DJI FC300S 4000x2250]") == 6
     assert "altitude 198.41 m amsl (drone-dji:AbsoluteAltitude; EXIF GPSAltitude 198.41 m" in out
-    assert "gimbal -140.00 -89.90 0.00; aircraft -138.70 -0.10 -4.00" in out
+    assert "gimbal 220.00 -89.90 0.00; aircraft 221.30 -0.10 -4.00" in out
     assert "database djiFC300S + EXIF FocalLength" in out and "time zone unknown" in out
+
+
+MAKERS = BRIGHTON.parent / "makers"
+
+
+@pytest.mark.skipif(not MAKERS.is_dir(), reason="../shared/photos/makers is absent")
+def test_inspect_makers_says_each_height_once_and_yaws_in_one_range(capsys):
+    """Parrot's height is EXIF GPSAltitude itself (said once, not twice); Teal's aircraft yaw (319.02) and its
+    gimbal's (-39.39 in the tags) are both shown from north in 0-360, so they compare."""
+    assert cli_main(["inspect", str(MAKERS / "parrot-1.jpg"), str(MAKERS / "teal2_img_ir_00015.jpg")]) == 0
+    out = capsys.readouterr().out
+    assert "altitude 78.99 m amsl (EXIF GPSAltitude; no height above the take-off point)" in out
+    assert "gimbal 320.61 -58.18 -1.96; aircraft 319.02 -3.93 -1.04" in out
 
 
 def test_inspect_json_with_a_bad_photo(tmp_path, capsys):

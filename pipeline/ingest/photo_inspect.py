@@ -56,11 +56,13 @@ def format_photo(p: Photo) -> str:
     lines = [f"{p.path}  [photo {p.make} {p.model} {p.width_px}x{p.height_px}]",
              f"  time: {_time_text(p)}",
              f"  position: {p.lat_deg:.7f} {p.lon_deg:.7f}, altitude {p.alt_m:.2f} m {p.alt_datum} ({p.alt_source}; "
-             f"EXIF GPSAltitude {_num(p.gps_alt_m)} m; {rel})"]
+             + ("" if p.alt_source.startswith("EXIF GPSAltitude") else f"EXIF GPSAltitude {_num(p.gps_alt_m)} m; ")
+             + f"{rel})"]
     g, f = p.gimbal_ypr_deg, p.flight_ypr_deg
-    body = "aircraft -" if f is None else f"aircraft {f[0]:.2f} {f[1]:.2f} {f[2]:.2f}"
-    lines.append(f"  attitude (yaw pitch roll deg, NED): gimbal {g[0]:.2f} {g[1]:.2f} {g[2]:.2f}; {body} "
-                 f"({p.maker} tags: {p.attitude_source})")
+    # yaws from north in [0, 360), whichever range the tags use, so the aircraft's and the gimbal's compare
+    body = "aircraft -" if f is None else f"aircraft {f[0] % 360:.2f} {f[1]:.2f} {f[2]:.2f}"
+    lines.append(f"  attitude (yaw 0-360 from north, pitch, roll deg, NED): gimbal {g[0] % 360:.2f} {g[1]:.2f} "
+                 f"{g[2]:.2f}; {body} ({p.maker} tags: {p.attitude_source})")
     k = p.intrinsics
     if k is None:
         lines.append("  intrinsics: none (no calibrated tags, database entry or 35 mm focal length)")

@@ -201,6 +201,7 @@ def _synchronize(flight: Flight, plan: ObservationPlan, track: TrackResult, rang
     refusal, geometry_warnings = run_checks(flight, plan.t_ns[useful], track.pixel_px[useful], range_m[useful])
     if refusal is not None:
         raise InputError(refusal, config.path)
+    geometry_warnings = plan.warnings + geometry_warnings  # ranges lost to a clock offset: every answer says so
     notes += geometry_warnings
     K = frame_K(flight.camera, flight.camera_source, flight.log, plan.t_ns)  # per frame when a zoom reports its FOV
     obs = assemble_observations(poses.subset(useful[inside]), plan.t_ns[useful], track.pixel_px[useful],

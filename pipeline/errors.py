@@ -37,6 +37,18 @@ class GeometryError(ObservationError):
     """The observation geometry does not determine the target (collinear, coincident, behind camera)."""
 
 
+def none_located(failures, path: str | PathLike | None) -> InputError:
+    """The error of a flight none of whose targets could be located: each target's reason, without the config's
+    path that the error already starts with. `failures`: objects with `target` and `message`."""
+    prefix = f"{path}: " if path is not None else None
+
+    def reason(message: str) -> str:
+        return message[len(prefix):] if prefix and message.startswith(prefix) else message
+
+    return InputError("no target could be located: " + "; ".join(f"{f.target}: {reason(f.message)}" for f in failures),
+                      path)
+
+
 def environment_error_message(exc: BaseException) -> str | None:
     """One line for an OSError the machine caused (full disk, quota, read-only file system, permissions, I/O
     error), naming the file; None for anything else (a bug, not the user's environment)."""

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.answer import Answer, choose_answer
-from pipeline.errors import InputError, RidgelocError
+from pipeline.errors import InputError, RidgelocError, none_located
 from pipeline.geometry.frames import enu_from_lla
 from pipeline.ingest.photo import Photo
 from pipeline.ingest.photo_views import PhotoViews, photo_heights_ellipsoid_m, photo_views
@@ -486,8 +486,7 @@ def process_photo_group(config):
         except RidgelocError as exc:
             failed.append(TargetFailure(t.name, str(exc), tuple([*METHODS, "dem", "dji"])))
     if not results:
-        raise InputError("no target could be located: " + "; ".join(f"{f.target}: {f.message}" for f in failed),
-                         config.path)
+        raise none_located(failed, config.path)
     settings = {k: v for k, v in results[0].settings.items() if k != "solve_failures"}
     timings = {"locate": sum(r.timings_s["locate"] for r in results)}
     return FlightResult(name=config.name, targets=results, failed=failed, timings_s=timings, settings=settings)

@@ -24,7 +24,7 @@ import numpy as np
 from pipeline.answer import choose_answer, unsolved_reasons
 from pipeline.check.flight import outside_telemetry, run_checks
 from pipeline.clock_estimate import ClockEstimate
-from pipeline.errors import ConfigError, InputError, RidgelocError
+from pipeline.errors import ConfigError, InputError, RidgelocError, none_located
 from pipeline.flight import Flight, TargetMark, acquire_mark
 from pipeline.flight_config import FlightConfig
 from pipeline.geometry.frames import enu_from_lla
@@ -201,6 +201,7 @@ def _synchronize(flight: Flight, plan: ObservationPlan, track: TrackResult, rang
     refusal, geometry_warnings = run_checks(flight, plan.t_ns[useful], track.pixel_px[useful], range_m[useful])
     if refusal is not None:
         raise InputError(refusal, config.path)
+    geometry_warnings = plan.warnings + geometry_warnings  # ranges lost to a clock offset: every answer says so
     notes += geometry_warnings
     K = frame_K(flight.camera, flight.camera_source, flight.log, plan.t_ns)  # per frame when a zoom reports its FOV
     obs = assemble_observations(poses.subset(useful[inside]), plan.t_ns[useful], track.pixel_px[useful],
@@ -398,8 +399,7 @@ def locate_targets(fp: FlightPass, targets: list[NamedTarget], first_marks: list
     results = [o for o in outcome if isinstance(o, GroupResult)]
     failed = [o for o in outcome if isinstance(o, TargetFailure)]
     if not results:
-        raise InputError("no target could be located: " + "; ".join(f"{f.target}: {f.message}" for f in failed),
-                         fp.flight.config.path)
+        raise none_located(failed, fp.flight.config.path)
     for r in results:
         r.settings["frames_decoded"] = fp.flight.decoder.decoded  # the flight's frames, decoded once for all
     # the flight's own settings: a target's without its solve failures, geometry warnings and CPU times, with the

@@ -119,3 +119,21 @@ def test_report_md_says_an_unsolved_methods_status_and_reason_in_words():
     assert "- range not solved (degenerate): the ranges are collinear" in md
     assert "- los not solved (failed): no frame with both a pixel and a range" in md
     assert "{'status'" not in md and "'reason'" not in md
+
+
+def test_photo_methods_have_names_and_no_empty_paper_rows():
+    """A run of video and photo flights: the photo methods (`dem`, `dji`) are named in Table 4, estimates.csv and the
+    report's legend as the others are (they read 'dem: dem'), have their own colours, and the paper comparison of
+    the video groups gets no row of dashes for them."""
+    from pipeline.report.exports import estimates_csv_text
+    from pipeline.report.labels import METHOD_COLORS, method_label
+
+    video = _result("group1", [0.0, 0.0, 0.0], {"ridge": [0.0, 0.0, 10.0], "mle": [3.0, 4.0, 0.0]})
+    photos = _result("h20", [0.0, 0.0, 0.0], {"mle": [1.0, 0.0, 0.0], "dem": [0.0, 2.0, 0.0], "dji": [0.0, 0, 3]})
+    md = report_markdown([video, photos])
+    assert "| Ray into the terrain model (DEM) | `dem` |" in md and "| DJI's own laser target | `dji` |" in md
+    assert "ours:dem" not in md and "ours:dji" not in md and "| ours:mle | 5.00 |" in md
+    rows = {r["method"]: r for r in csv.DictReader(io.StringIO(estimates_csv_text([photos])))}
+    assert rows["dem"]["method_label"] != "dem" and rows["dji"]["method_label"] != "dji"
+    assert all(method_label(m) != m for m in ("dem", "dji", "ground"))
+    assert len({METHOD_COLORS[m] for m in ("dem", "dji", "ground", *METHOD_COLORS)}) == len(METHOD_COLORS)

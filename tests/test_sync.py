@@ -140,3 +140,20 @@ def test_plan_bursts_one_observation_per_burst_even_without_a_logged_shot():
                              max_range_gap_s=0.05)
     np.testing.assert_array_equal(plan.frame_index, [1, 7, 12])
     np.testing.assert_allclose(plan.range_m, [900.0, np.nan, np.nan])
+
+
+def test_plan_bursts_warns_when_the_clock_puts_every_shot_outside_its_burst():
+    """Bursts are recorded around the 1 Hz laser shots that trigger them. A video_start a few seconds off (written
+    to the minute, say) moves every burst between two shots: the plan keeps its observations but loses all ranges,
+    and must say why rather than let the run answer from vision alone in silence."""
+    burst = np.array([-80, -40, 0, 40, 80]) * 1_000_000
+    centres = T0 + np.arange(6) * 3 * 1_000_000_000
+    shots = T0 + np.arange(-2, 20) * 1_000_000_000  # 1 Hz, every shot valid
+    ranges = RangeSeries(t_ns=shots, range_m=np.full(shots.size, 900.0), valid=np.ones(shots.size, bool))
+    t_video = np.concatenate([c + burst for c in centres]) - T0  # the video clock starts at T0
+    right = plan_observations(_frames(t_video), ranges, mode="bursts", video_offset_ns=T0)
+    assert np.isfinite(right.range_m).all() and right.warnings == []
+    off = plan_observations(_frames(t_video), ranges, mode="bursts", video_offset_ns=T0 - 2_316_000_000)
+    assert off.n == 6 and not np.isfinite(off.range_m).any()
+    assert len(off.warnings) == 1 and "only 0 of 6 bursts" in off.warnings[0]
+    assert "clock.video_start" in off.warnings[0]

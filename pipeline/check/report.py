@@ -53,7 +53,7 @@ def check_flight(config: FlightConfig, clock: bool = True) -> CheckResult:
     with Flight.open(config) as r:
         geo = geometry_checks(r)
         result = CheckResult(r, mapping_lines(r), geo, problems=list(geo.problems), warnings=list(geo.warnings))
-        result.warnings[:0] = r.notes
+        result.warnings[:0] = r.notes + (r.plan.warnings if r.plan is not None else [])
         add_frame_centre(result, frame_centre_checks(r.log))
         if clock and r.plan is not None and not geo.problems:
             try:

@@ -14,6 +14,10 @@ METHOD_LABELS = {
     "fusion": "Fusion algorithm",
     "ridge": "Fusion under ridge estimation",
     "mle": "Weighted MLE",
+    # The photo methods of `ridgeloc locate` (docs/locate.md).
+    "dem": "Ray into the terrain model (DEM)",
+    "dji": "DJI's own laser target",
+    "ground": "Ray onto level ground",
 }
 
 # Colour-blind-safe (Okabe-Ito) colours, one per method.
@@ -26,10 +30,14 @@ METHOD_COLORS = {
     "ridge": "#009E73",
     "dlt": "#F0E442",
     "mle": "#D55E00",
+    "dem": "#000000",
+    "dji": "#882255",
+    "ground": "#332288",
 }
 
 METHOD_MARKERS = {
     "vision": "s", "range": "D", "los": "v", "fusion-raw": "P", "fusion": "X", "ridge": "o", "dlt": "^", "mle": "h",
+    "dem": "*", "dji": "d", "ground": "p",
 }
 
 

@@ -30,6 +30,7 @@ METHOD_NAMES = {
     "vision": "Vision", "range": "Laser ranging", "los": "Line of sight",
     "fusion-raw": "Fusion without normalization", "fusion": "Fusion", "ridge": "Ridge fusion",
     "dlt": "DLT triangulation (initial value)", "mle": "Weighted MLE (ours)",
+    "dem": "Ray into the terrain model (DEM)", "dji": "DJI's own laser target", "ground": "Ray onto level ground",
 }
 
 # The paper's flight experiments (Huang et al., Tables 3 and 4), groups 1..6: for display beside ours only.
@@ -153,7 +154,9 @@ def report_markdown(results: Sequence[GroupResult | FlightResult], failures: Seq
             for m in methods:
                 if m in PAPER_TABLE4_M:
                     rows.append([f"paper:{m}", *[_fmt(PAPER_TABLE4_M[m][PAPER_GROUPS.index(n)]) for n in paper_cols]])
-                rows.append([f"ours:{m}", *[_fmt(errs[n].get(m)) or "—" for n in paper_cols]])
+                ours = [_fmt(errs[n].get(m)) for n in paper_cols]
+                if m in PAPER_TABLE4_M or any(ours):  # no row of dashes for a photo method on video flights
+                    rows.append([f"ours:{m}", *[c or "—" for c in ours]])
             out += [_md_table(["method", *paper_cols], rows), ""]
         out += ["## Flight parameters, as the paper's Table 3", ""]
         rows = [["Intersection angle (deg)", *[_fmt(r.intersection_angle_deg) for r in results]],

@@ -46,6 +46,7 @@ class ObservationPlan:
     notes: list[str] = field(default_factory=list)
     at_key_frames: bool = False  # observations moved to key frames, ranges interpolated at their times
     range_error_m: np.ndarray | None = None  # (m,) the interpolation's estimated error (at key frames), else None
+    warnings: list[str] = field(default_factory=list)  # what makes the plan suspect (`check` and `run` print them)
 
     @property
     def n(self) -> int:
@@ -68,6 +69,7 @@ def plan_observations(frames: FrameSeries, ranges: RangeSeries | None, *, mode: 
     the frames are key frames (None: unknown, or every frame decodes alone)."""
     t_frames = np.asarray(frames.t_ns, dtype=np.int64) + int(video_offset_ns)
     notes: list[str] = []
+    warnings: list[str] = []
     if ranges is not None:
         t_rng = np.asarray(ranges.t_ns, dtype=np.int64) + int(range_offset_ns)
         ok = usable_ranges(ranges)
@@ -107,6 +109,8 @@ def plan_observations(frames: FrameSeries, ranges: RangeSeries | None, *, mode: 
             has = j >= 0
             range_m[has] = np.asarray(ranges.range_m, dtype=np.float64)[good[j[has]]]
             range_t[has] = t_rng[good[j[has]]]
+            if mode == "bursts":
+                warnings = _bursts_without_shots(t_frames[frame_pos], t_rng[good], int(has.sum()), max_range_gap_s)
     else:
         raise InputError(f"unknown observation mode {mode!r}")
     if frame_pos.size == 0:
@@ -115,12 +119,27 @@ def plan_observations(frames: FrameSeries, ranges: RangeSeries | None, *, mode: 
     plan = ObservationPlan(frame_pos=frame_pos.astype(np.int64),
                            frame_index=np.asarray(frames.index, dtype=np.int64)[frame_pos],
                            t_ns=t_frames[frame_pos], range_m=range_m.astype(np.float64),
-                           range_t_ns=range_t.astype(np.int64), notes=notes)
+                           range_t_ns=range_t.astype(np.int64), notes=notes, warnings=warnings)
     if mode == "range_times" and keyframe is not None and at_key_frames is not False:
         plan = _at_key_frames(plan, frames, t_frames, np.asarray(keyframe, dtype=bool), ranges, t_rng, ok,
                               at_key_frames, int(key_frame_tolerance_s * NS_PER_S),
                               int(range_interpolation_gap_s * NS_PER_S), range_sigma_m)
     return plan
+
+
+def _bursts_without_shots(t_obs_ns: np.ndarray, t_shots_ns: np.ndarray, n_ranged: int,
+                          max_range_gap_s: float) -> list[str]:
+    """A burst of video is recorded around the laser shot that triggered it: when most bursts have no valid shot
+    within max_range_gap_s although valid shots fall between the first and the last burst, the ranges are lost to a
+    clock offset (video or range), not to the laser. One warning line, or none."""
+    n = t_obs_ns.size
+    between = int(((t_shots_ns >= t_obs_ns.min()) & (t_shots_ns <= t_obs_ns.max())).sum())
+    if n < 3 or 2 * n_ranged >= n or between < n:
+        return []
+    return [f"only {n_ranged} of {n} bursts of video have a laser shot within {max_range_gap_s:g} s, although "
+            f"{between} valid shots fall between the first and the last burst: the video clock (or the range's) "
+            "looks off, and the observations lose their ranges; check clock.video_start (or video_offset_s, "
+            "range_offset_s)"]
 
 
 def _allowance(n: int) -> int:

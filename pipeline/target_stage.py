@@ -300,6 +300,12 @@ def _solve_tracked(fp: FlightPass, tracked: list[_Tracked]) -> list[tuple[dict[s
     return solved
 
 
+def unstated_accuracies(config: FlightConfig) -> list[str]:
+    """The position and pointing accuracies a video flight's config leaves unstated (`sigma:` position_m,
+    attitude_deg), which the answer's uncertainty then takes from defaults and the flight's own misfit."""
+    return [k for k in ("position_m", "attitude_deg") if getattr(config.sigma, k) is None]
+
+
 def unix_times_ns(log, t_ns: np.ndarray) -> list[int] | None:
     """Times on the telemetry clock (the position's) mapped onto UNIX time through the log's clock link, where the
     clock is another (a KLV video's "video" clock, linked by its packets' time stamps); None where it is UNIX
@@ -323,6 +329,13 @@ def _result(fp: FlightPass, t: _Tracked, estimates: dict[str, Estimate], failure
                                **dem_answer_inputs(fp.dem, None if config.terrain is None else
                                                    config.terrain.vertical_sigma_m, obs, fp.origin,
                                                    estimates.get("dem")))
+    unstated = unstated_accuracies(config)
+    if unstated and answer.located:
+        why = (f"sensor accuracies not stated (sigma: {', '.join(unstated)}): the uncertainty rests on defaults and "
+               "on this flight's own misfit, which a short or smooth flight measures poorly; state your sensors' "
+               "specifications (docs/flight_config.md)")
+        answer = dataclasses.replace(answer, reason=f"{answer.reason}; {why}")
+        notes.append(why)
 
     reference = t.truth_m
     if reference is None:

@@ -316,3 +316,21 @@ def test_broken_flight_configs_of_a_folder_are_named_by_their_folders(tmp_path, 
     assert [line.split(": failed: ")[0] for line in err] == ["ridgeloc: north", "ridgeloc: south"], err
     assert "north/flight.yaml: altitdue: unknown key (did you mean 'altitude'?)" in err[0]
     assert "2 of 2 flight(s) failed: north, south" in printed.out and not out.exists()
+
+
+def test_an_answer_without_stated_accuracies_says_its_uncertainty_rests_on_defaults(tmp_path, capsys):
+    """group1 with its `sigma:` line removed: still located, and the answer's reason and the console say that
+    position and attitude accuracies were not stated; the sample config (sigma stated) says nothing of it."""
+    import csv
+
+    ROOT = Path(__file__).resolve().parents[1]
+    text = (ROOT / "configs" / "flights" / "group1.yaml").read_text().replace("../../", f"{ROOT.as_posix()}/")
+    bare = tmp_path / "group1_bare.yaml"
+    bare.write_text("\n".join(ln for ln in text.splitlines() if not ln.startswith("sigma:")) + "\n")
+    said = "sensor accuracies not stated (sigma: position_m, attitude_deg)"
+    for config, out, expect in ((bare, tmp_path / "bare", True),
+                                (ROOT / "configs" / "flights" / "group1.yaml", tmp_path / "stated", False)):
+        assert main(["run", str(config), "-o", str(out), "--no-figures"]) == 0
+        (row,) = list(csv.DictReader((out / "targets.csv").open()))
+        assert row["status"] == "located"
+        assert (said in row["reason"]) is expect and (said in capsys.readouterr().out) is expect

@@ -243,9 +243,11 @@ def _sigma(draft: Draft, log: FlightLog) -> None:
     unstated = [k for k in ("range_m", "position_m", "attitude_deg") if k not in stated]
     if unstated:
         draft.fill_in.append(FillIn("sigma", [
-            "sigma:   # optional: your sensors' specified standard deviations (none: the MLE estimates them from "
-            "the flight, less well on a short one)", *(f"  {k}: FILL_IN" for k in unstated)],
-            "sigma: " + ", ".join(unstated) + " from your sensors' specifications", required=False))
+            "sigma:   # recommended: your sensors' specified standard deviations (none: the answer's uncertainty "
+            "rests on defaults and the flight's own misfit, too small on a short or smooth flight)",
+            *(f"  {k}: FILL_IN" for k in unstated)],
+            "sigma: " + ", ".join(unstated) + " from your sensors' specifications (without them the CE90 rests "
+            "on defaults and may be too small)", required=False))
     if stated:
         draft.doc["sigma"] = stated
         draft.note("sigma", "Accuracies: the sensors' standard deviations as the files state them (their covariances): "

@@ -334,3 +334,22 @@ def test_an_answer_without_stated_accuracies_says_its_uncertainty_rests_on_defau
         (row,) = list(csv.DictReader((out / "targets.csv").open()))
         assert row["status"] == "located"
         assert (said in row["reason"]) is expect and (said in capsys.readouterr().out) is expect
+
+
+def test_a_mapping_section_for_a_format_the_flight_lacks_is_a_warning():
+    """`mapping: {ros: ...}` on a tlog flight changes nothing: check and run say so instead of taking it quietly
+    (a user fixing a convention in the wrong section saw 'consistent' and believed the fix took)."""
+    from pipeline.flight.flight import read_flight_logs, unused_mapping_warnings
+    from pipeline.flight_config import load_flight_config
+
+    assert unused_mapping_warnings({"ros": {}, "tlog": {}, "video": {}}, ["tlog"]) == [
+        "mapping.ros: no file of this flight is read as ros (its files: tlog), so this section changes nothing"]
+    assert unused_mapping_warnings({"ros": {}, "mcap": {}}, ["mcap"]) == []
+    assert unused_mapping_warnings({"klv": {}}, ["fmv", "video"]) == []
+    root = Path(__file__).resolve().parents[1]
+    config = load_flight_config(root / "configs" / "flights" / "group1.yaml")
+    import dataclasses
+
+    log = read_flight_logs(dataclasses.replace(config, mapping={"ros": {"gimbal": {"frame": "frd_ned"}}}))
+    assert sum("mapping.ros: no file of this flight is read as ros" in w for w in log.warnings) == 1
+    assert not any("mapping." in w for w in read_flight_logs(config).warnings)

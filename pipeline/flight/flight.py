@@ -26,6 +26,18 @@ from pipeline.intrinsics import resolve_camera
 from pipeline.sync.assemble import FrameStates, frame_states
 from pipeline.sync.select import ObservationPlan, plan_observations
 
+#: the `mapping:` sections each format's reader takes (a video's frames: `video`, whatever the telemetry)
+_MAPPING_SECTIONS = {"tlog": ("tlog",), "dataflash": ("dataflash",), "ulog": ("ulog",), "ros1": ("ros",),
+                     "ros2": ("ros",), "mcap": ("mcap", "ros"), "klv": ("klv",), "fmv": ("klv",), "srt": ("srt",)}
+
+
+def unused_mapping_warnings(mapping: dict | None, formats: list[str]) -> list[str]:
+    """A warning per `mapping:` section that no file of the flight is read with (a `ros:` block on a tlog flight
+    changes nothing, which looks like a fix that took)."""
+    used = {"video"} | {k for f in formats for k in _MAPPING_SECTIONS.get(f, ())}
+    return [f"mapping.{k}: no file of this flight is read as {k} (its files: {', '.join(dict.fromkeys(formats))}), so "
+            "this section changes nothing" for k in sorted(set(mapping or {}) - used)]
+
 
 def read_flight_logs(config: FlightConfig) -> FlightLog:
     """The flight's telemetry files read into one FlightLog; InputError when it lacks position, attitude or gimbal."""
@@ -39,6 +51,7 @@ def read_flight_logs(config: FlightConfig) -> FlightLog:
         if exc.path is not None or config.path is None:
             raise
         raise ConfigError(str(exc), config.path) from None
+    log.warnings += unused_mapping_warnings(config.mapping, log.formats)
     missing = [q for q in ("position", "attitude", "gimbal") if getattr(log, q) is None]
     if missing:
         supplied = [q for q in ("position", "attitude", "gimbal", "range", "frames") if getattr(log, q) is not None]

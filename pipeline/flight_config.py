@@ -56,7 +56,8 @@ class Files:
 @dataclass(frozen=True)
 class Camera:
     """Intrinsics (OpenCV pinhole + distortion; pixel coordinates with integer values at pixel centres, (0, 0) the
-    centre of the top-left pixel) and the camera's mounting in the gimbal. The intrinsics may be left out
+    centre of the top-left pixel) and the camera's mounting in the gimbal (or on the body: `fixed_to_body`). The
+    intrinsics may be left out
     together (all of width_px .. cy_px, and dist): they then come from the logs (`pipeline.intrinsics`)."""
 
     width_px: Annotated[int, Gt(0)] | None = None
@@ -68,6 +69,9 @@ class Camera:
     dist: tuple[float, ...] | None = None
     R_optical_from_gimbal: tuple[tuple[float, float, float], tuple[float, float, float],
                                  tuple[float, float, float]] = ((0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0))
+    # a camera fixed to the airframe (no gimbal): the vehicle's attitude is the camera's, R_optical_from_gimbal its
+    # mounting on the body (body FRD -> optical)
+    fixed_to_body: bool = False
 
     def __post_init__(self):
         given = [k for k in INTRINSIC_KEYS if getattr(self, k) is not None]

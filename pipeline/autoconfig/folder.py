@@ -126,5 +126,8 @@ def flight_files(folder: Folder) -> FlightFiles:
                        f"{'missing' if log.position.alt_datum == 'missing' else 'relative to the take-off point'})")
     if missing or not telemetry:
         what = ", ".join(missing) if missing else "telemetry"
+        if "gimbal" in missing and log.attitude is not None:
+            what += (" (for a camera fixed to the airframe, with no gimbal, write the config by hand with "
+                     "camera: {fixed_to_body: true}: docs/flight_config.md)")
         raise InputError(f"{folder.describe()}; missing for localization: {what}", folder.root)
     return FlightFiles(tuple(f.path for f in telemetry), videos[0].path if videos else None, log)

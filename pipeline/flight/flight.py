@@ -21,7 +21,7 @@ from pipeline.flight_config import Camera, FlightConfig
 from pipeline.geometry.frames import ellipsoid_from_amsl_m
 from pipeline.geometry.lens import undistort_pixels
 from pipeline.geometry.pose import FramePoses, frame_poses
-from pipeline.ingest.model import FlightLog, FrameSeries
+from pipeline.ingest.model import FlightLog, FrameSeries, GimbalSeries
 from pipeline.intrinsics import resolve_camera
 from pipeline.sync.assemble import FrameStates, frame_states
 from pipeline.sync.select import ObservationPlan, plan_observations
@@ -39,6 +39,24 @@ def unused_mapping_warnings(mapping: dict | None, formats: list[str]) -> list[st
             "this section changes nothing" for k in sorted(set(mapping or {}) - used)]
 
 
+def camera_on_the_body(log: FlightLog, shift_ns: int = 0) -> FlightLog:
+    """`camera.fixed_to_body`: the log's vehicle attitude as its gimbal (the gimbal frame is the body frame, so the
+    camera mount R_optical_from_gimbal is its mounting on the airframe), its times moved by `shift_ns` (the
+    attitude's clock offset less the gimbal's, so that the gimbal's offset puts it where the attitude's puts the
+    attitude); a gimbal the log states is set aside, with a warning. The log unchanged without an attitude (the
+    missing attitude is then reported)."""
+    att = log.attitude
+    if att is None:
+        return log
+    warnings = list(log.warnings)
+    if log.gimbal is not None:
+        warnings.append(f"camera.fixed_to_body: the gimbal attitude of {log.gimbal.source or 'the logs'} is not "
+                        "used; the camera turns with the vehicle's attitude")
+    gimbal = GimbalSeries(att.t_ns + np.int64(shift_ns), att.quat_wxyz, np.zeros(att.t_ns.size, dtype=bool),
+                          source=f"{att.source} (camera fixed to the body)", clock=att.clock, sigma_deg=att.sigma_deg)
+    return dataclasses.replace(log, gimbal=gimbal, warnings=warnings)
+
+
 def read_flight_logs(config: FlightConfig) -> FlightLog:
     """The flight's telemetry files read into one FlightLog; InputError when it lacks position, attitude or gimbal."""
     from pipeline.ingest import read_flight
@@ -52,6 +70,8 @@ def read_flight_logs(config: FlightConfig) -> FlightLog:
             raise
         raise ConfigError(str(exc), config.path) from None
     log.warnings += unused_mapping_warnings(config.mapping, log.formats)
+    if config.camera.fixed_to_body:
+        log = camera_on_the_body(log, config.clock.offset_ns("attitude") - config.clock.offset_ns("gimbal"))
     missing = [q for q in ("position", "attitude", "gimbal") if getattr(log, q) is None]
     if missing:
         supplied = [q for q in ("position", "attitude", "gimbal", "range", "frames") if getattr(log, q) is not None]

@@ -283,3 +283,22 @@ def test_the_principal_point_warning_names_a_named_target_as_the_config_gives_it
     (far,) = [w for w in warnings if "from the principal point" in w]
     assert far.startswith(f"target 'car' ({config}: targets[0] (car)): pixel [497, 250] is 138 px from the "
                           "principal point"), far
+
+
+def test_lines_of_sight_40_deg_apart_are_not_called_nearly_parallel():
+    """At 5 km a 1.1 deg pointing error moves where rays 40 deg apart meet by about +-150 m: still too much to check
+    the ranges against, but the rays are not 'nearly parallel' (a trial read that for 40 deg); 1.3 deg are."""
+    import numpy as np
+
+    from pipeline.check.geometry import Cluster, meet_undetermined_warning
+
+    def warning(gamma_deg):
+        c = Cluster(n=10, n_ranged=10, metric="laser sphere", spread_m=5.0, centre_m=np.zeros(3), meet_m=np.zeros(3),
+                    distance_m=5000.0, ahead=True, range_bias_m=-160.0, range_bias_sigma_m=2.0, gamma_deg=gamma_deg,
+                    meet_along_sigma_m=170.0)
+        return meet_undetermined_warning(c)
+
+    wide, narrow = warning(40.0), warning(1.3)
+    assert "nearly parallel" not in wide and wide.startswith(
+        "where the lines of sight meet (first to last 40.0 deg, 5.0 km away) is undetermined along them (+-170 m")
+    assert narrow.startswith("the lines of sight are nearly parallel (first to last 1.3 deg): where they meet is")

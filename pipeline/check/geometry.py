@@ -151,6 +151,11 @@ def range_bias_problem(c: Cluster) -> str | None:
             "wrong clock.range offset")
 
 
+#: lines of sight spanning less than this (deg) are called nearly parallel; wider ones can still leave where they meet
+#: undetermined for a long range (a pointing error moves it by distance * error / sin(span))
+PARALLEL_DEG = 10.0
+
+
 def meet_undetermined_warning(c: Cluster) -> str | None:
     """A one-line warning when the laser ranges disagree with where the rays meet beyond the statistical check
     but within how far a pointing error moves that point along nearly parallel rays, else None."""
@@ -158,7 +163,10 @@ def meet_undetermined_warning(c: Cluster) -> str | None:
         return None
     if abs(c.range_bias_m) <= max(5 * c.range_bias_sigma_m, 0.03 * c.distance_m):
         return None
-    return (f"the lines of sight are nearly parallel (first to last {c.gamma_deg:.1f} deg): where they meet is "
-            f"undetermined along them (+-{_fmt_m(c.meet_along_sigma_m)} for a {math.degrees(POINTING_ERROR_RAD):.1f} "
-            f"deg pointing error), so the laser ranges ({_fmt_m(abs(c.range_bias_m))} "
-            f"{'longer' if c.range_bias_m > 0 else 'shorter'}) cannot be checked against it")
+    head = (f"the lines of sight are nearly parallel (first to last {c.gamma_deg:.1f} deg): where they meet is "
+            if c.gamma_deg < PARALLEL_DEG else
+            f"where the lines of sight meet (first to last {c.gamma_deg:.1f} deg, {_fmt_m(c.distance_m)} away) is ")
+    return (head + f"undetermined along them (+-{_fmt_m(c.meet_along_sigma_m)} for a "
+            f"{math.degrees(POINTING_ERROR_RAD):.1f} deg pointing error), so the laser ranges "
+            f"({_fmt_m(abs(c.range_bias_m))} {'longer' if c.range_bias_m > 0 else 'shorter'}) cannot be checked "
+            "against it")

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from pipeline.check.flight import GeometryResult, geometry_checks, mapping_lines
-from pipeline.check.geometry import _fmt_m
+from pipeline.check.geometry import PARALLEL_DEG, _fmt_m
 from pipeline.clock_estimate import ClockEstimate, estimate_clock
 from pipeline.errors import RidgelocError
 from pipeline.flight import Flight, acquire_mark
@@ -93,7 +93,9 @@ def format_check(result: CheckResult) -> str:
         lines.append(f"  {g.what} at {c.n} observations ({c.n_ranged} with a range): {c.describe()}"
                      + ("  << no baseline" if c.no_baseline else "" if c.consistent else "  << not converging"))
         if c.consistent and c.range_bias_m == c.range_bias_m:  # not NaN
-            sigma = (f"undetermined: +-{c.meet_along_sigma_m:.0f} m along nearly parallel lines of sight"
+            along = "nearly parallel lines of sight" if c.gamma_deg < PARALLEL_DEG else \
+                f"lines of sight {c.gamma_deg:.0f} deg apart"
+            sigma = (f"undetermined: +-{c.meet_along_sigma_m:.0f} m along {along}"
                      if c.meet_undetermined else f"+-{c.range_bias_sigma_m:.1f} m")
             lines.append(f"  laser range - distance to where the lines of sight meet: {c.range_bias_m:+.1f} m "
                          f"({sigma})")

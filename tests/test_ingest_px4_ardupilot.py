@@ -53,6 +53,12 @@ def test_ulog_new_topics_and_global_position():
     assert log2.position.lat_deg[0] == pytest.approx(47.397, abs=1e-3)
     assert log2.attitude.t_ns.size == 1730
     assert log2.missing_for_localization() == ["gimbal", "range", "frames"]
+    raw = _raw_ulog("px4_pyulog_tagged_default_params.ulg", "vehicle_gps_position")
+    no_fix = int((raw["fix_type"] < 3).sum())  # the samples without a 3-D fix, counted from pyulog's own read
+    assert no_fix == 160 and log2.position.t_ns.size == len(raw["fix_type"]) - no_fix
+    assert sum(f"{no_fix} of {len(raw['fix_type'])} vehicle_gps_position messages dropped: no fix" in w
+               for w in log2.warnings) == 1
+    assert not any("dropped: no fix" in w for w in log.warnings)
 
 
 def test_ulog_truncated_and_garbage(tmp_path):

@@ -213,6 +213,10 @@ def fill_from_topics(log: FlightLog, data: dict[str, dict], mapping: dict, path:
         if t.size == 0:
             warnings.append(f"{path}: no GPS fix in {len(d['timestamp'])} {name} messages")
             continue
+        if t.size < len(d["timestamp"]):  # a user seeing fewer positions than messages should know why
+            warnings.append(f"{path}: {len(d['timestamp']) - t.size} of {len(d['timestamp'])} {name} messages "
+                            f"dropped: no fix (fix_type below {mapping['position']['min_fix_type']}, "
+                            "mapping.ulog.position.min_fix_type) or no coordinates")
         t, lat, lon, alt = sort_by_time(t, lat, lon, alt)
         log.position = PositionSeries(t, lat, lon, alt, datum, source=f"{src}:{name}", clock="boot")
         break

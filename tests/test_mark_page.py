@@ -150,3 +150,28 @@ def test_mark_shows_a_colour_video_in_colour(tmp_path):
     assert img.ndim == 3 and img.shape == (480, 720, 3)
     saturation = cv2.cvtColor(img, cv2.COLOR_BGR2HSV)[..., 1]
     assert np.percentile(saturation, 99) > 80  # a gray page has none
+
+
+_ZOOM = """<script>
+window.addEventListener('load', function () { setTimeout(function () {
+  var img = document.getElementById('frame');
+  document.getElementById('wrap').style.cssText += 'position: fixed; left: 0; top: 0;';
+  var zoom = document.getElementById('zoom'); zoom.value = '4'; zoom.dispatchEvent(new Event('change'));
+  var r = img.getBoundingClientRect();
+  img.dispatchEvent(new MouseEvent('click', {bubbles: true, clientX: r.left + 42, clientY: r.top + 82}));
+  var c = document.querySelector('.centre');
+  document.body.setAttribute('data-result', JSON.stringify({csv: document.getElementById('csv').value,
+    css: img.clientWidth, centre: [c.style.left, c.style.top]}));
+}, 500); });
+</script>"""
+
+
+@needs_chromium
+def test_zoomed_clicks_are_the_same_image_pixels_and_the_centre_is_shown(tmp_path):
+    """A 13 x 5 px target needs a zoom: at 4x a click 42, 82 CSS px from the corner is the image pixel (10, 20);
+    the image centre (where a laser points) is marked at (w/2, h/2) in pixel-edge terms."""
+    page = tmp_path / "marks.html"
+    page.write_text(mark_page(_frames(), "test").replace("</body>", _ZOOM + "</body>"))
+    res = page_result(page)
+    assert res["css"] == 1200 and res["centre"] == ["600px", "240px"]
+    assert res["csv"] == "name,frame_or_image,x_px,y_px\nT1,4,10.00,20.00\n"

@@ -26,7 +26,10 @@ _CSS = """
 body { font: 14px system-ui, sans-serif; margin: 1em; color: #222; }
 #wrap { position: relative; display: inline-block; border: 1px solid #888; cursor: crosshair; }
 #frame { display: block; max-width: 100%; image-rendering: pixelated; }
-#frame.full { max-width: none; }
+#scroll { max-width: 100%; max-height: 80vh; overflow: auto; }
+.centre { position: absolute; width: 15px; height: 15px; margin: -8px 0 0 -8px; pointer-events: none;
+          background: linear-gradient(#0ff, #0ff) center / 1px 100% no-repeat,
+                      linear-gradient(#0ff, #0ff) center / 100% 1px no-repeat; opacity: .8; }
 .pin { position: absolute; width: 11px; height: 11px; margin: -6px 0 0 -6px; border: 2px solid #ff0;
        border-radius: 50%; box-shadow: 0 0 0 1px #000; pointer-events: none; }
 .pin span { position: absolute; left: 12px; top: -6px; color: #ff0; font-weight: bold; text-shadow: 0 0 2px #000;
@@ -55,8 +58,13 @@ _JS = r"""
   function draw() {
     var f = FRAMES[current];
     if (img.getAttribute('src') !== f.src) { img.src = f.src; }
-    Array.prototype.slice.call(wrap.querySelectorAll('.pin')).forEach(function (p) { p.remove(); });
+    Array.prototype.slice.call(wrap.querySelectorAll('.pin, .centre')).forEach(function (p) { p.remove(); });
+    var z = Number(zoomSel.value);  // 0: fit the page; else CSS pixels per image pixel
+    img.style.maxWidth = z ? 'none' : '100%%';
+    img.style.width = z ? (f.width * z) + 'px' : '';
     var s = img.clientWidth / f.width;
+    var c = document.createElement('div'); c.className = 'centre';  // the image centre: where a laser points
+    c.style.left = (f.width / 2 * s) + 'px'; c.style.top = (f.height / 2 * s) + 'px'; wrap.appendChild(c);
     marks.forEach(function (m) {
       if (m.frame !== f.index) { return; }
       var p = document.createElement('div'); p.className = 'pin';
@@ -105,9 +113,8 @@ _JS = r"""
     if (i !== null) { marks.splice(Number(i), 1); draw(); }
   });
   sel.addEventListener('change', function () { current = Number(sel.value); draw(); });
-  document.getElementById('full').addEventListener('change', function (ev) {
-    img.classList.toggle('full', ev.target.checked); draw();
-  });
+  var zoomSel = document.getElementById('zoom');
+  zoomSel.addEventListener('change', draw);
   img.addEventListener('load', draw);
   window.addEventListener('resize', draw);
   document.getElementById('save').addEventListener('click', function () {
@@ -156,9 +163,12 @@ def mark_page(frames: Mapping[int | str, np.ndarray], title: str, marks: Sequenc
             f"<p>{how}</p>"
             f"<p><label>{what.capitalize()} <select id=\"frames\"></select></label> "
             "<label>Name <input id=\"name\" size=\"16\"></label> "
-            "<label><input type=\"checkbox\" id=\"full\"> full size</label> "
+            "<label>Zoom <select id=\"zoom\"><option value=\"0\">fit</option><option value=\"1\">1x</option>"
+            "<option value=\"2\">2x</option><option value=\"4\">4x</option><option value=\"8\">8x</option>"
+            "</select></label> <span title=\"the image centre, where a laser points\">cyan cross: image centre "
+            "(laser)</span> "
             f"<button id=\"save\">Save {escape(csv_name)}</button> <span id=\"error\" style=\"color:#b00\"></span></p>"
-            "<div id=\"wrap\"><img id=\"frame\" alt=\"frame\"></div>"
+            "<div id=\"scroll\"><div id=\"wrap\"><img id=\"frame\" alt=\"frame\"></div></div>"
             "<table id=\"list\"></table>"
             f"<p>{escape(','.join(MARKS_CSV_HEADER))} (what Save writes):<br>"
             "<textarea id=\"csv\" readonly></textarea></p>"

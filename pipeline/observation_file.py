@@ -160,6 +160,10 @@ def load(path: str | PathLike) -> Observations:
     try:
         doc = json.loads(text, parse_float=_parse_float, parse_int=_parse_int, parse_constant=_parse_constant)
     except json.JSONDecodeError as exc:
+        if str(path).lower().endswith((".yaml", ".yml")):  # a flight or run config: `run` takes those
+            raise ObservationError("a YAML config, not an observations JSON file: `ridgeloc run` takes flight "
+                                   "configs; `ridgeloc solve` the observations.json a run writes per flight (docs/"
+                                   "observations_format.md)", path) from None
         raise ObservationError(f"not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}",
                                path) from None
     except RecursionError:

@@ -65,3 +65,12 @@ def test_output_piped_into_a_reader_that_stops_early_ends_quietly():
     err = p.stderr.read().decode()
     assert p.wait(timeout=60) == 141
     assert "Traceback" not in err and "BrokenPipeError" not in err, err
+
+
+def test_solve_given_a_flight_config_says_what_it_takes(capsys):
+    from pathlib import Path
+
+    config = Path(__file__).resolve().parents[1] / "configs" / "flights" / "group1.yaml"
+    assert main(["solve", str(config)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "a YAML config, not an observations JSON file: `ridgeloc run` takes flight" in err

@@ -121,3 +121,21 @@ def test_screenshot_shows_the_layers_offline(groups, tmp_path):
     assert share("#FFD700") > 5e-5  # truth
     assert share(METHOD_COLORS["mle"], 20) > 1e-5  # the MLE's marker
     Path(shot).unlink()
+
+
+def test_answers_on_top_of_each_other_share_one_label():
+    """Ten answers within a few metres (the sample flights' one site) get one label, 'first and 9 more'; an
+    answer 1.3 km away keeps its own; within 20 m is 'on top' at least, or a fortieth of the map's extent."""
+    from types import SimpleNamespace
+
+    from pipeline.report.webmap import shared_labels
+
+    origin = (34.36, 108.76, 400.0)
+
+    def target(label, e_m, n_m):
+        return SimpleNamespace(label=label, origin_lla=origin, answer=SimpleNamespace(
+            position_m=np.array([e_m, n_m, 0.0]), located=True))
+
+    near = [target(f"g{i}", 3.0 * i, -2.0 * i) for i in range(10)]
+    labels = shared_labels([*near, target("far", 0.0, 1300.0), target("close_but_apart", 60.0, 0.0)])
+    assert labels == {"g0": "g0 and 9 more", "far": "far", "close_but_apart": "close_but_apart"}

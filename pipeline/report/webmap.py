@@ -238,6 +238,35 @@ def answer_sites(results: Sequence[GroupResult]) -> list[list[GroupResult]]:
     return sites
 
 
+#: answers closer than this (m), or a fortieth of the map's extent, share one label on the answers map
+LABEL_MERGE_M = 20.0
+
+
+def shared_labels(targets: Sequence[GroupResult]) -> dict[str, str]:
+    """{target label: its permanent map label} for located answers: answers closer than a fortieth of the map's
+    extent (at least LABEL_MERGE_M) to an earlier one share its label, "first and N more" (each marker's own
+    tooltip still names it); the others are absent from the dict. Eleven sample answers within 10 m stacked eleven
+    labels on one spot."""
+    pts, names = [], []
+    for t in targets:
+        lat, lon, _ = geodetic_from_enu(answer_of(t).position_m, t.origin_lla)
+        pts.append((float(lat), float(lon)))
+        names.append(t.label)
+    if not pts:
+        return {}
+    p = np.array(pts)
+    en_m = np.column_stack([(p[:, 1] - p[0, 1]) * np.cos(np.radians(p[0, 0])), p[:, 0] - p[0, 0]]) * 111_200.0
+    radius = max(LABEL_MERGE_M, float(np.ptp(en_m, axis=0).max()) / 40.0)
+    groups: list[list[int]] = []
+    for i in range(len(pts)):
+        near = next((g for g in groups if np.hypot(*(en_m[i] - en_m[g[0]])) < radius), None)
+        if near is None:
+            groups.append([i])
+        else:
+            near.append(i)
+    return {names[g[0]]: names[g[0]] + (f" and {len(g) - 1} more" if len(g) > 1 else "") for g in groups}
+
+
 def answers_map(targets: Sequence[GroupResult], tiles: bool = True):
     """A folium.Map of located targets' answers: each a marker with its name always shown, its 95 % ellipse, and
     the truth where a flight config gives it (a small black ring)."""
@@ -252,6 +281,7 @@ def answers_map(targets: Sequence[GroupResult], tiles: bool = True):
         folium.TileLayer(OSM_TILES, attr=OSM_ATTRIBUTION, name="OpenStreetMap", max_zoom=22, max_native_zoom=19,
                          control=False).add_to(m)
     bounds = []
+    labels = shared_labels(targets)
     for t in targets:
         a, row = answer_of(t), answer_row(t)
         lla = geodetic_from_enu(a.position_m, t.origin_lla)
@@ -272,9 +302,11 @@ def answers_map(targets: Sequence[GroupResult], tiles: bool = True):
                             tooltip=f"<b>{escape(t.label)}</b><br>{lla[0]:.7f}°, {lla[1]:.7f}°<br>"
                                     f"{escape(row['mgrs'])}<br>{one_decimal(row['alt_msl_m'])} m MSL{ce90}<br>"
                                     f"method {escape(str(row['method']))}").add_to(m)
-        folium.CircleMarker(_latlon(lla)[0], radius=1, opacity=0, fill=False,  # its name, always shown
-                            tooltip=folium.Tooltip(escape(t.label), permanent=True, direction="right",
-                                                   class_name="ridgeloc-target-label")).add_to(m)
+        label = labels.get(t.label)
+        if label is not None:  # its name, always shown (one label for answers that lie on top of each other)
+            folium.CircleMarker(_latlon(lla)[0], radius=1, opacity=0, fill=False,
+                                tooltip=folium.Tooltip(escape(label), permanent=True, direction="right",
+                                                       class_name="ridgeloc-target-label")).add_to(m)
         bounds += _latlon(lla)
     b = np.array(bounds)
     m.fit_bounds([b.min(axis=0).tolist(), b.max(axis=0).tolist()], padding_top_left=(30, 30),

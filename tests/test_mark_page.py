@@ -175,3 +175,18 @@ def test_zoomed_clicks_are_the_same_image_pixels_and_the_centre_is_shown(tmp_pat
     res = page_result(page)
     assert res["css"] == 1200 and res["centre"] == ["600px", "240px"]
     assert res["csv"] == "name,frame_or_image,x_px,y_px\nT1,4,10.00,20.00\n"
+
+
+def test_mark_takes_a_clip_alone_as_run_and_check_do(tmp_path, capsys, monkeypatch):
+    """`ridgeloc mark clip.ts` (no config): the page goes into the current folder (a clip's folder may be a
+    read-only archive) and says how the marks reach a run: a flight config for the clip with marks_file."""
+    from pipeline.cli import main
+
+    clip = ROOT / ".." / "shared" / "fmv" / "aphill_short.ts"
+    if not clip.is_file():
+        pytest.skip(f"{clip} absent (the shared read-only material is not beside this checkout)")
+    monkeypatch.chdir(tmp_path)
+    assert main(["mark", str(clip), "--max-frames", "2"]) == 0
+    out = capsys.readouterr().out
+    assert (tmp_path / "marks.html").is_file() and "marks_file: marks.csv" in out and "ridgeloc init" in out
+    assert len(re.findall(r"data:image/jpeg;base64,", (tmp_path / "marks.html").read_text())) == 2

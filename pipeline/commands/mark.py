@@ -76,7 +76,7 @@ def main(args) -> int:
     from pipeline.commands import not_a_config, output_file
     from pipeline.errors import ConfigError, InputError
     from pipeline.flight import Flight
-    from pipeline.flight_config import load_flight_config
+    from pipeline.flight_config import FMV_SUFFIXES, flight_config_for_video, load_flight_config
     from pipeline.ingest.photo_inspect import is_photo_input
     from pipeline.report.mark_page import mark_page
     from pipeline.targets import flight_targets
@@ -91,12 +91,18 @@ def main(args) -> int:
     if paths[0].is_dir() and not (paths[0] / "flight.yaml").is_file():  # mark takes photo folders: say it has none
         raise InputError(f"no drone photos (.jpg, .jpeg files) here, and a folder is not a flight config: `ridgeloc "
                          f"init {paths[0]}` writes one from a flight's files", paths[0])
-    # a folder or a file in the page's way is refused before the video is read
-    out = output_file(args.output or paths[0].resolve().parent / "marks.html", "marks.html")
-    try:
-        config = load_flight_config(paths[0])
-    except InputError as exc:
-        raise not_a_config(paths[0]) or exc from None
+    clip = paths[0].is_file() and paths[0].suffix.lower() in FMV_SUFFIXES
+    # a folder or a file in the page's way is refused before the video is read; a clip's folder may be a
+    # read-only archive: its page goes into the current folder
+    out = output_file(args.output or (Path("marks.html") if clip else paths[0].resolve().parent / "marks.html"),
+                      "marks.html")
+    if clip:  # a full-motion video alone, as `run` and `check` take it
+        config = flight_config_for_video(paths[0])
+    else:
+        try:
+            config = load_flight_config(paths[0])
+        except InputError as exc:
+            raise not_a_config(paths[0]) or exc from None
     if config.files.photos:
         return _photo_page(list(config.files.photos), config, out)
     with Flight.open(config) as flight:
@@ -115,6 +121,8 @@ def main(args) -> int:
         wanted = sorted(set(wanted) | {m["frame"] for m in known})
         images = flight.source.colour(wanted)  # in colour: the person marking tells targets apart by it
     atomic_write_text(out, mark_page(images, f"ridgeloc mark: {config.name}", known))
-    print(f"wrote {out} ({len(images)} frame(s)); open it in a browser, click the targets and save marks.csv, "
-          "then set `marks_file: marks.csv` in the flight config")
+    then = (f"then write a flight config for the clip (`ridgeloc init {paths[0].resolve().parent}`, or `-o` "
+            "elsewhere) and set `marks_file: marks.csv` in it") if clip else \
+        "then set `marks_file: marks.csv` in the flight config"
+    print(f"wrote {out} ({len(images)} frame(s)); open it in a browser, click the targets and save marks.csv, {then}")
     return 0

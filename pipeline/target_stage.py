@@ -330,12 +330,14 @@ def _result(fp: FlightPass, t: _Tracked, estimates: dict[str, Estimate], failure
                                                    config.terrain.vertical_sigma_m, obs, fp.origin,
                                                    estimates.get("dem")))
     unstated = unstated_accuracies(config)
+    answer_warnings = []
     if unstated and answer.located:
-        why = (f"sensor accuracies not stated (sigma: {', '.join(unstated)}): the uncertainty rests on defaults and "
-               "on this flight's own misfit, which a short or smooth flight measures poorly; state your sensors' "
-               "specifications (docs/flight_config.md)")
-        answer = dataclasses.replace(answer, reason=f"{answer.reason}; {why}")
-        notes.append(why)
+        answer_warnings.append(
+            f"sensor accuracies not stated (sigma: {', '.join(unstated)}): the uncertainty rests on defaults and on "
+            "this flight's own misfit, which a short or smooth flight measures poorly; state your sensors' "
+            "specifications (docs/flight_config.md)")
+        answer = dataclasses.replace(answer, reason="; ".join([answer.reason, *answer_warnings]))
+        notes += answer_warnings
 
     reference = t.truth_m
     if reference is None:
@@ -365,6 +367,8 @@ def _result(fp: FlightPass, t: _Tracked, estimates: dict[str, Estimate], failure
     settings["camera_resolved"] = {"source": flight.camera_source, **{k: getattr(cam, k) for k in (
         "width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px", "dist")}}
     settings["notes"] = [*fp.notes, *notes]
+    if answer_warnings:  # what limits the answer's uncertainty itself: the console and the TAK marker say it too
+        settings["answer_warnings"] = answer_warnings
     if flight.notes:  # the logs' own warnings (also in notes): damage read past, shown on the console too
         settings["input_warnings"] = list(flight.notes)
     if t.geometry_warnings:  # also in notes; every estimate's reason in the exports carries them

@@ -115,4 +115,6 @@ def test_a_marker_carries_the_warnings_of_its_answer(tmp_path):
     text = ET.fromstring(cot.read_bytes()).find("detail/remarks").text
     warnings = [ln for ln in text.splitlines() if ln.startswith("WARNING: ")]
     assert any(ln.startswith("WARNING: the laser ranges all end at sea level (+0.6 m") for ln in warnings), text
+    # a clip alone states no accuracies: its CE90 rests on defaults, which the marker says too
+    assert "WARNING: sensor accuracies not stated (sigma" in warnings[-1]
     assert all(": " not in ln[len("WARNING: "):] for ln in warnings)  # the head of each, not the advice

@@ -81,8 +81,8 @@ def group_summary(r, reused: bool = False) -> list[str]:
     lines = [f"{r.label}: {count(r.n_observations, 'observation')}, {state}" + (f", error {shown}" if shown else "")]
     lines += [f"  warning: {w}" for w in r.settings.get("input_warnings") or []]  # a truncated log, say
     lines += [f"  warning: {w}" for w in r.settings.get("geometry_warnings") or []]
-    lines += [f"  {n}" for n in r.settings.get("notes") or [] if str(n).startswith(("mle: the error model does not fit",
-                                                                                 "sensor accuracies not stated"))]
+    lines += [f"  warning: {w}" for w in r.settings.get("answer_warnings") or []]
+    lines += [f"  {n}" for n in r.settings.get("notes") or [] if str(n).startswith("mle: the error model does not fit")]
     mle = r.estimates.get("mle")
     rejected = mle.extras.get("rejected") if mle is not None and isinstance(mle.extras, dict) else None
     if rejected:

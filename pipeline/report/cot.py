@@ -121,7 +121,8 @@ def cot_target(r: GroupResult, row: dict) -> CotTarget:
     return CotTarget(uid=target_uid(flight_key(r) + "\n" + (r.target or "")), callsign=row["name"],
                      lat_deg=row["lat_deg"], lon_deg=row["lon_deg"], hae_m=row["alt_m"], ce90_m=row["ce90_m"],
                      le90_m=row["le90_m"], attributes=attributes,
-                     remarks=remarks(row, _flight_time(r), r.settings.get("geometry_warnings") or ()))
+                     remarks=remarks(row, _flight_time(r), [*(r.settings.get("geometry_warnings") or ()),
+                                                            *(r.settings.get("answer_warnings") or ())]))
 
 
 def cot_entries(results, now: datetime | None = None, options: CotOptions | None = None) -> list[PackageEntry]:

@@ -333,9 +333,9 @@ def _result(fp: FlightPass, t: _Tracked, estimates: dict[str, Estimate], failure
     answer_warnings = []
     if unstated and answer.located:
         answer_warnings.append(
-            f"sensor accuracies not stated (sigma: {', '.join(unstated)}): the uncertainty rests on defaults and on "
-            "this flight's own misfit, which a short or smooth flight measures poorly; state your sensors' "
-            "specifications (docs/flight_config.md)")
+            f"sensor accuracies not stated ({', '.join('sigma.' + k for k in unstated)}): the uncertainty rests on "
+            "defaults and on this flight's own misfit, which a short or smooth flight measures poorly; state your "
+            "sensors' specifications (docs/flight_config.md)")
         answer = dataclasses.replace(answer, reason="; ".join([answer.reason, *answer_warnings]))
         notes += answer_warnings
 

@@ -327,7 +327,7 @@ def test_an_answer_without_stated_accuracies_says_its_uncertainty_rests_on_defau
     text = (ROOT / "configs" / "flights" / "group1.yaml").read_text().replace("../../", f"{ROOT.as_posix()}/")
     bare = tmp_path / "group1_bare.yaml"
     bare.write_text("\n".join(ln for ln in text.splitlines() if not ln.startswith("sigma:")) + "\n")
-    said = "sensor accuracies not stated (sigma: position_m, attitude_deg)"
+    said = "sensor accuracies not stated (sigma.position_m, sigma.attitude_deg)"
     for config, out, expect in ((bare, tmp_path / "bare", True),
                                 (ROOT / "configs" / "flights" / "group1.yaml", tmp_path / "stated", False)):
         assert main(["run", str(config), "-o", str(out), "--no-figures"]) == 0

@@ -116,5 +116,5 @@ def test_a_marker_carries_the_warnings_of_its_answer(tmp_path):
     warnings = [ln for ln in text.splitlines() if ln.startswith("WARNING: ")]
     assert any(ln.startswith("WARNING: the laser ranges all end at sea level (+0.6 m") for ln in warnings), text
     # a clip alone states no accuracies: its CE90 rests on defaults, which the marker says too
-    assert "WARNING: sensor accuracies not stated (sigma" in warnings[-1]
+    assert warnings[-1] == "WARNING: sensor accuracies not stated (sigma.position_m, sigma.attitude_deg)"
     assert all(": " not in ln[len("WARNING: "):] for ln in warnings)  # the head of each, not the advice

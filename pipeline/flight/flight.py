@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline.errors import ConfigError, InputError, RidgelocError
-from pipeline.flight.frames import FrameSource, open_frames
+from pipeline.flight.frames import FrameSource, open_frames, with_cut_off
 from pipeline.flight_config import Camera, FlightConfig
 from pipeline.geometry.frames import ellipsoid_from_amsl_m
 from pipeline.geometry.lens import undistort_pixels
@@ -80,9 +80,8 @@ def read_flight_logs(config: FlightConfig) -> FlightLog:
                   if supplied == ["frames"] else
                   "give the logs that record them, or, where a log has them under other names, set `mapping:` "
                   "(`ridgeloc inspect LOG` lists what each file holds)")
-        cut = [w for w in log.warnings if "looks cut off" in w or "demuxing stopped early" in w]
-        raise InputError(f"the flight's files {what}: no {', '.join(missing)}; {advice}"
-                         + "".join(f"; {w}" for w in cut), config.path)
+        raise with_cut_off(InputError(f"the flight's files {what}: no {', '.join(missing)}; {advice}", config.path),
+                           log.warnings)
     return log
 
 
@@ -169,8 +168,8 @@ class Flight:
             plan, plan_error = None, None
             try:
                 plan = plan_flight_observations(config, source.frames, log, keyframe=source.keyframe)
-            except InputError as exc:
-                plan_error = exc
+            except InputError as exc:  # frames missing from a cut-off video: say that it looks cut off
+                plan_error = with_cut_off(exc, [*log.warnings, *source.warnings])
             separation, origin, origin_error = None, None, None
             try:
                 separation = geoid_separation_m(config, log)
@@ -181,7 +180,7 @@ class Flight:
             source.close()
             raise
         return cls(config, log, source, camera, camera_source, plan, plan_error, separation, origin, origin_error,
-                   list(log.warnings))
+                   [*log.warnings, *source.warnings])
 
     # ---- the frames -------------------------------------------------------------------------------------------
 

@@ -73,6 +73,9 @@ def read_flight_logs(config: FlightConfig) -> FlightLog:
     if config.camera.fixed_to_body:
         log = camera_on_the_body(log, config.clock.offset_ns("attitude") - config.clock.offset_ns("gimbal"))
     missing = [q for q in ("position", "attitude", "gimbal") if getattr(log, q) is None]
+    if config.camera.fixed_to_body and "attitude" in missing:  # no gimbal to give: the camera turns with the body
+        missing = [q if q != "attitude" else "attitude (camera.fixed_to_body: the camera turns with it)"
+                   for q in missing if q != "gimbal"]
     if missing:
         supplied = [q for q in ("position", "attitude", "gimbal", "range", "frames") if getattr(log, q) is not None]
         what = f"supply only {', '.join(supplied)}" if supplied else "supply nothing ridgeloc reads"

@@ -360,8 +360,13 @@ def test_a_mapping_section_for_a_format_the_flight_lacks_is_a_warning():
     from pipeline.flight.flight import read_flight_logs, unused_mapping_warnings
     from pipeline.flight_config import load_flight_config
 
-    assert unused_mapping_warnings({"ros": {}, "tlog": {}, "video": {}}, ["tlog"]) == [
+    assert unused_mapping_warnings({"ros": {}, "tlog": {}}, ["tlog"]) == [
         "mapping.ros: no file of this flight is read as ros (its files: tlog), so this section changes nothing"]
+    # `video:` is read for a video listed among the telemetry files only: files.video takes files.frames_csv
+    assert unused_mapping_warnings({"video": {"frames_csv": None}}, ["tlog"]) == [
+        "mapping.video: read only for a video listed in files.telemetry (its files: tlog); the video of files.video "
+        "takes files.frames_csv, so this section changes nothing"]
+    assert unused_mapping_warnings({"video": {}}, ["video", "srt"]) == []
     assert unused_mapping_warnings({"ros": {}, "mcap": {}}, ["mcap"]) == []
     assert unused_mapping_warnings({"klv": {}}, ["fmv", "video"]) == []
     root = Path(__file__).resolve().parents[1]

@@ -26,17 +26,22 @@ from pipeline.intrinsics import resolve_camera
 from pipeline.sync.assemble import FrameStates, frame_states
 from pipeline.sync.select import ObservationPlan, plan_observations
 
-#: the `mapping:` sections each format's reader takes (a video's frames: `video`, whatever the telemetry)
+#: the `mapping:` sections each format's reader takes (`video`: a video listed among the telemetry files; the
+#: video of files.video takes files.frames_csv)
 _MAPPING_SECTIONS = {"tlog": ("tlog",), "dataflash": ("dataflash",), "ulog": ("ulog",), "ros1": ("ros",),
-                     "ros2": ("ros",), "mcap": ("mcap", "ros"), "klv": ("klv",), "fmv": ("klv",), "srt": ("srt",)}
+                     "ros2": ("ros",), "mcap": ("mcap", "ros"), "klv": ("klv",), "fmv": ("klv",), "srt": ("srt",),
+                     "video": ("video",)}
 
 
 def unused_mapping_warnings(mapping: dict | None, formats: list[str]) -> list[str]:
     """A warning per `mapping:` section that no file of the flight is read with (a `ros:` block on a tlog flight
-    changes nothing, which looks like a fix that took)."""
-    used = {"video"} | {k for f in formats for k in _MAPPING_SECTIONS.get(f, ())}
-    return [f"mapping.{k}: no file of this flight is read as {k} (its files: {', '.join(dict.fromkeys(formats))}), so "
-            "this section changes nothing" for k in sorted(set(mapping or {}) - used)]
+    changes nothing, which looks like a fix that took). `formats`: those of the telemetry files."""
+    used = {k for f in formats for k in _MAPPING_SECTIONS.get(f, ())}
+    files = ", ".join(dict.fromkeys(formats))
+    return [f"mapping.video: read only for a video listed in files.telemetry (its files: {files}); the video of "
+            "files.video takes files.frames_csv, so this section changes nothing" if k == "video" else
+            f"mapping.{k}: no file of this flight is read as {k} (its files: {files}), so this section changes "
+            "nothing" for k in sorted(set(mapping or {}) - used)]
 
 
 def camera_on_the_body(log: FlightLog, shift_ns: int = 0) -> FlightLog:

@@ -300,10 +300,12 @@ def _solve_tracked(fp: FlightPass, tracked: list[_Tracked]) -> list[tuple[dict[s
     return solved
 
 
-def unstated_accuracies(config: FlightConfig) -> list[str]:
+def unstated_accuracies(config: FlightConfig, method: str | None = None) -> list[str]:
     """The position and pointing accuracies a video flight's config leaves unstated (`sigma:` position_m,
-    attitude_deg), which the answer's uncertainty then takes from defaults and the flight's own misfit."""
-    return [k for k in ("position_m", "attitude_deg") if getattr(config.sigma, k) is None]
+    attitude_deg), which the answer's uncertainty then takes from defaults and the flight's own misfit; those the
+    answer's `method` states in its own `sigma` option (`solve.options.mle.sigma`) count as stated."""
+    own = ((config.solve.options or {}).get(method) or {}).get("sigma") or {} if method else {}
+    return [k for k in ("position_m", "attitude_deg") if getattr(config.sigma, k) is None and own.get(k) is None]
 
 
 def unix_times_ns(log, t_ns: np.ndarray) -> list[int] | None:
@@ -329,7 +331,7 @@ def _result(fp: FlightPass, t: _Tracked, estimates: dict[str, Estimate], failure
                                **dem_answer_inputs(fp.dem, None if config.terrain is None else
                                                    config.terrain.vertical_sigma_m, obs, fp.origin,
                                                    estimates.get("dem")))
-    unstated = unstated_accuracies(config)
+    unstated = unstated_accuracies(config, answer.method)
     answer_warnings = []
     if unstated and answer.located:
         answer_warnings.append(

@@ -51,3 +51,36 @@ def test_the_attitudes_clock_offset_moves_the_camera_with_it():
         c = shifted.clock
         g, a = flight.log.gimbal, flight.log.attitude
         assert (g.t_ns + c.offset_ns("gimbal") == a.t_ns + c.offset_ns("attitude")).all()
+
+
+def test_a_log_without_attitude_asks_for_the_attitude_alone(monkeypatch):
+    """fixed_to_body on a log with a position only: the one thing to give is the attitude the camera turns with
+    (not 'no attitude, gimbal', a gimbal the key says there is none of); check labels the mounting as the body's."""
+    import pytest
+
+    import pipeline.ingest
+    from pipeline.check.flight import mapping_lines
+    from pipeline.errors import InputError
+    from pipeline.flight.flight import read_flight_logs
+    from pipeline.ingest.model import FlightLog
+
+    config = load_flight_config(ROOT / "configs" / "flights" / "group1.yaml")
+    fixed = dataclasses.replace(config, camera=dataclasses.replace(config.camera, fixed_to_body=True))
+    real = read_flight_logs(config)
+
+    def position_only(*args, **kwargs):
+        return FlightLog(path=real.path, position=real.position, formats=["tlog"])
+
+    with monkeypatch.context() as m:
+        m.setattr(pipeline.ingest, "read_flight", position_only)
+        with pytest.raises(InputError) as info:
+            read_flight_logs(fixed)
+    msg = str(info.value)
+    assert "supply only position: no attitude (camera.fixed_to_body: the camera turns with it);" in msg
+    assert "gimbal" not in msg
+    with Flight.open(fixed) as flight:
+        (mount,) = [line for line in mapping_lines(flight) if line.lstrip().startswith("mount")]
+    assert mount.endswith("(body FRD: camera.fixed_to_body)")
+    with Flight.open(config) as flight:
+        (mount,) = [line for line in mapping_lines(flight) if line.lstrip().startswith("mount")]
+    assert mount.endswith("(gimbal FRD)")

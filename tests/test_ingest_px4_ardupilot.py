@@ -61,6 +61,26 @@ def test_ulog_new_topics_and_global_position():
     assert not any("dropped: no fix" in w for w in log.warnings)
 
 
+def test_global_positions_without_coordinates_are_not_said_to_lack_a_fix():
+    """vehicle_global_position has no fix_type: its dropped samples lack coordinates, and the warning says that
+    (not 'fix_type below 3', a field the topic does not have)."""
+    from pipeline.ingest.mapping import mapping_for
+    from pipeline.ingest.model import FlightLog
+    from pipeline.ingest.ulog import fill_from_topics
+
+    n = 10
+    lat = np.full(n, 47.4)
+    lat[:3] = np.nan
+    data = {"vehicle_global_position": {"timestamp": np.arange(n, dtype=np.uint64) * 100_000, "lat": lat,
+                                        "lon": np.full(n, 8.5), "alt": np.full(n, 500.0),
+                                        "alt_ellipsoid": np.full(n, 550.0)}}
+    log = FlightLog(path="x.ulg", formats=["ulog"])
+    fill_from_topics(log, data, mapping_for("ulog"), Path("x.ulg"))
+    assert log.position.t_ns.size == 7
+    (w,) = [w for w in log.warnings if "dropped" in w]
+    assert w == "x.ulg: 3 of 10 vehicle_global_position messages dropped: no coordinates (NaN or 0, 0)"
+
+
 def test_ulog_truncated_and_garbage(tmp_path):
     data = (LOGS / "px4_pyulog_tagged_default_params.ulg").read_bytes()
     cut = tmp_path / "cut.ulg"

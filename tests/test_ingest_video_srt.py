@@ -222,3 +222,54 @@ def test_a_video_without_telemetry_is_refused_with_what_it_does_supply(tmp_path)
     msg = str(info.value)
     assert "supply only frames: no position, attitude, gimbal; a video without KLV metadata needs the flight's " \
            "telemetry logs beside it (files.telemetry)" in msg and "\n" not in msg
+
+
+def _ts_video(path, n=40, fps=20, size=(64, 48)):
+    """A plain MPEG transport stream (no KLV), as a camera's recorder writes one."""
+    from fractions import Fraction
+
+    import av
+
+    with av.open(str(path), "w", format="mpegts") as out:
+        s = out.add_stream("mpeg2video", rate=fps)
+        s.width, s.height, s.pix_fmt = size[0], size[1], "yuv420p"
+        for i in range(n):
+            img = np.full((size[1], size[0], 3), (i * 6) % 256, np.uint8)
+            frame = av.VideoFrame.from_ndarray(img, format="bgr24").reformat(format="yuv420p")
+            frame.pts, frame.time_base = i, Fraction(1, fps)
+            for pkt in s.encode(frame):
+                out.mux(pkt)
+        for pkt in s.encode():
+            out.mux(pkt)
+
+
+def test_a_cut_off_video_beside_the_telemetry_says_so(tmp_path):
+    """files.video cut mid-packet (a tlog flight's recorder stopped): the flight's notes say it looks cut off, as
+    they do for a full-motion video read as telemetry, and an observation frame lost with the tail says why."""
+    import dataclasses
+
+    from pipeline.errors import InputError
+    from pipeline.flight import Flight
+    from pipeline.flight_config import load_flight_config
+
+    whole = tmp_path / "v.ts"
+    _ts_video(whole)
+    data = whole.read_bytes()
+    cut = tmp_path / "cut.ts"
+    cut.write_bytes(data[: len(data) // 2 + 100])
+    base = load_flight_config(Path(__file__).resolve().parents[1] / "configs" / "flights" / "group1.yaml")
+
+    def flight(video, frames):
+        return dataclasses.replace(base, files=dataclasses.replace(base.files, video=str(video), frames_csv=None),
+                                   observations=dataclasses.replace(base.observations, mode="frames",
+                                                                    frame_indices=frames))
+
+    with Flight.open(flight(whole, (1, 2))) as f:
+        assert not any("cut off" in w for w in f.notes)
+    with Flight.open(flight(cut, (1, 2))) as f:
+        assert sum("cut.ts: ends inside a transport packet" in w and "looks cut off" in w for w in f.notes) == 1
+    with Flight.open(flight(cut, (1, 39))) as f, pytest.raises(InputError) as info:
+        f.require_plan()
+    msg = str(info.value)
+    assert "observation frame(s) not in the video: [39]" in msg and "cut.ts: ends inside a transport packet" in msg
+    assert "\n" not in msg

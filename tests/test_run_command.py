@@ -336,14 +336,37 @@ def test_an_answer_without_stated_accuracies_says_its_uncertainty_rests_on_defau
         assert (said in row["reason"]) is expect and (said in capsys.readouterr().out) is expect
 
 
+def test_accuracies_the_answers_method_states_in_its_own_sigma_option_are_stated():
+    """`solve.options.mle.sigma` gives the MLE its sensor sigmas: an mle answer's uncertainty rests on them, so it
+    is not said to rest on defaults; another method's answer (propagated from `sigma:`) still is."""
+    import dataclasses
+
+    from pipeline.flight_config import SigmaPriors, Solve, load_flight_config
+    from pipeline.target_stage import unstated_accuracies
+
+    ROOT = Path(__file__).resolve().parents[1]
+    config = dataclasses.replace(load_flight_config(ROOT / "configs" / "flights" / "group1.yaml"),
+                                 sigma=SigmaPriors())
+    assert unstated_accuracies(config, "mle") == ["position_m", "attitude_deg"]
+    own = dataclasses.replace(config, solve=Solve(options={"mle": {"sigma": {"position_m": 2.0}}}))
+    assert unstated_accuracies(own, "mle") == ["attitude_deg"]
+    assert unstated_accuracies(own, "los") == ["position_m", "attitude_deg"]
+    assert unstated_accuracies(own, None) == ["position_m", "attitude_deg"]
+
+
 def test_a_mapping_section_for_a_format_the_flight_lacks_is_a_warning():
     """`mapping: {ros: ...}` on a tlog flight changes nothing: check and run say so instead of taking it quietly
     (a user fixing a convention in the wrong section saw 'consistent' and believed the fix took)."""
     from pipeline.flight.flight import read_flight_logs, unused_mapping_warnings
     from pipeline.flight_config import load_flight_config
 
-    assert unused_mapping_warnings({"ros": {}, "tlog": {}, "video": {}}, ["tlog"]) == [
+    assert unused_mapping_warnings({"ros": {}, "tlog": {}}, ["tlog"]) == [
         "mapping.ros: no file of this flight is read as ros (its files: tlog), so this section changes nothing"]
+    # `video:` is read for a video listed among the telemetry files only: files.video takes files.frames_csv
+    assert unused_mapping_warnings({"video": {"frames_csv": None}}, ["tlog"]) == [
+        "mapping.video: read only for a video listed in files.telemetry (its files: tlog); the video of files.video "
+        "takes files.frames_csv, so this section changes nothing"]
+    assert unused_mapping_warnings({"video": {}}, ["video", "srt"]) == []
     assert unused_mapping_warnings({"ros": {}, "mcap": {}}, ["mcap"]) == []
     assert unused_mapping_warnings({"klv": {}}, ["fmv", "video"]) == []
     root = Path(__file__).resolve().parents[1]

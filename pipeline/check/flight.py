@@ -84,8 +84,10 @@ def mapping_lines(r: Flight) -> list[str]:
     cam = r.camera
     lines.append(f"  {'intrinsics':<10} {cam.width_px}x{cam.height_px} px, fx {cam.fx_px:.1f} fy {cam.fy_px:.1f}, "
                  f"principal point ({cam.cx_px:.1f}, {cam.cy_px:.1f}), dist {list(cam.dist)} from {r.camera_source}")
+    mount = now.mount if now.mount != "frd" else "body FRD: camera.fixed_to_body" if cam.fixed_to_body else \
+        "gimbal FRD"
     lines.append(f"  {'mount':<10} R_optical_from_gimbal {[list(row) for row in cam.R_optical_from_gimbal]} "
-                 f"({'gimbal FRD' if now.mount == 'frd' else now.mount})")
+                 f"({mount})")
     arms = r.config.lever_arms_m
     lines.append(f"  {'levers':<10} camera {list(arms.camera)} m, rangefinder {list(arms.rangefinder)} m (body FRD)")
     offsets = ", ".join(f"{s} {c.offset_ns(s) / 1e9:+.3f} s" for s in CLOCK_SOURCES if s != "video" and

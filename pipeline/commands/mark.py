@@ -121,8 +121,10 @@ def main(args) -> int:
         wanted = sorted(set(wanted) | {m["frame"] for m in known})
         images = flight.source.colour(wanted)  # in colour: the person marking tells targets apart by it
     atomic_write_text(out, mark_page(images, f"ridgeloc mark: {config.name}", known))
-    then = (f"then write a flight config for the clip (`ridgeloc init {paths[0].resolve().parent}`, or `-o` "
-            "elsewhere) and set `marks_file: marks.csv` in it") if clip else \
+    # init of the clip itself: its folder may hold other clips (init of a folder reads them all as one flight)
+    # and may be read-only
+    then = (f"then write a flight config for the clip (`ridgeloc init {paths[0].resolve()} -o flight.yaml`) and "
+            "set `marks_file: marks.csv` in it") if clip else \
         "then set `marks_file: marks.csv` in the flight config"
     print(f"wrote {out} ({len(images)} frame(s)); open it in a browser, click the targets and save marks.csv, {then}")
     return 0

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline.errors import ConfigError, InputError, RidgelocError
-from pipeline.flight.frames import FrameSource, open_frames
+from pipeline.flight.frames import FrameSource, open_frames, with_cut_off
 from pipeline.flight_config import Camera, FlightConfig
 from pipeline.geometry.frames import ellipsoid_from_amsl_m
 from pipeline.geometry.lens import undistort_pixels
@@ -26,17 +26,22 @@ from pipeline.intrinsics import resolve_camera
 from pipeline.sync.assemble import FrameStates, frame_states
 from pipeline.sync.select import ObservationPlan, plan_observations
 
-#: the `mapping:` sections each format's reader takes (a video's frames: `video`, whatever the telemetry)
+#: the `mapping:` sections each format's reader takes (`video`: a video listed among the telemetry files; the
+#: video of files.video takes files.frames_csv)
 _MAPPING_SECTIONS = {"tlog": ("tlog",), "dataflash": ("dataflash",), "ulog": ("ulog",), "ros1": ("ros",),
-                     "ros2": ("ros",), "mcap": ("mcap", "ros"), "klv": ("klv",), "fmv": ("klv",), "srt": ("srt",)}
+                     "ros2": ("ros",), "mcap": ("mcap", "ros"), "klv": ("klv",), "fmv": ("klv",), "srt": ("srt",),
+                     "video": ("video",)}
 
 
 def unused_mapping_warnings(mapping: dict | None, formats: list[str]) -> list[str]:
     """A warning per `mapping:` section that no file of the flight is read with (a `ros:` block on a tlog flight
-    changes nothing, which looks like a fix that took)."""
-    used = {"video"} | {k for f in formats for k in _MAPPING_SECTIONS.get(f, ())}
-    return [f"mapping.{k}: no file of this flight is read as {k} (its files: {', '.join(dict.fromkeys(formats))}), so "
-            "this section changes nothing" for k in sorted(set(mapping or {}) - used)]
+    changes nothing, which looks like a fix that took). `formats`: those of the telemetry files."""
+    used = {k for f in formats for k in _MAPPING_SECTIONS.get(f, ())}
+    files = ", ".join(dict.fromkeys(formats))
+    return [f"mapping.video: read only for a video listed in files.telemetry (its files: {files}); the video of "
+            "files.video takes files.frames_csv, so this section changes nothing" if k == "video" else
+            f"mapping.{k}: no file of this flight is read as {k} (its files: {files}), so this section changes "
+            "nothing" for k in sorted(set(mapping or {}) - used)]
 
 
 def camera_on_the_body(log: FlightLog, shift_ns: int = 0) -> FlightLog:
@@ -73,6 +78,9 @@ def read_flight_logs(config: FlightConfig) -> FlightLog:
     if config.camera.fixed_to_body:
         log = camera_on_the_body(log, config.clock.offset_ns("attitude") - config.clock.offset_ns("gimbal"))
     missing = [q for q in ("position", "attitude", "gimbal") if getattr(log, q) is None]
+    if config.camera.fixed_to_body and "attitude" in missing:  # no gimbal to give: the camera turns with the body
+        missing = [q if q != "attitude" else "attitude (camera.fixed_to_body: the camera turns with it)"
+                   for q in missing if q != "gimbal"]
     if missing:
         supplied = [q for q in ("position", "attitude", "gimbal", "range", "frames") if getattr(log, q) is not None]
         what = f"supply only {', '.join(supplied)}" if supplied else "supply nothing ridgeloc reads"
@@ -80,9 +88,8 @@ def read_flight_logs(config: FlightConfig) -> FlightLog:
                   if supplied == ["frames"] else
                   "give the logs that record them, or, where a log has them under other names, set `mapping:` "
                   "(`ridgeloc inspect LOG` lists what each file holds)")
-        cut = [w for w in log.warnings if "looks cut off" in w or "demuxing stopped early" in w]
-        raise InputError(f"the flight's files {what}: no {', '.join(missing)}; {advice}"
-                         + "".join(f"; {w}" for w in cut), config.path)
+        raise with_cut_off(InputError(f"the flight's files {what}: no {', '.join(missing)}; {advice}", config.path),
+                           log.warnings)
     return log
 
 
@@ -169,8 +176,8 @@ class Flight:
             plan, plan_error = None, None
             try:
                 plan = plan_flight_observations(config, source.frames, log, keyframe=source.keyframe)
-            except InputError as exc:
-                plan_error = exc
+            except InputError as exc:  # frames missing from a cut-off video: say that it looks cut off
+                plan_error = with_cut_off(exc, [*log.warnings, *source.warnings])
             separation, origin, origin_error = None, None, None
             try:
                 separation = geoid_separation_m(config, log)
@@ -181,7 +188,7 @@ class Flight:
             source.close()
             raise
         return cls(config, log, source, camera, camera_source, plan, plan_error, separation, origin, origin_error,
-                   list(log.warnings))
+                   [*log.warnings, *source.warnings])
 
     # ---- the frames -------------------------------------------------------------------------------------------
 

@@ -16,6 +16,20 @@ from pipeline.flight_config import FlightConfig
 from pipeline.ingest.model import FlightLog, FrameSeries
 
 
+def cut_off_warnings(warnings: Sequence[str]) -> list[str]:
+    """The warnings of a video or log that looks cut off or whose demuxing stopped early (`ingest.video`)."""
+    return [w for w in warnings if "looks cut off" in w or "demuxing stopped early" in w]
+
+
+def with_cut_off(exc: RidgelocError, warnings: Sequence[str]) -> RidgelocError:
+    """`exc` with the cut-off warnings among `warnings` added to its one line (what is missing may be in the
+    part of the file that was lost)."""
+    cut = cut_off_warnings(warnings)
+    if cut:
+        exc.args = (str(exc) + "".join(f"; {w}" for w in cut), *exc.args[1:])
+    return exc
+
+
 class TimedDecoder:
     """Decodes chosen frame numbers to grayscale and accumulates the time spent. `prefetch(order)` announces the
     frame numbers that will be asked for, in that order, to a reader that can decode ahead (a video file: worker
@@ -57,12 +71,14 @@ class FrameSource:
     """`frames`: the FrameSeries (index, t_ns on the video clock); `decoder(indices)` -> {index: gray image}
     (a TimedDecoder); `keyframe` (n,) bool, aligned with `frames`: the frames that decode on their own (None
     where every frame does, or it is not known); `close()` releases the reader (also on leaving a `with` block;
-    closing twice is harmless)."""
+    closing twice is harmless). `warnings`: the video file's own (it looks cut off), for the flight's notes."""
 
     def __init__(self, frames: FrameSeries, read: Callable[[list[int]], dict[int, np.ndarray]], closable=None,
-                 prefetch: Callable[[list[int]], None] | None = None, keyframe: np.ndarray | None = None):
+                 prefetch: Callable[[list[int]], None] | None = None, keyframe: np.ndarray | None = None,
+                 warnings: Sequence[str] = ()):
         self.frames = frames
         self.keyframe = keyframe
+        self.warnings = list(warnings)
         self.decoder = TimedDecoder(read, prefetch)
         self._closable = closable
 
@@ -113,10 +129,14 @@ def open_frames(config: FlightConfig, log: FlightLog) -> FrameSource:
         try:
             frames = ingest.read_video(config.files.video, frames_csv=config.files.frames_csv or "auto",
                                        index=video.index)
+        except RidgelocError as exc:  # a frames CSV longer than a cut-off video: say that it looks cut off
+            video.close()
+            raise with_cut_off(exc, video.index.warnings) from None
         except BaseException:
             video.close()
             raise
-        return FrameSource(frames, video.read, video, video.prefetch, _keyframes(video, frames))
+        return FrameSource(frames, video.read, video, video.prefetch, _keyframes(video, frames),
+                           video.index.warnings)
     if log.frames is not None and "fmv" in log.formats:  # full-motion video: the frames of the telemetry file
         video = ingest.VideoFrames(log.frames.source, gray=True, index=log.video_indexes.get(log.frames.source))
         return FrameSource(log.frames, video.read, video, video.prefetch, _keyframes(video, log.frames))

@@ -214,9 +214,10 @@ def fill_from_topics(log: FlightLog, data: dict[str, dict], mapping: dict, path:
             warnings.append(f"{path}: no GPS fix in {len(d['timestamp'])} {name} messages")
             continue
         if t.size < len(d["timestamp"]):  # a user seeing fewer positions than messages should know why
+            why = (f"no fix (fix_type below {mapping['position']['min_fix_type']}, mapping.ulog.position."
+                   "min_fix_type) or no coordinates" if "fix_type" in d else "no coordinates (NaN or 0, 0)")
             warnings.append(f"{path}: {len(d['timestamp']) - t.size} of {len(d['timestamp'])} {name} messages "
-                            f"dropped: no fix (fix_type below {mapping['position']['min_fix_type']}, "
-                            "mapping.ulog.position.min_fix_type) or no coordinates")
+                            f"dropped: {why}")
         t, lat, lon, alt = sort_by_time(t, lat, lon, alt)
         log.position = PositionSeries(t, lat, lon, alt, datum, source=f"{src}:{name}", clock="boot")
         break

@@ -355,3 +355,22 @@ def test_sample_flights_bursts_align_within_their_creation_second(group, telemet
     created = offset // 10**9 * 10**9
     frames, shots = read_file(folder / "video.mp4").frames.t_ns, read_file(folder / telemetry).range.t_ns
     assert align_bursts(frames, shots, created, created + 10**9) == offset
+
+
+def test_a_folder_of_several_clips_is_refused_each_clip_being_a_flight(tmp_path, capsys):
+    """Two full-motion videos in one folder are two flights (frames and telemetry in each file): init refuses in one
+    line naming how to init one clip, instead of merging both clips' telemetry into one flight's config."""
+    from pipeline.cli import main as cli_main
+
+    fmv = Path(__file__).resolve().parents[1].parent / "shared" / "fmv"
+    if not fmv.is_dir():
+        pytest.skip("../shared/fmv absent (the shared read-only material is not beside this checkout)")
+    folder = tmp_path / "clips"
+    folder.mkdir()
+    for name in ("aphill_short.ts", "aphill_klv_10s.ts"):
+        (folder / name).symlink_to(fmv / name)
+    assert cli_main(["init", str(folder)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "2 full-motion videos, each a flight of its own" in err
+    assert f"`ridgeloc init {folder / 'aphill_klv_10s.ts'} -o aphill_klv_10s.yaml`" in err
+    assert not (folder / "flight.yaml").exists()

@@ -108,6 +108,11 @@ def flight_files(folder: Folder) -> FlightFiles:
     missing) when the files do not make one: no video or images, two videos, no position, attitude or gimbal."""
     videos = [f for f in folder.files if f.plain_video]
     telemetry = [f for f in folder.files if not f.plain_video]
+    clips = [f for f in telemetry if "fmv" in f.log.formats]  # each its own flight: frames and telemetry in one
+    if len(clips) > 1:
+        raise InputError(f"{folder.describe()}; {len(clips)} full-motion videos, each a flight of its own: put each "
+                         f"in a folder of its own, or init one clip (`ridgeloc init {clips[0].path} -o "
+                         f"{clips[0].path.stem}.yaml`)", folder.root)
     if len(videos) > 1:
         srt_stems = {f.path.stem.lower() for f in telemetry if f.path.suffix.lower() == ".srt"}
         paired = [v for v in videos if v.path.stem.lower() in srt_stems]  # a DJI video beside its SRT

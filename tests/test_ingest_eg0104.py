@@ -196,8 +196,8 @@ def test_check_json_on_a_clip_prints_frame_centre():
     fc = doc["frame_centre"]
     assert fc["n"] == 48 and fc["median_m"] < 1.0 and fc["p95_m"] >= fc["median_m"] and fc["explained_by"] is None
     assert "grid north" in fc["convention"]
-    assert any("azimuths read from UTM grid north (klv.azimuth_north: auto)" in w and "35.5 m read from true north"
-               in w for w in doc["warnings"]), doc["warnings"]
+    assert any("azimuths read from UTM grid north (klv.azimuth_north: auto)" in w
+               and "35.5 m from it read from true north" in w for w in doc["warnings"]), doc["warnings"]
 
 
 @pytest.mark.parametrize("name", sorted(CLIPS))

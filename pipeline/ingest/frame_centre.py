@@ -234,6 +234,6 @@ def auto_north(table: KlvTable) -> tuple[str, str | None]:
     name = Path(table.source).name
     if c.explained_by == GRID_NORTH:
         return "grid", (f"{name}: azimuths read from UTM grid north (klv.azimuth_north: auto): the payload's frame "
-                        f"centres lie {c.alternatives[GRID_NORTH]:.1f} m (median) from the line of sight so, "
-                        f"{c.median_m:.1f} m read from true north")
+                        f"centres lie {c.alternatives[GRID_NORTH]:.1f} m (median) from the line of sight read so, "
+                        f"{c.median_m:.1f} m from it read from true north")
     return "true", None

@@ -133,8 +133,10 @@ def _bursts_without_shots(t_obs_ns: np.ndarray, t_shots_ns: np.ndarray, n_ranged
     within max_range_gap_s although valid shots fall between the first and the last burst, the ranges are lost to a
     clock offset (video or range), not to the laser. One warning line, or none."""
     n = t_obs_ns.size
+    if n < 3 or 2 * n_ranged >= n:
+        return []
     between = int(((t_shots_ns >= t_obs_ns.min()) & (t_shots_ns <= t_obs_ns.max())).sum())
-    if n < 3 or 2 * n_ranged >= n or between < n:
+    if between < n:
         return []
     return [f"only {n_ranged} of {n} bursts of video have a laser shot within {max_range_gap_s:g} s, although "
             f"{between} valid shots fall between the first and the last burst: the video clock (or the range's) "

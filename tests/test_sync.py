@@ -157,3 +157,11 @@ def test_plan_bursts_warns_when_the_clock_puts_every_shot_outside_its_burst():
     assert off.n == 6 and not np.isfinite(off.range_m).any()
     assert len(off.warnings) == 1 and "only 0 of 6 bursts" in off.warnings[0]
     assert "clock.video_start" in off.warnings[0]
+
+
+def test_the_bursts_check_takes_no_bursts_quietly():
+    import numpy as np
+
+    from pipeline.sync.select import _bursts_without_shots
+
+    assert _bursts_without_shots(np.array([], dtype=np.int64), np.array([1, 2], dtype=np.int64), 0, 0.1) == []

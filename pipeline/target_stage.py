@@ -18,6 +18,7 @@ import functools
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -26,7 +27,7 @@ from pipeline.check.flight import outside_telemetry, run_checks
 from pipeline.clock_estimate import ClockEstimate
 from pipeline.errors import ConfigError, InputError, RidgelocError, none_located
 from pipeline.flight import Flight, TargetMark, acquire_mark
-from pipeline.flight_config import FlightConfig
+from pipeline.flight_config import FMV_SUFFIXES, FlightConfig
 from pipeline.geometry.frames import enu_from_lla
 from pipeline.geometry.rays import intersection_angle_deg
 from pipeline.ingest.clocks import find_link, map_clock
@@ -334,11 +335,12 @@ def _result(fp: FlightPass, t: _Tracked, estimates: dict[str, Estimate], failure
     unstated = unstated_accuracies(config, answer.method)
     answer_warnings = []
     if unstated and answer.located:
+        where = (f"in a flight config for the clip (`ridgeloc init {config.path} -o flight.yaml`, then `sigma:`)"
+                 if Path(config.path or "").suffix.lower() in FMV_SUFFIXES else "(docs/flight_config.md)")
         answer_warnings.append(
             f"sensor accuracies not stated ({', '.join('sigma.' + k for k in unstated)}): the uncertainty rests on "
             "defaults and on this flight's own misfit, which a short or smooth flight measures poorly; state your "
-            "sensors' specifications (docs/flight_config.md)")
-        answer = dataclasses.replace(answer, reason="; ".join([answer.reason, *answer_warnings]))
+            f"sensors' specifications {where}")
         notes += answer_warnings
 
     reference = t.truth_m

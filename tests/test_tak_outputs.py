@@ -111,6 +111,9 @@ def test_a_marker_carries_the_warnings_of_its_answer(tmp_path):
     assert cli_main(["run", str(clip), "-o", str(tmp_path / "out"), "--no-figures", "-q"]) == 0
     (row,) = list(csv.DictReader((tmp_path / "out" / "targets.csv").open()))
     assert "warning: the laser ranges all end at sea level" in row["reason"]
+    # no config to state accuracies in: the advice names how to write one for the clip
+    assert row["reason"].endswith(f"in a flight config for the clip (`ridgeloc init {clip.resolve()} -o flight.yaml`, "
+                                  "then `sigma:`)")
     (cot,) = (tmp_path / "out" / "cot").glob("*.cot")
     text = ET.fromstring(cot.read_bytes()).find("detail/remarks").text
     warnings = [ln for ln in text.splitlines() if ln.startswith("WARNING: ")]

@@ -113,6 +113,12 @@ def _num(x, decimals: int = 3):
     return round(x, decimals) if np.isfinite(x) else None
 
 
+def answer_warnings(r: GroupResult) -> list[str]:
+    """What a located answer is to be read with: the run's geometry warnings (its checks, about every point of the
+    flight), then the answer's own (`settings["answer_warnings"]`: accuracies the config leaves unstated)."""
+    return [*(r.settings.get("geometry_warnings") or []), *(r.settings.get("answer_warnings") or [])]
+
+
 def answer_row(r: GroupResult) -> dict:
     """targets.csv's row of one target (keys ANSWER_COLUMNS; None where undefined)."""
     a = answer_of(r)
@@ -122,7 +128,7 @@ def answer_row(r: GroupResult) -> dict:
                alt_msl_datum=ALT_MSL_DATUM)
     if not a.located:
         return row
-    warnings = r.settings.get("geometry_warnings") or []  # what the run's checks say about every point of it
+    warnings = answer_warnings(r)
     if warnings:
         row["reason"] = "; ".join([a.reason, *(f"warning: {w}" for w in warnings)])
     lat, lon, h = geodetic_from_enu(a.position_m, r.origin_lla)

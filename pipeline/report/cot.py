@@ -20,7 +20,7 @@ from pathlib import Path
 from pipeline.atomic import atomic_dir, atomic_write_bytes
 from pipeline.errors import InputError
 from pipeline.flight_config import RESERVED_FLIGHT_NAMES
-from pipeline.report.answers import answer_row
+from pipeline.report.answers import answer_row, answer_warnings
 from pipeline.report.labels import count, one_decimal
 from pipeline.results import GroupResult, per_target
 from pipeline.tak import DEFAULT_STALE_S, DEFAULT_TYPE
@@ -92,8 +92,8 @@ def _m(x) -> str:
 
 def remarks(row: dict, when: str | None, warnings=()) -> str:
     """The remarks ATAK shows under the marker: the method, MGRS, CE90/LE90 and category, the 95 % ellipse, the
-    heights, the flight, and the head of each of the run's geometry warnings (its words before the first colon:
-    what is wrong, not the advice), which targets.csv's reason gives in full."""
+    heights, the flight, and the head of each of the answer's warnings (`answer_warnings`: its words before the
+    first colon, what is wrong, not the advice), which targets.csv's reason gives in full."""
     lines = [f"ridgeloc {row['method']} from {count(row['n_observations'], 'observation')}",
              f"MGRS {mgrs_spaced(row['mgrs'])}",
              f"CE90 {_m(row['ce90_m'])}, LE90 {_m(row['le90_m'])}"
@@ -121,8 +121,7 @@ def cot_target(r: GroupResult, row: dict) -> CotTarget:
     return CotTarget(uid=target_uid(flight_key(r) + "\n" + (r.target or "")), callsign=row["name"],
                      lat_deg=row["lat_deg"], lon_deg=row["lon_deg"], hae_m=row["alt_m"], ce90_m=row["ce90_m"],
                      le90_m=row["le90_m"], attributes=attributes,
-                     remarks=remarks(row, _flight_time(r), [*(r.settings.get("geometry_warnings") or ()),
-                                                            *(r.settings.get("answer_warnings") or ())]))
+                     remarks=remarks(row, _flight_time(r), answer_warnings(r)))
 
 
 def cot_entries(results, now: datetime | None = None, options: CotOptions | None = None) -> list[PackageEntry]:

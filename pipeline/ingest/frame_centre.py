@@ -132,9 +132,10 @@ def _conventions(table: KlvTable, m: np.ndarray) -> str:
     return out + (", azimuths from UTM grid north" if table.azimuth_north == "grid" else "")
 
 
-def check_frame_centre(table: KlvTable) -> FrameCentreCheck | None:
+def check_frame_centre(table: KlvTable, max_packets: int | None = None) -> FrameCentreCheck | None:
     """The frame-centre check of decoded KLV packets, or None where no packet has everything it needs. Cost
-    linear in the packets, times the (fixed) number of alternatives."""
+    linear in the packets, times the (fixed) number of alternatives; `max_packets`: at most this many of them,
+    evenly spaced (medians need no more)."""
     c = table.cols
     pos, alt, datum, _ = sensor_position(table)
     m = (pos & np.isfinite(c["sensor_az_deg"]) & np.isfinite(c["sensor_el_deg"]) & np.isfinite(c["slant_range_m"])
@@ -144,6 +145,10 @@ def check_frame_centre(table: KlvTable) -> FrameCentreCheck | None:
     m &= platform | table.is_eg0104
     if not m.any():
         return None
+    if max_packets is not None and m.sum() > max_packets:
+        keep = np.flatnonzero(m)[np.linspace(0, m.sum() - 1, max_packets).round().astype(int)]
+        m = np.zeros_like(m)
+        m[keep] = True
     lat, lon = c["lat_deg"][m], c["lon_deg"][m]
     c_lat, c_lon = c["centre_lat_deg"][m], c["centre_lon_deg"][m]
     n_sensor, n_centre = geoid_undulation_m(lat, lon), geoid_undulation_m(c_lat, c_lon)  # EGM2008, cached area
@@ -222,13 +227,16 @@ def frame_centre_document(checks: list[tuple[str, FrameCentreCheck]]) -> dict | 
     return {**docs[0], "others": docs[1:]} if len(docs) > 1 else docs[0]
 
 
+#: packets the azimuth_north "auto" decision looks at, at most (a 10-minute clip has 18,000)
+AUTO_NORTH_PACKETS = 1000
+
+
 def auto_north(table: KlvTable) -> tuple[str, str | None]:
-    """`mapping: {klv: {azimuth_north: auto}}` (a full-motion video run alone, `ridgeloc run clip.ts`): "grid" where
-    the frame-centre check of the azimuths read from true north finds the miss explained by a grid-north reading
+    """`mapping: {klv: {azimuth_north: auto}}` (a full-motion video run alone, `ridgeloc run clip.ts`): for a table
+    read from true north, "grid" where its frame-centre check finds the miss explained by a grid-north reading
     (`GRID_NORTH`, the rule `ridgeloc check` and `ridgeloc init` apply), else "true"; and a note saying which and
     why (None where the table has no frame centres to judge by)."""
-    table.azimuth_north = "true"
-    c = check_frame_centre(table)
+    c = check_frame_centre(table, AUTO_NORTH_PACKETS)
     if c is None:
         return "true", None
     name = Path(table.source).name

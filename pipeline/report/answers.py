@@ -114,9 +114,9 @@ def _num(x, decimals: int = 3):
 
 
 def answer_warnings(r: GroupResult) -> list[str]:
-    """What a located answer is to be read with: the run's geometry warnings (its checks, about every point of the
-    flight), then the answer's own (`settings["answer_warnings"]`: accuracies the config leaves unstated)."""
-    return [*(r.settings.get("geometry_warnings") or []), *(r.settings.get("answer_warnings") or [])]
+    """What a located answer is to be read with: its own warnings (`settings["answer_warnings"]`: accuracies the
+    config leaves unstated), then the run's geometry warnings (its checks, about every point of the flight)."""
+    return [*(r.settings.get("answer_warnings") or []), *(r.settings.get("geometry_warnings") or [])]
 
 
 def answer_row(r: GroupResult) -> dict:

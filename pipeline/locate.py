@@ -23,6 +23,7 @@ import numpy as np
 from pipeline.answer import Answer, choose_answer
 from pipeline.errors import InputError, RidgelocError, none_located
 from pipeline.geometry.frames import enu_from_lla
+from pipeline.geometry.geodesic import pairwise_geodesic_m
 from pipeline.ingest.photo import Photo
 from pipeline.ingest.photo_views import PhotoViews, photo_heights_ellipsoid_m, photo_views
 from pipeline.photo_errors import PhotoErrorModel, photo_error_model
@@ -297,11 +298,7 @@ def check_one_site(photos: list[Photo], pixel_px=None) -> None:
            if not (np.isnan(u) and np.isnan(v))] if pixel_px is not None else photos
     if len(use) < 2:
         return
-    lat, lon = np.radians([p.lat_deg for p in use]), np.radians([p.lon_deg for p in use])
-    # great-circle distances (haversine, mean Earth radius): a site check, metres do not matter
-    h = (np.sin((lat[:, None] - lat[None]) / 2) ** 2
-         + np.cos(lat[:, None]) * np.cos(lat[None]) * np.sin((lon[:, None] - lon[None]) / 2) ** 2)
-    d_km = 2 * 6371.0 * np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0)))
+    d_km = pairwise_geodesic_m([p.lat_deg for p in use], [p.lon_deg for p in use]) / 1000.0
     i, j = np.unravel_index(int(np.argmax(d_km)), d_km.shape)
     if d_km[i, j] > ONE_SITE_KM:
         raise InputError(f"{use[i].name} and {use[j].name} were taken {d_km[i, j]:,.0f} km apart: photos of one "

@@ -197,8 +197,9 @@ def test_photos_without_marks_or_laser_are_told_to_mark_the_target(tmp_path, cap
 
 
 def test_photos_of_different_places_are_refused_in_one_line(tmp_path, capsys):
-    """A DJI photo of Brighton and a Teal photo of Utah (1,731 km apart) are no one target's photos: refused in
-    one line naming both, before any method runs (the MLE answered +-92875 km), and nothing written."""
+    """A DJI photo of Brighton and a Teal photo of Utah (1,735 km apart on the WGS84 geodesic) are no one target's
+    photos: refused in one line naming both, before any method runs (the MLE answered +-92875 km), and nothing
+    written."""
     from pathlib import Path
 
     shared = Path(__file__).resolve().parents[2] / "shared" / "photos"
@@ -207,10 +208,10 @@ def test_photos_of_different_places_are_refused_in_one_line(tmp_path, capsys):
         pytest.skip("../shared/photos absent (the shared read-only material is not beside this checkout)")
     assert cli_main(["locate", str(a), str(b), "-o", str(tmp_path / "out")]) == 1
     err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and "DJI_0024.JPG and teal2_img_ir_00015.jpg were taken 1,731 km apart" in err
+    assert err.count("\n") == 0 and "DJI_0024.JPG and teal2_img_ir_00015.jpg were taken 1,735 km apart" in err
     assert not (tmp_path / "out").exists()
     photos = [read_photo_checked(a), read_photo_checked(b)]
     locate_photos([photos[0]])  # each site alone is no error of this kind
-    with pytest.raises(InputError, match="1,731 km apart"):
+    with pytest.raises(InputError, match="1,735 km apart"):
         locate_photos(photos, pixel_px=[[100.0, 100.0], [50.0, 50.0]])
     locate_photos(photos, pixel_px=[[100.0, 100.0], [np.nan, np.nan]], rotation_deg=0)  # the far one unmarked

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.geometry.geodesic import pairwise_geodesic_m
 from pipeline.report.answers import answer_of, answer_row, determined_estimates, shown_covariance
 from pipeline.report.geometry import (
     best_reference_m,
@@ -220,22 +221,32 @@ SITE_KM = 50.0
 ANSWER_COLOR = "#D55E00"
 
 
+def _answer_lat_lon(targets: Sequence[GroupResult]) -> tuple[np.ndarray, np.ndarray]:
+    """(lat, lon) (n,) deg of the targets' answers."""
+    lla = [geodetic_from_enu(answer_of(t).position_m, t.origin_lla) for t in targets]
+    return np.array([float(p[0]) for p in lla]), np.array([float(p[1]) for p in lla])
+
+
+def _grouped(d_m: np.ndarray, radius_m: float) -> list[list[int]]:
+    """Indices grouped greedily in order: each joins the first group whose first member is within radius_m
+    (`d_m` (n, n) distances)."""
+    groups: list[list[int]] = []
+    for i in range(d_m.shape[0]):
+        near = next((g for g in groups if d_m[i, g[0]] < radius_m), None)
+        if near is None:
+            groups.append([i])
+        else:
+            near.append(i)
+    return groups
+
+
 def answer_sites(results: Sequence[GroupResult]) -> list[list[GroupResult]]:
     """The located targets grouped by site: each joins the first site whose first target is within SITE_KM."""
-    sites: list[list[GroupResult]] = []
-    for t in results:
-        a = answer_of(t)
-        if not a.located:
-            continue
-        lat, lon, _ = geodetic_from_enu(a.position_m, t.origin_lla)
-        for site in sites:
-            lat0, lon0, _ = geodetic_from_enu(answer_of(site[0]).position_m, site[0].origin_lla)
-            if np.hypot(lat - lat0, (lon - lon0) * np.cos(np.radians(lat))) * 111.2 < SITE_KM:
-                site.append(t)
-                break
-        else:
-            sites.append([t])
-    return sites
+    located = [t for t in results if answer_of(t).located]
+    if not located:
+        return []
+    d_m = pairwise_geodesic_m(*_answer_lat_lon(located))
+    return [[located[i] for i in g] for g in _grouped(d_m, SITE_KM * 1000.0)]
 
 
 #: answers closer than this (m), or a fortieth of the map's extent, share one label on the answers map
@@ -247,24 +258,13 @@ def shared_labels(targets: Sequence[GroupResult]) -> dict[str, str]:
     extent (at least LABEL_MERGE_M) to an earlier one share its label, "first and N more" (each marker's own
     tooltip still names it); the others are absent from the dict. Eleven sample answers within 10 m stacked eleven
     labels on one spot."""
-    pts, names = [], []
-    for t in targets:
-        lat, lon, _ = geodetic_from_enu(answer_of(t).position_m, t.origin_lla)
-        pts.append((float(lat), float(lon)))
-        names.append(t.label)
-    if not pts:
+    if not targets:
         return {}
-    p = np.array(pts)
-    en_m = np.column_stack([(p[:, 1] - p[0, 1]) * np.cos(np.radians(p[0, 0])), p[:, 0] - p[0, 0]]) * 111_200.0
-    radius = max(LABEL_MERGE_M, float(np.ptp(en_m, axis=0).max()) / 40.0)
-    groups: list[list[int]] = []
-    for i in range(len(pts)):
-        near = next((g for g in groups if np.hypot(*(en_m[i] - en_m[g[0]])) < radius), None)
-        if near is None:
-            groups.append([i])
-        else:
-            near.append(i)
-    return {names[g[0]]: names[g[0]] + (f" and {len(g) - 1} more" if len(g) > 1 else "") for g in groups}
+    d_m = pairwise_geodesic_m(*_answer_lat_lon(targets))
+    radius = max(LABEL_MERGE_M, float(d_m.max()) / 40.0)
+    names = [t.label for t in targets]
+    return {names[g[0]]: names[g[0]] + (f" and {len(g) - 1} more" if len(g) > 1 else "")
+            for g in _grouped(d_m, radius)}
 
 
 def answers_map(targets: Sequence[GroupResult], tiles: bool = True):

@@ -20,6 +20,7 @@ import numpy as np
 import pymap3d
 
 from pipeline.geometry.frames import R_ecef_from_enu, ecef_from_lla
+from pipeline.geometry.geodesic import geodesic_m
 
 NODE_POSTS = 64  # node spacing along the ray, in posts (horizontally)
 MAX_NODES = 20_000  # node intervals per ray at most (the crossings per interval are bounded by the grid)
@@ -122,14 +123,14 @@ def _crossings(g: np.ndarray, t: np.ndarray, ray: np.ndarray, n_lines: int):
 
 def _where_the_dem_is(dem, origin_lla: np.ndarray) -> str:
     """For a ray that misses the DEM's area from a camera outside it: where the DEM is, and how far (a DEM of
-    another site says so), e.g. "; the DEM covers lat 40.7088..40.7121, lon -111.8962..-111.8925, 1812 km from the
-    camera". Empty for a camera over the DEM's bounds."""
+    another site says so), e.g. "; the DEM covers lat 40.7088..40.7121, lon -111.8962..-111.8925, about 1812 km
+    from the camera" (the geodesic to the nearest point of its outline). Empty for a camera over the DEM's bounds."""
     lat0, lat1, lon0, lon1 = dem.bounds_deg
     lat, lon = float(origin_lla[0]), float(origin_lla[1])
     if lat0 <= lat <= lat1 and lon0 <= lon <= lon1:
         return ""
-    e, n, _ = pymap3d.geodetic2enu(dem.outline_deg[:, 0], dem.outline_deg[:, 1], 0.0, lat, lon, 0.0)
-    d_m = float(np.hypot(e, n).min())  # to the nearest of the outline's sampled points: within a few posts
+    d_m = float(geodesic_m(lat, lon, dem.outline_deg[:, 0], dem.outline_deg[:, 1]).min())  # to the nearest of the
+    # outline's sampled points: within a few posts
     far = f"{d_m / 1000:.0f} km" if d_m >= 10_000 else f"{d_m:.0f} m"
     return f"; the DEM covers lat {lat0:.4f}..{lat1:.4f}, lon {lon0:.4f}..{lon1:.4f}, about {far} from the camera"
 
